@@ -1,0 +1,9 @@
+"""ogscene3d: incremental open-vocabulary 3D semantic mapping with semantic Gaussians and a 3D scene graph."""
+
+from .camera import Camera
+from .config import Config, load_config
+from .frame import Frame
+
+__version__ = "0.1.0"
+
+__all__ = ["Camera", "Config", "Frame", "load_config", "__version__"]

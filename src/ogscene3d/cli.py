@@ -1,0 +1,53 @@
+"""The ``ogscene3d`` command line: one entry point, one subcommand per capability.
+
+Each subcommand lives in the module that implements it and exposes ``add_parser(subparsers)``,
+which registers the subcommand and sets ``func`` (``args -> int`` exit code) as its default.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+
+from .errors import OGSceneError
+
+# Modules that register a subcommand, in the order they appear in --help.
+_COMMAND_MODULES = [
+    "ogscene3d.render_demo",
+]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="ogscene3d", description="Incremental open-vocabulary 3D semantic mapping and scene graphs."
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in _COMMAND_MODULES:
+        importlib.import_module(name).add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO, format="%(levelname)s %(name)s: %(message)s"
+    )
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except OGSceneError as e:
+        print(f"ogscene3d {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"ogscene3d {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

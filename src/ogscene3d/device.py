@@ -1,0 +1,44 @@
+"""One place that turns a user's ``device=`` argument into torch and Warp devices."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+
+import torch
+
+
+def resolve_device(device: str | torch.device | None = None) -> torch.device:
+    """Accept "cpu", "cuda", "cuda:0", a torch.device or None (CUDA when available, else CPU)."""
+    if device is None:
+        return torch.device("cuda:0" if torch.cuda.is_available() else "cpu")
+    dev = torch.device(device)
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            raise ValueError(f"device={device!r} was asked for but torch sees no CUDA GPU; use device='cpu'")
+        if dev.index is None:
+            dev = torch.device("cuda", torch.cuda.current_device())
+    elif dev.type != "cpu":
+        raise ValueError(f"device={device!r} is not supported: use 'cpu', 'cuda' or 'cuda:N'")
+    return dev
+
+
+def warp_device(device: torch.device):
+    """The Warp device for a torch device (initialises Warp on first use)."""
+    import warp as wp
+
+    wp.init()
+    return wp.device_from_torch(device)
+
+
+@contextlib.contextmanager
+def warp_stream(device: torch.device) -> Iterator[object]:
+    """Run Warp launches on torch's current stream so that no extra synchronisation is needed."""
+    import warp as wp
+
+    wdev = warp_device(device)
+    if device.type == "cuda":
+        with wp.ScopedStream(wp.stream_from_torch(device)):
+            yield wdev
+    else:
+        yield wdev

@@ -1,0 +1,72 @@
+"""One RGB-D frame as the mapper consumes it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .camera import Camera
+
+
+def check_pose(pose: np.ndarray, what: str = "pose", tol: float = 1e-3) -> np.ndarray:
+    """Return ``pose`` as float64 4x4 or raise ValueError if it is not a finite rigid transform."""
+    pose = np.asarray(pose, dtype=np.float64)
+    if pose.shape != (4, 4):
+        raise ValueError(f"{what}: expected a 4x4 matrix, got shape {pose.shape}")
+    if not np.all(np.isfinite(pose)):
+        raise ValueError(f"{what}: contains NaN or inf")
+    R = pose[:3, :3]
+    if np.abs(R @ R.T - np.eye(3)).max() > tol or abs(np.linalg.det(R) - 1.0) > tol:
+        raise ValueError(f"{what}: rotation part is not orthonormal with det +1 (non-rigid pose)")
+    if np.abs(pose[3] - np.array([0.0, 0.0, 0.0, 1.0])).max() > tol:
+        raise ValueError(f"{what}: last row is not [0, 0, 0, 1]")
+    return pose
+
+
+@dataclass
+class Frame:
+    """An RGB-D frame. ``pose`` is camera-to-world 4x4 (OpenCV axes) or None when it must be tracked.
+
+    ``segments`` is an int32 id map (0 = no segment) with ``segment_scores`` {id: SAM predicted IoU};
+    ``gt_instances`` / ``gt_classes`` are ground-truth maps when the dataset has them (synthetic scenes).
+    """
+
+    index: int
+    rgb: np.ndarray  # uint8 [H, W, 3]
+    depth: np.ndarray  # float32 [H, W], metres, 0 = invalid
+    K: np.ndarray  # float32 [3, 3]
+    pose: np.ndarray | None = None  # float64 [4, 4] c2w
+    timestamp: float = 0.0
+    name: str = ""  # the rgb file stem; precomputed segments are looked up by it
+    segments: np.ndarray | None = None
+    segment_scores: dict[int, float] = field(default_factory=dict)
+    gt_instances: np.ndarray | None = None
+    gt_classes: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.rgb.ndim != 3 or self.rgb.shape[2] != 3 or self.rgb.dtype != np.uint8:
+            raise ValueError(f"frame {self.index}: rgb must be uint8 HxWx3, got {self.rgb.dtype} {self.rgb.shape}")
+        if self.depth.shape != self.rgb.shape[:2]:
+            raise ValueError(
+                f"frame {self.index}: depth shape {self.depth.shape} differs from rgb shape {self.rgb.shape[:2]}"
+            )
+        if self.segments is not None and self.segments.shape != self.rgb.shape[:2]:
+            raise ValueError(
+                f"frame {self.index}: segments shape {self.segments.shape} differs from rgb {self.rgb.shape[:2]}"
+            )
+        self.K = np.asarray(self.K, dtype=np.float32)
+        if self.pose is not None:
+            self.pose = check_pose(self.pose, f"frame {self.index} pose")
+
+    @property
+    def height(self) -> int:
+        return int(self.rgb.shape[0])
+
+    @property
+    def width(self) -> int:
+        return int(self.rgb.shape[1])
+
+    @property
+    def camera(self) -> Camera:
+        return Camera.from_K(self.K, self.width, self.height)

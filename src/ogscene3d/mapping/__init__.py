@@ -1,0 +1,1 @@
+"""ogscene3d.mapping"""

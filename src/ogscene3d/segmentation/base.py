@@ -1,0 +1,35 @@
+"""The Segmenter protocol every 2D front-end implements (SAM, SAM+detector, classical, simulated)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+
+@dataclass
+class Segmentation:
+    """One frame's open-set segmentation.
+
+    ``ids``: int32 [H, W], 0 = no segment, ids are per-frame only (never consistent across frames).
+    ``scores``: {id: predicted IoU in [0, 1]} (SAM's, or the front-end's own estimate).
+    ``names``: {id: class name} for segments that came with a detector label.
+    """
+
+    ids: np.ndarray
+    scores: dict[int, float] = field(default_factory=dict)
+    names: dict[int, str] = field(default_factory=dict)
+
+    def score_map(self) -> np.ndarray:
+        """Per-pixel score (0 where there is no segment)."""
+        lut = np.zeros(int(self.ids.max(initial=0)) + 1, dtype=np.float32)
+        for k, v in self.scores.items():
+            if 0 < k < lut.size:
+                lut[k] = v
+        return lut[self.ids]
+
+
+@runtime_checkable
+class Segmenter(Protocol):
+    def __call__(self, rgb: np.ndarray, depth: np.ndarray | None = None) -> Segmentation: ...

@@ -1,0 +1,69 @@
+"""The precomputed segments format (DESIGN.md "Files").
+
+``DIR/<rgb stem>.png``: uint16 segment ids, 0 = no segment, same size as the RGB image;
+``DIR/<rgb stem>.json``: optional ``{"scores": {"<id>": float}}`` (SAM predicted IoU).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..atomic import atomic_write_bytes
+from ..errors import DataError
+
+
+def segments_paths(directory: str | Path, stem: str) -> tuple[Path, Path]:
+    d = Path(directory)
+    return d / f"{stem}.png", d / f"{stem}.json"
+
+
+def write_segments(directory: str | Path, stem: str, ids: np.ndarray, scores: dict[int, float] | None = None) -> Path:
+    """Write one frame's segment map (atomically: a partial file never looks like a finished frame)."""
+    ids = np.asarray(ids)
+    if ids.ndim != 2:
+        raise ValueError(f"segment ids must be a 2D map, got shape {ids.shape}")
+    if ids.min(initial=0) < 0 or ids.max(initial=0) > 65535:
+        raise ValueError("segment ids must lie in [0, 65535] to be stored as uint16 PNG")
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    png, js = segments_paths(d, stem)
+    if scores is not None:
+        payload = {"scores": {str(int(k)): float(v) for k, v in scores.items()}}
+        atomic_write_bytes(js, json.dumps(payload).encode())
+    ok, buf = cv2.imencode(".png", ids.astype(np.uint16))
+    if not ok:
+        raise DataError(f"{png}: could not encode segment map")
+    atomic_write_bytes(png, buf.tobytes())
+    return png
+
+
+def read_segments(
+    directory: str | Path, stem: str, shape: tuple[int, int] | None = None
+) -> tuple[np.ndarray, dict[int, float]]:
+    """Read one frame's segments: (int32 id map, {id: score}). Missing scores default to 1.0."""
+    png, js = segments_paths(directory, stem)
+    if not png.is_file():
+        raise DataError(f"{png}: segments file is missing")
+    ids = cv2.imread(str(png), cv2.IMREAD_UNCHANGED)
+    if ids is None:
+        raise DataError(f"{png}: cannot decode segments PNG (corrupt or truncated)")
+    if ids.ndim != 2:
+        raise DataError(f"{png}: segments PNG must be single-channel uint16, got shape {ids.shape}")
+    if shape is not None and tuple(ids.shape) != tuple(shape):
+        raise DataError(f"{png}: segments are {ids.shape[1]}x{ids.shape[0]}, the RGB image is {shape[1]}x{shape[0]}")
+    ids = ids.astype(np.int32)
+    present = [int(i) for i in np.unique(ids) if i != 0]
+    scores = {i: 1.0 for i in present}
+    if js.is_file():
+        try:
+            payload = json.loads(js.read_text())
+            raw = payload["scores"]
+            for k, v in raw.items():
+                scores[int(k)] = float(v)
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as e:
+            raise DataError(f"{js}: malformed segment scores ({e}); expected {{\"scores\": {{\"<id>\": float}}}}") from e
+    return ids, {i: scores[i] for i in present}
