@@ -3,7 +3,8 @@
 from .camera import Camera
 from .config import Config, load_config
 from .frame import Frame
+from .render import rasterization
 
 __version__ = "0.1.0"
 
-__all__ = ["Camera", "Config", "Frame", "load_config", "__version__"]
+__all__ = ["Camera", "Config", "Frame", "load_config", "rasterization", "__version__"]

@@ -21,7 +21,9 @@ class Camera:
             raise ValueError(f"Camera width/height must be positive, got {self.width}x{self.height}")
         vals = np.array([self.fx, self.fy, self.cx, self.cy], dtype=np.float64)
         if not np.all(np.isfinite(vals)) or self.fx <= 0 or self.fy <= 0:
-            raise ValueError(f"Camera intrinsics must be finite with positive focal lengths, got {vals.tolist()}")
+            raise ValueError(
+                f"Camera intrinsics must be finite with positive focal lengths, got {vals.tolist()}"
+            )
 
     @classmethod
     def from_K(cls, K: np.ndarray, width: int, height: int) -> Camera:

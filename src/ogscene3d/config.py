@@ -60,6 +60,23 @@ class SegmentationConfig:
     sam_score_range: list[float] = field(default_factory=lambda: [0.88, 1.0])
     conf_range: list[float] = field(default_factory=lambda: [0.5, 1.0])
     execution_provider: str = "auto"  # auto | cpu | cuda
+    # SAM automatic mask generation (paper Sec. III-B.1); defaults follow segment-anything's generator.
+    sam_input_size: int = 1024  # encoder side length, used only when the ONNX input has no fixed size
+    points_per_batch: int = 16  # grid prompts per decoder call (1 when the export fixes the batch to 1)
+    stability_score_offset: float = 1.0
+    mask_threshold: float = 0.0  # logit threshold that binarises decoder masks
+    # open-vocabulary detector (YOLO-World style export)
+    detector_input_size: int = 640  # letterbox side, used only when the ONNX input has no fixed size
+    detector_score_thresh: float = 0.25
+    detector_nms_thresh: float = 0.5
+    detector_max_detections: int = 100
+    detector_box_format: str = "xyxy"  # xyxy | cxcywh, for exports with separate boxes/scores/labels outputs
+    # classical (weight-free) fallback: graph segmentation on colour, depth and normals
+    classical_k: float = 1.5  # Felzenszwalb scale: larger -> larger regions
+    classical_min_size: int = 60  # pixels at the working resolution
+    classical_max_side: int = 320  # images are segmented at most this large, labels upsampled
+    classical_depth_weight: float = 8.0  # weight of the relative depth step |dz|/z in an edge weight
+    classical_normal_weight: float = 2.0  # weight of (1 - cos) between neighbouring normals
 
 
 @dataclass
@@ -103,6 +120,9 @@ class CaptionerConfig:
     api_key_env: str = "OPENAI_API_KEY"
     timeout_s: float = 30.0
     max_retries: int = 2
+    backoff_s: float = 1.0  # first retry delay; doubles per retry
+    max_tokens: int = 300
+    concurrency: int = 4  # parallel per-node caption requests
 
 
 @dataclass
@@ -113,6 +133,15 @@ class RelationsConfig:
     api_key_env: str = "OPENAI_API_KEY"
     timeout_s: float = 30.0
     max_retries: int = 2
+    backoff_s: float = 1.0
+    max_tokens: int = 2000
+    # geometric predictor (metres / ratios); also the LLM's per-pair fallback
+    contact_tol: float = 0.05  # vertical gap still counted as contact ("on")
+    cell_size: float = 0.05  # horizontal grid for per-column stacking tests
+    overlap_ratio: float = 0.3  # shared footprint cells (of the smaller node) for on/above/under/below
+    inside_ratio: float = 0.8  # fraction of points inside the other's box for "in"
+    under_gap: float = 0.5  # lower, smaller node closer than this: "under", else "below"
+    attach_elevation: float = 0.1  # min height above a wall's bottom for "attached to"
 
 
 @dataclass
@@ -120,7 +149,9 @@ class NodeConfidenceConfig:
     kind: str = "mean"  # mean | clip
     clip_image: str | None = None
     clip_text: str | None = None
-    clip_vocab: str | None = None
+    clip_vocab: str | None = None  # OpenAI bpe_simple_vocab_16e6.txt(.gz), or HF vocab.json (+ clip_merges)
+    clip_merges: str | None = None  # HF merges.txt, only with a vocab.json
+    execution_provider: str = "auto"  # auto | cpu | cuda
 
 
 @dataclass
@@ -133,6 +164,15 @@ class GraphConfig:
     tau_e: float = 0.2
     min_gaussians: int = 20
     up_axis: list[float] = field(default_factory=lambda: [0.0, -1.0, 0.0])
+    max_points_per_node: int = 1024  # random subsample of a node's Gaussians for edges and relations
+    background: bool = False  # run graph updates on a worker thread (never blocks mapping)
+    max_masked_views: int = 3
+    crop_max_side: int = 256  # stored crops are downscaled to this many pixels on the long side
+    context_pad: float = 0.25  # context crop: bbox grown by this fraction of its size on each side
+    min_obs_pixels: int = 50  # smaller projections are not stored as observations
+    query_embedding: str = "none"  # none | clip | openai (the captioner's endpoint, /embeddings)
+    embedding_model: str = ""
+    query_min_similarity: float = 0.25
     captioner: CaptionerConfig = field(default_factory=CaptionerConfig)
     relations: RelationsConfig = field(default_factory=RelationsConfig)
     confidence: NodeConfidenceConfig = field(default_factory=NodeConfidenceConfig)
@@ -144,6 +184,25 @@ class TrackingConfig:
     max_translation: float = 0.3  # metres per frame beyond which a step is implausible
     max_rotation_deg: float = 30.0
     keyframe_every: int = 5
+    # RGB-D odometry (ogscene3d.tracking); see that module's docstring for the meaning of each field.
+    method: str = "hybrid"  # hybrid | color | point_to_plane
+    iterations: list[int] = field(default_factory=lambda: [6, 10, 20])  # per pyramid level, coarse to fine
+    max_width: int = 640  # track on images downsampled by an integer factor to at most this width; 0 = full
+    depth_min: float = 0.1  # metres
+    depth_max: float = 5.0  # metres
+    depth_outlier_trunc: float = 0.07  # metres
+    depth_huber_delta: float = 0.05  # metres
+    intensity_huber_delta: float = 0.1  # intensity in [0, 1]
+    min_fitness: float = 0.25  # fraction of pixels with a valid correspondence below which a step fails
+    max_inlier_rmse: float = 0.1  # hybrid residual above which a step fails
+    keyframe_fitness: float = 0.7  # overlap with the keyframe below which the frame becomes a keyframe
+    keyframe_translation: float = 0.1  # metres from the keyframe beyond which the frame becomes a keyframe
+    keyframe_rotation_deg: float = 10.0
+    max_lost_frames: int = 0  # consecutive failures after which tracking restarts at the last pose; 0 = never
+    feature_init: bool = True  # ORB + RANSAC initial guess when the motion prior does not converge
+    orb_features: int = 1000
+    ransac_threshold: float = 0.05  # metres
+    min_feature_inliers: int = 20
 
 
 @dataclass

@@ -23,11 +23,26 @@ def resolve_device(device: str | torch.device | None = None) -> torch.device:
     return dev
 
 
+_WARP_READY = False
+
+
+def _mark_ready() -> None:
+    global _WARP_READY
+    _WARP_READY = True
+
+
 def warp_device(device: torch.device):
     """The Warp device for a torch device (initialises Warp on first use)."""
     import warp as wp
 
-    wp.init()
+    # Warp logs a line per module load; keep the console for our own progress (users can lower it again).
+    if not _WARP_READY:
+        if hasattr(wp, "LOG_WARNING"):
+            wp.config.log_level = wp.LOG_WARNING
+        else:
+            wp.config.quiet = True
+        wp.init()
+        _mark_ready()
     return wp.device_from_torch(device)
 
 

@@ -46,14 +46,17 @@ class Frame:
 
     def __post_init__(self) -> None:
         if self.rgb.ndim != 3 or self.rgb.shape[2] != 3 or self.rgb.dtype != np.uint8:
-            raise ValueError(f"frame {self.index}: rgb must be uint8 HxWx3, got {self.rgb.dtype} {self.rgb.shape}")
+            raise ValueError(
+                f"frame {self.index}: rgb must be uint8 HxWx3, got {self.rgb.dtype} {self.rgb.shape}"
+            )
         if self.depth.shape != self.rgb.shape[:2]:
             raise ValueError(
                 f"frame {self.index}: depth shape {self.depth.shape} differs from rgb shape {self.rgb.shape[:2]}"
             )
         if self.segments is not None and self.segments.shape != self.rgb.shape[:2]:
             raise ValueError(
-                f"frame {self.index}: segments shape {self.segments.shape} differs from rgb {self.rgb.shape[:2]}"
+                f"frame {self.index}: segments shape {self.segments.shape} "
+                f"differs from rgb {self.rgb.shape[:2]}"
             )
         self.K = np.asarray(self.K, dtype=np.float32)
         if self.pose is not None:

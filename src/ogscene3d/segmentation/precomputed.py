@@ -21,7 +21,9 @@ def segments_paths(directory: str | Path, stem: str) -> tuple[Path, Path]:
     return d / f"{stem}.png", d / f"{stem}.json"
 
 
-def write_segments(directory: str | Path, stem: str, ids: np.ndarray, scores: dict[int, float] | None = None) -> Path:
+def write_segments(
+    directory: str | Path, stem: str, ids: np.ndarray, scores: dict[int, float] | None = None
+) -> Path:
     """Write one frame's segment map (atomically: a partial file never looks like a finished frame)."""
     ids = np.asarray(ids)
     if ids.ndim != 2:
@@ -54,7 +56,9 @@ def read_segments(
     if ids.ndim != 2:
         raise DataError(f"{png}: segments PNG must be single-channel uint16, got shape {ids.shape}")
     if shape is not None and tuple(ids.shape) != tuple(shape):
-        raise DataError(f"{png}: segments are {ids.shape[1]}x{ids.shape[0]}, the RGB image is {shape[1]}x{shape[0]}")
+        raise DataError(
+            f"{png}: segments are {ids.shape[1]}x{ids.shape[0]}, the RGB image is {shape[1]}x{shape[0]}"
+        )
     ids = ids.astype(np.int32)
     present = [int(i) for i in np.unique(ids) if i != 0]
     scores = {i: 1.0 for i in present}
@@ -65,5 +69,7 @@ def read_segments(
             for k, v in raw.items():
                 scores[int(k)] = float(v)
         except (json.JSONDecodeError, KeyError, TypeError, ValueError) as e:
-            raise DataError(f"{js}: malformed segment scores ({e}); expected {{\"scores\": {{\"<id>\": float}}}}") from e
+            raise DataError(
+                f'{js}: malformed segment scores ({e}); expected {{"scores": {{"<id>": float}}}}'
+            ) from e
     return ids, {i: scores[i] for i in present}

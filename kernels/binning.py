@@ -1,0 +1,91 @@
+"""Tile binning: which 16x16 tiles each projected Gaussian touches, keyed for a per-tile depth sort.
+
+Keys are 64-bit: ``(camera * tiles_per_camera + tile) << 32 | float_bits(depth)``. Depths of kept
+Gaussians are > near_plane > 0, and positive IEEE floats order like their bit patterns, so one radix
+sort gives tiles in order and, inside each tile, Gaussians front to back.
+"""
+
+import warp as wp
+
+
+@wp.func
+def tile_rect(center: wp.vec2, radius: float, tile_size: int, tiles_x: int, tiles_y: int) -> wp.vec4i:
+    ts = float(tile_size)
+    x0 = wp.min(wp.max(0, int((center[0] - radius) / ts)), tiles_x)
+    y0 = wp.min(wp.max(0, int((center[1] - radius) / ts)), tiles_y)
+    x1 = wp.min(wp.max(0, int((center[0] + radius + ts - 1.0) / ts)), tiles_x)
+    y1 = wp.min(wp.max(0, int((center[1] + radius + ts - 1.0) / ts)), tiles_y)
+    return wp.vec4i(x0, y0, x1, y1)
+
+
+@wp.kernel(enable_backward=False)
+def count_tiles(
+    means2d: wp.array(dtype=wp.vec2),
+    radii: wp.array(dtype=wp.int32),
+    tile_size: int,
+    tiles_x: int,
+    tiles_y: int,
+    counts: wp.array(dtype=wp.int32),
+):
+    tid = wp.tid()
+    r = radii[tid]
+    if r <= 0:
+        counts[tid] = 0
+        return
+    rect = tile_rect(means2d[tid], float(r), tile_size, tiles_x, tiles_y)
+    counts[tid] = (rect[2] - rect[0]) * (rect[3] - rect[1])
+
+
+@wp.kernel(enable_backward=False)
+def emit_intersections(
+    means2d: wp.array(dtype=wp.vec2),
+    radii: wp.array(dtype=wp.int32),
+    depth_bits: wp.array(dtype=wp.int32),
+    offsets: wp.array(dtype=wp.int64),
+    num_gaussians: int,
+    tile_size: int,
+    tiles_x: int,
+    tiles_y: int,
+    keys: wp.array(dtype=wp.int64),
+    values: wp.array(dtype=wp.int32),
+):
+    """``offsets`` is the inclusive prefix sum of the per-Gaussian tile counts."""
+    tid = wp.tid()
+    r = radii[tid]
+    if r <= 0:
+        return
+    rect = tile_rect(means2d[tid], float(r), tile_size, tiles_x, tiles_y)
+    cam = tid // num_gaussians
+    base = wp.int64(cam * tiles_x * tiles_y)
+    w = rect[2] - rect[0]
+    count = w * (rect[3] - rect[1])
+    start = offsets[tid] - wp.int64(count)
+    low = wp.int64(depth_bits[tid]) & wp.int64(4294967295)
+    k = wp.int64(0)
+    for ty in range(rect[1], rect[3]):
+        for tx in range(rect[0], rect[2]):
+            tile = base + wp.int64(ty * tiles_x + tx)
+            keys[start + k] = (tile << wp.int64(32)) | low
+            values[start + k] = tid
+            k += wp.int64(1)
+
+
+@wp.kernel(enable_backward=False)
+def tile_ranges(
+    keys: wp.array(dtype=wp.int64),
+    num_isects: int,
+    tile_start: wp.array(dtype=wp.int32),
+    tile_end: wp.array(dtype=wp.int32),
+):
+    """Per (camera, tile) the half-open range [start, end) of its entries in the sorted lists."""
+    i = wp.tid()
+    tile = wp.int32(keys[i] >> wp.int64(32))
+    if i == 0:
+        tile_start[tile] = 0
+    else:
+        prev = wp.int32(keys[i - 1] >> wp.int64(32))
+        if prev != tile:
+            tile_end[prev] = i
+            tile_start[tile] = i
+    if i == num_isects - 1:
+        tile_end[tile] = num_isects

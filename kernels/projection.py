@@ -1,0 +1,112 @@
+"""EWA projection of 3D Gaussians into each camera (gsplat's math, no antialiasing compensation).
+
+The kernel is straight-line code, so its backward is Warp's generated adjoint (launched with
+``adjoint=True``); only the blending loops need hand-written backward kernels.
+"""
+
+import warp as wp
+
+mat23 = wp.types.matrix(shape=(2, 3), dtype=wp.float32)
+
+
+@wp.func
+def quat_wxyz_to_mat(q: wp.vec4) -> wp.mat33:
+    n = wp.normalize(q)
+    w = n[0]
+    x = n[1]
+    y = n[2]
+    z = n[3]
+    return wp.mat33(
+        1.0 - 2.0 * (y * y + z * z),
+        2.0 * (x * y - w * z),
+        2.0 * (x * z + w * y),
+        2.0 * (x * y + w * z),
+        1.0 - 2.0 * (x * x + z * z),
+        2.0 * (y * z - w * x),
+        2.0 * (x * z - w * y),
+        2.0 * (y * z + w * x),
+        1.0 - 2.0 * (x * x + y * y),
+    )
+
+
+@wp.kernel
+def project_gaussians(
+    means: wp.array(dtype=wp.vec3),
+    quats: wp.array(dtype=wp.vec4),
+    scales: wp.array(dtype=wp.vec3),
+    viewmats: wp.array(dtype=wp.mat44),
+    Ks: wp.array(dtype=wp.mat33),
+    num_gaussians: int,
+    width: int,
+    height: int,
+    near_plane: float,
+    far_plane: float,
+    eps2d: float,
+    means2d: wp.array(dtype=wp.vec2),
+    conics: wp.array(dtype=wp.vec3),
+    depths: wp.array(dtype=float),
+    radii: wp.array(dtype=wp.int32),
+):
+    """One thread per (camera, Gaussian); outputs are flattened as c * N + n. radius 0 means culled."""
+    tid = wp.tid()
+    c = tid // num_gaussians
+    n = tid - c * num_gaussians
+    V = viewmats[c]
+    K = Ks[c]
+    R = wp.mat33(V[0, 0], V[0, 1], V[0, 2], V[1, 0], V[1, 1], V[1, 2], V[2, 0], V[2, 1], V[2, 2])
+    t = wp.vec3(V[0, 3], V[1, 3], V[2, 3])
+    p = R * means[n] + t
+    z = p[2]
+    if z <= near_plane or z >= far_plane:
+        radii[tid] = 0
+        return
+
+    M = quat_wxyz_to_mat(quats[n])
+    s = scales[n]
+    RS = M * wp.diag(s)
+    cov_w = RS * wp.transpose(RS)
+    cov_c = R * cov_w * wp.transpose(R)
+
+    fx = K[0, 0]
+    fy = K[1, 1]
+    cx = K[0, 2]
+    cy = K[1, 2]
+    # Clamp the Jacobian's evaluation point to 1.3x the field of view, as 3DGS/gsplat do, so that
+    # Gaussians far outside the image do not get exploding screen-space covariances.
+    tan_fovx = 0.5 * float(width) / fx
+    tan_fovy = 0.5 * float(height) / fy
+    lim_x_pos = (float(width) - cx) / fx + 0.3 * tan_fovx
+    lim_x_neg = cx / fx + 0.3 * tan_fovx
+    lim_y_pos = (float(height) - cy) / fy + 0.3 * tan_fovy
+    lim_y_neg = cy / fy + 0.3 * tan_fovy
+    rz = 1.0 / z
+    tx = z * wp.min(lim_x_pos, wp.max(-lim_x_neg, p[0] * rz))
+    ty = z * wp.min(lim_y_pos, wp.max(-lim_y_neg, p[1] * rz))
+    J = mat23(fx * rz, 0.0, -fx * tx * rz * rz, 0.0, fy * rz, -fy * ty * rz * rz)
+    cov2d = J * cov_c * wp.transpose(J)
+    a = cov2d[0, 0] + eps2d
+    b = cov2d[0, 1]
+    d = cov2d[1, 1] + eps2d
+    det = a * d - b * b
+    if det <= 0.0:
+        radii[tid] = 0
+        return
+    inv_det = 1.0 / det
+    mean2d = wp.vec2(fx * p[0] * rz + cx, fy * p[1] * rz + cy)
+
+    mid = 0.5 * (a + d)
+    lam = mid + wp.sqrt(wp.max(0.01, mid * mid - det))
+    r = wp.ceil(3.0 * wp.sqrt(lam))
+    if (
+        mean2d[0] + r <= 0.0
+        or mean2d[0] - r >= float(width)
+        or mean2d[1] + r <= 0.0
+        or mean2d[1] - r >= float(height)
+    ):
+        radii[tid] = 0
+        return
+
+    radii[tid] = wp.int32(r)
+    means2d[tid] = mean2d
+    conics[tid] = wp.vec3(d * inv_det, -b * inv_det, a * inv_det)
+    depths[tid] = z

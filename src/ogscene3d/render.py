@@ -1,0 +1,466 @@
+"""Functional rendering API over the Warp kernels (gsplat's argument conventions).
+
+``rasterization`` projects 3D Gaussians (EWA), bins them into 16x16 tiles, sorts each tile front to
+back with one 64-bit radix sort, and alpha-blends any number of channels per pixel. Gradients flow to
+means, quats, scales, opacities and colors through two autograd Functions: the projection (Warp's
+generated adjoint) and the blending (hand-written back-to-front kernel).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+
+from ._validate import check_image_size, check_tensor
+from .device import warp_stream
+
+RENDER_MODES = ("RGB", "D", "ED", "RGB+D", "RGB+ED")
+# Channels blended per kernel pass; wider inputs are blended in chunks (each chunk is its own Warp
+# vector type, compiled once).
+MAX_CHANNELS_PER_PASS = 32
+
+
+def _wp():
+    import warp as wp
+
+    from .device import warp_device
+
+    warp_device(torch.device("cpu"))  # one-time Warp initialisation (quiet logging)
+    return wp
+
+
+def _kernels():
+    from ogscene3d.kernels import binning, projection, raster
+
+    return projection, binning, raster
+
+
+def _as_wp(t: torch.Tensor, dtype: Any = None):
+    """A flat (1D) Warp view of a contiguous tensor; vector/matrix dtypes consume the trailing dims."""
+    t = t.contiguous()
+    shape = getattr(dtype, "_shape_", ())
+    t = t.reshape(-1, *shape) if shape else t.reshape(-1)
+    return _wp().from_torch(t, dtype=dtype, requires_grad=False)
+
+
+class _Project(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, means, quats, scales, viewmats, Ks, width, height, near_plane, far_plane, eps2d):
+        wp = _wp()
+        projection, _, _ = _kernels()
+        C, N = viewmats.shape[0], means.shape[0]
+        dev = means.device
+        means2d = torch.zeros(C, N, 2, device=dev)
+        conics = torch.zeros(C, N, 3, device=dev)
+        depths = torch.zeros(C, N, device=dev)
+        radii = torch.zeros(C, N, dtype=torch.int32, device=dev)
+        args = [
+            means.detach().contiguous(),
+            quats.detach().contiguous(),
+            scales.detach().contiguous(),
+            viewmats.detach().contiguous(),
+            Ks.detach().contiguous(),
+        ]
+        if C * N > 0:
+            with warp_stream(dev) as wdev:
+                wp.launch(
+                    projection.project_gaussians,
+                    dim=C * N,
+                    inputs=_project_inputs(args, N, width, height, near_plane, far_plane, eps2d),
+                    outputs=_project_outputs(means2d, conics, depths, radii),
+                    device=wdev,
+                )
+        ctx.save_for_backward(*args, means2d, conics, depths, radii)
+        ctx.params = (N, width, height, near_plane, far_plane, eps2d)
+        ctx.mark_non_differentiable(radii)
+        return means2d, conics, depths, radii
+
+    @staticmethod
+    def backward(ctx, v_means2d, v_conics, v_depths, _v_radii):
+        wp = _wp()
+        projection, _, _ = _kernels()
+        means, quats, scales, viewmats, Ks, means2d, conics, depths, radii = ctx.saved_tensors
+        N, width, height, near_plane, far_plane, eps2d = ctx.params
+        C = viewmats.shape[0]
+        v_means = torch.zeros_like(means)
+        v_quats = torch.zeros_like(quats)
+        v_scales = torch.zeros_like(scales)
+        grads_out = [
+            torch.zeros_like(means2d) if v_means2d is None else v_means2d.contiguous(),
+            torch.zeros_like(conics) if v_conics is None else v_conics.contiguous(),
+            torch.zeros_like(depths) if v_depths is None else v_depths.contiguous(),
+        ]
+        if C * N > 0:
+            with warp_stream(means.device) as wdev:
+                wp.launch(
+                    projection.project_gaussians,
+                    dim=C * N,
+                    inputs=_project_inputs(
+                        [means, quats, scales, viewmats, Ks], N, width, height, near_plane, far_plane, eps2d
+                    ),
+                    outputs=_project_outputs(means2d.clone(), conics.clone(), depths.clone(), radii.clone()),
+                    adj_inputs=[
+                        _as_wp(v_means, wp.vec3),
+                        _as_wp(v_quats, wp.vec4),
+                        _as_wp(v_scales, wp.vec3),
+                        None,
+                        None,
+                        0,
+                        0,
+                        0,
+                        0.0,
+                        0.0,
+                        0.0,
+                    ],
+                    adj_outputs=[
+                        _as_wp(grads_out[0], wp.vec2),
+                        _as_wp(grads_out[1], wp.vec3),
+                        _as_wp(grads_out[2]),
+                        None,
+                    ],
+                    adjoint=True,
+                    device=wdev,
+                )
+        return v_means, v_quats, v_scales, None, None, None, None, None, None, None
+
+
+def _project_inputs(args, N, width, height, near_plane, far_plane, eps2d):
+    wp = _wp()
+    means, quats, scales, viewmats, Ks = args
+    return [
+        _as_wp(means, wp.vec3),
+        _as_wp(quats, wp.vec4),
+        _as_wp(scales, wp.vec3),
+        _as_wp(viewmats, wp.mat44),
+        _as_wp(Ks, wp.mat33),
+        N,
+        width,
+        height,
+        float(near_plane),
+        float(far_plane),
+        float(eps2d),
+    ]
+
+
+def _project_outputs(means2d, conics, depths, radii):
+    wp = _wp()
+    return [_as_wp(means2d, wp.vec2), _as_wp(conics, wp.vec3), _as_wp(depths), _as_wp(radii)]
+
+
+@dataclass
+class TileBins:
+    """Tile binning result: per (camera, tile) ranges into the depth-sorted Gaussian id list."""
+
+    tile_size: int
+    tiles_x: int
+    tiles_y: int
+    tile_start: torch.Tensor  # [C * tiles] int32
+    tile_end: torch.Tensor  # [C * tiles] int32
+    isect_ids: torch.Tensor  # [M] int32, flattened c * N + n, sorted by (camera, tile, depth)
+    tiles_per_gaussian: torch.Tensor  # [C, N] int32
+
+    @property
+    def num_intersections(self) -> int:
+        return int(self.isect_ids.shape[0])
+
+
+def bin_gaussians(
+    means2d: torch.Tensor,
+    radii: torch.Tensor,
+    depths: torch.Tensor,
+    width: int,
+    height: int,
+    tile_size: int = 16,
+) -> TileBins:
+    """Assign projected Gaussians [C, N] to tiles and sort every tile's list front to back."""
+    wp = _wp()
+    _, binning, _ = _kernels()
+    C, N = radii.shape
+    dev = radii.device
+    tiles_x = (width + tile_size - 1) // tile_size
+    tiles_y = (height + tile_size - 1) // tile_size
+    n_tiles = C * tiles_x * tiles_y
+    tile_start = torch.zeros(n_tiles, dtype=torch.int32, device=dev)
+    tile_end = torch.zeros(n_tiles, dtype=torch.int32, device=dev)
+    counts = torch.zeros(C, N, dtype=torch.int32, device=dev)
+    if C * N == 0:
+        empty = torch.zeros(0, dtype=torch.int32, device=dev)
+        return TileBins(tile_size, tiles_x, tiles_y, tile_start, tile_end, empty, counts)
+    m2d = _as_wp(means2d.detach(), wp.vec2)
+    rad = _as_wp(radii)
+    with warp_stream(dev) as wdev:
+        wp.launch(
+            binning.count_tiles,
+            dim=C * N,
+            inputs=[m2d, rad, tile_size, tiles_x, tiles_y],
+            outputs=[_as_wp(counts)],
+            device=wdev,
+        )
+        offsets = torch.cumsum(counts.reshape(-1).to(torch.int64), 0)
+        total = int(offsets[-1].item())  # the one host sync: the sort buffers' size
+        keys = torch.zeros(2 * max(total, 1), dtype=torch.int64, device=dev)
+        values = torch.zeros(2 * max(total, 1), dtype=torch.int32, device=dev)
+        if total > 0:
+            depth_bits = depths.detach().contiguous().view(torch.int32)
+            wk, wv = _as_wp(keys), _as_wp(values)
+            wp.launch(
+                binning.emit_intersections,
+                dim=C * N,
+                inputs=[m2d, rad, _as_wp(depth_bits), _as_wp(offsets), N, tile_size, tiles_x, tiles_y],
+                outputs=[wk, wv],
+                device=wdev,
+            )
+            wp.utils.radix_sort_pairs(wk, wv, total)
+            wp.launch(
+                binning.tile_ranges,
+                dim=total,
+                inputs=[wk, total],
+                outputs=[_as_wp(tile_start), _as_wp(tile_end)],
+                device=wdev,
+            )
+    return TileBins(tile_size, tiles_x, tiles_y, tile_start, tile_end, values[:total], counts)
+
+
+def _chunks(D: int) -> list[tuple[int, int]]:
+    return [(s, min(D, s + MAX_CHANNELS_PER_PASS)) for s in range(0, D, MAX_CHANNELS_PER_PASS)]
+
+
+class _Rasterize(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, means2d, conics, colors, opacities, backgrounds, bins: TileBins, width, height):
+        wp = _wp()
+        _, _, raster = _kernels()
+        C, N, D = colors.shape
+        dev = colors.device
+        out_colors = torch.empty(C, height, width, D, device=dev)
+        out_alphas = torch.empty(C, height, width, device=dev)
+        last_ids = torch.empty(C, height, width, dtype=torch.int32, device=dev)
+        common = [_as_wp(means2d.detach(), wp.vec2), _as_wp(conics.detach(), wp.vec3)]
+        tiles = bins.tiles_x * bins.tiles_y
+        dim = C * tiles * bins.tile_size * bins.tile_size
+        with warp_stream(dev) as wdev:
+            for s, e in _chunks(D):
+                fwd, _ = raster.raster_kernels(e - s)
+                vec = wp.types.vector(length=e - s, dtype=wp.float32)
+                part = torch.empty(C, height, width, e - s, device=dev)
+                bg = backgrounds[:, s:e] if backgrounds is not None else torch.zeros(C, e - s, device=dev)
+                wp.launch(
+                    fwd,
+                    dim=dim,
+                    inputs=[
+                        *common,
+                        _as_wp(colors[..., s:e].detach(), vec),
+                        _as_wp(opacities.detach()),
+                        _as_wp(bg.detach(), vec),
+                        int(backgrounds is not None),
+                        _as_wp(bins.tile_start),
+                        _as_wp(bins.tile_end),
+                        _as_wp(bins.isect_ids),
+                        N,
+                        width,
+                        height,
+                        bins.tile_size,
+                        bins.tiles_x,
+                        tiles,
+                    ],
+                    outputs=[_as_wp(part, vec), _as_wp(out_alphas), _as_wp(last_ids)],
+                    device=wdev,
+                    block_dim=bins.tile_size * bins.tile_size,
+                )
+                out_colors[..., s:e] = part
+        ctx.save_for_backward(
+            means2d,
+            conics,
+            colors,
+            opacities,
+            backgrounds if backgrounds is not None else torch.empty(0, device=dev),
+            out_alphas,
+            last_ids,
+        )
+        ctx.bins = bins
+        ctx.has_bg = backgrounds is not None
+        ctx.size = (width, height)
+        ctx.mark_non_differentiable(last_ids)
+        return out_colors, out_alphas.unsqueeze(-1), last_ids
+
+    @staticmethod
+    def backward(ctx, v_colors_out, v_alphas_out, _v_last):
+        wp = _wp()
+        _, _, raster = _kernels()
+        means2d, conics, colors, opacities, backgrounds, out_alphas, last_ids = ctx.saved_tensors
+        bins: TileBins = ctx.bins
+        width, height = ctx.size
+        C, N, D = colors.shape
+        dev = colors.device
+        v_means2d = torch.zeros_like(means2d)
+        v_conics = torch.zeros_like(conics)
+        v_colors = torch.zeros_like(colors)
+        v_opac = torch.zeros(C, N, device=dev)
+        if v_colors_out is None:
+            v_colors_out = torch.zeros(C, height, width, D, device=dev)
+        v_alpha = torch.zeros(C, height, width, device=dev) if v_alphas_out is None else v_alphas_out[..., 0]
+        tiles = bins.tiles_x * bins.tiles_y
+        dim = C * tiles * bins.tile_size * bins.tile_size
+        with warp_stream(dev) as wdev:
+            for chunk, (s, e) in enumerate(_chunks(D)):
+                _, bwd = raster.raster_kernels(e - s)
+                vec = wp.types.vector(length=e - s, dtype=wp.float32)
+                bg = backgrounds[:, s:e] if ctx.has_bg else torch.zeros(C, e - s, device=dev)
+                v_part = torch.zeros(C, N, e - s, device=dev)
+                # The alpha output depends on geometry only: count its gradient in one chunk.
+                v_a = v_alpha if chunk == 0 else torch.zeros_like(v_alpha)
+                wp.launch(
+                    bwd,
+                    dim=dim,
+                    inputs=[
+                        _as_wp(means2d.detach(), wp.vec2),
+                        _as_wp(conics.detach(), wp.vec3),
+                        _as_wp(colors[..., s:e].detach(), vec),
+                        _as_wp(opacities.detach()),
+                        _as_wp(bg.detach(), vec),
+                        int(ctx.has_bg),
+                        _as_wp(bins.tile_start),
+                        _as_wp(bins.isect_ids),
+                        _as_wp(out_alphas),
+                        _as_wp(last_ids),
+                        _as_wp(v_colors_out[..., s:e], vec),
+                        _as_wp(v_a),
+                        N,
+                        width,
+                        height,
+                        bins.tile_size,
+                        bins.tiles_x,
+                        tiles,
+                    ],
+                    outputs=[
+                        _as_wp(v_means2d, wp.vec2),
+                        _as_wp(v_conics, wp.vec3),
+                        _as_wp(v_part, vec),
+                        _as_wp(v_opac),
+                    ],
+                    device=wdev,
+                    block_dim=bins.tile_size * bins.tile_size,
+                )
+                v_colors[..., s:e] = v_part
+        v_bg = None
+        if ctx.has_bg and ctx.needs_input_grad[4]:
+            T = (1.0 - out_alphas).unsqueeze(-1)
+            v_bg = (v_colors_out * T).sum(dim=(1, 2))
+        return v_means2d, v_conics, v_colors, v_opac.sum(0), v_bg, None, None, None
+
+
+def _check_common(means, quats, scales, opacities, viewmats, Ks, width, height):
+    check_tensor("means", means, (None, 3))
+    dev = means.device
+    N = means.shape[0]
+    check_tensor("quats", quats, (N, 4), dev)
+    check_tensor("scales", scales, (N, 3), dev)
+    check_tensor("opacities", opacities, (N,), dev)
+    check_tensor("viewmats", viewmats, (None, 4, 4), dev)
+    C = viewmats.shape[0]
+    check_tensor("Ks", Ks, (C, 3, 3), dev)
+    if C == 0:
+        raise ValueError("viewmats must hold at least one camera, got shape [0, 4, 4]")
+    if N and bool((scales <= 0).any()):
+        raise ValueError("scales must be positive (activated, e.g. exp(log_scales))")
+    if N and bool((quats.norm(dim=-1) == 0).any()):
+        raise ValueError("quats contains a zero quaternion")
+    if bool(((Ks[:, 0, 0] <= 0) | (Ks[:, 1, 1] <= 0)).any()):
+        raise ValueError("Ks must have positive focal lengths")
+    return check_image_size(width, height)
+
+
+def rasterization(
+    means: torch.Tensor,
+    quats: torch.Tensor,
+    scales: torch.Tensor,
+    opacities: torch.Tensor,
+    colors: torch.Tensor,
+    viewmats: torch.Tensor,
+    Ks: torch.Tensor,
+    width: int,
+    height: int,
+    near_plane: float = 0.01,
+    far_plane: float = 1e10,
+    backgrounds: torch.Tensor | None = None,
+    render_mode: str = "RGB",
+    eps2d: float = 0.3,
+    tile_size: int = 16,
+) -> tuple[torch.Tensor, torch.Tensor, dict]:
+    """Render C views of N Gaussians.
+
+    Args (float32, all on one device; quats wxyz, scales and opacities already activated):
+        means [N, 3], quats [N, 4], scales [N, 3], opacities [N], colors [N, D] or [C, N, D],
+        viewmats [C, 4, 4] world-to-camera (OpenCV axes), Ks [C, 3, 3], backgrounds [C, D] or None.
+        render_mode: "RGB" (colors), "D" (accumulated depth), "ED" (expected depth = D / alpha),
+        "RGB+D", "RGB+ED" (depth appended as the last channel).
+    Returns:
+        colors [C, H, W, D] (+1 channel with depth in the "+D"/"+ED" modes, D = 1 in "D"/"ED"),
+        alphas [C, H, W, 1], meta (projection and binning results: radii, means2d, depths, conics,
+        tiles_per_gaussian, tile ranges, isect_ids, n_cameras, width, height, tile_size).
+    Differentiable w.r.t. means, quats, scales, opacities and colors (not viewmats or Ks).
+    """
+    width, height = _check_common(means, quats, scales, opacities, viewmats, Ks, width, height)
+    if render_mode not in RENDER_MODES:
+        raise ValueError(f"render_mode must be one of {RENDER_MODES}, got {render_mode!r}")
+    if not (isinstance(tile_size, int) and 1 <= tile_size <= 32):
+        raise ValueError(f"tile_size must be an int in [1, 32], got {tile_size!r}")
+    if not (near_plane > 0 and far_plane > near_plane):
+        raise ValueError(
+            f"need 0 < near_plane < far_plane, got near_plane={near_plane}, far_plane={far_plane}"
+        )
+    if not eps2d >= 0:
+        raise ValueError(f"eps2d must be >= 0, got {eps2d}")
+    dev = means.device
+    N, C = means.shape[0], viewmats.shape[0]
+    if colors.dim() == 2:
+        check_tensor("colors", colors, (N, None), dev)
+        colors = colors.unsqueeze(0).expand(C, N, colors.shape[-1])
+    else:
+        check_tensor("colors", colors, (C, N, None), dev)
+    if colors.shape[-1] == 0:
+        raise ValueError("colors must have at least one channel")
+    D = colors.shape[-1]
+    if backgrounds is not None:
+        check_tensor("backgrounds", backgrounds, (C, D), dev)
+
+    means2d, conics, depths, radii = _Project.apply(
+        means, quats, scales, viewmats, Ks, width, height, near_plane, far_plane, eps2d
+    )
+    with torch.no_grad():
+        bins = bin_gaussians(means2d, radii, depths, width, height, tile_size)
+
+    if render_mode in ("D", "ED"):
+        blend, bg = depths.unsqueeze(-1), None
+    elif render_mode in ("RGB+D", "RGB+ED"):
+        blend = torch.cat([colors, depths.unsqueeze(-1)], dim=-1)
+        bg = None if backgrounds is None else torch.cat([backgrounds, backgrounds.new_zeros(C, 1)], dim=-1)
+    else:
+        blend, bg = colors, backgrounds
+    render, alphas, last_ids = _Rasterize.apply(
+        means2d, conics, blend.contiguous(), opacities, bg, bins, width, height
+    )
+    if render_mode in ("ED", "RGB+ED"):
+        expected = render[..., -1:] / alphas.clamp_min(1e-10)
+        render = torch.cat([render[..., :-1], expected], dim=-1)
+    meta = {
+        "radii": radii,
+        "means2d": means2d,
+        "depths": depths,
+        "conics": conics,
+        "tiles_per_gaussian": bins.tiles_per_gaussian,
+        "tile_start": bins.tile_start,
+        "tile_end": bins.tile_end,
+        "isect_ids": bins.isect_ids,
+        "n_intersections": bins.num_intersections,
+        "last_ids": last_ids,
+        "n_cameras": C,
+        "width": width,
+        "height": height,
+        "tile_size": tile_size,
+        "tile_width": bins.tiles_x,
+        "tile_height": bins.tiles_y,
+    }
+    return render, alphas, meta
