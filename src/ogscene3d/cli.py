@@ -16,6 +16,7 @@ from .errors import OGSceneError
 # Modules that register a subcommand, in the order they appear in --help.
 _COMMAND_MODULES = [
     "ogscene3d.render_demo",
+    "ogscene3d.eval.eval_cli",
 ]
 
 

@@ -20,13 +20,14 @@ from .errors import ConfigError
 
 @dataclass
 class DataConfig:
-    kind: str = "auto"  # auto | replica | scannet | tum | sevenscenes | synthetic
+    kind: str = "auto"  # auto | replica | scannet | tum | sevenscenes | labelfusion | synthetic
     path: str | None = None
     segments_dir: str | None = None
     stride: int = 1
     start: int = 0
     max_frames: int | None = None
     depth_scale: float | None = None  # raw depth units per metre; None = the dataset's own
+    depth_format: str = "auto"  # auto (the layout's own) | linear (raw / scale) | shift3 (APC: (raw >> 3) / scale)
     intrinsics: list[float] | None = None  # [fx, fy, cx, cy] overriding the dataset's
     min_depth: float = 0.0
     max_depth: float = 0.0  # 0 = no limit

@@ -51,7 +51,8 @@ class Frame:
             )
         if self.depth.shape != self.rgb.shape[:2]:
             raise ValueError(
-                f"frame {self.index}: depth shape {self.depth.shape} differs from rgb shape {self.rgb.shape[:2]}"
+                f"frame {self.index}: depth shape {self.depth.shape} "
+                f"differs from rgb shape {self.rgb.shape[:2]}"
             )
         if self.segments is not None and self.segments.shape != self.rgb.shape[:2]:
             raise ValueError(
