@@ -80,9 +80,9 @@ def raster_kernels(channels: int):
         px = float(x) + 0.5
         py = float(y) + 0.5
         ct = cam * tiles_per_cam + pix[1]
-        T = 1.0
+        T = float(1.0)
         acc = vec()
-        last = -1
+        last = int(-1)
         for i in range(tile_start[ct], tile_end[ct]):
             g = isect_ids[i]
             a = gaussian_alpha(conics[g], means2d[g], opacities[g % num_gaussians], px, py)
@@ -145,7 +145,7 @@ def raster_kernels(channels: int):
         v_c = v_out_colors[out]
         v_a_out = v_out_alphas[out]
         # Blending a background adds T_final * bg, whose derivative w.r.t. each alpha is -T_final/(1-a) * bg.
-        bg_dot = 0.0
+        bg_dot = float(0.0)
         if use_background != 0:
             bg_dot = wp.dot(backgrounds[cam], v_c)
         behind = vec()  # sum over Gaussians behind the current one of c_j * w_j
