@@ -4,7 +4,18 @@ from .camera import Camera
 from .config import Config, load_config
 from .frame import Frame
 from .render import rasterization
+from .semantics import SemanticRender, render_semantics, rendering_contribution
 
 __version__ = "0.1.0"
 
-__all__ = ["Camera", "Config", "Frame", "load_config", "rasterization", "__version__"]
+__all__ = [
+    "Camera",
+    "Config",
+    "Frame",
+    "load_config",
+    "rasterization",
+    "render_semantics",
+    "rendering_contribution",
+    "SemanticRender",
+    "__version__",
+]

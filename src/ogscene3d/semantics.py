@@ -1,0 +1,277 @@
+"""Semantic rendering API: confidence-weighted label voting and per-Gaussian rendering contribution.
+
+Both build on the rasterizer's projection and tile binning, restricted to labelled Gaussians
+(label >= 0): unlabelled Gaussians neither vote nor occlude (DESIGN.md "Kernel math").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import torch
+
+from ._validate import check_tensor
+from .device import warp_stream
+from .render import TileBins, _as_wp, _check_common, _Project, _wp, bin_gaussians
+
+DEFAULT_BUFFER_SIZE = 8
+
+
+@dataclass
+class SemanticRender:
+    """``labels`` [C, H, W] int32 (-1 where no labelled Gaussian votes); ``weights`` [C, H, W] the winning
+    vote max_k R_p[k]. With ``return_buffer``: ``buffer_labels`` / ``buffer_weights`` [C, H, W, B], the
+    per-pixel (label, weight) entries (label -1 = empty). ``meta`` holds ``overflow_pixels`` (pixels that saw
+    more distinct labels than the buffer holds) and ``overflow_votes`` (votes dropped or evicted)."""
+
+    labels: torch.Tensor
+    weights: torch.Tensor
+    buffer_labels: torch.Tensor | None = None
+    buffer_weights: torch.Tensor | None = None
+    meta: dict = field(default_factory=dict)
+
+
+def _check_semantic_inputs(means, quats, scales, opacities, labels, confidences, viewmats, Ks, width, height):
+    width, height = _check_common(means, quats, scales, opacities, viewmats, Ks, width, height)
+    N = means.shape[0]
+    check_tensor("labels", labels, (N,), means.device, dtypes=(torch.int32, torch.int64))
+    check_tensor("confidences", confidences, (N,), means.device)
+    if N and bool(((confidences < 0) | (confidences > 1)).any()):
+        raise ValueError("confidences must lie in [0, 1]")
+    if N and int(labels.max()) > torch.iinfo(torch.int32).max:
+        raise ValueError("labels must fit in int32")
+    return width, height
+
+
+def _vote(
+    means,
+    quats,
+    scales,
+    opacities,
+    labels,
+    confidences,
+    viewmats,
+    Ks,
+    width,
+    height,
+    near_plane,
+    far_plane,
+    eps2d,
+    tile_size,
+    buffer_size,
+):
+    """Project and bin the labelled subset, run the voting kernel. Returns (subset index, geometry, outputs)."""
+    wp = _wp()
+    from ogscene3d.kernels.semantic import semantic_kernels
+
+    if not (isinstance(buffer_size, int) and 1 <= buffer_size <= 64):
+        raise ValueError(f"buffer_size must be an int in [1, 64], got {buffer_size!r}")
+    dev = means.device
+    C = viewmats.shape[0]
+    keep = torch.nonzero(labels >= 0).squeeze(1)
+    sub = [t.detach()[keep].contiguous() for t in (means, quats, scales, opacities)]
+    sub_labels = labels[keep].to(torch.int32).contiguous()
+    sub_conf = confidences.detach()[keep].contiguous()
+    n = int(keep.numel())
+    with torch.no_grad():
+        means2d, conics, depths, radii = _Project.apply(
+            sub[0],
+            sub[1],
+            sub[2],
+            viewmats.detach(),
+            Ks.detach(),
+            width,
+            height,
+            near_plane,
+            far_plane,
+            eps2d,
+        )
+        bins = bin_gaussians(means2d, radii, depths, width, height, tile_size)
+    buf_l = torch.full((C, height, width, buffer_size), -1, dtype=torch.int32, device=dev)
+    buf_w = torch.zeros(C, height, width, buffer_size, device=dev)
+    out_l = torch.full((C, height, width), -1, dtype=torch.int32, device=dev)
+    out_w = torch.zeros(C, height, width, device=dev)
+    overflow = torch.zeros(C, height, width, dtype=torch.int32, device=dev)
+    vote, _ = semantic_kernels(buffer_size)
+    veci = wp.types.vector(length=buffer_size, dtype=wp.int32)
+    vecf = wp.types.vector(length=buffer_size, dtype=wp.float32)
+    geometry = [
+        _as_wp(means2d, wp.vec2),
+        _as_wp(conics, wp.vec3),
+        _as_wp(sub[3]),
+        _as_wp(sub_labels),
+        _as_wp(sub_conf),
+        _as_wp(bins.tile_start),
+        _as_wp(bins.tile_end),
+        _as_wp(bins.isect_ids),
+    ]
+    dims = [max(n, 1), width, height, bins.tile_size, bins.tiles_x, bins.tiles_x * bins.tiles_y]
+    launch_dim = C * bins.tiles_x * bins.tiles_y * bins.tile_size * bins.tile_size
+    with warp_stream(dev) as wdev:
+        wp.launch(
+            vote,
+            dim=launch_dim,
+            inputs=[*geometry, *dims],
+            outputs=[
+                _as_wp(buf_l, veci),
+                _as_wp(buf_w, vecf),
+                _as_wp(out_l),
+                _as_wp(out_w),
+                _as_wp(overflow),
+            ],
+            device=wdev,
+            block_dim=bins.tile_size * bins.tile_size,
+        )
+    return keep, bins, geometry, dims, launch_dim, (buf_l, buf_w, out_l, out_w, overflow)
+
+
+def render_semantics(
+    means: torch.Tensor,
+    quats: torch.Tensor,
+    scales: torch.Tensor,
+    opacities: torch.Tensor,
+    labels: torch.Tensor,
+    confidences: torch.Tensor,
+    viewmats: torch.Tensor,
+    Ks: torch.Tensor,
+    width: int,
+    height: int,
+    near_plane: float = 0.01,
+    far_plane: float = 1e10,
+    eps2d: float = 0.3,
+    tile_size: int = 16,
+    buffer_size: int = DEFAULT_BUFFER_SIZE,
+    return_buffer: bool = False,
+) -> SemanticRender:
+    """Per-pixel label = argmax_k R_p[k] with R_p[k] = sum_{i: l_i = k} conf_i a_ip prod_{j<i} (1 - conf_j a_jp).
+
+    Shapes as in :func:`rasterization`; ``labels`` [N] int32/int64 (-1 = unlabelled), ``confidences`` [N]
+    float32 in [0, 1]. Memory is O(C * H * W * buffer_size), never O(H * W * number of labels).
+    """
+    width, height = _check_semantic_inputs(
+        means, quats, scales, opacities, labels, confidences, viewmats, Ks, width, height
+    )
+    _, bins, _, _, _, (buf_l, buf_w, out_l, out_w, overflow) = _vote(
+        means,
+        quats,
+        scales,
+        opacities,
+        labels,
+        confidences,
+        viewmats,
+        Ks,
+        width,
+        height,
+        near_plane,
+        far_plane,
+        eps2d,
+        tile_size,
+        buffer_size,
+    )
+    meta = {
+        "buffer_size": buffer_size,
+        "overflow_pixels": int((overflow > 0).sum()),
+        "overflow_votes": int(overflow.sum()),
+        "n_intersections": bins.num_intersections,
+    }
+    return SemanticRender(
+        labels=out_l,
+        weights=out_w,
+        buffer_labels=buf_l if return_buffer else None,
+        buffer_weights=buf_w if return_buffer else None,
+        meta=meta,
+    )
+
+
+def rendering_contribution(
+    means: torch.Tensor,
+    quats: torch.Tensor,
+    scales: torch.Tensor,
+    opacities: torch.Tensor,
+    labels: torch.Tensor,
+    confidences: torch.Tensor,
+    viewmat: torch.Tensor,
+    K: torch.Tensor,
+    width: int,
+    height: int,
+    pixel_mask: torch.Tensor | None = None,
+    eps: float = 1e-6,
+    near_plane: float = 0.01,
+    far_plane: float = 1e10,
+    eps2d: float = 0.3,
+    tile_size: int = 16,
+    buffer_size: int = DEFAULT_BUFFER_SIZE,
+) -> torch.Tensor:
+    """P_conf(i) = sum_p w_ip R_p[l_i] / (sum_p w_ip + eps) over pixels in ``pixel_mask`` (all if None).
+
+    ``viewmat`` [4, 4] world-to-camera, ``K`` [3, 3], ``pixel_mask`` [H, W] bool. Returns [N] float32 in
+    [0, 1]; 0 for unlabelled Gaussians and Gaussians that reach no (masked) pixel. Where a pixel's buffer
+    overflowed, R_p of a dropped label is taken as 0 (see ``render_semantics`` meta to detect it).
+    """
+    if isinstance(viewmat, torch.Tensor) and viewmat.dim() == 2:
+        viewmat = viewmat.unsqueeze(0)
+    if isinstance(K, torch.Tensor) and K.dim() == 2:
+        K = K.unsqueeze(0)
+    check_tensor("viewmat", viewmat, (1, 4, 4), means.device if isinstance(means, torch.Tensor) else None)
+    check_tensor("K", K, (1, 3, 3), means.device if isinstance(means, torch.Tensor) else None)
+    width, height = _check_semantic_inputs(
+        means, quats, scales, opacities, labels, confidences, viewmat, K, width, height
+    )
+    if not eps > 0:
+        raise ValueError(f"eps must be > 0, got {eps}")
+    dev = means.device
+    if pixel_mask is not None:
+        check_tensor("pixel_mask", pixel_mask, (height, width), dev, dtypes=(torch.bool, torch.uint8))
+    wp = _wp()
+    from ogscene3d.kernels.semantic import semantic_kernels
+
+    keep, bins, geometry, dims, launch_dim, (buf_l, buf_w, *_rest) = _vote(
+        means,
+        quats,
+        scales,
+        opacities,
+        labels,
+        confidences,
+        viewmat,
+        K,
+        width,
+        height,
+        near_plane,
+        far_plane,
+        eps2d,
+        tile_size,
+        buffer_size,
+    )
+    n = int(keep.numel())
+    num = torch.zeros(max(n, 1), device=dev)
+    den = torch.zeros(max(n, 1), device=dev)
+    mask = (
+        pixel_mask.to(torch.uint8).contiguous()
+        if pixel_mask is not None
+        else torch.zeros(1, dtype=torch.uint8, device=dev)
+    )
+    _, contribution = semantic_kernels(buffer_size)
+    veci = wp.types.vector(length=buffer_size, dtype=wp.int32)
+    vecf = wp.types.vector(length=buffer_size, dtype=wp.float32)
+    with warp_stream(dev) as wdev:
+        wp.launch(
+            contribution,
+            dim=launch_dim,
+            inputs=[
+                *geometry,
+                _as_wp(buf_l, veci),
+                _as_wp(buf_w, vecf),
+                _as_wp(mask),
+                int(pixel_mask is not None),
+                *dims,
+            ],
+            outputs=[_as_wp(num), _as_wp(den)],
+            device=wdev,
+            block_dim=bins.tile_size * bins.tile_size,
+        )
+    p_conf = torch.zeros(means.shape[0], device=dev)
+    p_conf[keep] = (num / (den + eps))[:n]
+    return p_conf.clamp_(0.0, 1.0)
+
+
+__all__ = ["SemanticRender", "render_semantics", "rendering_contribution", "TileBins"]

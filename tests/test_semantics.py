@@ -1,0 +1,160 @@
+"""Semantic voting and rendering contribution against the dense one-hot / autograd reference."""
+
+import pytest
+import torch
+from reference_semantic import semantic_reference
+from scenes import cameras, random_scene
+
+from ogscene3d import render_semantics, rendering_contribution
+
+
+def _compare(device, scene, labels, conf, width, height, pixel_mask=None, buffer_size=8):
+    means, quats, scales, opac = scene
+    vm, K = cameras(width, height, device=device)
+    sem = render_semantics(
+        means, quats, scales, opac, labels, conf, vm, K, width, height, buffer_size=buffer_size
+    )
+    p = rendering_contribution(
+        means,
+        quats,
+        scales,
+        opac,
+        labels,
+        conf,
+        vm[0],
+        K[0],
+        width,
+        height,
+        pixel_mask=pixel_mask,
+        buffer_size=buffer_size,
+    )
+    ref_lab, R, _, ref_p = semantic_reference(
+        means, quats, scales, opac, labels, conf, vm[0], K[0], width, height, pixel_mask=pixel_mask
+    )
+    got = sem.labels[0].cpu().long()
+    # ties aside: pixels whose two best reference votes are within 1e-5 may legitimately differ
+    if R.shape[1] >= 2:
+        top2 = R.topk(2, dim=1).values
+        clear = (top2[:, 0] - top2[:, 1] > 1e-5).reshape(height, width)
+    else:
+        clear = torch.ones(height, width, dtype=torch.bool)
+    agree = (got == ref_lab)[clear].double().mean()
+    assert agree >= 0.995, float(agree)
+    ref_w = R.max(dim=1).values.reshape(height, width) if R.shape[1] else torch.zeros(height, width)
+    assert (sem.weights[0].cpu().double() - ref_w).abs().max() < 1e-4
+    assert p.shape == labels.shape and p.dtype == torch.float32
+    assert (p.cpu().double() - ref_p).abs().max() < 1e-4
+    assert float(p.min()) >= 0 and float(p.max()) <= 1
+    return sem, p, ref_p
+
+
+def _scene(n, seed, device):
+    means, quats, scales, opac, _ = random_scene(n, seed=seed, device=device)
+    return [means, quats, scales, opac]
+
+
+def test_unlabelled_interleaved_in_depth(device):
+    n = 300
+    scene = _scene(n, 5, device)
+    g = torch.Generator().manual_seed(5)
+    labels = torch.randint(0, 6, (n,), generator=g, dtype=torch.int32)
+    labels[::3] = -1  # every third Gaussian unlabelled, spread through depth
+    conf = torch.rand(n, generator=g)
+    sem, p, _ = _compare(device, scene, labels.to(device), conf.to(device), 64, 48)
+    assert (p.cpu()[labels < 0] == 0).all()
+    assert sem.meta["overflow_pixels"] == 0
+
+
+def test_unlabelled_gaussians_do_not_occlude(device):
+    means = torch.tensor([[0.0, 0.0, 2.0], [0.0, 0.0, 4.0]], device=device)
+    quats = torch.tensor([[1.0, 0, 0, 0]] * 2, device=device)
+    scales = torch.full((2, 3), 0.5, device=device)
+    opac = torch.full((2,), 0.95, device=device)
+    labels = torch.tensor([-1, 7], dtype=torch.int32, device=device)
+    conf = torch.tensor([1.0, 0.8], device=device)
+    vm, K = cameras(24, 24, device=device)
+    sem = render_semantics(means, quats, scales, opac, labels, conf, vm, K, 24, 24)
+    assert int(sem.labels[0, 12, 12]) == 7
+    assert abs(float(sem.weights[0, 12, 12]) - 0.8 * 0.95 * 0.99) < 0.05
+
+
+def test_confidence_zero_and_one(device):
+    n = 200
+    scene = _scene(n, 9, device)
+    g = torch.Generator().manual_seed(9)
+    labels = torch.randint(0, 4, (n,), generator=g, dtype=torch.int32)
+    conf = (torch.rand(n, generator=g) > 0.5).float()
+    _, p, _ = _compare(device, scene, labels.to(device), conf.to(device), 48, 40)
+    assert (p.cpu()[conf == 0] == 0).all()
+
+
+def test_one_label_everywhere(device):
+    n = 150
+    scene = _scene(n, 13, device)
+    labels = torch.full((n,), 42, dtype=torch.int32, device=device)
+    conf = torch.rand(n, generator=torch.Generator().manual_seed(1)).to(device)
+    sem, _, _ = _compare(device, scene, labels, conf, 40, 30)
+    assert set(sem.labels.unique().tolist()) <= {-1, 42}
+
+
+def test_pixel_mask_restricts_contribution(device):
+    n = 200
+    scene = _scene(n, 21, device)
+    g = torch.Generator().manual_seed(21)
+    labels = torch.randint(0, 5, (n,), generator=g, dtype=torch.int32).to(device)
+    conf = torch.rand(n, generator=g).to(device)
+    mask = torch.zeros(30, 40, dtype=torch.bool)
+    mask[5:20, 10:30] = True
+    _, p_masked, _ = _compare(device, scene, labels, conf, 40, 30, pixel_mask=mask.to(device))
+    _, p_all, _ = _compare(device, scene, labels, conf, 40, 30)
+    assert not torch.allclose(p_masked, p_all)
+
+
+def test_more_labels_than_buffer(device):
+    # 12 Gaussians with distinct labels stacked on the optical axis, front ones strongest
+    n = 12
+    means = torch.zeros(n, 3)
+    means[:, 2] = torch.linspace(2.0, 5.0, n)
+    quats = torch.tensor([[1.0, 0, 0, 0]]).repeat(n, 1)
+    scales = torch.full((n, 3), 0.6)
+    opac = torch.full((n,), 0.3)
+    labels = torch.arange(100, 100 + n, dtype=torch.int32)
+    conf = torch.ones(n)
+    scene = [t.to(device) for t in (means, quats, scales, opac)]
+    vm, K = cameras(16, 16, device=device)
+    small = render_semantics(
+        *scene, labels.to(device), conf.to(device), vm, K, 16, 16, buffer_size=4, return_buffer=True
+    )
+    assert small.meta["overflow_pixels"] > 0 and small.meta["overflow_votes"] > 0
+    assert small.buffer_labels.shape == (1, 16, 16, 4)
+    ref_lab, _, _, _ = semantic_reference(*scene, labels, conf, vm[0], K[0], 16, 16)
+    # the strongest votes survive eviction, so the winner is still right
+    assert torch.equal(small.labels[0].cpu().long(), ref_lab)
+    big = render_semantics(*scene, labels.to(device), conf.to(device), vm, K, 16, 16, buffer_size=16)
+    assert big.meta["overflow_pixels"] == 0
+    assert torch.equal(big.labels[0].cpu().long(), ref_lab)
+
+
+def test_bad_semantic_inputs():
+    means, quats, scales, opac, _ = random_scene(4)
+    vm, K = cameras(8, 8)
+    with pytest.raises(ValueError, match="labels"):
+        render_semantics(means, quats, scales, opac, torch.zeros(4), torch.ones(4), vm, K, 8, 8)
+    with pytest.raises(ValueError, match="confidences"):
+        render_semantics(
+            means, quats, scales, opac, torch.zeros(4, dtype=torch.int32), torch.full((4,), 1.5), vm, K, 8, 8
+        )
+    with pytest.raises(ValueError, match="pixel_mask"):
+        rendering_contribution(
+            means,
+            quats,
+            scales,
+            opac,
+            torch.zeros(4, dtype=torch.int32),
+            torch.ones(4),
+            vm[0],
+            K[0],
+            8,
+            8,
+            pixel_mask=torch.ones(4, 4, dtype=torch.bool),
+        )
