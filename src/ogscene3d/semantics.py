@@ -60,7 +60,7 @@ def _vote(
     tile_size,
     buffer_size,
 ):
-    """Project and bin the labelled subset, run the voting kernel. Returns (subset index, geometry, outputs)."""
+    """Project and bin the labelled subset and run the voting kernel."""
     wp = _wp()
     from ogscene3d.kernels.semantic import semantic_kernels
 
@@ -143,7 +143,7 @@ def render_semantics(
     buffer_size: int = DEFAULT_BUFFER_SIZE,
     return_buffer: bool = False,
 ) -> SemanticRender:
-    """Per-pixel label = argmax_k R_p[k] with R_p[k] = sum_{i: l_i = k} conf_i a_ip prod_{j<i} (1 - conf_j a_jp).
+    """Per-pixel label argmax_k R_p[k], R_p[k] = sum_{i: l_i = k} conf_i a_ip prod_{j<i} (1 - conf_j a_jp).
 
     Shapes as in :func:`rasterization`; ``labels`` [N] int32/int64 (-1 = unlabelled), ``confidences`` [N]
     float32 in [0, 1]. Memory is O(C * H * W * buffer_size), never O(H * W * number of labels).
