@@ -1,0 +1,69 @@
+"""Semantic render + rendering contribution cost relative to a colour forward pass of the same scene.
+
+python benchmarks/semantic.py --device cuda                 # 500k Gaussians at 1200x680
+python benchmarks/semantic.py --device cpu --counts 20k --width 160 --height 120
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import camera, parse_count, peak_mb, print_table, synthetic_gaussians, time_ms  # noqa: E402
+
+from ogscene3d import rasterization, render_semantics, rendering_contribution  # noqa: E402
+from ogscene3d.device import resolve_device  # noqa: E402
+
+
+def bench_one(n: int, W: int, H: int, n_labels: int, iters: int, device: torch.device) -> dict:
+    means, quats, scales, opac, colors, labels, conf = synthetic_gaussians(n, device, labels=n_labels)
+    vm, K = camera(W, H, device)
+
+    def color():
+        with torch.no_grad():
+            return rasterization(means, quats, scales, opac, colors, vm, K, W, H)
+
+    def semantic():
+        return render_semantics(means, quats, scales, opac, labels, conf, vm, K, W, H)
+
+    def contribution():
+        return rendering_contribution(means, quats, scales, opac, labels, conf, vm[0], K[0], W, H)
+
+    t_color = time_ms(color, device, iters=iters)
+    t_sem = time_ms(semantic, device, iters=iters)
+    t_contrib = time_ms(contribution, device, iters=iters)
+    return {
+        "N": n,
+        "device": device.type,
+        "color_fwd_ms": t_color,
+        "semantic_ms": t_sem,
+        "contribution_ms": t_contrib,
+        "(sem+contrib)/color": (t_sem + t_contrib) / t_color,
+        "peak_MiB": peak_mb(contribution, device),
+        "overflow_px": semantic().meta["overflow_pixels"],
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--device", default=None)
+    ap.add_argument("--counts", default="500k")
+    ap.add_argument("--width", type=int, default=1200)
+    ap.add_argument("--height", type=int, default=680)
+    ap.add_argument("--labels", type=int, default=2000)
+    ap.add_argument("--iters", type=int, default=10)
+    args = ap.parse_args()
+    device = resolve_device(args.device)
+    W, H = args.width, args.height
+    rows = [bench_one(parse_count(c), W, H, args.labels, args.iters, device) for c in args.counts.split(",")]
+    print(f"semantic kernels at {W}x{H}, {args.labels} distinct labels, one camera")
+    print("contribution_ms includes the voting pass it needs")
+    print_table(rows, list(rows[0].keys()))
+
+
+if __name__ == "__main__":
+    main()
