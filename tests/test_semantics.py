@@ -158,3 +158,20 @@ def test_bad_semantic_inputs():
             8,
             pixel_mask=torch.ones(4, 4, dtype=torch.bool),
         )
+
+
+def test_contribution_can_return_the_label_map(device):
+    n = 120
+    means, quats, scales, opac = _scene(n, 31, device)
+    g = torch.Generator().manual_seed(31)
+    labels = torch.randint(-1, 5, (n,), generator=g, dtype=torch.int32).to(device)
+    conf = torch.rand(n, generator=g).to(device)
+    vm, K = cameras(40, 30, device=device)
+    p, sem = rendering_contribution(
+        means, quats, scales, opac, labels, conf, vm[0], K[0], 40, 30, return_semantics=True
+    )
+    alone = render_semantics(means, quats, scales, opac, labels, conf, vm, K, 40, 30)
+    assert torch.equal(sem.labels, alone.labels) and torch.equal(sem.weights, alone.weights)
+    assert torch.equal(
+        p, rendering_contribution(means, quats, scales, opac, labels, conf, vm[0], K[0], 40, 30)
+    )

@@ -151,7 +151,7 @@ def render_semantics(
     width, height = _check_semantic_inputs(
         means, quats, scales, opacities, labels, confidences, viewmats, Ks, width, height
     )
-    _, bins, _, _, _, (buf_l, buf_w, out_l, out_w, overflow) = _vote(
+    _, bins, _, _, _, outputs = _vote(
         means,
         quats,
         scales,
@@ -168,19 +168,7 @@ def render_semantics(
         tile_size,
         buffer_size,
     )
-    meta = {
-        "buffer_size": buffer_size,
-        "overflow_pixels": int((overflow > 0).sum()),
-        "overflow_votes": int(overflow.sum()),
-        "n_intersections": bins.num_intersections,
-    }
-    return SemanticRender(
-        labels=out_l,
-        weights=out_w,
-        buffer_labels=buf_l if return_buffer else None,
-        buffer_weights=buf_w if return_buffer else None,
-        meta=meta,
-    )
+    return _semantic_render(bins, buffer_size, outputs, return_buffer)
 
 
 def rendering_contribution(
@@ -201,12 +189,15 @@ def rendering_contribution(
     eps2d: float = 0.3,
     tile_size: int = 16,
     buffer_size: int = DEFAULT_BUFFER_SIZE,
-) -> torch.Tensor:
+    return_semantics: bool = False,
+) -> torch.Tensor | tuple[torch.Tensor, SemanticRender]:
     """P_conf(i) = sum_p w_ip R_p[l_i] / (sum_p w_ip + eps) over pixels in ``pixel_mask`` (all if None).
 
     ``viewmat`` [4, 4] world-to-camera, ``K`` [3, 3], ``pixel_mask`` [H, W] bool. Returns [N] float32 in
     [0, 1]; 0 for unlabelled Gaussians and Gaussians that reach no (masked) pixel. Where a pixel's buffer
     overflowed, R_p of a dropped label is taken as 0 (see ``render_semantics`` meta to detect it).
+    With ``return_semantics`` it also returns the label map of this view (a :class:`SemanticRender` with its
+    buffer), which it computes anyway: one call instead of ``render_semantics`` + ``rendering_contribution``.
     """
     if isinstance(viewmat, torch.Tensor) and viewmat.dim() == 2:
         viewmat = viewmat.unsqueeze(0)
@@ -225,7 +216,7 @@ def rendering_contribution(
     wp = _wp()
     from ogscene3d.kernels.semantic import semantic_kernels
 
-    keep, bins, geometry, dims, launch_dim, (buf_l, buf_w, *_rest) = _vote(
+    keep, bins, geometry, dims, launch_dim, (buf_l, buf_w, out_l, out_w, overflow) = _vote(
         means,
         quats,
         scales,
@@ -271,7 +262,27 @@ def rendering_contribution(
         )
     p_conf = torch.zeros(means.shape[0], device=dev)
     p_conf[keep] = (num / (den + eps))[:n]
-    return p_conf.clamp_(0.0, 1.0)
+    p_conf.clamp_(0.0, 1.0)
+    if not return_semantics:
+        return p_conf
+    return p_conf, _semantic_render(bins, buffer_size, (buf_l, buf_w, out_l, out_w, overflow), True)
+
+
+def _semantic_render(bins: TileBins, buffer_size: int, outputs, return_buffer: bool) -> SemanticRender:
+    buf_l, buf_w, out_l, out_w, overflow = outputs
+    meta = {
+        "buffer_size": buffer_size,
+        "overflow_pixels": int((overflow > 0).sum()),
+        "overflow_votes": int(overflow.sum()),
+        "n_intersections": bins.num_intersections,
+    }
+    return SemanticRender(
+        labels=out_l,
+        weights=out_w,
+        buffer_labels=buf_l if return_buffer else None,
+        buffer_weights=buf_w if return_buffer else None,
+        meta=meta,
+    )
 
 
 __all__ = ["SemanticRender", "render_semantics", "rendering_contribution", "TileBins"]
