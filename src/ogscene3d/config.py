@@ -27,7 +27,7 @@ class DataConfig:
     start: int = 0
     max_frames: int | None = None
     depth_scale: float | None = None  # raw depth units per metre; None = the dataset's own
-    depth_format: str = "auto"  # auto (the layout's own) | linear (raw / scale) | shift3 (APC: (raw >> 3) / scale)
+    depth_format: str = "auto"  # auto (the layout's) | linear (raw / scale) | shift3 (APC: (raw >> 3) / scale)
     intrinsics: list[float] | None = None  # [fx, fy, cx, cy] overriding the dataset's
     min_depth: float = 0.0
     max_depth: float = 0.0  # 0 = no limit
@@ -73,11 +73,11 @@ class SegmentationConfig:
     detector_max_detections: int = 100
     detector_box_format: str = "xyxy"  # xyxy | cxcywh, for exports with separate boxes/scores/labels outputs
     # classical (weight-free) fallback: graph segmentation on colour, depth and normals
-    classical_k: float = 1.5  # Felzenszwalb scale: larger -> larger regions
+    classical_k: float = 100.0  # Felzenszwalb scale (CIELAB ΔE units): larger -> larger regions
     classical_min_size: int = 60  # pixels at the working resolution
     classical_max_side: int = 320  # images are segmented at most this large, labels upsampled
-    classical_depth_weight: float = 8.0  # weight of the relative depth step |dz|/z in an edge weight
-    classical_normal_weight: float = 2.0  # weight of (1 - cos) between neighbouring normals
+    classical_depth_weight: float = 300.0  # ΔE per unit of relative depth discontinuity
+    classical_normal_weight: float = 30.0  # ΔE per unit of (1 - cos) between neighbouring normals
 
 
 @dataclass
@@ -111,6 +111,14 @@ class MappingConfig:
     prune_opacity: float = 0.005
     prune_scale: float = 0.5
     checkpoint_every: int = 0  # keyframes; 0 = only at the end
+    init_opacity: float = 0.9  # opacity of newly added Gaussians
+    init_alpha_thresh: float = 0.5  # a pixel whose rendered alpha is below this is unexplained -> new Gaussian
+    init_depth_margin: float = 0.1  # metres; observed depth this far in front of the rendered one -> new Gaussian
+    refine_cluster_radius: float = 0.3  # metres; search radius of the cluster-level refinement
+    refine_graph_k: int = 8  # same-label neighbours linked per Gaussian when building clusters
+    memory_max: int = 64  # long-term memory buffer capacity (frames)
+    memory_point_step: int = 4  # pixel grid step of the memory point clouds (overlap criterion)
+    longterm_pixel_step: int = 2  # pixel grid step of the long-term pixel-to-Gaussian association
 
 
 @dataclass
@@ -187,7 +195,7 @@ class TrackingConfig:
     keyframe_every: int = 5
     # RGB-D odometry (ogscene3d.tracking); see that module's docstring for the meaning of each field.
     method: str = "hybrid"  # hybrid | color | point_to_plane
-    iterations: list[int] = field(default_factory=lambda: [6, 10, 20])  # per pyramid level, coarse to fine
+    iterations: list[int] = field(default_factory=lambda: [20, 10, 5])  # per pyramid level, coarse to fine
     max_width: int = 640  # track on images downsampled by an integer factor to at most this width; 0 = full
     depth_min: float = 0.1  # metres
     depth_max: float = 5.0  # metres
@@ -195,13 +203,13 @@ class TrackingConfig:
     depth_huber_delta: float = 0.05  # metres
     intensity_huber_delta: float = 0.1  # intensity in [0, 1]
     min_fitness: float = 0.25  # fraction of pixels with a valid correspondence below which a step fails
-    max_inlier_rmse: float = 0.1  # hybrid residual above which a step fails
+    max_inlier_rmse: float = 0.02  # Open3D residual above which a step fails (good steps: 1e-5..4e-3)
     keyframe_fitness: float = 0.7  # overlap with the keyframe below which the frame becomes a keyframe
     keyframe_translation: float = 0.1  # metres from the keyframe beyond which the frame becomes a keyframe
     keyframe_rotation_deg: float = 10.0
     max_lost_frames: int = 0  # consecutive failures after which tracking restarts at the last pose; 0 = never
     feature_init: bool = True  # ORB + RANSAC initial guess when the motion prior does not converge
-    orb_features: int = 1000
+    orb_features: int = 500
     ransac_threshold: float = 0.05  # metres
     min_feature_inliers: int = 20
 

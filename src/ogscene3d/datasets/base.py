@@ -1,0 +1,377 @@
+"""The lazy RGB-D dataset base class and the image/pose readers every layout shares.
+
+A reader lists its frames once (file paths, poses, timestamps: cheap) as :class:`FrameRecord` s and
+reads pixels only when a frame is asked for. Everything that can go wrong with a file raises
+:class:`~ogscene3d.errors.DataError` naming the file and the problem; iteration turns that into a
+logged warning and a skipped frame when ``on_bad_frame == "skip"``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..camera import Camera
+from ..config import DataConfig
+from ..errors import DataError
+from ..frame import Frame, check_pose
+from ..segmentation.precomputed import read_segments
+
+log = logging.getLogger(__name__)
+
+DEPTH_FORMATS = ("linear", "shift3")
+
+_PNG_END = b"IEND\xaeB`\x82"
+_JPEG_END = b"\xff\xd9"
+
+
+# --------------------------------------------------------------------------------------- file readers
+
+
+def _read_bytes(path: Path, what: str) -> bytes:
+    if not path.is_file():
+        raise DataError(f"{path}: {what} file is missing")
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        raise DataError(f"{path}: cannot read {what} file ({e})") from e
+    if not data:
+        raise DataError(f"{path}: {what} file is empty")
+    return data
+
+
+def _check_complete(path: Path, data: bytes, what: str) -> None:
+    """Reject truncated PNG/JPEG files (OpenCV would silently return a partly grey image)."""
+    if data[:8] == b"\x89PNG\r\n\x1a\n":
+        if not data.rstrip(b"\x00").endswith(_PNG_END):
+            raise DataError(f"{path}: {what} PNG is truncated (no IEND chunk)")
+    elif data[:2] == b"\xff\xd8":
+        # Some encoders pad after the end-of-image marker; look for it near the end.
+        if _JPEG_END not in data[-64:]:
+            raise DataError(f"{path}: {what} JPEG is truncated (no end-of-image marker)")
+
+
+def read_rgb(path: str | Path) -> np.ndarray:
+    """Read a colour image as uint8 [H, W, 3] RGB (grey images are replicated, alpha is dropped)."""
+    path = Path(path)
+    data = _read_bytes(path, "rgb")
+    _check_complete(path, data, "rgb")
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise DataError(f"{path}: cannot decode rgb image (corrupt or unsupported format)")
+    if img.dtype != np.uint8:
+        raise DataError(f"{path}: rgb image must be 8-bit, got {img.dtype}")
+    if img.ndim == 2:
+        img = np.repeat(img[:, :, None], 3, axis=2)
+    elif img.shape[2] == 4:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGB)
+    elif img.shape[2] == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    else:
+        raise DataError(f"{path}: rgb image has {img.shape[2]} channels, expected 3")
+    return np.ascontiguousarray(img)
+
+
+def read_depth_raw(path: str | Path) -> np.ndarray:
+    """Read a single-channel 16-bit depth PNG as raw uint16 [H, W] (no scaling)."""
+    path = Path(path)
+    data = _read_bytes(path, "depth")
+    _check_complete(path, data, "depth")
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise DataError(f"{path}: cannot decode depth image (corrupt or unsupported format)")
+    if img.ndim != 2:
+        raise DataError(f"{path}: depth image must be single-channel, got shape {img.shape}")
+    if img.dtype != np.uint16:
+        raise DataError(f"{path}: depth image must be 16-bit, got {img.dtype}")
+    return img
+
+
+def decode_depth(raw: np.ndarray, depth_format: str, scale: float) -> np.ndarray:
+    """Raw uint16 depth -> float32 metres (0 stays invalid).
+
+    ``linear``: metres = raw / scale (Replica 6553.5, TUM 5000, ScanNet/7-Scenes 1000).
+    ``shift3``: the APC/label-fusion bit-shifted format, metres = (raw >> 3) / scale with scale 1e4.
+    """
+    if depth_format == "linear":
+        out = raw.astype(np.float32) / np.float32(scale)
+    elif depth_format == "shift3":
+        out = (raw >> 3).astype(np.float32) / np.float32(scale)
+    else:
+        raise DataError(f"unknown depth format {depth_format!r}; expected one of {DEPTH_FORMATS}")
+    return out
+
+
+def read_matrix(path: str | Path, shape: tuple[int, int], what: str = "matrix") -> np.ndarray:
+    """Read a whitespace-separated text matrix (e.g. a 4x4 pose or 3x3 intrinsics) as float64."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: {what} file is missing")
+    try:
+        vals = np.array(path.read_text().split(), dtype=np.float64)
+    except ValueError as e:
+        raise DataError(f"{path}: {what} file holds non-numeric text ({e})") from e
+    n = shape[0] * shape[1]
+    if vals.size != n:
+        # intrinsics are sometimes stored as 4x4 (ScanNet); take the upper-left block.
+        if shape == (3, 3) and vals.size == 16:
+            return vals.reshape(4, 4)[:3, :3]
+        raise DataError(f"{path}: expected {n} numbers for a {shape[0]}x{shape[1]} {what}, found {vals.size}")
+    return vals.reshape(shape)
+
+
+def K_from_values(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
+    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]], dtype=np.float32)
+
+
+def check_K(K: np.ndarray, source: str) -> np.ndarray:
+    K = np.asarray(K, dtype=np.float64)
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise DataError(
+            f"{source}: intrinsics must be a finite 3x3 matrix with positive focal lengths, got {K}"
+        )
+    return K.astype(np.float32)
+
+
+def quat_to_matrix(q_xyzw: np.ndarray, normalize: bool = True) -> np.ndarray:
+    """Rotation matrices [..., 3, 3] from quaternions [..., 4] in (x, y, z, w) order (TUM).
+
+    With ``normalize=False`` a non-unit quaternion gives a non-orthonormal matrix (so that a
+    pose check can reject it instead of silently accepting a corrupt value).
+    """
+    q = np.asarray(q_xyzw, dtype=np.float64)
+    if normalize:
+        q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    R = np.stack(
+        [
+            1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
+            2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+            2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y),
+        ],
+        axis=-1,
+    )  # fmt: skip
+    return R.reshape(q.shape[:-1] + (3, 3))
+
+
+# --------------------------------------------------------------------------------------- dataset
+
+
+@dataclass
+class FrameRecord:
+    """What a reader knows about a frame before reading pixels.
+
+    ``pose`` is the raw c2w matrix, or ``pose_path`` a 4x4 text file read with the frame; either is
+    validated when the frame is read, so that one bad pose fails (or skips) one frame only.
+    ``pose_source`` names where the pose came from for error messages.
+    """
+
+    name: str
+    rgb_path: Path
+    depth_path: Path
+    pose: np.ndarray | None = None
+    pose_source: str = ""
+    pose_path: Path | None = None
+    timestamp: float = 0.0
+    extras: dict[str, Path] = field(default_factory=dict)
+
+
+class RGBDDataset:
+    """A lazy, indexable sequence of :class:`~ogscene3d.frame.Frame`.
+
+    ``len(ds)`` is the number of selected frames, ``ds[i]`` reads frame ``i`` (raising
+    :class:`DataError` if it is bad, whatever ``on_bad_frame`` says), and iterating yields the
+    frames in order, skipping bad ones with a warning when ``on_bad_frame == "skip"``.
+    ``Frame.index`` is the position in this selection; ``Frame.name`` the rgb file stem.
+    """
+
+    kind = "base"
+    depth_scale_default = 1000.0
+    depth_format_default = "linear"
+    min_depth_default = 0.0
+    invalid_raw: int | None = None  # a raw depth value that means "no measurement" (7-Scenes: 65535)
+
+    def __init__(
+        self,
+        root: Path,
+        records: list[FrameRecord],
+        K: np.ndarray | None,
+        config: DataConfig,
+        segments_dir: Path | None = None,
+        resize_rgb_to_depth: bool = False,
+    ) -> None:
+        self.root = Path(root)
+        self.config = config
+        if not records:
+            raise DataError(f"{self.root}: no frames found for the {self.kind} layout")
+        if config.start < 0 or config.stride < 1:
+            raise DataError(
+                f"data.start must be >= 0 and data.stride >= 1, got {config.start}, {config.stride}"
+            )
+        if config.max_frames is not None and config.max_frames < 1:
+            raise DataError(f"data.max_frames must be >= 1 or null, got {config.max_frames}")
+        if config.on_bad_frame not in ("error", "skip"):
+            raise DataError(f"data.on_bad_frame must be 'error' or 'skip', got {config.on_bad_frame!r}")
+        selected = records[config.start :: config.stride]
+        if config.max_frames is not None:
+            selected = selected[: config.max_frames]
+        if not selected:
+            raise DataError(
+                f"{self.root}: frame range start={config.start} stride={config.stride} selects none of "
+                f"{len(records)} frames"
+            )
+        self.records = selected
+        if config.intrinsics is not None:
+            if len(config.intrinsics) != 4:
+                raise DataError(f"data.intrinsics must be [fx, fy, cx, cy], got {config.intrinsics}")
+            K = K_from_values(*config.intrinsics)
+        if K is None:
+            raise DataError(
+                f"{self.root}: no camera intrinsics found; give data.intrinsics = [fx, fy, cx, cy]"
+            )
+        self.K = check_K(K, str(self.root))
+        self.depth_scale = float(
+            config.depth_scale if config.depth_scale is not None else self.depth_scale_default
+        )
+        if not np.isfinite(self.depth_scale) or self.depth_scale <= 0:
+            raise DataError(f"depth scale must be a positive number, got {self.depth_scale}")
+        self.depth_format = (
+            config.depth_format if config.depth_format != "auto" else self.depth_format_default
+        )
+        if self.depth_format not in DEPTH_FORMATS:
+            raise DataError(
+                f"data.depth_format must be 'auto' or one of {DEPTH_FORMATS}, got {config.depth_format!r}"
+            )
+        self.min_depth = config.min_depth if config.min_depth > 0 else self.min_depth_default
+        self.max_depth = config.max_depth
+        self.segments_dir = Path(segments_dir) if segments_dir is not None else None
+        if self.segments_dir is not None and not self.segments_dir.is_dir():
+            raise DataError(f"{self.segments_dir}: segments folder does not exist")
+        self.resize_rgb_to_depth = resize_rgb_to_depth
+
+    # -- sequence protocol
+
+    def __len__(self) -> int:
+        return len(self.records)
+
+    def __getitem__(self, i: int) -> Frame:
+        if not isinstance(i, int | np.integer):
+            raise TypeError(f"dataset indices must be integers, got {type(i).__name__}")
+        n = len(self.records)
+        if i < 0:
+            i += n
+        if not 0 <= i < n:
+            raise IndexError(f"frame index {i} out of range for {n} frames")
+        return self._load(int(i))
+
+    def __iter__(self) -> Iterator[Frame]:
+        for i in range(len(self.records)):
+            try:
+                frame = self._load(i)
+            except DataError as e:
+                if self.config.on_bad_frame == "skip":
+                    log.warning("skipping frame %d (%s): %s", i, self.records[i].name, e)
+                    continue
+                raise
+            yield frame
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({str(self.root)!r}, {len(self)} frames)"
+
+    @property
+    def camera(self) -> Camera:
+        """Camera of the first frame (reads its depth image for the size)."""
+        h, w = read_depth_raw(self.records[0].depth_path).shape
+        return Camera.from_K(self.K, w, h)
+
+    # -- reading
+
+    def _load(self, i: int) -> Frame:
+        rec = self.records[i]
+        raw = read_depth_raw(rec.depth_path)
+        depth = decode_depth(raw, self.depth_format, self.depth_scale)
+        if self.invalid_raw is not None:
+            depth[raw == self.invalid_raw] = 0.0
+        if self.min_depth > 0:
+            depth[depth < self.min_depth] = 0.0
+        if self.max_depth > 0:
+            depth[depth > self.max_depth] = 0.0
+        rgb = read_rgb(rec.rgb_path)
+        if rgb.shape[:2] != depth.shape:
+            if not self.resize_rgb_to_depth:
+                raise DataError(
+                    f"{rec.rgb_path}: rgb is {rgb.shape[1]}x{rgb.shape[0]}, depth {rec.depth_path.name} is "
+                    f"{depth.shape[1]}x{depth.shape[0]}"
+                )
+            rgb = cv2.resize(rgb, (depth.shape[1], depth.shape[0]), interpolation=cv2.INTER_AREA)
+        pose = None
+        raw_pose = rec.pose
+        if rec.pose_path is not None:
+            raw_pose = read_matrix(rec.pose_path, (4, 4), "pose")
+        if raw_pose is not None:
+            try:
+                pose = check_pose(
+                    raw_pose, rec.pose_source or str(rec.pose_path or f"pose of frame {rec.name}")
+                )
+            except ValueError as e:
+                raise DataError(str(e)) from e
+        segments, scores = None, {}
+        if self.segments_dir is not None:
+            segments, scores = read_segments(self.segments_dir, rec.rgb_path.stem, depth.shape)
+        gt_instances, gt_classes = self._load_gt(rec, depth.shape)
+        return Frame(
+            index=i,
+            rgb=rgb,
+            depth=depth,
+            K=self.K,
+            pose=pose,
+            timestamp=rec.timestamp,
+            name=rec.rgb_path.stem,
+            segments=segments,
+            segment_scores=scores,
+            gt_instances=gt_instances,
+            gt_classes=gt_classes,
+        )
+
+    def _load_gt(
+        self, rec: FrameRecord, shape: tuple[int, int]
+    ) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Ground-truth (instance map, class map) for layouts that have them; None otherwise."""
+        return None, None
+
+
+def read_label_png(
+    path: Path, shape: tuple[int, int], what: str, transform: Callable | None = None
+) -> np.ndarray:
+    """Read an 8/16-bit single-channel label PNG as int32 [H, W], checking its size."""
+    data = _read_bytes(path, what)
+    _check_complete(path, data, what)
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise DataError(f"{path}: cannot decode {what} image")
+    if img.ndim != 2:
+        raise DataError(f"{path}: {what} image must be single-channel, got shape {img.shape}")
+    if img.shape != tuple(shape):
+        raise DataError(
+            f"{path}: {what} is {img.shape[1]}x{img.shape[0]}, the depth image is {shape[1]}x{shape[0]}"
+        )
+    out = img.astype(np.int32)
+    return transform(out) if transform is not None else out
+
+
+def frame_number(stem: str) -> int:
+    """The trailing integer of a file stem (``frame000012`` -> 12, ``frame-000012.color`` -> 12)."""
+    digits = ""
+    for ch in reversed(stem.split(".")[0]):
+        if ch.isdigit():
+            digits = ch + digits
+        elif digits:
+            break
+    if not digits:
+        raise DataError(f"file name {stem!r} holds no frame number")
+    return int(digits)

@@ -1,0 +1,96 @@
+"""``open_dataset``: layout detection and the one entry point to every reader."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+from ..config import DataConfig
+from ..errors import DataError
+from .base import RGBDDataset
+from .replica import ReplicaDataset
+from .scannet import ScanNetDataset
+from .sevenscenes import LabelFusionDataset, SevenScenesDataset
+from .synthetic import SyntheticDataset
+from .tum import TUMDataset
+
+# Detection order matters: a synthetic scene is also a Replica scene, label-fusion also 7-Scenes.
+READERS: dict[str, type[RGBDDataset]] = {
+    "synthetic": SyntheticDataset,
+    "replica": ReplicaDataset,
+    "scannet": ScanNetDataset,
+    "tum": TUMDataset,
+    "labelfusion": LabelFusionDataset,
+    "sevenscenes": SevenScenesDataset,
+}
+
+_LAYOUTS = (
+    "synthetic (results/ + traj.txt + gt/instances.json), replica (results/frame*.jpg + traj.txt), "
+    "scannet (color/ + depth/ + pose/), tum (rgb.txt + depth.txt), labelfusion/sevenscenes (frame-*.color.*)"
+)
+
+
+def detect_kind(path: str | Path) -> tuple[str, Path]:
+    """(kind, scene folder) for ``path``; a folder holding exactly one recognisable scene is entered."""
+    root = Path(path)
+    if not root.exists():
+        raise DataError(f"{root}: dataset path does not exist")
+    if not root.is_dir():
+        raise DataError(f"{root}: dataset path is not a folder")
+    for kind, reader in READERS.items():
+        if reader.detect(root):
+            return kind, root
+    children = [d for d in sorted(root.iterdir()) if d.is_dir()]
+    found = [(k, d) for d in children for k, r in READERS.items() if r.detect(d)]
+    scenes = {d for _, d in found}
+    if len(scenes) == 1:
+        return found[0]
+    if len(scenes) > 1:
+        names = ", ".join(sorted(d.name for d in scenes))
+        raise DataError(f"{root}: holds several scenes ({names}); open one of them")
+    if not any(root.iterdir()):
+        raise DataError(f"{root}: folder is empty")
+    raise DataError(f"{root}: no known dataset layout; expected one of {_LAYOUTS}")
+
+
+def open_dataset(
+    path: str | Path | None = None,
+    kind: str = "auto",
+    segments_dir: str | Path | None = None,
+    stride: int | None = None,
+    max_frames: int | None = None,
+    config: DataConfig | None = None,
+) -> RGBDDataset:
+    """Open an RGB-D sequence lazily.
+
+    Arguments left at None fall back to ``config`` (a :class:`DataConfig`; its ``path``, ``kind``,
+    ``segments_dir``, ``stride``, ``max_frames``, and also ``start``, ``depth_scale``,
+    ``depth_format``, ``intrinsics``, ``min_depth``/``max_depth``, ``on_bad_frame``), then to the
+    defaults (stride 1, all frames). ``kind``: auto | replica | scannet | tum | sevenscenes |
+    labelfusion | synthetic. Raises :class:`DataError` for a missing folder or an unknown layout.
+    """
+    cfg = dataclasses.replace(config) if config is not None else DataConfig()
+    if path is None:
+        path = cfg.path
+    if path is None:
+        raise DataError("no dataset path given (argument path or data.path)")
+    if kind == "auto" and cfg.kind != "auto":
+        kind = cfg.kind
+    if segments_dir is None and cfg.segments_dir:
+        segments_dir = cfg.segments_dir
+    if stride is not None:
+        cfg.stride = int(stride)
+    if max_frames is not None:
+        cfg.max_frames = int(max_frames)
+    if kind == "auto":
+        kind, root = detect_kind(path)
+    else:
+        if kind not in READERS:
+            raise DataError(f"unknown dataset kind {kind!r}; expected auto or one of {sorted(READERS)}")
+        root = Path(path)
+        if not root.is_dir():
+            raise DataError(f"{root}: dataset path does not exist or is not a folder")
+        if not READERS[kind].detect(root):
+            raise DataError(f"{root}: does not look like a {kind} dataset; expected one of {_LAYOUTS}")
+    seg = Path(segments_dir) if segments_dir is not None else None
+    return READERS[kind](root, cfg, seg)

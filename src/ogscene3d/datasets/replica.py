@@ -1,0 +1,121 @@
+"""Replica in the NICE-SLAM / SplaTAM layout.
+
+``SCENE/results/frame%06d.jpg`` (or .png), ``SCENE/results/depth%06d.png`` (uint16, metres =
+value / 6553.5), ``SCENE/traj.txt`` (one row-major 4x4 camera-to-world matrix per line, OpenCV
+axes, line k = frame k), and ``cam_params.json`` (``{"camera": {"w", "h", "fx", "fy", "cx", "cy",
+"scale"}}``) in the scene folder or its parent. The json's ``scale`` is the depth scale.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..config import DataConfig
+from ..errors import DataError
+from .base import FrameRecord, K_from_values, RGBDDataset, frame_number
+
+_RGB_SUFFIXES = (".jpg", ".jpeg", ".png")
+
+
+def find_cam_params(root: Path) -> Path | None:
+    for d in (root, root.parent):
+        p = d / "cam_params.json"
+        if p.is_file():
+            return p
+    return None
+
+
+def read_cam_params(path: Path) -> tuple[np.ndarray, float | None, tuple[int, int] | None]:
+    """(K, depth scale or None, (w, h) or None) from a NICE-SLAM ``cam_params.json``."""
+    try:
+        cam = json.loads(path.read_text())["camera"]
+        K = K_from_values(float(cam["fx"]), float(cam["fy"]), float(cam["cx"]), float(cam["cy"]))
+        scale = float(cam["scale"]) if "scale" in cam else None
+        size = (int(cam["w"]), int(cam["h"])) if "w" in cam and "h" in cam else None
+    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as e:
+        raise DataError(
+            f'{path}: malformed camera parameters ({e}); expected {{"camera": {{"fx", "fy", "cx", "cy"}}}}'
+        ) from e
+    return K, scale, size
+
+
+def read_traj(path: Path) -> np.ndarray:
+    """[N, 4, 4] camera-to-world poses from a NICE-SLAM ``traj.txt`` (16 numbers per line)."""
+    if not path.is_file():
+        raise DataError(f"{path}: trajectory file is missing")
+    poses = []
+    for k, line in enumerate(path.read_text().splitlines()):
+        if not line.strip():
+            continue
+        try:
+            vals = np.array(line.split(), dtype=np.float64)
+        except ValueError as e:
+            raise DataError(f"{path}:{k + 1}: non-numeric pose ({e})") from e
+        if vals.size != 16:
+            raise DataError(f"{path}:{k + 1}: expected 16 numbers (a row-major 4x4 pose), found {vals.size}")
+        poses.append(vals.reshape(4, 4))
+    if not poses:
+        raise DataError(f"{path}: trajectory file holds no poses")
+    return np.stack(poses)
+
+
+def list_replica_frames(results: Path) -> list[tuple[int, Path, Path]]:
+    """(frame number, rgb path, depth path) sorted by number, for ``results/frame*`` images."""
+    rgbs = [p for p in results.glob("frame*") if p.suffix.lower() in _RGB_SUFFIXES]
+    out = []
+    for p in rgbs:
+        n = frame_number(p.stem)
+        out.append((n, p, results / f"depth{p.stem[len('frame') :]}.png"))
+    out.sort(key=lambda t: t[0])
+    return out
+
+
+class ReplicaDataset(RGBDDataset):
+    kind = "replica"
+    depth_scale_default = 6553.5
+
+    @staticmethod
+    def detect(root: Path) -> bool:
+        return (root / "results").is_dir() and (root / "traj.txt").is_file()
+
+    def __init__(self, root: Path, config: DataConfig, segments_dir: Path | None = None) -> None:
+        root = Path(root)
+        results = root / "results"
+        if not results.is_dir():
+            raise DataError(f"{root}: no results/ folder (Replica NICE-SLAM layout)")
+        frames = list_replica_frames(results)
+        if not frames:
+            raise DataError(f"{results}: no frame*.jpg / frame*.png images")
+        traj_path = root / "traj.txt"
+        poses = read_traj(traj_path)
+        if frames[-1][0] >= len(poses):
+            raise DataError(
+                f"{traj_path}: {len(poses)} poses, but results/ holds frame number {frames[-1][0]} "
+                f"({frames[-1][1].name})"
+            )
+        K = None
+        cam = find_cam_params(root)
+        if cam is not None:
+            K, scale, _ = read_cam_params(cam)
+            if scale is not None:
+                self.depth_scale_default = scale
+        records = [
+            FrameRecord(
+                name=rgb.stem,
+                rgb_path=rgb,
+                depth_path=depth,
+                pose=poses[n],
+                pose_source=f"{traj_path}:{n + 1}",
+                timestamp=float(n),
+            )
+            for n, rgb, depth in frames
+        ]
+        if K is None and config.intrinsics is None:
+            raise DataError(
+                f"{root}: cam_params.json not found here or in the parent folder; "
+                "give data.intrinsics = [fx, fy, cx, cy]"
+            )
+        super().__init__(root, records, K, config, segments_dir)

@@ -1,0 +1,79 @@
+"""ScanNet as exported by the official SensReader (``python reader.py --export_*``).
+
+``SCENE/color/N.jpg`` (1296x968), ``SCENE/depth/N.png`` (uint16 millimetres, 640x480),
+``SCENE/pose/N.txt`` (4x4 camera-to-world, OpenCV axes; invalid frames hold ``-inf``), and the
+intrinsics in ``SCENE/intrinsic/intrinsic_depth.txt`` (4x4; or ``intrinsic_color.txt``, rescaled)
+or ``SCENE/intrinsics.txt``. Colour is resampled to the depth resolution, so frames use the depth
+camera's intrinsics (the two are registered in ScanNet's export).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..config import DataConfig
+from ..errors import DataError
+from .base import FrameRecord, RGBDDataset, read_depth_raw, read_matrix, read_rgb
+
+_RGB_SUFFIXES = (".jpg", ".jpeg", ".png")
+
+
+def _numeric_stems(folder: Path, suffixes: tuple[str, ...]) -> dict[int, Path]:
+    out = {}
+    for p in folder.iterdir():
+        if p.suffix.lower() in suffixes and p.stem.isdigit():
+            out[int(p.stem)] = p
+    return out
+
+
+class ScanNetDataset(RGBDDataset):
+    kind = "scannet"
+    depth_scale_default = 1000.0
+
+    @staticmethod
+    def detect(root: Path) -> bool:
+        return (root / "color").is_dir() and (root / "depth").is_dir()
+
+    def __init__(self, root: Path, config: DataConfig, segments_dir: Path | None = None) -> None:
+        root = Path(root)
+        color = _numeric_stems(root / "color", _RGB_SUFFIXES)
+        if not color:
+            raise DataError(f"{root / 'color'}: no numbered colour images (N.jpg)")
+        pose_dir = root / "pose"
+        has_poses = pose_dir.is_dir()  # without pose/ the frames need tracking
+        records = [
+            FrameRecord(
+                name=color[n].stem,
+                rgb_path=color[n],
+                depth_path=root / "depth" / f"{n}.png",
+                pose_path=pose_dir / f"{n}.txt" if has_poses else None,
+                timestamp=float(n),
+            )
+            for n in sorted(color)
+        ]
+        K = None
+        if config.intrinsics is None:
+            K = self._intrinsics(root, records[0])
+        super().__init__(root, records, K, config, segments_dir, resize_rgb_to_depth=True)
+
+    @staticmethod
+    def _intrinsics(root: Path, first: FrameRecord) -> np.ndarray:
+        intr = root / "intrinsic"
+        if (intr / "intrinsic_depth.txt").is_file():
+            return read_matrix(intr / "intrinsic_depth.txt", (3, 3), "intrinsics")
+        if (root / "intrinsics.txt").is_file():
+            return read_matrix(root / "intrinsics.txt", (3, 3), "intrinsics")
+        if (intr / "intrinsic_color.txt").is_file():
+            # Colour intrinsics, rescaled to the depth image the frames are resampled to.
+            K = read_matrix(intr / "intrinsic_color.txt", (3, 3), "intrinsics").copy()
+            h_c, w_c = read_rgb(first.rgb_path).shape[:2]
+            h_d, w_d = read_depth_raw(first.depth_path).shape
+            K[0] *= w_d / w_c
+            K[1] *= h_d / h_c
+            return K
+        raise DataError(
+            f"{root}: no intrinsics (intrinsic/intrinsic_depth.txt, intrinsic/intrinsic_color.txt or "
+            "intrinsics.txt); give data.intrinsics = [fx, fy, cx, cy]"
+        )

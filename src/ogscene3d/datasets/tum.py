@@ -1,0 +1,127 @@
+"""TUM RGB-D: ``rgb.txt`` / ``depth.txt`` (``timestamp filename`` lines), ``groundtruth.txt``
+(``timestamp tx ty tz qx qy qz qw``: the optical centre's camera-to-world pose, OpenCV axes) and
+16-bit depth PNGs at 5000 units per metre.
+
+Frames are the rgb images that have a depth image (and, when ``groundtruth.txt`` exists, a pose)
+within ``MAX_DT`` seconds, as in TUM's ``associate.py``. Intrinsics: ``data.intrinsics`` if given,
+else the published calibration of the freiburg1/2/3 sensor named in the folder name, else the
+ROS default (525, 525, 319.5, 239.5) with a warning.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from ..config import DataConfig
+from ..errors import DataError
+from .base import FrameRecord, K_from_values, RGBDDataset, quat_to_matrix
+
+log = logging.getLogger(__name__)
+
+MAX_DT = 0.02  # seconds
+
+TUM_INTRINSICS = {
+    "freiburg1": (517.3, 516.5, 318.6, 255.3),
+    "freiburg2": (520.9, 521.0, 325.1, 249.7),
+    "freiburg3": (535.4, 539.2, 320.1, 247.6),
+}
+ROS_DEFAULT = (525.0, 525.0, 319.5, 239.5)
+
+
+def read_tum_list(path: Path, columns: int) -> tuple[np.ndarray, list[list[str]]]:
+    """(timestamps [N], the remaining columns per line) of a TUM list file; '#' lines are comments."""
+    if not path.is_file():
+        raise DataError(f"{path}: file is missing")
+    stamps, rest = [], []
+    for k, line in enumerate(path.read_text().splitlines()):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        parts = line.replace(",", " ").split()
+        if len(parts) != columns:
+            raise DataError(f"{path}:{k + 1}: expected {columns} columns, found {len(parts)}")
+        try:
+            stamps.append(float(parts[0]))
+        except ValueError as e:
+            raise DataError(f"{path}:{k + 1}: bad timestamp {parts[0]!r}") from e
+        rest.append(parts[1:])
+    if not stamps:
+        raise DataError(f"{path}: holds no entries")
+    return np.array(stamps), rest
+
+
+def associate(a: np.ndarray, b: np.ndarray, max_dt: float = MAX_DT) -> np.ndarray:
+    """For each stamp in ``a`` the index of the nearest stamp in ``b`` within ``max_dt`` (-1: none)."""
+    order = np.argsort(b)
+    bs = b[order]
+    pos = np.clip(np.searchsorted(bs, a), 1, max(len(bs) - 1, 1))
+    lo = np.clip(pos - 1, 0, len(bs) - 1)
+    hi = np.clip(pos, 0, len(bs) - 1)
+    pick = np.where(np.abs(bs[lo] - a) <= np.abs(bs[hi] - a), lo, hi)
+    ok = np.abs(bs[pick] - a) <= max_dt
+    return np.where(ok, order[pick], -1)
+
+
+class TUMDataset(RGBDDataset):
+    kind = "tum"
+    depth_scale_default = 5000.0
+
+    @staticmethod
+    def detect(root: Path) -> bool:
+        return (root / "rgb.txt").is_file() and (root / "depth.txt").is_file()
+
+    def __init__(self, root: Path, config: DataConfig, segments_dir: Path | None = None) -> None:
+        root = Path(root)
+        t_rgb, rgb_files = read_tum_list(root / "rgb.txt", 2)
+        t_depth, depth_files = read_tum_list(root / "depth.txt", 2)
+        d_idx = associate(t_rgb, t_depth)
+        gt_path = root / "groundtruth.txt"
+        poses = None
+        if gt_path.is_file():
+            t_gt, vals = read_tum_list(gt_path, 8)
+            try:
+                v = np.array(vals, dtype=np.float64)
+            except ValueError as e:
+                raise DataError(f"{gt_path}: non-numeric pose values ({e})") from e
+            g_idx = associate(t_rgb, t_gt)
+            poses = np.tile(np.eye(4), (len(v), 1, 1))
+            # Quaternions are printed with 4 decimals: renormalise those that are unit up to rounding,
+            # keep the others as they are so that the pose check rejects that frame (non-rigid).
+            q = v[:, 3:7]
+            norm = np.linalg.norm(q, axis=1, keepdims=True)
+            q = np.where(np.abs(norm - 1.0) < 1e-2, q / np.maximum(norm, 1e-12), q)
+            poses[:, :3, :3] = quat_to_matrix(q, normalize=False)
+            poses[:, :3, 3] = v[:, :3]
+        else:
+            g_idx = np.zeros(len(t_rgb), dtype=np.int64)
+            log.info("%s: no groundtruth.txt; frames have no pose (use tracking.poses=odometry)", root)
+        records = []
+        for i, (ts, (rgb_name,)) in enumerate(zip(t_rgb, rgb_files)):
+            if d_idx[i] < 0 or (poses is not None and g_idx[i] < 0):
+                continue
+            records.append(
+                FrameRecord(
+                    name=Path(rgb_name).stem,
+                    rgb_path=root / rgb_name,
+                    depth_path=root / depth_files[d_idx[i]][0],
+                    pose=None if poses is None else poses[g_idx[i]],
+                    pose_source=f"{gt_path} (t={ts:.6f})",
+                    timestamp=float(ts),
+                )
+            )
+        if not records:
+            raise DataError(f"{root}: no rgb frame has a depth image (and pose) within {MAX_DT} s")
+        K = None
+        if config.intrinsics is None:
+            name = str(root.resolve()).lower()
+            for key, vals in TUM_INTRINSICS.items():
+                if key in name:
+                    K = K_from_values(*vals)
+                    break
+            else:
+                log.warning("%s: unknown TUM sensor; using the ROS default intrinsics %s", root, ROS_DEFAULT)
+                K = K_from_values(*ROS_DEFAULT)
+        super().__init__(root, records, K, config, segments_dir)

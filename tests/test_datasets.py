@@ -1,0 +1,372 @@
+"""Dataset readers: real samples (depth scale + pose convention by reprojection), every layout on tiny
+fabricated sequences, configuration overrides, and every bad-input case."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from ogscene3d.config import DataConfig
+from ogscene3d.datasets import detect_kind, open_dataset
+from ogscene3d.errors import DataError
+from ogscene3d.frame import Frame
+from ogscene3d.segmentation.precomputed import write_segments
+
+# --------------------------------------------------------------------------------------- helpers
+
+
+def reprojection_error(fa: Frame, fb: Frame, step: int = 4) -> tuple[float, float, int]:
+    """Back-project frame a's depth, move it with the poses into frame b, compare with b's depth.
+
+    Returns (median |depth difference| in m, fraction within 5 cm, number of compared pixels).
+    """
+    pts = fa.camera.backproject(fa.depth)[::step, ::step].reshape(-1, 3)
+    pts = pts[fa.depth[::step, ::step].reshape(-1) > 0].astype(np.float64)
+    world = pts @ fa.pose[:3, :3].T + fa.pose[:3, 3]
+    w2c = np.linalg.inv(fb.pose)
+    pc = world @ w2c[:3, :3].T + w2c[:3, 3]
+    z = pc[:, 2]
+    front = z > 0.1
+    pc, z = pc[front], z[front]
+    # pixel (x, y) has its centre at (x + 0.5, y + 0.5) in K's frame
+    u = np.floor(fb.K[0, 0] * pc[:, 0] / z + fb.K[0, 2]).astype(int)
+    v = np.floor(fb.K[1, 1] * pc[:, 1] / z + fb.K[1, 2]).astype(int)
+    inside = (u >= 0) & (v >= 0) & (u < fb.width) & (v < fb.height)
+    db = fb.depth[v[inside], u[inside]]
+    ok = db > 0
+    diff = np.abs(db[ok] - z[inside][ok])
+    return float(np.median(diff)), float((diff < 0.05).mean()), int(ok.sum())
+
+
+def _png(path: Path, img: np.ndarray) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    assert cv2.imwrite(str(path), img)
+    return path
+
+
+def _rgb(h: int, w: int, seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed).integers(0, 255, (h, w, 3), dtype=np.uint8)
+
+
+def _pose(tx: float = 0.0) -> np.ndarray:
+    p = np.eye(4)
+    p[0, 3] = tx
+    return p
+
+
+def make_replica(root: Path, n: int = 3, w: int = 32, h: int = 24, cam_in_parent: bool = False) -> Path:
+    """A tiny Replica-layout scene: fronto-parallel wall at 2 m, camera stepping 0.1 m in x."""
+    scene = root / "scene"
+    for i in range(n):
+        _png(scene / "results" / f"frame{i:06d}.jpg", _rgb(h, w, i))
+        _png(scene / "results" / f"depth{i:06d}.png", np.full((h, w), round(2.0 * 6553.5), np.uint16))
+    (scene / "traj.txt").write_text(
+        "".join(" ".join(map(str, _pose(0.1 * i).ravel())) + "\n" for i in range(n))
+    )
+    cam = {"camera": {"w": w, "h": h, "fx": 20.0, "fy": 20.0, "cx": w / 2, "cy": h / 2, "scale": 6553.5}}
+    (root if cam_in_parent else scene).joinpath("cam_params.json").write_text(json.dumps(cam))
+    return scene
+
+
+# --------------------------------------------------------------------------------------- real samples
+
+
+def test_replica_sample_scale_and_poses(shared_data):
+    root = shared_data / "replica_room0_nice_slam"
+    kind, scene = detect_kind(root)  # the parent folder holds one scene: it is entered
+    assert kind == "replica" and scene.name == "room0"
+    ds = open_dataset(root, max_frames=20)
+    assert len(ds) == 20
+    f0, f19 = ds[0], ds[19]
+    assert f0.name == "frame000000" and f0.rgb.shape == (680, 1200, 3)
+    np.testing.assert_allclose(f0.K, [[600, 0, 599.5], [0, 600, 339.5], [0, 0, 1]])
+    assert 0.5 < np.median(f0.depth[f0.depth > 0]) < 6.0  # metres: the 6553.5 scale is applied
+    med, frac, n = reprojection_error(f0, f19)
+    assert n > 1000 and med < 0.02 and frac > 0.8
+    # A wrong depth scale breaks the reprojection: the check can fail.
+    bad = open_dataset(root, config=DataConfig(depth_scale=1000.0))
+    med_bad, _, _ = reprojection_error(bad[0], bad[19])
+    assert med_bad > 0.1
+
+
+def test_sevenscenes_sample_scale_and_poses(shared_data):
+    ds = open_dataset(shared_data / "7scenes_redkitchen_stride20")
+    assert ds.kind == "sevenscenes" and len(ds) == 50
+    f0, f1 = ds[0], ds[1]
+    np.testing.assert_allclose(f0.K, [[585, 0, 320], [0, 585, 240], [0, 0, 1]])
+    assert f0.depth.max() < 10.0
+    med, frac, n = reprojection_error(f0, f1)
+    assert n > 1000 and med < 0.03 and frac > 0.8
+
+
+def test_labelfusion_sample_shift3_depth_and_labels(shared_data):
+    ds = open_dataset(shared_data / "labelfusion_shelf_labels")
+    assert ds.kind == "labelfusion" and ds.depth_format == "shift3" and len(ds) == 15
+    f0, f5 = ds[0], ds[5]
+    assert abs(float(f0.K[0, 0]) - 611.69) < 0.1
+    valid = f0.depth[f0.depth > 0]
+    assert valid.min() >= 0.3 and np.median(valid) < 2.0  # a shelf bin under a metre or so away
+    assert set(np.unique(f0.gt_classes)) <= {0, 8, 22} and f0.gt_instances is None
+    med, frac, n = reprojection_error(f0, f5)
+    assert n > 200 and med < 0.03 and frac > 0.7
+    # Reading the same files as linear millimetres gives depths 8x too large.
+    lin = open_dataset(shared_data / "labelfusion_shelf_labels", config=DataConfig(depth_format="linear"))
+    assert np.median(lin[0].depth[lin[0].depth > 0]) > 3.0 * np.median(valid)
+
+
+# --------------------------------------------------------------------------------------- layouts
+
+
+def test_replica_fabricated_and_frame_selection(tmp_path):
+    scene = make_replica(tmp_path, n=6, cam_in_parent=True)
+    ds = open_dataset(scene)
+    assert ds.kind == "replica" and len(ds) == 6
+    f = ds[-1]
+    assert f.index == 5 and f.name == "frame000005"
+    assert f.depth.dtype == np.float32 and np.allclose(f.depth, 2.0, atol=1e-3)
+    assert np.allclose(f.pose[0, 3], 0.5)
+    assert [fr.name for fr in open_dataset(scene, stride=2)] == ["frame000000", "frame000002", "frame000004"]
+    assert len(open_dataset(scene, max_frames=2)) == 2
+    sel = open_dataset(scene, config=DataConfig(start=1, stride=2, max_frames=2))
+    assert [fr.name for fr in sel] == ["frame000001", "frame000003"]
+    # explicit arguments win over the config
+    assert len(open_dataset(scene, stride=1, config=DataConfig(stride=3))) == 6
+    med, frac, _ = reprojection_error(ds[0], ds[1], step=1)
+    assert med < 1e-3 and frac == 1.0
+
+
+def test_config_overrides(tmp_path):
+    scene = make_replica(tmp_path)
+    d = open_dataset(scene, config=DataConfig(depth_scale=6553.5 / 2))[0].depth
+    assert np.allclose(d, 4.0, atol=1e-3)
+    f = open_dataset(scene, config=DataConfig(intrinsics=[30.0, 31.0, 15.0, 11.0]))[0]
+    np.testing.assert_allclose(f.K, [[30, 0, 15], [0, 31, 11], [0, 0, 1]])
+    assert not open_dataset(scene, config=DataConfig(max_depth=1.5))[0].depth.any()
+    assert not open_dataset(scene, config=DataConfig(min_depth=2.5))[0].depth.any()
+    assert open_dataset(scene, config=DataConfig(path=str(scene)), kind="auto").root == scene
+
+
+def test_scannet_layout_resizes_colour_to_depth(tmp_path):
+    root = tmp_path / "scene0000_00"
+    for i in range(2):
+        _png(root / "color" / f"{i}.jpg", _rgb(48, 64, i))
+        _png(root / "depth" / f"{i}.png", np.full((24, 32), 1500, np.uint16))
+        (root / "pose").mkdir(exist_ok=True)
+        np.savetxt(root / "pose" / f"{i}.txt", _pose(i * 0.2))
+    (root / "intrinsic").mkdir()
+    K4 = np.eye(4)
+    K4[:3, :3] = [[100.0, 0, 32], [0, 100, 24], [0, 0, 1]]
+    np.savetxt(root / "intrinsic" / "intrinsic_color.txt", K4)
+    ds = open_dataset(root)
+    assert ds.kind == "scannet"
+    f = ds[1]
+    assert f.rgb.shape == (24, 32, 3) and np.allclose(f.depth, 1.5)
+    np.testing.assert_allclose(f.K, [[50, 0, 16], [0, 50, 12], [0, 0, 1]])  # colour K rescaled to depth
+    assert f.pose[0, 3] == pytest.approx(0.2)
+    # ScanNet marks lost tracking with -inf poses: an error naming the pose file, or a skipped frame
+    np.savetxt(root / "pose" / "1.txt", np.full((4, 4), -np.inf))
+    with pytest.raises(DataError, match=r"1\.txt.*NaN or inf"):
+        open_dataset(root)[1]
+    assert len(list(open_dataset(root, config=DataConfig(on_bad_frame="skip")))) == 1
+
+
+def test_tum_layout_association_and_quaternions(tmp_path):
+    root = tmp_path / "rgbd_dataset_freiburg1_desk"
+    (root / "rgb").mkdir(parents=True)
+    (root / "depth").mkdir()
+    rgb_lines, depth_lines = ["# color images"], ["# depth maps"]
+    for i in range(3):
+        t = 100.0 + i * 0.1
+        _png(root / "rgb" / f"{t:.6f}.png", _rgb(24, 32, i))
+        _png(root / "depth" / f"{t + 0.005:.6f}.png", np.full((24, 32), 5000 * (i + 1), np.uint16))
+        rgb_lines.append(f"{t:.6f} rgb/{t:.6f}.png")
+        depth_lines.append(f"{t + 0.005:.6f} depth/{t + 0.005:.6f}.png")
+    rgb_lines.append("100.500000 rgb/100.500000.png")  # no depth within 20 ms: not a frame
+    (root / "rgb.txt").write_text("\n".join(rgb_lines) + "\n")
+    (root / "depth.txt").write_text("\n".join(depth_lines) + "\n")
+    s = np.sqrt(0.5)  # 90 degrees about z
+    gt = ["# timestamp tx ty tz qx qy qz qw"] + [
+        f"{100.0 + i * 0.1 + 0.002:.6f} {i} 2 3 0 0 {s} {s}" for i in range(3)
+    ]
+    (root / "groundtruth.txt").write_text("\n".join(gt) + "\n")
+    ds = open_dataset(root)
+    assert ds.kind == "tum" and len(ds) == 3
+    np.testing.assert_allclose(ds.K[0, 0], 517.3)  # freiburg1 calibration from the folder name
+    f = ds[2]
+    assert np.allclose(f.depth, 3.0)  # 5000 units per metre
+    np.testing.assert_allclose(f.pose[:3, :3], [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-9)
+    np.testing.assert_allclose(f.pose[:3, 3], [2, 2, 3])
+    assert f.timestamp == pytest.approx(100.2)
+    # a non-unit quaternion is a bad pose at that frame
+    gt[2] = "100.102000 1 2 3 0 0 0.9 0.9"
+    (root / "groundtruth.txt").write_text("\n".join(gt) + "\n")
+    with pytest.raises(DataError, match="groundtruth.txt.*non-rigid"):
+        open_dataset(root)[1]
+
+
+def test_sevenscenes_invalid_depth_and_sequences(tmp_path):
+    root = tmp_path / "chess"
+    for s in (1, 2):
+        for i in range(2):
+            d = np.full((24, 32), 1200, np.uint16)
+            d[0, 0] = 65535
+            _png(root / f"seq-0{s}" / f"frame-{i:06d}.color.png", _rgb(24, 32, i))
+            _png(root / f"seq-0{s}" / f"frame-{i:06d}.depth.png", d)
+            np.savetxt(root / f"seq-0{s}" / f"frame-{i:06d}.pose.txt", _pose(i))
+    ds = open_dataset(root)
+    assert ds.kind == "sevenscenes" and len(ds) == 4
+    f = ds[0]
+    assert f.depth[0, 0] == 0.0 and np.allclose(f.depth[1:], 1.2)
+    assert f.name == "frame-000000.color"
+    np.testing.assert_allclose(f.K[0, 0], 585.0)
+    (root / "seq-02" / "frame-000001.pose.txt").unlink()
+    ds = open_dataset(root)
+    with pytest.raises(DataError, match=r"seq-02/frame-000001\.pose\.txt: pose file is missing"):
+        ds[3]
+    assert len(list(open_dataset(root, config=DataConfig(on_bad_frame="skip")))) == 3
+
+
+def test_segments_dir_is_read_and_checked(tmp_path):
+    scene = make_replica(tmp_path)
+    seg = tmp_path / "seg"
+    ids = np.zeros((24, 32), np.int32)
+    ids[:, 16:] = 7
+    for i in range(3):
+        write_segments(seg, f"frame{i:06d}", ids, {7: 0.93})
+    f = open_dataset(scene, segments_dir=seg)[1]
+    assert np.array_equal(f.segments, ids) and f.segment_scores == {7: pytest.approx(0.93)}
+    write_segments(seg, "frame000002", np.zeros((12, 16), np.int32))
+    with pytest.raises(DataError, match=r"frame000002\.png.*16x12"):
+        open_dataset(scene, segments_dir=seg)[2]
+    (seg / "frame000001.png").unlink()
+    with pytest.raises(DataError, match=r"frame000001\.png.*missing"):
+        open_dataset(scene, segments_dir=seg)[1]
+    with pytest.raises(DataError, match="segments folder does not exist"):
+        open_dataset(scene, segments_dir=tmp_path / "nope")
+
+
+# --------------------------------------------------------------------------------------- bad input
+
+
+def _rm(name):
+    return lambda s: (s / "results" / name).unlink()
+
+
+def _write(name, data):
+    return lambda s: (s / "results" / name).write_bytes(data)
+
+
+def _cut(name, keep):
+    return lambda s: (s / "results" / name).write_bytes((s / "results" / name).read_bytes()[keep])
+
+
+def _img(name, img):
+    return lambda s: _png(s / "results" / name, img)
+
+
+@pytest.mark.parametrize(
+    "damage, match",
+    [
+        (_rm("frame000001.jpg"), None),  # fewer frames: not an error
+        (_rm("depth000001.png"), r"depth000001\.png: depth file is missing"),
+        (_write("depth000001.png", b"not a png"), r"depth000001\.png: cannot decode"),
+        (_write("frame000001.jpg", b""), r"frame000001\.jpg: rgb file is empty"),
+        (_cut("depth000001.png", slice(0, 60)), r"depth000001\.png: depth PNG is truncated"),
+        (_cut("frame000001.jpg", slice(0, -300)), r"frame000001\.jpg: rgb JPEG is truncated"),
+        (_img("depth000001.png", np.zeros((12, 16), np.uint16)), r"frame000001\.jpg: rgb is 32x24, depth"),
+        (
+            _img("depth000001.png", np.zeros((24, 32), np.uint8)),
+            r"depth000001\.png: depth image must be 16-bit",
+        ),
+        (_img("depth000001.png", np.zeros((24, 32, 3), np.uint16)), r"must be single-channel"),
+        (
+            _write("frame000001.jpg", cv2.imencode(".png", np.zeros((24, 32, 3), np.uint16))[1].tobytes()),
+            r"frame000001\.jpg: rgb image must be 8-bit",
+        ),
+    ],
+)
+def test_bad_frame_files(tmp_path, caplog, damage, match):
+    scene = make_replica(tmp_path)
+    damage(scene)
+    ds = open_dataset(scene)
+    if match is None:
+        assert len(ds) == 2 and [f.name for f in ds] == ["frame000000", "frame000002"]
+        return
+    assert len(ds) == 3  # lazy: opening never reads pixels
+    ds[0]
+    with pytest.raises(DataError, match=match):
+        ds[1]
+    with pytest.raises(DataError, match=match):
+        list(ds)
+    skip = open_dataset(scene, config=DataConfig(on_bad_frame="skip"))
+    with caplog.at_level(logging.WARNING, logger="ogscene3d.datasets.base"):
+        names = [f.name for f in skip]
+    assert names == ["frame000000", "frame000002"]
+    assert any("frame000001" in r.getMessage() for r in caplog.records)
+
+
+@pytest.mark.parametrize(
+    "row, match",
+    [
+        ("nan " * 16, "NaN or inf"),
+        ("2 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1", "non-rigid"),
+        ("1 0 0 0 0 1 0 0 0 0 1 0 0 0 1 1", r"last row"),
+    ],
+)
+def test_bad_poses(tmp_path, row, match):
+    scene = make_replica(tmp_path)
+    lines = (scene / "traj.txt").read_text().splitlines()
+    lines[1] = row
+    (scene / "traj.txt").write_text("\n".join(lines) + "\n")
+    ds = open_dataset(scene)
+    with pytest.raises(DataError, match=rf"traj\.txt:2.*{match}"):
+        ds[1]
+    assert [f.name for f in open_dataset(scene, config=DataConfig(on_bad_frame="skip"))] == [
+        "frame000000",
+        "frame000002",
+    ]
+
+
+def test_bad_layouts_and_metadata(tmp_path):
+    with pytest.raises(DataError, match="does not exist"):
+        open_dataset(tmp_path / "missing")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(DataError, match="folder is empty"):
+        open_dataset(tmp_path / "empty")
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "notes.txt").write_text("hello")
+    with pytest.raises(DataError, match="no known dataset layout"):
+        open_dataset(tmp_path / "other")
+    with pytest.raises(DataError, match="unknown dataset kind"):
+        open_dataset(tmp_path / "other", kind="kitti")
+    scene = make_replica(tmp_path / "r")
+    with pytest.raises(DataError, match="does not look like a tum dataset"):
+        open_dataset(scene, kind="tum")
+    # traj.txt shorter than the frames
+    (scene / "traj.txt").write_text((scene / "traj.txt").read_text().splitlines()[0] + "\n")
+    with pytest.raises(DataError, match=r"traj\.txt: 1 poses"):
+        open_dataset(scene)
+    (scene / "traj.txt").write_text("1 2 3\n")
+    with pytest.raises(DataError, match=r"traj\.txt:1: expected 16 numbers"):
+        open_dataset(scene)
+    scene2 = make_replica(tmp_path / "r2")
+    (scene2 / "cam_params.json").write_text("{not json")
+    with pytest.raises(DataError, match="cam_params.json: malformed camera parameters"):
+        open_dataset(scene2)
+    (scene2 / "cam_params.json").unlink()
+    with pytest.raises(DataError, match="cam_params.json not found"):
+        open_dataset(scene2)
+    assert open_dataset(scene2, config=DataConfig(intrinsics=[20.0, 20.0, 16.0, 12.0]))[0].K[0, 0] == 20.0
+    with pytest.raises(DataError, match="selects none"):
+        open_dataset(scene2, config=DataConfig(start=10, intrinsics=[20.0, 20.0, 16.0, 12.0]))
+    with pytest.raises(DataError, match="on_bad_frame"):
+        open_dataset(scene2, config=DataConfig(on_bad_frame="ignore", intrinsics=[20.0, 20.0, 16.0, 12.0]))
+    for p in (scene2 / "results").iterdir():
+        p.unlink()
+    with pytest.raises(DataError, match="no frame"):
+        open_dataset(scene2, kind="replica")
