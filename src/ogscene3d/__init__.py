@@ -2,6 +2,7 @@
 
 from .camera import Camera
 from .config import Config, load_config
+from .datasets import make_synthetic_scene, open_dataset
 from .frame import Frame
 from .render import rasterization
 from .semantics import SemanticRender, render_semantics, rendering_contribution
