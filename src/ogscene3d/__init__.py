@@ -14,6 +14,8 @@ __all__ = [
     "Config",
     "Frame",
     "load_config",
+    "make_synthetic_scene",
+    "open_dataset",
     "rasterization",
     "render_semantics",
     "rendering_contribution",
