@@ -17,6 +17,11 @@ from .errors import OGSceneError
 _COMMAND_MODULES = [
     "ogscene3d.render_demo",
     "ogscene3d.eval.eval_cli",
+    "ogscene3d.datasets.synth_cli",
+    "ogscene3d.viewer.cli",
+    "ogscene3d.mapping.run_cli",
+    "ogscene3d.tracking",
+    "ogscene3d.graph.graph_cli",
 ]
 
 

@@ -464,3 +464,17 @@ def rasterization(
         "tile_height": bins.tiles_y,
     }
     return render, alphas, meta
+
+
+# The semantic half of the functional API lives in its own module; DESIGN.md names render.py as the home
+# of all three functions, so they are importable from here too (imported last: semantics uses this module).
+from .semantics import SemanticRender, render_semantics, rendering_contribution  # noqa: E402
+
+__all__ = [
+    "TileBins",
+    "bin_gaussians",
+    "rasterization",
+    "render_semantics",
+    "rendering_contribution",
+    "SemanticRender",
+]

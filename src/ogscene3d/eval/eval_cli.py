@@ -1,0 +1,213 @@
+"""``ogscene3d eval RUN_DIR --gt GT``: score a run, print a table, write metrics.json and pictures."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from ..atomic import atomic_write_text
+from ..errors import ConfigError, DataError, OGSceneError
+from .metrics import format_metrics_table
+from .plots import iou_bar_chart, write_png
+from .protocols import PROTOCOLS
+from .readers import find_ground_truth
+from .run_eval import evaluate_run
+from .trajectory import ate, read_trajectory
+
+
+def add_parser(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "eval",
+        help="evaluate a run directory against ground truth (3D semantics, scene graph, trajectory)",
+        description=(
+            "Score RUN_DIR (gaussians.ply, graph.json) against ground truth GT: a synthetic scene directory "
+            "(found automatically for runs of synthetic scenes), its gt/ folder, or a labelled PLY "
+            "(x, y, z, class[, instance]) with a class-name table. "
+            "Prints a table and writes metrics.json and a per-class IoU bar chart into the run directory."
+        ),
+    )
+    p.add_argument("run_dir", metavar="RUN_DIR", type=Path, help="run directory written by the mapper")
+    p.add_argument(
+        "--gt",
+        type=Path,
+        default=None,
+        help="ground truth: scene dir, gt/ folder or labelled PLY (default: the synthetic scene the run was "
+        "made from, RUN_DIR/scene or config.yaml's data.path)",
+    )
+    p.add_argument(
+        "--protocol",
+        default="hovsg",
+        choices=[*PROTOCOLS, "both"],
+        help="hovsg: k-NN vote onto GT points, counted on GT points; conceptgraphs: nearest GT label per "
+        "predicted point, counted on predicted points (default: hovsg)",
+    )
+    p.add_argument(
+        "--ignore",
+        default=None,
+        help="comma-separated class names left out of the means (default: wall,floor,ceiling for hovsg, "
+        "'other' for conceptgraphs; '' = none)",
+    )
+    p.add_argument(
+        "--mapping",
+        default="auto",
+        choices=["auto", "text", "overlap"],
+        help="naming of scene labels: text (graph node tags vs class names), overlap (majority overlap with "
+        "GT instances: oracle), auto (text when tags match, else overlap)",
+    )
+    p.add_argument("--classes", type=Path, default=None, help="class-name JSON for a bare labelled PLY")
+    p.add_argument("--k", type=int, default=5, help="neighbours of the HOV-SG majority vote (default 5)")
+    p.add_argument("--min-opacity", type=float, default=0.0, help="drop Gaussians below this opacity")
+    p.add_argument(
+        "--assoc-radius",
+        type=float,
+        default=0.1,
+        help="metres; Gaussians farther from the GT take no part in overlap mapping and node matching "
+        "(default 0.1; 0 = no limit)",
+    )
+    p.add_argument("--min-node-iou", type=float, default=0.1, help="IoU for a node to match a GT instance")
+    p.add_argument(
+        "--traj",
+        nargs=2,
+        metavar=("EST", "GT"),
+        type=Path,
+        default=None,
+        help="also report ATE RMSE between two trajectory files (4x4/3x4 rows or TUM), same poses in order",
+    )
+    p.add_argument(
+        "--views",
+        type=int,
+        default=3,
+        help="render the map at this many evenly spread frames of a synthetic GT scene: 2D metrics and "
+        "RGB | labels | GT | confidence PNGs (default 3; 0 = none; --no-plots keeps the metrics only)",
+    )
+    p.add_argument("--view-frames", default=None, help="comma-separated frame indices to render instead")
+    p.add_argument("--device", default="cpu", help="rendering device for --views (cpu, cuda, cuda:0)")
+    p.add_argument("--align", default="se3", choices=["se3", "sim3", "none"], help="trajectory alignment")
+    p.add_argument(
+        "--out", type=Path, default=None, help="where to write metrics.json and PNGs (default RUN_DIR)"
+    )
+    p.add_argument("--no-plots", action="store_true", help="write no PNG (bar chart, views)")
+    p.set_defaults(func=run)
+
+
+def _pct(x: Any) -> str:
+    return "   n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{100 * x:6.2f}"
+
+
+def _json_safe(x: Any) -> Any:
+    """NaN/inf -> None (strict JSON), recursively."""
+    if isinstance(x, dict):
+        return {k: _json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_json_safe(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def _int_list(text: str | None) -> list[int] | None:
+    if text is None:
+        return None
+    try:
+        return [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise ConfigError(f"--view-frames: expected comma-separated integers, got {text!r}") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        return _run(args)
+    except OGSceneError:
+        raise
+    except ValueError as e:
+        # The library validates its inputs with ValueError; on the command line they are input errors.
+        raise OGSceneError(str(e)) from e
+
+
+def _run(args: argparse.Namespace) -> int:
+    protocols = list(PROTOCOLS) if args.protocol == "both" else [args.protocol]
+    ignore = None if args.ignore is None else [s.strip() for s in args.ignore.split(",") if s.strip()]
+    if args.k < 1:
+        raise ConfigError(f"--k must be >= 1, got {args.k}")
+    gt_path = args.gt
+    if gt_path is None:
+        gt_path = find_ground_truth(args.run_dir)
+        if gt_path is None:
+            raise DataError(
+                f"{args.run_dir}: no --gt given and no synthetic scene with gt/ found "
+                "(RUN_DIR/scene or config.yaml data.path)"
+            )
+    # Read the trajectories first so that a bad file fails before the (longer) map evaluation.
+    traj = None if args.traj is None else [read_trajectory(p) for p in args.traj]
+    result = evaluate_run(
+        args.run_dir,
+        gt_path,
+        protocols=protocols,
+        ignore=ignore,
+        mapping=args.mapping,
+        classes=args.classes,
+        k=args.k,
+        min_opacity=args.min_opacity,
+        assoc_radius=args.assoc_radius if args.assoc_radius > 0 else None,
+        min_node_iou=args.min_node_iou,
+        num_views=args.views,
+        view_frames=_int_list(args.view_frames),
+        out_dir=None if args.no_plots else (args.out or args.run_dir),
+        device=args.device,
+    )
+    report = result.report
+    if traj is not None:
+        report["trajectory"] = ate(traj[0], traj[1], args.align).to_dict()
+
+    out = args.out or args.run_dir
+    m = report["label_mapping"]
+    print(f"run: {args.run_dir}   ground truth: {report['ground_truth']}")
+    print(
+        f"label mapping: {m['method']} "
+        f"({m['num_mapped_labels']}/{m['num_scene_labels']} scene labels named); "
+        f"{report['num_gaussians_evaluated']} Gaussians, {report['num_gt_points']} GT points"
+    )
+    for name, metrics in result.semantic.items():
+        print()
+        print(format_metrics_table(metrics))
+        if not args.no_plots:
+            chart = iou_bar_chart(
+                metrics.class_names,
+                metrics.iou,
+                title=f"per-class IoU, {name} protocol (mIoU {100 * metrics.miou:.1f})",
+                nan_text=["ignored" if n in metrics.ignored else "not in GT" for n in metrics.class_names],
+            )
+            png = write_png(Path(out) / f"iou_{name}.png", chart)
+            report["semantic_3d"][name]["bar_chart"] = png.name
+    v = report.get("semantic_2d")
+    if v:
+        print()
+        print(format_metrics_table(result.views, per_class=False) if result.views else v["protocol"])
+        if v["pictures"]:
+            print(f"pictures: {', '.join(v['pictures'])}")
+    g = report.get("scene_graph")
+    if g:
+        print()
+        print(f"scene graph: {g['protocol']}")
+        print(
+            f"relation recall {_pct(g['recall'])}   edge recall {_pct(g['edge_recall'])}   "
+            f"({g['num_recalled']}/{g['num_gt']} triplets; {g['num_unmatched_endpoint']} unmatched endpoint, "
+            f"{g['num_no_edge']} no edge, {g['num_wrong_relation']} wrong relation; "
+            f"{g['num_matched_nodes']} nodes matched)"
+        )
+    t = report.get("trajectory")
+    if t:
+        print()
+        print(
+            f"trajectory: ATE RMSE {t['ate_rmse_m']:.4f} m after {t['alignment']} alignment "
+            f"({t['num_poses']} poses)"
+        )
+    for note in report.get("notes", []):
+        print(f"note: {note}")
+    path = Path(out) / "metrics.json"
+    atomic_write_text(path, json.dumps(_json_safe(report), indent=2, allow_nan=False) + "\n")
+    print(f"\nwrote {path}")
+    return 0

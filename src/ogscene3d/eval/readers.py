@@ -1,0 +1,412 @@
+"""Readers for what ``ogscene3d eval`` compares: a run directory and a ground truth.
+
+Run directory (DESIGN.md "Files"): ``gaussians.ply`` (vertex fields ``x y z ... opacity ... label
+confidence``) and, optionally, ``graph.json``.
+
+Ground truth, any of:
+
+* a synthetic scene directory (or its ``gt/`` folder; layout in :mod:`ogscene3d.datasets.synthetic`):
+  ``gt/instances.json`` — ``{"classes": {id: name}, "instances": {"<id>": {"class": name, ...}},
+  "relations": [[subject, relation, object], ...], "symmetric_relations": [...],
+  "inverse_relations": {...}}``, or the flat ``{"<id>": {"class": name}, ..., "relations": [...]}`` —
+  and the labelled point cloud ``gt/points.ply`` (``x y z instance [class]`` vertex fields; the
+  class of a point is taken from its instance);
+* a labelled PLY file with ``x y z`` and a class field (``class``, ``label``, ``semantic``,
+  ``class_id`` or ``category_id``), optionally an ``instance``/``object_id`` field, plus a class-name
+  table: ``--classes FILE.json``, else ``<ply stem>.json`` or ``classes.json`` beside the PLY. The
+  table is a JSON list (index = class id), a ``{"<id>": name}`` object, or either under ``"classes"``.
+
+Class ids are re-indexed to 0..C-1 in table order; points whose id is not in the table are void (-1).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import DataError
+
+log = logging.getLogger(__name__)
+
+_CLASS_FIELDS = ("class", "label", "semantic", "class_id", "category_id", "semantic_id")
+_INSTANCE_FIELDS = ("instance", "instance_id", "object_id", "objectId")
+
+
+@dataclass
+class RunData:
+    """What a run directory holds for evaluation."""
+
+    means: np.ndarray  # [N, 3] float64 Gaussian centres, metres
+    labels: np.ndarray  # [N] int64 scene labels, -1 = unlabeled
+    confidences: np.ndarray  # [N] float32 in [0, 1]
+    opacities: np.ndarray | None  # [N] float32 in (0, 1) (sigmoid of the stored logit), None if absent
+    graph: dict[str, Any] | None  # parsed graph.json or None
+
+
+@dataclass
+class GroundTruth:
+    """A labelled ground-truth point cloud with class names, instances and relation triplets."""
+
+    points: np.ndarray  # [M, 3] float64
+    classes: np.ndarray  # [M] int64 index into class_names, -1 = void
+    class_names: list[str]
+    instances: np.ndarray | None = None  # [M] int64 instance ids, -1 = none
+    instance_classes: dict[int, int] = field(default_factory=dict)  # instance id -> class index
+    relations: list[tuple[int, str, int]] = field(default_factory=list)
+    symmetric_relations: list[str] | None = None  # None = the evaluator's defaults
+    inverse_relations: list[tuple[str, str]] | None = None
+    class_ids: list[int] | None = None  # the dataset's own id of each class (for its 2D label maps)
+    source: str = ""
+
+    def class_index_of_ids(self, ids: Any) -> np.ndarray:
+        """Dataset class ids (e.g. a GT class image) -> indices into ``class_names``, -1 if unknown."""
+        raw = np.asarray(ids).astype(np.int64)
+        if self.class_ids is None:
+            raise DataError(f"{self.source}: the ground truth has no class-id table for 2D label maps")
+        out, _ = _reindex(raw, dict(zip(self.class_ids, self.class_names)))
+        return out
+
+
+def find_ground_truth(run_dir: str | Path) -> Path | None:
+    """The synthetic scene a run was made from, if it can be found: ``RUN_DIR/scene`` (where
+    ``ogscene3d run`` without ``--data`` generates it), else ``data.path`` of ``RUN_DIR/config.yaml``;
+    either must hold ``gt/instances.json``. None when neither does."""
+    run = Path(run_dir)
+    candidates = [run / "scene"]
+    cfg = run / "config.yaml"
+    if cfg.is_file():
+        import yaml
+
+        try:
+            data = yaml.safe_load(cfg.read_text()) or {}
+        except yaml.YAMLError as e:
+            raise DataError(f"{cfg}: invalid YAML ({e})") from None
+        path = (data.get("data") or {}).get("path") if isinstance(data, dict) else None
+        if path:
+            p = Path(path)
+            candidates.append(p if p.is_absolute() else run / p)
+    for c in candidates:
+        if (c / "gt" / "instances.json").is_file():
+            return c
+    return None
+
+
+def _read_ply_vertices(path: Path) -> Any:
+    from plyfile import PlyData
+
+    try:
+        ply = PlyData.read(str(path))
+    except FileNotFoundError:
+        raise DataError(f"{path}: file not found") from None
+    except Exception as e:  # plyfile raises assorted errors on truncated/corrupt files
+        raise DataError(f"{path}: not a readable PLY file ({e})") from None
+    if "vertex" not in ply:
+        raise DataError(f"{path}: PLY has no 'vertex' element")
+    return ply["vertex"].data
+
+
+def _xyz(v: Any, path: Path) -> np.ndarray:
+    names = v.dtype.names or ()
+    for f in ("x", "y", "z"):
+        if f not in names:
+            raise DataError(f"{path}: vertex field '{f}' missing (have {list(names)})")
+    pts = np.stack([v["x"], v["y"], v["z"]], axis=1).astype(np.float64)
+    if not np.all(np.isfinite(pts)):
+        raise DataError(
+            f"{path}: {int((~np.isfinite(pts)).any(axis=1).sum())} vertices have NaN/inf coordinates"
+        )
+    return pts
+
+
+def _int_field(v: Any, name: str, path: Path) -> np.ndarray:
+    a = np.asarray(v[name])
+    if np.issubdtype(a.dtype, np.floating):
+        if not np.all(np.isfinite(a)) or not np.all(a == np.round(a)):
+            raise DataError(f"{path}: field '{name}' must hold whole numbers")
+    return a.astype(np.int64)
+
+
+def read_run(run_dir: str | Path) -> RunData:
+    """Read ``gaussians.ply`` (required) and ``graph.json`` (optional) of a run directory."""
+    run = Path(run_dir)
+    if not run.is_dir():
+        raise DataError(f"{run}: run directory not found")
+    ply = run / "gaussians.ply"
+    if not ply.is_file():
+        raise DataError(f"{ply}: missing (a run directory holds gaussians.ply, see DESIGN.md)")
+    v = _read_ply_vertices(ply)
+    names = v.dtype.names or ()
+    if "label" not in names:
+        raise DataError(f"{ply}: vertex field 'label' missing: not a semantic Gaussian map")
+    means = _xyz(v, ply)
+    labels = _int_field(v, "label", ply)
+    conf = (
+        np.asarray(v["confidence"], dtype=np.float32)
+        if "confidence" in names
+        else np.ones(len(labels), np.float32)
+    )
+    if not np.all(np.isfinite(conf)):
+        raise DataError(f"{ply}: field 'confidence' has NaN/inf")
+    opac = None
+    if "opacity" in names:
+        logit = np.asarray(v["opacity"], dtype=np.float64)
+        opac = (1.0 / (1.0 + np.exp(-np.clip(logit, -60, 60)))).astype(np.float32)
+    graph = None
+    gpath = run / "graph.json"
+    if gpath.is_file():
+        graph = read_graph_json(gpath)
+    return RunData(means=means, labels=labels, confidences=conf, opacities=opac, graph=graph)
+
+
+def read_graph_json(path: str | Path) -> dict[str, Any]:
+    """Parse and sanity-check ``graph.json`` ({"nodes": [...], "edges": [...]})."""
+    path = Path(path)
+    try:
+        g = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise DataError(f"{path}: file not found") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise DataError(f"{path}: invalid JSON ({e})") from None
+    if (
+        not isinstance(g, dict)
+        or not isinstance(g.get("nodes", []), list)
+        or not isinstance(g.get("edges", []), list)
+    ):
+        raise DataError(f"{path}: expected an object with 'nodes' and 'edges' lists")
+    for n in g.get("nodes", []):
+        if not isinstance(n, dict) or "id" not in n:
+            raise DataError(f"{path}: every node needs an 'id' (got {n!r:.80})")
+    for e in g.get("edges", []):
+        if not isinstance(e, dict) or not {"source", "target", "relation"} <= set(e):
+            raise DataError(f"{path}: every edge needs 'source', 'target', 'relation' (got {e!r:.80})")
+    g.setdefault("nodes", [])
+    g.setdefault("edges", [])
+    return g
+
+
+def _load_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise DataError(f"{path}: file not found") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise DataError(f"{path}: invalid JSON ({e})") from None
+
+
+def read_class_table(path: str | Path) -> dict[int, str]:
+    """Class id -> name from a JSON list, ``{"<id>": name}`` object, or either under ``"classes"``."""
+    path = Path(path)
+    data = _load_json(path)
+    if isinstance(data, dict) and "classes" in data:
+        data = data["classes"]
+    if isinstance(data, list):
+        if not all(isinstance(n, str) for n in data):
+            raise DataError(f"{path}: a class list must hold names (strings)")
+        return dict(enumerate(data))
+    if isinstance(data, dict):
+        out: dict[int, str] = {}
+        for k, n in data.items():
+            try:
+                out[int(k)] = str(n["name"] if isinstance(n, dict) else n)
+            except (ValueError, KeyError, TypeError):
+                raise DataError(f"{path}: class table entry {k!r}: {n!r} is not 'id': name") from None
+        return out
+    raise DataError(f"{path}: expected a list of class names or an {{id: name}} object")
+
+
+def _reindex(raw: np.ndarray, table: dict[int, str]) -> tuple[np.ndarray, list[str]]:
+    """Raw class ids -> compact indices in table order (ids sorted); unknown ids -> -1."""
+    ids = np.array(sorted(table), dtype=np.int64)
+    names = [table[int(i)] for i in ids]
+    if ids.size == 0:
+        return np.full(raw.shape, -1, np.int64), names
+    pos = np.clip(np.searchsorted(ids, raw), 0, ids.size - 1)
+    out = np.where(ids[pos] == raw, pos, -1).astype(np.int64)
+    return out, names
+
+
+@dataclass
+class _InstanceTable:
+    instance_class: dict[int, str]
+    class_table: dict[int, str] | None
+    relations: list[tuple[int, str, int]]
+    symmetric: list[str] | None
+    inverses: list[tuple[str, str]] | None
+
+
+def _read_instances_json(path: Path) -> _InstanceTable:
+    """Both the synthetic generator's layout (``{"classes", "instances", "relations", ...}``) and the
+    flat one (``{"<id>": {"class": name}, ..., "relations": [...]}``)."""
+    data = _load_json(path)
+    if not isinstance(data, dict):
+        raise DataError(f"{path}: expected an object with instances and relations")
+    entries = data["instances"] if isinstance(data.get("instances"), dict) else data
+    inst: dict[int, str] = {}
+    for k, val in entries.items():
+        try:
+            iid = int(k)
+        except ValueError:
+            continue  # top-level metadata of the flat layout ("relations", "version", ...)
+        if isinstance(val, dict) and isinstance(val.get("class"), str):
+            inst[iid] = val["class"]
+        elif isinstance(val, str):
+            inst[iid] = val
+        else:
+            raise DataError(f"{path}: instance {k}: expected {{'class': name}}, got {val!r:.80}")
+    table = None
+    if isinstance(data.get("classes"), dict):
+        try:
+            table = {int(k): str(v) for k, v in data["classes"].items()}
+        except ValueError:
+            raise DataError(f"{path}: 'classes' must map class ids to names") from None
+    rels: list[tuple[int, str, int]] = []
+    raw = data.get("relations", [])
+    if not isinstance(raw, list):
+        raise DataError(f"{path}: 'relations' must be a list of [subject, relation, object]")
+    for r in raw:
+        if not (isinstance(r, (list, tuple)) and len(r) == 3):
+            raise DataError(f"{path}: relation {r!r} is not [subject, relation, object]")
+        try:
+            rels.append((int(r[0]), str(r[1]), int(r[2])))
+        except (TypeError, ValueError):
+            raise DataError(f"{path}: relation {r!r}: subject/object must be instance ids") from None
+    sym = data.get("symmetric_relations")
+    inv = data.get("inverse_relations")
+    return _InstanceTable(
+        instance_class=inst,
+        class_table=table,
+        relations=rels,
+        symmetric=[str(x) for x in sym] if isinstance(sym, list) else None,
+        inverses=[(str(a), str(b)) for a, b in inv.items()] if isinstance(inv, dict) else None,
+    )
+
+
+def _find_gt_ply(folder: Path) -> Path:
+    plys = sorted(folder.glob("*.ply"))
+    if not plys:
+        raise DataError(f"{folder}: no labelled point cloud (*.ply) found")
+    if len(plys) == 1:
+        return plys[0]
+    for name in ("points.ply", "gt_points.ply", "labels.ply", "pointcloud.ply", "semantic.ply"):
+        if (folder / name).is_file():
+            return folder / name
+    raise DataError(f"{folder}: several PLY files {[p.name for p in plys]}; pass the labelled one to --gt")
+
+
+def load_ground_truth(gt: str | Path, classes: str | Path | None = None) -> GroundTruth:
+    """Load ground truth from a synthetic scene directory, a ``gt/`` folder or a labelled PLY file."""
+    path = Path(gt)
+    if not path.exists():
+        raise DataError(f"{path}: ground truth not found")
+    if path.is_dir():
+        folder = path / "gt" if (path / "gt" / "instances.json").is_file() else path
+        inst_json = folder / "instances.json"
+        if inst_json.is_file():
+            return _load_instance_gt(folder, inst_json)
+        ply = _find_gt_ply(folder)
+    else:
+        ply = path
+    return _load_labelled_ply(ply, classes)
+
+
+def _load_instance_gt(folder: Path, inst_json: Path) -> GroundTruth:
+    table = _read_instances_json(inst_json)
+    ply = _find_gt_ply(folder)
+    v = _read_ply_vertices(ply)
+    names = v.dtype.names or ()
+    pts = _xyz(v, ply)
+    inst_field = next((f for f in _INSTANCE_FIELDS if f in names), None)
+    if inst_field is None:
+        raise DataError(
+            f"{ply}: no instance field ({'/'.join(_INSTANCE_FIELDS)}) to join with {inst_json.name}"
+        )
+    inst = _int_field(v, inst_field, ply)
+    if table.class_table:
+        class_ids: list[int] | None = sorted(table.class_table)
+        class_names = [table.class_table[i] for i in class_ids]
+        missing = sorted(set(table.instance_class.values()) - set(class_names))
+        if missing:
+            raise DataError(f"{inst_json}: instance classes {missing} are not in its 'classes' table")
+    else:
+        class_ids = None
+        class_names = sorted(set(table.instance_class.values()))
+    cidx = {n: i for i, n in reversed(list(enumerate(class_names)))}
+    instance_classes = {i: cidx[n] for i, n in table.instance_class.items()}
+    ids = np.array(sorted(instance_classes), dtype=np.int64)
+    lut = np.array([instance_classes[int(i)] for i in ids], dtype=np.int64)
+    if ids.size:
+        pos = np.clip(np.searchsorted(ids, inst), 0, ids.size - 1)
+        known = ids[pos] == inst
+        classes = np.where(known, lut[pos], -1)
+    else:
+        known = np.zeros(inst.shape, bool)
+        classes = np.full(inst.shape, -1, np.int64)
+    unknown = int(((inst >= 0) & ~known).sum())
+    if unknown:
+        log.warning(
+            "%s: %d points have instance ids absent from %s; treated as void", ply, unknown, inst_json
+        )
+    for s, _, o in table.relations:
+        if s not in instance_classes or o not in instance_classes:
+            raise DataError(f"{inst_json}: relation ({s}, ..., {o}) names an unknown instance")
+    return GroundTruth(
+        points=pts,
+        classes=classes.astype(np.int64),
+        class_names=class_names,
+        instances=np.where(known, inst, -1).astype(np.int64),
+        instance_classes=instance_classes,
+        relations=table.relations,
+        symmetric_relations=table.symmetric,
+        inverse_relations=table.inverses,
+        class_ids=class_ids,
+        source=str(folder),
+    )
+
+
+def _load_labelled_ply(ply: Path, classes: str | Path | None) -> GroundTruth:
+    v = _read_ply_vertices(ply)
+    names = v.dtype.names or ()
+    pts = _xyz(v, ply)
+    cfield = next((f for f in _CLASS_FIELDS if f in names), None)
+    if cfield is None:
+        raise DataError(f"{ply}: no class field (one of {list(_CLASS_FIELDS)}); have {list(names)}")
+    raw = _int_field(v, cfield, ply)
+    table_path = Path(classes) if classes is not None else None
+    if table_path is None:
+        for cand in (ply.with_suffix(".json"), ply.parent / "classes.json"):
+            if cand.is_file():
+                table_path = cand
+                break
+    if table_path is None:
+        raise DataError(
+            f"{ply}: no class-name table; pass --classes FILE.json (a list of names or {{id: name}})"
+        )
+    table = read_class_table(table_path)
+    cls, class_names = _reindex(raw, table)
+    void = int(((raw >= 0) & (cls < 0)).sum())
+    if void:
+        log.warning("%s: %d points have class ids absent from %s; treated as void", ply, void, table_path)
+    ifield = next((f for f in _INSTANCE_FIELDS if f in names), None)
+    instances = None
+    instance_classes: dict[int, int] = {}
+    if ifield is not None:
+        instances = _int_field(v, ifield, ply)
+        ok = (instances >= 0) & (cls >= 0)
+        if ok.any():
+            pairs = np.unique(np.stack([instances[ok], cls[ok]], axis=1), axis=0)
+            instance_classes = {int(i): int(c) for i, c in pairs}
+    return GroundTruth(
+        points=pts,
+        classes=cls,
+        class_names=class_names,
+        instances=instances,
+        instance_classes=instance_classes,
+        relations=[],
+        class_ids=sorted(table),
+        source=str(ply),
+    )

@@ -1,0 +1,168 @@
+"""HOV-SG / ConceptGraphs protocols and 2D novel-view metrics on toy data with hand-checked results."""
+
+import numpy as np
+import pytest
+import torch
+
+from ogscene3d.eval.protocols import (
+    conceptgraphs_protocol,
+    evaluate_semantic_3d,
+    hovsg_protocol,
+    label_lookup,
+    majority_vote,
+    nearest_neighbors,
+    novel_view_metrics,
+)
+
+
+def _line(xs):
+    xs = np.asarray(xs, dtype=np.float64)
+    return np.stack([xs, np.zeros_like(xs), np.zeros_like(xs)], axis=1)
+
+
+# GT: 10 points on a line, x = 0..9; chair (0) at x < 5, table (1) at x >= 5.
+GT_PTS = _line(np.arange(10))
+GT_CLS = np.array([0] * 5 + [1] * 5)
+NAMES = ["chair", "table"]
+# Predictions at x = i + 0.1 (no distance ties), the one at 4.1 wrongly says table.
+PRED_PTS = _line(np.arange(10) + 0.1)
+PRED_CLS = np.array([0] * 4 + [1] * 6)
+
+
+def test_hovsg_toy_line():
+    # The 5 nearest predictions of GT x=4 are x=2..6 (0,0,1,1,1) -> table: one chair point lost.
+    m = hovsg_protocol(PRED_PTS, PRED_CLS, GT_PTS, GT_CLS, NAMES, ignore=())
+    np.testing.assert_allclose(m.iou, [4 / 5, 5 / 6])
+    assert m.macc == pytest.approx((4 / 5 + 1) / 2)
+    assert m.support.tolist() == [5, 5]  # counted on GT points
+    assert m.protocol.startswith("hovsg")
+
+
+def test_protocols_differ_on_a_cluster_of_wrong_points():
+    # Three extra chair predictions just right of x = 9.
+    pts = np.concatenate([PRED_PTS, _line([9.2, 9.3, 9.4])])
+    cls = np.concatenate([PRED_CLS, [0, 0, 0]])
+    # HOV-SG: GT x=9 now sees (9.1:table, 9.2, 9.3, 9.4: chair, 8.1: table) -> chair; x=4 as before.
+    h = hovsg_protocol(pts, cls, GT_PTS, GT_CLS, NAMES, ignore=())
+    np.testing.assert_allclose(h.iou, [4 / 6, 4 / 6])
+    assert h.miou == pytest.approx(2 / 3) and h.macc == pytest.approx(0.8)
+    # ConceptGraphs: each prediction vs its nearest GT point: 13 predicted points are counted.
+    c = conceptgraphs_protocol(pts, cls, GT_PTS, GT_CLS, NAMES, ignore=())
+    # chair: TP 4, FN 1 (4.1), FP 3 (cluster); table: TP 5, FN 3, FP 1.
+    np.testing.assert_allclose(c.iou, [4 / 8, 5 / 9])
+    assert c.support.sum() == 13
+    assert c.protocol.startswith("conceptgraphs")
+
+
+def test_background_ignore_handling_per_protocol():
+    names = ["chair", "wall"]
+    gt_pts = _line([0, 1, 5, 6])
+    gt_cls = np.array([0, 0, 1, 1])
+    pred_pts = _line([0.1, 1.1, 5.1, 6.1])
+    pred_cls = np.array([0, 0, 0, 1])  # one wall point predicted as chair
+    h = hovsg_protocol(pred_pts, pred_cls, gt_pts, gt_cls, names, ignore=["wall"], k=1)
+    assert h.iou[0] == pytest.approx(2 / 3) and h.miou == pytest.approx(2 / 3)  # kept as a false positive
+    c = conceptgraphs_protocol(pred_pts, pred_cls, gt_pts, gt_cls, names, ignore=["wall"])
+    assert c.miou == 1.0  # dropped
+    d = evaluate_semantic_3d(pred_pts, pred_cls, gt_pts, gt_cls, names, protocol="hovsg", k=1)
+    assert d.ignored == ["wall"]  # HOV-SG default background list
+
+
+def test_unlabelled_predictions_do_not_vote_in_hovsg_but_miss_in_conceptgraphs():
+    pred_cls = PRED_CLS.copy()
+    pred_cls[:] = -1
+    pred_cls[0] = 0  # only one labelled prediction: every GT point gets chair
+    h = hovsg_protocol(PRED_PTS, pred_cls, GT_PTS, GT_CLS, NAMES, ignore=())
+    np.testing.assert_allclose(h.iou, [5 / 10, 0.0])
+    c = conceptgraphs_protocol(PRED_PTS, pred_cls, GT_PTS, GT_CLS, NAMES, ignore=())
+    np.testing.assert_allclose(c.iou, [1 / 5, 0.0])
+    assert c.to_dict()["unassigned_predictions"] == 9
+    none = hovsg_protocol(PRED_PTS, np.full(10, -1), GT_PTS, GT_CLS, NAMES, ignore=())
+    assert none.miou == 0.0
+
+
+def test_majority_vote_ties_and_validity():
+    votes = np.array([[2, 2, 1, 1, 5], [3, 3, 3, 0, 0], [4, 9, 9, 9, 9], [1, 1, 1, 1, 1]])
+    valid = np.ones_like(votes, dtype=bool)
+    valid[2, 1:] = False
+    valid[3, :] = False
+    np.testing.assert_array_equal(majority_vote(votes, valid), [1, 3, 4, -1])
+
+
+def test_majority_vote_matches_bincount_reference():
+    rng = np.random.default_rng(0)
+    votes = rng.integers(0, 6, size=(500, 5))
+    ref = np.array([np.bincount(r).argmax() for r in votes])
+    np.testing.assert_array_equal(majority_vote(votes), ref)
+
+
+def test_nearest_neighbors_matches_brute_force_and_radius():
+    rng = np.random.default_rng(1)
+    ref = rng.random((300, 3))
+    qry = rng.random((200, 3))
+    d, i = nearest_neighbors(ref, qry, k=3)
+    full = np.linalg.norm(qry[:, None] - ref[None], axis=2)
+    np.testing.assert_allclose(d, np.sort(full, axis=1)[:, :3])
+    _, i1 = nearest_neighbors(ref, qry + 10.0, k=1, max_distance=0.5)
+    assert (i1 == -1).all()
+
+
+@pytest.mark.parametrize("bad", [np.zeros((3, 2)), np.array([[0.0, np.nan, 0.0]])])
+def test_bad_points_rejected(bad):
+    with pytest.raises(ValueError, match="pred_points"):
+        hovsg_protocol(bad, np.zeros(len(bad), int), GT_PTS, GT_CLS, NAMES)
+
+
+def test_unknown_protocol():
+    with pytest.raises(ValueError, match="unknown protocol"):
+        evaluate_semantic_3d(PRED_PTS, PRED_CLS, GT_PTS, GT_CLS, NAMES, protocol="openscene")
+
+
+def test_label_lookup_dict_and_array():
+    labels = np.array([[5, 7], [-1, 9]])
+    np.testing.assert_array_equal(label_lookup({5: 0, 9: 2}, labels), [[0, -1], [-1, 2]])
+    np.testing.assert_array_equal(label_lookup(np.array([3, 3, 3, 3, 3, 1]), labels), [[1, -1], [-1, -1]])
+    np.testing.assert_array_equal(label_lookup({}, labels), -np.ones((2, 2)))
+
+
+def test_novel_view_metrics_two_views():
+    r1 = np.array([[10, 10], [11, -1]])
+    g1 = np.array([[0, 0], [1, 1]])
+    r2 = torch.tensor([[12, 11], [10, 10]], dtype=torch.int32)  # 12 has no class
+    g2 = np.array([[1, 1], [0, -1]])
+    m = novel_view_metrics([r1, r2], [g1, g2], {10: 0, 11: 1}, ["chair", "table"])
+    # chair: 3 TP; table: 2 TP, 2 misses (-1 and unmapped 12); the void pixel is skipped.
+    np.testing.assert_allclose(m.iou, [1.0, 0.5])
+    assert m.miou == pytest.approx(0.75) and m.macc == pytest.approx(0.75)
+    assert m.support.sum() == 7 and "novel-view" in m.protocol
+    with pytest.raises(ValueError, match="view 0"):
+        novel_view_metrics([r1], [np.zeros((3, 2), int)], {10: 0}, ["chair", "table"])
+
+
+def _brute_force_confusions(pred_pts, pred_cls, gt_pts, gt_cls, c, k):
+    d = np.linalg.norm(gt_pts[:, None] - pred_pts[None], axis=2)
+    lab = pred_cls >= 0
+    nn = np.argsort(d[:, lab], axis=1, kind="stable")[:, :k]
+    votes = np.array([np.bincount(row, minlength=c).argmax() for row in pred_cls[lab][nn]])
+    h = np.zeros((c, c + 1), int)
+    np.add.at(h, (gt_cls, votes), 1)
+    ref = gt_cls[np.argmin(np.linalg.norm(pred_pts[:, None] - gt_pts[None], axis=2), axis=1)]
+    cg = np.zeros((c, c + 1), int)
+    np.add.at(cg, (ref, np.where(pred_cls < 0, c, pred_cls)), 1)
+    return h, cg
+
+
+def test_protocols_match_brute_force_with_small_chunks(monkeypatch):
+    import ogscene3d.eval.protocols as protocols
+
+    monkeypatch.setattr(protocols, "_CHUNK", 7)  # exercise the chunked KD-tree queries and votes
+    rng = np.random.default_rng(5)
+    gt_pts, pred_pts = rng.random((120, 3)), rng.random((90, 3))
+    gt_cls = (gt_pts[:, 0] * 4).astype(int)  # 4 slabs along x
+    pred_cls = np.where(rng.random(90) < 0.8, (pred_pts[:, 0] * 4).astype(int), rng.integers(-1, 4, 90))
+    names = ["a", "b", "c", "d"]
+    h_ref, cg_ref = _brute_force_confusions(pred_pts, pred_cls, gt_pts, gt_cls, 4, 5)
+    h = protocols.hovsg_protocol(pred_pts, pred_cls, gt_pts, gt_cls, names, ignore=())
+    np.testing.assert_array_equal(h.confusion, h_ref)
+    cg = protocols.conceptgraphs_protocol(pred_pts, pred_cls, gt_pts, gt_cls, names, ignore=())
+    np.testing.assert_array_equal(cg.confusion, cg_ref)
