@@ -77,7 +77,10 @@ class SegmentationConfig:
     classical_min_size: int = 60  # pixels at the working resolution
     classical_max_side: int = 320  # images are segmented at most this large, labels upsampled
     classical_depth_weight: float = 300.0  # ΔE per unit of relative depth discontinuity
-    classical_normal_weight: float = 30.0  # ΔE per unit of (1 - cos) between neighbouring normals
+    classical_normal_weight: float = 100.0  # ΔE per unit of (1 - cos) between neighbouring normals
+    # simulated SAM from ground-truth instances (synthetic scenes only)
+    simulated_noise: str = "default"  # none | low | default | high
+    simulated_seed: int = 0
 
 
 @dataclass
@@ -119,6 +122,8 @@ class MappingConfig:
     memory_max: int = 64  # long-term memory buffer capacity (frames)
     memory_point_step: int = 4  # pixel grid step of the memory point clouds (overlap criterion)
     longterm_pixel_step: int = 2  # pixel grid step of the long-term pixel-to-Gaussian association
+    fill_unlabeled: bool = True  # unlabeled Gaussians under a labeled segment take its label (local.fill_unlabeled)
+    refine_unlabeled: bool = True  # individual refinement also labels unlabeled Gaussians (their confidence is 0)
 
 
 @dataclass
@@ -173,7 +178,16 @@ class GraphConfig:
     tau_e: float = 0.2
     min_gaussians: int = 20
     up_axis: list[float] = field(default_factory=lambda: [0.0, -1.0, 0.0])
-    max_points_per_node: int = 1024  # random subsample of a node's Gaussians for edges and relations
+    # A node's points for edges and relations: its Gaussian means thinned to one per voxel of edge_voxel
+    # metres (0 = theta_e / 2, spatially uniform), then at most max_points_per_node (seeded random).
+    edge_voxel: float = 0.0
+    max_points_per_node: int = 4096
+    # Extension of Eqs. 20-21 (false = the paper's rule only): a pair is also a candidate when the bottom
+    # (or top) band of one node lies mostly within theta_e of the other (furniture on the floor, lamp on a
+    # ceiling), which R_ij misses because it normalises by the whole node.
+    support_edges: bool = True
+    support_band: float = 0.05  # metres along up
+    support_ratio: float = 0.5
     background: bool = False  # run graph updates on a worker thread (never blocks mapping)
     max_masked_views: int = 3
     crop_max_side: int = 256  # stored crops are downscaled to this many pixels on the long side
@@ -194,7 +208,8 @@ class TrackingConfig:
     max_rotation_deg: float = 30.0
     keyframe_every: int = 5
     # RGB-D odometry (ogscene3d.tracking); see that module's docstring for the meaning of each field.
-    method: str = "hybrid"  # hybrid | color | point_to_plane
+    method: str = "auto"  # auto (point_to_plane, hybrid if degenerate) | hybrid | color | point_to_plane
+    min_conditioning: float = 0.01  # auto: keyframe conditioning below which hybrid replaces point_to_plane
     iterations: list[int] = field(default_factory=lambda: [20, 10, 5])  # per pyramid level, coarse to fine
     max_width: int = 640  # track on images downsampled by an integer factor to at most this width; 0 = full
     depth_min: float = 0.1  # metres
@@ -208,6 +223,7 @@ class TrackingConfig:
     keyframe_translation: float = 0.1  # metres from the keyframe beyond which the frame becomes a keyframe
     keyframe_rotation_deg: float = 10.0
     max_lost_frames: int = 0  # consecutive failures after which tracking restarts at the last pose; 0 = never
+    max_residual_ratio: float = 5.0  # re-acquisition fails above this x the recent residuals; 0 = off
     feature_init: bool = True  # ORB + RANSAC initial guess when the motion prior does not converge
     orb_features: int = 500
     ransac_threshold: float = 0.05  # metres

@@ -1,0 +1,126 @@
+"""Fusion of grid-prompted and detector-prompted SAM segments (paper Sec. III-B.1).
+
+M_f keeps every segment of M_d (detector boxes as SAM prompts, precise, labelled) and adds each segment s
+of M_s (SAM's automatic grid masks, complete coverage) whose pixel overlap ratio with its corresponding
+M_d segment is below tau_m (0.7):
+
+    ratio(s) = max_d |s ∩ d| / |s|,
+
+the corresponding segment being the M_d segment that covers most of s. Where the kept M_s segments and
+M_d overlap, M_d wins the pixel (it "maintains object-level precision"); a kept M_s segment therefore
+only fills pixels that no detector segment claims. Per-pixel scores are the winning segment's SAM
+predicted IoU (``Segmentation.score_map``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .base import Segmentation
+from .detector_onnx import Detections, DetectorOnnx
+from .masks import paint_masks
+from .sam_onnx import SamOnnx, check_rgb
+
+
+def overlap_ratios(ms: Segmentation, md: Segmentation) -> dict[int, float]:
+    """{M_s id: max_d |s ∩ d| / |s|} for every segment present in ``ms.ids``."""
+    s_ids = np.asarray(ms.ids, dtype=np.int64)
+    d_ids = np.asarray(md.ids, dtype=np.int64)
+    if s_ids.shape != d_ids.shape:
+        raise ValueError(f"M_s {s_ids.shape} and M_d {d_ids.shape} id maps differ in shape")
+    if s_ids.min(initial=0) < 0 or d_ids.min(initial=0) < 0:
+        raise ValueError("segment ids must be >= 0")
+    ns, nd = int(s_ids.max(initial=0)) + 1, int(d_ids.max(initial=0)) + 1
+    # joint histogram of (s, d) pixel pairs: one bincount instead of a loop over segments
+    joint = np.bincount((s_ids * nd + d_ids).ravel(), minlength=ns * nd).reshape(ns, nd)
+    area = joint.sum(axis=1)
+    best = joint[:, 1:].max(axis=1) if nd > 1 else np.zeros(ns, dtype=np.int64)
+    present = np.flatnonzero(area[1:] > 0) + 1
+    return {int(s): float(best[s] / area[s]) for s in present}
+
+
+def fuse_segmentations(
+    ms: Segmentation, md: Segmentation, tau_m: float = 0.7, min_area: int = 1
+) -> Segmentation:
+    """M_f from M_s and M_d (see the module docstring).
+
+    Output ids: the M_d segments first (1..K_d, in their id order), then the kept M_s segments. M_s
+    segments left with fewer than ``min_area`` visible pixels once M_d has taken its pixels are dropped.
+    Scores missing from a Segmentation's ``scores`` default to 1.0 (as for precomputed segments).
+    """
+    if not 0.0 <= tau_m <= 1.0:
+        raise ValueError(f"tau_m must lie in [0, 1], got {tau_m}")
+    ratios = overlap_ratios(ms, md)
+    keep_s = np.array(sorted(s for s, r in ratios.items() if r < tau_m), dtype=np.int64)
+    d_ids = np.asarray(md.ids, dtype=np.int64)
+    s_ids = np.asarray(ms.ids, dtype=np.int64)
+    d_present = np.flatnonzero(np.bincount(d_ids.ravel())[1:]) + 1
+    lut_d = np.zeros(int(d_ids.max(initial=0)) + 1, dtype=np.int64)
+    lut_d[d_present] = np.arange(1, d_present.size + 1)
+    out = lut_d[d_ids]
+    lut_s = np.zeros(int(s_ids.max(initial=0)) + 1, dtype=np.int64)
+    lut_s[keep_s] = np.arange(d_present.size + 1, d_present.size + 1 + keep_s.size)
+    free = out == 0
+    out[free] = lut_s[s_ids[free]]
+    # drop M_s segments that M_d has (almost) swallowed, then make ids consecutive again
+    visible = np.bincount(out.ravel(), minlength=d_present.size + keep_s.size + 1)
+    alive = np.ones(visible.size, dtype=bool)
+    alive[0] = False
+    alive[d_present.size + 1 :] = visible[d_present.size + 1 :] >= max(1, min_area)
+    alive[1 : d_present.size + 1] = True
+    final = np.zeros(visible.size, dtype=np.int32)
+    final[alive] = np.arange(1, int(alive.sum()) + 1, dtype=np.int32)
+    ids = final[out]
+    scores: dict[int, float] = {}
+    names: dict[int, str] = {}
+    for new, old in zip(final[1 : d_present.size + 1], d_present):
+        scores[int(new)] = float(md.scores.get(int(old), 1.0))
+        if int(old) in md.names:
+            names[int(new)] = md.names[int(old)]
+    for new, old in zip(final[d_present.size + 1 :], keep_s):
+        if new > 0:
+            scores[int(new)] = float(ms.scores.get(int(old), 1.0))
+            if int(old) in ms.names:
+                names[int(new)] = ms.names[int(old)]
+    return Segmentation(ids, scores, names)
+
+
+@dataclass
+class OpenSetResult:
+    """The three segmentations of one frame: grid M_s, detector M_d, fused M_f, plus the detections."""
+
+    ms: Segmentation
+    md: Segmentation
+    mf: Segmentation
+    detections: Detections
+
+
+class SamDetectorSegmenter:
+    """The paper's open-set front-end: SAM grid masks + detector-prompted SAM masks, fused (M_f).
+
+    One SAM encoder pass per frame serves both the grid prompts and the detector's box prompts.
+    """
+
+    def __init__(self, sam: SamOnnx, detector: DetectorOnnx, tau_m: float = 0.7) -> None:
+        if not 0.0 <= tau_m <= 1.0:
+            raise ValueError(f"tau_m must lie in [0, 1], got {tau_m}")
+        self.sam = sam
+        self.detector = detector
+        self.tau_m = float(tau_m)
+
+    def segment(self, rgb: np.ndarray) -> OpenSetResult:
+        """M_s, M_d and M_f of one uint8 RGB frame [H, W, 3]."""
+        rgb = check_rgb(rgb)
+        image = self.sam.embed(rgb)
+        shape = image.orig_size
+        area = self.sam.min_region_area
+        ms = paint_masks(self.sam.generate(image), shape, area)
+        dets = self.detector(rgb)
+        md = paint_masks(self.sam.segment_boxes(image, dets.boxes, list(dets.names)), shape, area)
+        return OpenSetResult(ms, md, fuse_segmentations(ms, md, self.tau_m, area), dets)
+
+    def __call__(self, rgb: np.ndarray, depth: np.ndarray | None = None) -> Segmentation:
+        """M_f for one frame (depth is unused)."""
+        return self.segment(rgb).mf

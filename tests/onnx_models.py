@@ -1,0 +1,264 @@
+"""Tiny ONNX models with the input/output signatures of real segmentation exports, built with onnx.helper.
+
+They let the tests run ogscene3d's real pre/post-processing, prompting, filtering, NMS, painting and
+fusion code against models whose answers are known in closed form:
+
+- SAM encoder: average-pools the (preprocessed) image into a [1, 256, 64, 64] embedding.
+- SAM decoder: for a point prompt, output c is a disc of radius ``radii[c]`` around the first prompt point
+  (logit = slopes[c] * (radii[c] - distance)); for a box prompt (first label 2) every output is the box
+  (logit = 10 * signed distance to the nearest box edge). Predicted IoUs are constants per output
+  (``ious`` for points, ``box_iou`` for boxes). Geometry is computed in original pixels from
+  ``orig_im_size`` exactly as the real decoder maps its masks back, so the prompt transform is exercised.
+- Detector: returns fixed detections (in the letterboxed input frame) in one of the common layouts.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import onnx
+from onnx import TensorProto, helper, numpy_helper
+
+OPSET = 17
+
+
+def _save(graph: onnx.GraphProto, path: str | Path) -> Path:
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)])
+    model.ir_version = 8
+    onnx.checker.check_model(model)
+    path = Path(path)
+    onnx.save(model, str(path))
+    return path
+
+
+def _const(name: str, value: np.ndarray) -> onnx.TensorProto:
+    return numpy_helper.from_array(np.asarray(value), name)
+
+
+def make_sam_encoder(
+    path: str | Path,
+    size: int = 1024,
+    layout: str = "nchw",
+    dtype: str = "float",
+    symbolic: bool = False,
+    emb_size: int = 64,
+) -> Path:
+    """Encoder ``image``[1,3,S,S] (nchw), ``input_image``[S,S,3] (hwc) or [1,S,S,3] (nhwc) -> embeddings.
+
+    The embedding is the (S/emb_size)-pixel average pool of the input ([1, 256, emb_size, emb_size], 64
+    as SAM's), spread over 256 channels by a 1x1 convolution (channel c = pooled input channel c % 3).
+    """
+    elem = TensorProto.FLOAT if dtype == "float" else TensorProto.UINT8
+    s: int | str = "S" if symbolic else size
+    nodes = []
+    inits = []
+    if layout == "nchw":
+        inp = helper.make_tensor_value_info("image", elem, [1, 3, s, s])
+        x = "image"
+    else:
+        shape = [s, s, 3] if layout == "hwc" else [1, s, s, 3]
+        inp = helper.make_tensor_value_info("input_image", elem, shape)
+        nodes.append(helper.make_node("Cast", ["input_image"], ["xf"], to=TensorProto.FLOAT))
+        if layout == "hwc":
+            nodes.append(helper.make_node("Transpose", ["xf"], ["xt"], perm=[2, 0, 1]))
+            inits.append(_const("ax0", np.array([0], dtype=np.int64)))
+            nodes.append(helper.make_node("Unsqueeze", ["xt", "ax0"], ["x4"]))
+        else:
+            nodes.append(helper.make_node("Transpose", ["xf"], ["x4"], perm=[0, 3, 1, 2]))
+        x = "x4"
+    if symbolic and layout != "nchw":
+        # like samexporter's --use-preprocess exports: the graph pads the resized image to S x S itself
+        inits.append(_const("full", np.array([size, size], dtype=np.int64)))
+        inits.append(_const("zeros6", np.zeros(6, dtype=np.int64)))  # begins, then N and C ends
+        inits.append(_const("hw_idx", np.array([2, 3], dtype=np.int64)))
+        nodes += [
+            helper.make_node("Shape", [x], ["xshape"]),
+            helper.make_node("Gather", ["xshape", "hw_idx"], ["xhw"], axis=0),
+            helper.make_node("Sub", ["full", "xhw"], ["padhw"]),
+            helper.make_node("Concat", ["zeros6", "padhw"], ["pads"], axis=0),
+            helper.make_node("Pad", [x, "pads"], ["xpad"]),
+        ]
+        x = "xpad"
+    k = size // emb_size
+    nodes.append(helper.make_node("AveragePool", [x], ["pooled"], kernel_shape=[k, k], strides=[k, k]))
+    w = np.zeros((256, 3, 1, 1), dtype=np.float32)
+    w[np.arange(256), np.arange(256) % 3] = 1.0
+    inits.append(_const("w", w))
+    nodes.append(helper.make_node("Conv", ["pooled", "w"], ["image_embeddings"]))
+    out = helper.make_tensor_value_info("image_embeddings", TensorProto.FLOAT, [1, 256, emb_size, emb_size])
+    graph = helper.make_graph(nodes, "sam_encoder", [inp], [out], initializer=inits)
+    return _save(graph, path)
+
+
+def make_sam_decoder(
+    path: str | Path,
+    radii: Sequence[float] = (6.0, 10.0, 16.0, 20.0),
+    slopes: Sequence[float] = (10.0, 10.0, 10.0, 0.3),
+    ious: Sequence[float] = (0.99, 0.80, 0.95, 0.97),
+    box_iou: float = 0.96,
+    batch: int | None = None,
+    input_size: int = 1024,
+    drop_input: str | None = None,
+) -> Path:
+    """Decoder with segment-anything's interface; ``batch`` None = dynamic prompt batch, else fixed.
+
+    ``drop_input`` leaves one input out (to test the error for a wrong model).
+    """
+    c = len(radii)
+    b: int | str = "B" if batch is None else batch
+    f = TensorProto.FLOAT
+    ins = {
+        "image_embeddings": helper.make_tensor_value_info("image_embeddings", f, [1, 256, 64, 64]),
+        "point_coords": helper.make_tensor_value_info("point_coords", f, [b, "N", 2]),
+        "point_labels": helper.make_tensor_value_info("point_labels", f, [b, "N"]),
+        "mask_input": helper.make_tensor_value_info("mask_input", f, [1, 1, 256, 256]),
+        "has_mask_input": helper.make_tensor_value_info("has_mask_input", f, [1]),
+        "orig_im_size": helper.make_tensor_value_info("orig_im_size", f, [2]),
+    }
+    inits = []
+    if drop_input:
+        # the graph still reads the tensor: make it a constant so that the model stays valid
+        del ins[drop_input]
+        inits.append(_const(drop_input, np.ones((1, 2), dtype=np.float32)))
+    inits += [
+        _const("i0", np.array(0, dtype=np.int64)),
+        _const("i1", np.array(1, dtype=np.int64)),
+        _const("half", np.array(0.5, dtype=np.float32)),
+        _const("zero_f", np.array(0.0, dtype=np.float32)),
+        _const("one_f", np.array(1.0, dtype=np.float32)),
+        _const("ten", np.array(10.0, dtype=np.float32)),
+        _const("two", np.array(2.0, dtype=np.float32)),
+        _const("inv_size", np.array(1.0 / input_size, dtype=np.float32)),
+        _const("shape_b1", np.array([-1, 1], dtype=np.int64)),
+        _const("shape_b111", np.array([-1, 1, 1, 1], dtype=np.int64)),
+        _const("shape_11h1", np.array([1, 1, -1, 1], dtype=np.int64)),
+        _const("shape_111w", np.array([1, 1, 1, -1], dtype=np.int64)),
+        _const("radii", np.asarray(radii, dtype=np.float32).reshape(1, c, 1, 1)),
+        _const("slopes", np.asarray(slopes, dtype=np.float32).reshape(1, c, 1, 1)),
+        _const("ious_pt", np.asarray(ious, dtype=np.float32).reshape(1, c)),
+        _const("ious_box", np.full((1, c), box_iou, dtype=np.float32)),
+        _const("zeros_c", np.zeros((1, c, 1, 1), dtype=np.float32)),
+        _const("lowres_tail", np.array([256, 256], dtype=np.int64)),
+    ]
+    n = helper.make_node
+    nodes = [
+        # original-pixel scale of the model frame: longest side / encoder size
+        n("ReduceMax", ["orig_im_size"], ["long_side"], keepdims=0),
+        n("Mul", ["long_side", "inv_size"], ["scale"]),
+        n("Mul", ["point_coords", "scale"], ["pts"]),  # [B, N, 2] original pixels
+        n("Gather", ["pts", "i0"], ["p0"], axis=1),  # [B, 2]
+        n("Gather", ["pts", "i1"], ["p1"], axis=1),
+        n("Gather", ["p0", "i0"], ["x0v"], axis=1),  # [B]
+        n("Gather", ["p0", "i1"], ["y0v"], axis=1),
+        n("Gather", ["p1", "i0"], ["x1v"], axis=1),
+        n("Gather", ["p1", "i1"], ["y1v"], axis=1),
+        n("Reshape", ["x0v", "shape_b111"], ["x0"]),
+        n("Reshape", ["y0v", "shape_b111"], ["y0"]),
+        n("Reshape", ["x1v", "shape_b111"], ["x1"]),
+        n("Reshape", ["y1v", "shape_b111"], ["y1"]),
+        # pixel-centre coordinate grids from orig_im_size
+        n("Gather", ["orig_im_size", "i0"], ["hf"], axis=0),
+        n("Gather", ["orig_im_size", "i1"], ["wf"], axis=0),
+        n("Range", ["zero_f", "hf", "one_f"], ["yr"]),
+        n("Range", ["zero_f", "wf", "one_f"], ["xr"]),
+        n("Add", ["yr", "half"], ["yc"]),
+        n("Add", ["xr", "half"], ["xc"]),
+        n("Reshape", ["yc", "shape_11h1"], ["Y"]),
+        n("Reshape", ["xc", "shape_111w"], ["X"]),
+        # discs around the first point
+        n("Sub", ["X", "x0"], ["dx"]),
+        n("Sub", ["Y", "y0"], ["dy"]),
+        n("Mul", ["dx", "dx"], ["dx2"]),
+        n("Mul", ["dy", "dy"], ["dy2"]),
+        n("Add", ["dx2", "dy2"], ["d2"]),
+        n("Sqrt", ["d2"], ["dist"]),  # [B, 1, H, W]
+        n("Sub", ["radii", "dist"], ["rad_minus"]),  # [B, C, H, W]
+        n("Mul", ["rad_minus", "slopes"], ["disc_logits"]),
+        # boxes between the first two points
+        n("Sub", ["X", "x0"], ["bl"]),
+        n("Sub", ["x1", "X"], ["br"]),
+        n("Sub", ["Y", "y0"], ["bt"]),
+        n("Sub", ["y1", "Y"], ["bb"]),
+        n("Min", ["bl", "br", "bt", "bb"], ["inside"]),
+        n("Mul", ["inside", "ten"], ["box1"]),
+        n("Add", ["box1", "zeros_c"], ["box_logits"]),  # broadcast to [B, C, H, W]
+        # which prompt kind: first label == 2
+        n("Gather", ["point_labels", "i0"], ["lab0"], axis=1),  # [B]
+        n("Equal", ["lab0", "two"], ["is_box_v"]),
+        n("Reshape", ["is_box_v", "shape_b111"], ["is_box"]),
+        n("Where", ["is_box", "box_logits", "disc_logits"], ["masks"]),
+        n("Reshape", ["is_box_v", "shape_b1"], ["is_box2"]),
+        n("Mul", ["x0v", "zero_f"], ["zb"]),
+        n("Reshape", ["zb", "shape_b1"], ["zb2"]),  # [B, 1] zeros: gives the IoUs their batch size
+        n("Add", ["ious_pt", "zb2"], ["ious_pt_b"]),
+        n("Add", ["ious_box", "zb2"], ["ious_box_b"]),
+        n("Where", ["is_box2", "ious_box_b", "ious_pt_b"], ["iou_predictions"]),
+        n("Shape", ["iou_predictions"], ["bc"]),
+        n("Concat", ["bc", "lowres_tail"], ["lr_shape"], axis=0),
+        n("ConstantOfShape", ["lr_shape"], ["low_res_masks"], value=helper.make_tensor("v", f, [1], [0.0])),
+    ]
+    outs = [
+        helper.make_tensor_value_info("masks", f, [b, c, "H", "W"]),
+        helper.make_tensor_value_info("iou_predictions", f, [b, c]),
+        helper.make_tensor_value_info("low_res_masks", f, [b, c, 256, 256]),
+    ]
+    graph = helper.make_graph(nodes, "sam_decoder", list(ins.values()), outs, initializer=inits)
+    return _save(graph, path)
+
+
+def make_detector(
+    path: str | Path,
+    boxes_xyxy: np.ndarray,
+    class_scores: np.ndarray,
+    layout: str = "yolo_head",
+    size: int = 640,
+    head_transposed: bool = False,
+) -> Path:
+    """Detector returning fixed detections given in the letterboxed input frame.
+
+    ``boxes_xyxy`` [A, 4], ``class_scores`` [A, K]. Layouts: "yolo_head" one output [1, 4+K, A]
+    (``head_transposed``: [1, A, 4+K]), "dense" boxes [1, A, 4] + scores [1, A, K], "nms" num_dets +
+    boxes [1, A, 4] + scores [1, A] + labels [1, A] (argmax of class_scores).
+    """
+    boxes_xyxy = np.asarray(boxes_xyxy, dtype=np.float32)
+    class_scores = np.asarray(class_scores, dtype=np.float32)
+    a, k = class_scores.shape
+    f = TensorProto.FLOAT
+    inp = helper.make_tensor_value_info("images", f, [1, 3, size, size])
+    n = helper.make_node
+    # 0 * mean(image): the outputs formally depend on the input, as a real detector's do
+    nodes = [n("ReduceMean", ["images"], ["m"], keepdims=0), n("Mul", ["m", "zero"], ["z"])]
+    inits = [_const("zero", np.array(0.0, dtype=np.float32))]
+    outs = []
+
+    def emit(name: str, value: np.ndarray, elem: int = f) -> None:
+        inits.append(_const(name + "_c", value))
+        if elem == f:
+            nodes.append(n("Add", [name + "_c", "z"], [name]))
+        else:
+            nodes.append(n("Identity", [name + "_c"], [name]))
+        outs.append(helper.make_tensor_value_info(name, elem, list(value.shape)))
+
+    if layout == "yolo_head":
+        cx = (boxes_xyxy[:, 0] + boxes_xyxy[:, 2]) / 2
+        cy = (boxes_xyxy[:, 1] + boxes_xyxy[:, 3]) / 2
+        w = boxes_xyxy[:, 2] - boxes_xyxy[:, 0]
+        h = boxes_xyxy[:, 3] - boxes_xyxy[:, 1]
+        head = np.concatenate([np.stack([cx, cy, w, h], axis=1), class_scores], axis=1)  # [A, 4+K]
+        emit("output0", (head if head_transposed else head.T)[None].astype(np.float32))
+    elif layout == "dense":
+        emit("boxes", boxes_xyxy[None])
+        emit("scores", class_scores[None])
+    elif layout == "nms":
+        labels = class_scores.argmax(axis=1).astype(np.int64)
+        scores = class_scores.max(axis=1).astype(np.float32)
+        emit("num_dets", np.array([[a]], dtype=np.int64), TensorProto.INT64)
+        emit("boxes", boxes_xyxy[None])
+        emit("scores", scores[None])
+        emit("labels", labels[None], TensorProto.INT64)
+    else:
+        raise ValueError(layout)
+    graph = helper.make_graph(nodes, "detector", [inp], outs, initializer=inits)
+    return _save(graph, path)

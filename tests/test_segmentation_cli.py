@@ -1,0 +1,150 @@
+"""``ogscene3d segment`` and ``make_segmenter`` on a tiny 7-Scenes-layout dataset with tiny ONNX models."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+from onnx_models import make_detector, make_sam_decoder, make_sam_encoder
+
+from ogscene3d.cli import main
+from ogscene3d.config import SegmentationConfig
+from ogscene3d.errors import ConfigError
+from ogscene3d.segmentation.classical import ClassicalSegmenter
+from ogscene3d.segmentation.factory import make_segmenter
+from ogscene3d.segmentation.fusion import SamDetectorSegmenter
+from ogscene3d.segmentation.precomputed import read_segments
+from ogscene3d.segmentation.sam_onnx import SamOnnx
+
+H, W = 96, 128
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    root = tmp_path_factory.mktemp("seg_cli")
+    data = root / "data"
+    data.mkdir()
+    rng = np.random.default_rng(0)
+    for i in range(3):
+        rgb = rng.integers(0, 255, (H, W, 3), dtype=np.uint8)
+        cv2.imwrite(str(data / f"frame-{i:06d}.color.png"), rgb)
+        cv2.imwrite(str(data / f"frame-{i:06d}.depth.png"), np.full((H, W), 1500, np.uint16))
+        np.savetxt(data / f"frame-{i:06d}.pose.txt", np.eye(4))
+    np.savetxt(data / "camera-intrinsics.txt", np.array([[100.0, 0, 64], [0, 100.0, 48], [0, 0, 1]]))
+    boxes = np.array([[100, 130, 300, 280], [350, 330, 600, 530], [0, 0, 10, 10]], np.float32)
+    scores = np.array([[0.9, 0.0], [0.0, 0.7], [0.0, 0.0]], np.float32)
+    return {
+        "data": data,
+        "root": root,
+        "enc": make_sam_encoder(root / "enc.onnx"),
+        "dec": make_sam_decoder(root / "dec.onnx"),
+        "det": make_detector(root / "det.onnx", boxes, scores),
+    }
+
+
+def sam_args(scene, out, *extra):
+    return [
+        "segment",
+        "--data",
+        str(scene["data"]),
+        "--out",
+        str(out),
+        "--sam-encoder",
+        str(scene["enc"]),
+        "--sam-decoder",
+        str(scene["dec"]),
+        "--points-per-side",
+        "2",
+        "--set",
+        "segmentation.min_region_area=10",
+        "--no-progress",
+        *extra,
+    ]
+
+
+def test_sam_backend_writes_resumable_segments(scene, tmp_path):
+    out = tmp_path / "segs"
+    assert main(sam_args(scene, out, "--backend", "sam")) == 0
+    stems = [f"frame-{i:06d}.color" for i in range(3)]
+    for stem in stems:
+        ids, scores = read_segments(out, stem, (H, W))
+        assert len(scores) == 4 and all(s == pytest.approx(0.95) for s in scores.values())
+        assert json.loads((out / f"{stem}.json").read_text()).keys() == {"scores"}
+    # resume: a finished frame is not recomputed, a missing one is
+    marker = {"scores": {"1": 0.5}}
+    (out / f"{stems[0]}.json").write_text(json.dumps(marker))
+    (out / f"{stems[1]}.png").unlink()
+    assert main(sam_args(scene, out, "--backend", "sam")) == 0
+    assert json.loads((out / f"{stems[0]}.json").read_text()) == marker
+    assert len(read_segments(out, stems[1])[1]) == 4
+    # --overwrite redoes everything
+    assert main(sam_args(scene, out, "--backend", "sam", "--overwrite")) == 0
+    assert json.loads((out / f"{stems[0]}.json").read_text()) != marker
+
+
+def test_sam_detector_backend_keeps_names(scene, tmp_path):
+    out = tmp_path / "fused"
+    classes = tmp_path / "classes.txt"
+    classes.write_text("chair\n\ntable\n")
+    args = sam_args(scene, out, "--backend", "sam+detector", "--detector", str(scene["det"]))
+    assert main([*args, "--classes", str(classes), "--max-frames", "1"]) == 0
+    payload = json.loads((out / "frame-000000.color.json").read_text())
+    assert payload["names"] == {"1": "chair", "2": "table"}
+    assert len(payload["scores"]) == 4  # two boxes + the two grid discs off the boxes
+    assert not (out / "frame-000001.color.png").exists()
+
+
+def test_classical_backend(scene, tmp_path):
+    out = tmp_path / "classical"
+    args = [
+        "segment",
+        "--data",
+        str(scene["data"]),
+        "--out",
+        str(out),
+        "--backend",
+        "classical",
+        "--no-progress",
+    ]
+    assert main([*args, "--stride", "2"]) == 0
+    ids, scores = read_segments(out, "frame-000002.color", (H, W))
+    assert ids.min() >= 1 and all(0.88 <= s <= 1.0 for s in scores.values())
+    assert not (out / "frame-000001.color.png").exists()
+
+
+def test_cli_errors(scene, tmp_path, capsys):
+    base = ["segment", "--data", str(scene["data"]), "--out", str(tmp_path / "x"), "--no-progress"]
+    assert main(base) == 2  # the default backend (precomputed) computes nothing
+    assert "--backend" in capsys.readouterr().err
+    assert main([*base, "--backend", "sam", "--sam-encoder", str(tmp_path / "none.onnx")]) == 2
+    assert "sam_decoder" in capsys.readouterr().err
+    bad = [*base, "--backend", "sam", "--sam-encoder", str(tmp_path / "none.onnx"), "--sam-decoder", "d.onnx"]
+    assert main(bad) == 2
+    assert "none.onnx: SAM image encoder ONNX file does not exist" in capsys.readouterr().err
+    no_classes = sam_args(scene, tmp_path / "y", "--backend", "sam+detector", "--detector", str(scene["det"]))
+    assert main(no_classes) == 2
+    assert "detector_classes" in capsys.readouterr().err
+    assert main(["segment", "--data", str(tmp_path / "missing"), "--out", "o", "--backend", "classical"]) == 2
+    assert main([*base, "--backend", "simulated"]) == 2  # no ground truth in a 7-Scenes folder
+    assert "ground-truth instance maps" in capsys.readouterr().err
+
+
+def test_make_segmenter(scene):
+    cfg = SegmentationConfig(backend="sam", sam_encoder=str(scene["enc"]), sam_decoder=str(scene["dec"]))
+    assert isinstance(make_segmenter(cfg), SamOnnx)
+    cfg.backend = "sam+detector"
+    cfg.detector = str(scene["det"])
+    cfg.detector_classes = ["chair", "table"]
+    assert isinstance(make_segmenter(cfg), SamDetectorSegmenter)
+    cfg.backend = "classical"
+    seg = make_segmenter(cfg, np.array([[200.0, 0, 64], [0, 210.0, 48], [0, 0, 1]]))
+    assert isinstance(seg, ClassicalSegmenter) and (seg.fx, seg.fy) == (200.0, 210.0)
+    for backend, msg in (("precomputed", "computes none"), ("magic", "unknown")):
+        with pytest.raises(ConfigError, match=msg):
+            make_segmenter(SegmentationConfig(backend=backend))
+    with pytest.raises(ConfigError, match="simulated_noise"):
+        make_segmenter(SegmentationConfig(backend="simulated", simulated_noise="extreme"))
+    with pytest.raises(ConfigError, match="sam_encoder"):
+        make_segmenter(SegmentationConfig(backend="sam"))
