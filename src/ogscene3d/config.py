@@ -122,6 +122,7 @@ class MappingConfig:
     memory_max: int = 64  # long-term memory buffer capacity (frames)
     memory_point_step: int = 4  # pixel grid step of the memory point clouds (overlap criterion)
     longterm_pixel_step: int = 2  # pixel grid step of the long-term pixel-to-Gaussian association
+    longterm_knn_k: int = 5  # Gaussians associated with each back-projected memory pixel (within knn_radius)
     fill_unlabeled: bool = True  # unlabeled Gaussians under a labeled segment take its label (local.fill_unlabeled)
     refine_unlabeled: bool = True  # individual refinement also labels unlabeled Gaussians (their confidence is 0)
 
