@@ -1,1 +1,24 @@
-"""ogscene3d.viewer"""
+"""ogscene3d.viewer: the live web viewer (viser) of the map and the scene graph (``ogscene3d-live``).
+
+Producers build :class:`MapSnapshot` objects (``snapshot_from_mapper`` for a live Mapper, ``load_run``
+for a saved run) and hand them to :meth:`LiveViewer.publish`; :class:`LiveSession` runs a mapper on a
+background thread and does that between frames. viser is imported only when a viewer is created.
+"""
+
+from .app import LiveViewer, MappingControl
+from .live import LiveSession
+from .runs import RunInfo, load_run
+from .scene import ViewerSettings
+from .snapshot import MapSnapshot, empty_snapshot, snapshot_from_mapper
+
+__all__ = [
+    "LiveSession",
+    "LiveViewer",
+    "MapSnapshot",
+    "MappingControl",
+    "RunInfo",
+    "ViewerSettings",
+    "empty_snapshot",
+    "load_run",
+    "snapshot_from_mapper",
+]

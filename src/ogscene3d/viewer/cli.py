@@ -1,0 +1,344 @@
+"""``ogscene3d-live`` (also ``ogscene3d live``): watch mapping live in a browser, or browse a saved run.
+
+    ogscene3d-live RUN_DIR                          browse gaussians.ply + graph.json of a run
+    ogscene3d-live --data SCENE [--segments S]      map SCENE live
+    ogscene3d-live --synthetic                      generate the synthetic scene and map it live
+
+The server binds 127.0.0.1 unless ``--host`` says otherwise and prints the URL with the port it got.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+from ..errors import ConfigError, DataError, OGSceneError
+
+log = logging.getLogger(__name__)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from e
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {v}")
+    return v
+
+
+def _positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from e
+    if not v > 0 or v == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text}")
+    return v
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"size must look like 1280x800, got {text!r}") from e
+    if w < 64 or h < 64:
+        raise argparse.ArgumentTypeError(f"size must be at least 64x64, got {text!r}")
+    return w, h
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "run_dir", nargs="?", default=None, metavar="RUN_DIR", help="saved run directory to browse"
+    )
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--data", default=None, help="dataset folder to map live (Replica, ScanNet, TUM, ...)")
+    src.add_argument("--synthetic", action="store_true", help="generate the synthetic scene and map it live")
+    p.add_argument("--config", default=None, help="YAML config (e.g. configs/replica.yaml)")
+    p.add_argument("--segments", default=None, help="folder of precomputed segments (<rgb stem>.png/.json)")
+    p.add_argument("--device", default=None, help="mapping device: cpu, cuda or cuda:N")
+    p.add_argument("--max-frames", type=_positive_int, default=None, help="map at most this many frames")
+    p.add_argument(
+        "--out",
+        default=None,
+        help="run directory written at the end of live mapping (and the default of the GUI's save box)",
+    )
+    p.add_argument(
+        "--synthetic-dir",
+        default=None,
+        help="where --synthetic writes its scene (default: OUT/scene, else outputs/live-synthetic)",
+    )
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="config override, repeatable (e.g. --set mapping.opt_iters=5)",
+    )
+    p.add_argument(
+        "--host", default="127.0.0.1", help="address to bind (0.0.0.0 exposes the viewer to the network)"
+    )
+    p.add_argument(
+        "--port", type=int, default=8080, help="port to try first (the next free one is used if busy)"
+    )
+    p.add_argument("--rate", type=_positive_float, default=4.0, help="maximum viewer updates per second")
+    p.add_argument("--max-splats", type=_positive_int, default=200_000, help="most Gaussians drawn as splats")
+    p.add_argument(
+        "--max-points", type=_positive_int, default=1_000_000, help="most Gaussians drawn as points"
+    )
+    p.add_argument(
+        "--render",
+        choices=["auto", "splats", "points"],
+        default="auto",
+        help="auto: splats up to --max-splats, points beyond",
+    )
+    p.add_argument(
+        "--color", choices=["rgb", "semantic", "confidence"], default="rgb", help="initial colouring"
+    )
+    p.add_argument(
+        "--up",
+        default=None,
+        choices=["+x", "-x", "+y", "-y", "+z", "-z"],
+        help="world up direction (default: the config's graph.up_axis)",
+    )
+    p.add_argument(
+        "--exit-when-done", action="store_true", help="stop serving once live mapping has finished"
+    )
+    p.add_argument(
+        "--screenshot",
+        default=None,
+        metavar="PNG",
+        help="render the view in headless chromium into PNG and exit (after mapping, in live mode)",
+    )
+    p.add_argument(
+        "--screenshot-size", type=_size, default=(1280, 800), metavar="WxH", help="screenshot size"
+    )
+    p.add_argument(
+        "--screenshot-wait", type=_positive_float, default=8.0, help="seconds to let the browser draw first"
+    )
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser(
+        "live",
+        help="live web viewer of the map and the scene graph (viser)",
+        description=(__doc__ or "").split("\n\n")[0],
+    )
+    add_arguments(p)
+    p.set_defaults(func=run)
+
+
+def _up_from_config(cfg) -> tuple[float, float, float]:
+    import numpy as np
+
+    up = np.asarray(cfg.graph.up_axis, dtype=np.float64)
+    if up.shape != (3,) or not np.isfinite(up).all() or not np.linalg.norm(up) > 0:
+        raise ConfigError(f"graph.up_axis must be a non-zero 3-vector, got {cfg.graph.up_axis!r}")
+    return tuple(float(v) for v in up)  # type: ignore[return-value]
+
+
+def _settings(args):
+    from .scene import ViewerSettings
+
+    try:
+        return ViewerSettings(
+            color_mode=args.color, render=args.render, max_splats=args.max_splats, max_points=args.max_points
+        ).validate()
+    except ValueError as e:
+        raise ConfigError(f"viewer settings: {e}") from e
+
+
+def _serve_forever(viewer, stop: threading.Event, session=None, exit_when_done: bool = False) -> None:
+    while not stop.wait(0.5):
+        if session is not None and session.done and exit_when_done:
+            break
+
+
+def take_screenshot(
+    viewer, out: str | Path, size: tuple[int, int] = (1280, 800), wait: float = 8.0, timeout: float = 180.0
+) -> Path:
+    """Open the viewer in headless chromium and write a PNG once the picture has settled.
+
+    After ``wait`` seconds, screenshots are taken until two in a row are identical (the splats are
+    sorted and faded in; software WebGL can take tens of seconds for the first full frame) or
+    ``timeout`` seconds have passed.
+    """
+    from ..atomic import atomic_write_bytes
+    from .headless import HeadlessBrowser, find_chromium
+
+    if find_chromium() is None:
+        raise ConfigError("--screenshot needs chromium (e.g. apt-get install chromium)")
+    before = viewer.stats["pushes"]
+    deadline = time.monotonic() + timeout
+    with HeadlessBrowser(viewer.url, *size) as browser:
+        if not viewer.wait_until(lambda s: s["clients"] > 0 and s["pushes"] > before, timeout=60):
+            raise OGSceneError(f"the headless browser did not connect: {browser.log_tail()}")
+        time.sleep(wait)
+        png, previous = browser.screenshot(), b""
+        while png != previous and time.monotonic() < deadline:
+            time.sleep(1.0)
+            png, previous = browser.screenshot(), png
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(out, png)
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    """Entry point shared by ``ogscene3d-live`` and ``ogscene3d live``; returns the exit code."""
+    from .app import LiveViewer
+
+    if args.run_dir is not None and (args.data or args.synthetic):
+        raise ConfigError(
+            "give either RUN_DIR (browse a saved run) or --data/--synthetic (map live), not both"
+        )
+    if args.run_dir is None and not args.data and not args.synthetic:
+        raise ConfigError("nothing to show: give RUN_DIR, --data DATASET or --synthetic")
+
+    stop = threading.Event()
+    prev = signal.getsignal(signal.SIGTERM)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    session = None
+    viewer = None
+    try:
+        if args.run_dir is not None:
+            from .runs import load_run
+
+            snap, info = load_run(args.run_dir)
+            up = args.up or (tuple(info.up) if info.up is not None else None)
+            viewer = LiveViewer(
+                args.host,
+                args.port,
+                settings=_settings(args),
+                up=up,
+                max_rate_hz=args.rate,
+                title=f"ogscene3d: {info.path.name}",
+            )
+            viewer.publish(snap)
+            print(
+                f"ogscene3d-live: browsing {info.path} ({snap.total_gaussians} Gaussians, "
+                f"{len((snap.graph or {}).get('nodes', []))} graph nodes)"
+            )
+        else:
+            session, viewer = _start_live(args)
+        if args.screenshot:
+            if session is not None:
+                while not session.join(0.5) and not stop.is_set():
+                    pass
+            out = take_screenshot(viewer, args.screenshot, args.screenshot_size, args.screenshot_wait)
+            print(f"ogscene3d-live: screenshot written to {out}")
+        else:
+            print(f"ogscene3d-live: open {viewer.url} in a browser (Ctrl-C to stop)", flush=True)
+            _serve_forever(viewer, stop, session, args.exit_when_done)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if session is not None:
+            session.stop()
+        if viewer is not None:
+            viewer.close()
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGTERM, prev)
+    if session is not None and session.error is not None:
+        print(f"ogscene3d-live: mapping failed: {session.status}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _start_live(args: argparse.Namespace):
+    from ..config import load_config
+    from ..datasets import make_synthetic_scene, open_dataset
+    from ..mapping.mapper import Mapper
+    from .app import LiveViewer
+    from .live import LiveSession
+
+    overrides = list(args.overrides)
+    if args.device:
+        overrides.append(f"device={args.device}")
+    cfg = load_config(args.config, overrides)
+    data = args.data
+    if args.synthetic:
+        s = cfg.synthetic
+        scene_dir = Path(
+            args.synthetic_dir or (Path(args.out) / "scene" if args.out else "outputs/live-synthetic")
+        )
+        print(
+            f"ogscene3d-live: synthetic scene (seed {s.seed}, {s.frames} frames, {s.width}x{s.height}) "
+            f"in {scene_dir}",
+            flush=True,
+        )
+        data = make_synthetic_scene(
+            scene_dir,
+            s.seed,
+            s.frames,
+            s.width,
+            s.height,
+            s.noise,
+            s.depth_noise,
+            s.pose_noise,
+            progress=True,
+        )
+    ds = open_dataset(data, segments_dir=args.segments, max_frames=args.max_frames, config=cfg.data)
+    if len(ds) == 0:
+        raise DataError(f"{data}: the dataset has no frames")
+    mapper = Mapper(cfg, cfg.device)
+
+    def prepare(frame) -> None:
+        if frame.segments is None and mapper.segmenter is None:
+            from ..mapping.run_cli import make_segmenter
+
+            mapper.segmenter = make_segmenter(cfg, frame.K)
+
+    up = args.up or _up_from_config(cfg)
+    viewer = LiveViewer(
+        args.host,
+        args.port,
+        settings=_settings(args),
+        up=up,
+        max_rate_hz=args.rate,
+        title=f"ogscene3d: {Path(str(data)).name}",
+    )
+    session = LiveSession(
+        mapper,
+        (ds[i] for i in range(len(ds))),
+        viewer,
+        budget=max(args.max_points, args.max_splats),
+        out_dir=args.out,
+        prepare=prepare,
+    )
+    viewer.set_control(session)
+    session.start()
+    return session, viewer
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="ogscene3d-live", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    add_arguments(p)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """The ``ogscene3d-live`` console script."""
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO, format="%(levelname)s %(name)s: %(message)s"
+    )
+    try:
+        return run(args)
+    except OGSceneError as e:
+        print(f"ogscene3d-live: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

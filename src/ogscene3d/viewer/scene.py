@@ -1,0 +1,439 @@
+"""The viewer's 3D layers: Gaussians (splats or points), camera trajectory + frustum, scene graph.
+
+Each layer keeps what it last sent and re-sends only what changed. All methods run on the viewer's
+push thread (never on the mapping thread), so they may take their time.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .colors import confidence_colors, dim, label_color_uint8, label_colors
+from .snapshot import MapSnapshot, covariances, decimate_indices, rotmat_to_wxyz
+
+log = logging.getLogger(__name__)
+
+COLOR_MODES = ("rgb", "semantic", "confidence")
+RENDER_MODES = ("auto", "splats", "points")
+HIGHLIGHT_RGB = (255, 196, 0)
+EDGE_RGB = (70, 70, 70)
+
+
+@dataclass
+class ViewerSettings:
+    """Display settings (the GUI edits them; the CLI sets their start values).
+
+    ``max_splats``: at most this many Gaussians are sent as splats; ``max_points``: as points. In
+    ``render="auto"`` a map up to ``max_splats`` is drawn as splats, a larger one as points.
+    ``point_size`` is in metres (0 = from the median Gaussian scale).
+    """
+
+    color_mode: str = "rgb"
+    render: str = "auto"
+    max_splats: int = 200_000
+    max_points: int = 1_000_000
+    point_size: float = 0.0
+    show_gaussians: bool = True
+    show_trajectory: bool = True
+    show_camera: bool = True
+    show_nodes: bool = True
+    show_edges: bool = True
+    show_edge_labels: bool = True
+    max_edge_labels: int = 300
+
+    def validate(self) -> ViewerSettings:
+        if self.color_mode not in COLOR_MODES:
+            raise ValueError(f"color mode must be one of {COLOR_MODES}, got {self.color_mode!r}")
+        if self.render not in RENDER_MODES:
+            raise ValueError(f"render mode must be one of {RENDER_MODES}, got {self.render!r}")
+        if self.max_splats < 1 or self.max_points < 1:
+            raise ValueError(
+                f"max_splats and max_points must be >= 1, got {self.max_splats}, {self.max_points}"
+            )
+        if not np.isfinite(self.point_size) or self.point_size < 0:
+            raise ValueError(f"point_size must be a finite number >= 0, got {self.point_size}")
+        return self
+
+
+def scene_bounds(means: np.ndarray) -> tuple[np.ndarray, float]:
+    """Robust centre and size (m) of a point set: 2nd-98th percentile box of at most 20k points."""
+    if len(means) == 0:
+        return np.zeros(3), 1.0
+    idx = decimate_indices(len(means), 20_000)
+    pts = means if idx is None else means[idx]
+    lo, hi = np.percentile(pts, 2, axis=0), np.percentile(pts, 98, axis=0)
+    return 0.5 * (lo + hi), float(max(np.linalg.norm(hi - lo), 0.1))
+
+
+def node_text(node: dict) -> str:
+    """The short text drawn at a node: its tag, else the first words of its caption, else its id."""
+    tag = str(node.get("tag") or "").strip()
+    if tag:
+        return tag
+    caption = str(node.get("caption") or "").strip()
+    if caption:
+        words = caption.split()
+        return " ".join(words[:4]) + ("..." if len(words) > 4 else "")
+    return f"#{node.get('id')}"
+
+
+def node_matches(node: dict, query: str) -> bool:
+    """Case-insensitive substring match of ``query`` over the node's tag and caption (and '#id')."""
+    q = query.strip().lower()
+    if not q:
+        return False
+    hay = f"{node.get('tag') or ''}\n{node.get('caption') or ''}\n#{node.get('id')}".lower()
+    return q in hay
+
+
+def _valid_node(node: dict) -> bool:
+    """A node can be drawn when it has an id and a finite 3D centre (others are skipped, not fatal)."""
+    try:
+        int(node["id"])
+        c = np.asarray(node["center"], dtype=np.float64)
+    except (KeyError, TypeError, ValueError):
+        return False
+    return c.shape == (3,) and bool(np.isfinite(c).all())
+
+
+def drawable_graph(graph: dict | None) -> dict | None:
+    """The part of a graph document the viewer can draw: nodes with an int id and a finite centre,
+    edges whose integer source and target are such nodes. Malformed entries are dropped (a live graph
+    half-way through an update must not break the viewer); None stays None."""
+    if not isinstance(graph, dict):
+        return None
+    nodes = [n for n in graph.get("nodes", []) if isinstance(n, dict) and _valid_node(n)]
+    ids = {int(n["id"]) for n in nodes}
+    edges = []
+    for e in graph.get("edges", []):
+        try:
+            if int(e["source"]) in ids and int(e["target"]) in ids:
+                edges.append(e)
+        except (KeyError, TypeError, ValueError):
+            continue
+    return {**graph, "nodes": nodes, "edges": edges}
+
+
+def _box_segments(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The 12 edges of the axis-aligned box [lo, hi] as [12, 2, 3]."""
+    c = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=np.float64)
+    corners = lo + c * (hi - lo)
+    pairs = [(i, j) for i in range(8) for j in range(i + 1, 8) if np.abs(c[i] - c[j]).sum() == 1]
+    return np.stack([corners[[i, j]] for i, j in pairs])
+
+
+class SceneLayers:
+    """Owns the viser scene nodes of the viewer (server-wide, so every browser sees the same scene)."""
+
+    def __init__(self, server, on_node_click: Callable[[int], None] | None = None) -> None:
+        self.server = server
+        self.scene = server.scene
+        self.on_node_click = on_node_click
+        self.center = np.zeros(3)
+        self.extent = 1.0
+        # What was last sent, for diffing.
+        self._gauss_handle = None
+        self._gauss_kind: str | None = None
+        self.shown_gaussians = 0
+        self.shown_kind = ""
+        self._traj_key: tuple | None = None
+        self._traj_handle = None
+        self._frustum = None
+        self._frustum_key: tuple | None = None
+        self._image_id: int | None = None
+        self._pose_key: tuple | None = None
+        self._nodes: dict[int, tuple] = {}  # id -> (text, center, highlighted, radius)
+        self._node_handles: dict[int, tuple] = {}  # id -> (label handle, sphere handle)
+        self._edges_key: tuple | None = None
+        self._edge_handles: list = []
+        self._highlight_handle = None
+        self._highlight_key: tuple | None = None
+
+    # ------------------------------------------------------------------ Gaussians
+    def update_bounds(self, snap: MapSnapshot) -> None:
+        self.center, self.extent = scene_bounds(snap.means)
+
+    def update_map(self, snap: MapSnapshot, st: ViewerSettings, highlight_labels: set[int] | None) -> None:
+        """(Re)send the Gaussians with the current colour mode, render mode and budgets."""
+        n = len(snap)
+        kind = st.render
+        if kind == "auto":
+            kind = "splats" if (snap.total_gaussians or n) <= st.max_splats else "points"
+        budget = st.max_splats if kind == "splats" else st.max_points
+        idx = decimate_indices(n, budget)
+        s = snap if idx is None else snap.subset(idx)
+        if st.color_mode == "semantic":
+            rgb = label_colors(s.labels)
+        elif st.color_mode == "confidence":
+            rgb = confidence_colors(s.confidences, s.labels)
+        else:
+            rgb = np.clip(s.colors, 0.0, 1.0)
+        if highlight_labels:
+            rgb = np.where(np.isin(s.labels, list(highlight_labels))[:, None], rgb, dim(rgb))
+        if len(s) == 0:
+            self._remove_gaussians()
+            return
+        if kind != self._gauss_kind:
+            self._remove_gaussians()
+        if kind == "splats":
+            cov = covariances(s.quats, s.scales)
+            op = s.opacities[:, None]
+            if self._gauss_handle is None:
+                self._gauss_handle = self.scene.add_gaussian_splats(
+                    "/map/gaussians",
+                    centers=s.means,
+                    covariances=cov,
+                    rgbs=rgb,
+                    opacities=op,
+                    visible=st.show_gaussians,
+                )
+            else:
+                self._gauss_handle.set_gaussians(s.means, cov, rgb, op)
+        else:
+            size = st.point_size or float(np.clip(2.0 * np.median(s.scales.max(axis=1)), 0.002, 0.05))
+            if self._gauss_handle is None:
+                self._gauss_handle = self.scene.add_point_cloud(
+                    "/map/gaussians",
+                    points=s.means,
+                    colors=rgb,
+                    point_size=size,
+                    precision="float32",
+                    point_shape="circle",
+                    point_shading="flat",
+                    visible=st.show_gaussians,
+                )
+            else:
+                self._gauss_handle.points = s.means
+                self._gauss_handle.colors = (np.clip(rgb, 0, 1) * 255).astype(np.uint8)
+                self._gauss_handle.point_size = size
+        self._gauss_kind = kind
+        self.shown_gaussians = len(s)
+        self.shown_kind = kind
+
+    def _remove_gaussians(self) -> None:
+        if self._gauss_handle is not None:
+            self._gauss_handle.remove()
+        self._gauss_handle = None
+        self._gauss_kind = None
+        self.shown_gaussians = 0
+        self.shown_kind = ""
+
+    # ------------------------------------------------------------------ camera
+    def update_camera(self, snap: MapSnapshot, st: ViewerSettings) -> None:
+        """Trajectory polyline and the current frustum (with the current image when there is one)."""
+        traj = snap.trajectory
+        key = (len(traj), tuple(np.round(traj[-1, :3, 3], 6)) if len(traj) else ())
+        if key != self._traj_key:
+            if self._traj_handle is not None:
+                self._traj_handle.remove()
+                self._traj_handle = None
+            if len(traj) >= 2:
+                pos = traj[:, :3, 3]
+                seg = np.stack([pos[:-1], pos[1:]], axis=1).astype(np.float32)
+                self._traj_handle = self.scene.add_line_segments(
+                    "/camera/trajectory",
+                    points=seg,
+                    colors=(230, 60, 30),
+                    thickness=2.0,
+                    thickness_units="screen",
+                    visible=st.show_trajectory,
+                )
+            self._traj_key = key
+        if snap.pose is None:
+            return
+        w, h = snap.image_size or (640, 480)
+        fy = float(snap.K[1, 1]) if snap.K is not None else 0.5 * h / np.tan(np.deg2rad(30))
+        fov, aspect = 2.0 * float(np.arctan(0.5 * h / fy)), w / h
+        scale = float(np.clip(0.06 * self.extent, 0.05, 0.5))
+        fkey = (round(fov, 5), round(aspect, 5), round(scale, 3))
+        if self._frustum is None or fkey != self._frustum_key:
+            if self._frustum is not None:
+                self._frustum.remove()
+            self._frustum = self.scene.add_camera_frustum(
+                "/camera/current",
+                fov=fov,
+                aspect=aspect,
+                scale=scale,
+                color=(230, 60, 30),
+                thickness=2.0,
+                thickness_units="screen",
+                visible=st.show_camera,
+            )
+            self._frustum_key = fkey
+            self._image_id = None
+            self._pose_key = None
+        pose_key = tuple(np.round(snap.pose[:3].ravel(), 6))
+        if pose_key != self._pose_key:
+            self._frustum.wxyz = rotmat_to_wxyz(snap.pose[:3, :3])
+            self._frustum.position = snap.pose[:3, 3]
+            self._pose_key = pose_key
+        if snap.image is not None and id(snap.image) != self._image_id:
+            step = max(1, int(np.ceil(snap.image.shape[1] / 240)))
+            self._frustum.image = np.ascontiguousarray(snap.image[::step, ::step])
+            self._image_id = id(snap.image)
+
+    # ------------------------------------------------------------------ graph
+    def update_graph(self, graph: dict | None, st: ViewerSettings, matches: set[int]) -> None:
+        """Node labels + clickable spheres at node centres, edges with relation labels, match boxes."""
+        nodes = {int(n["id"]): n for n in (graph or {}).get("nodes", []) if _valid_node(n)}
+        radius = float(np.clip(0.012 * self.extent, 0.015, 0.08))
+        for nid in [i for i in self._node_handles if i not in nodes]:
+            for h in self._node_handles.pop(nid):
+                h.remove()
+            self._nodes.pop(nid, None)
+        for nid, node in nodes.items():
+            center = np.asarray(node["center"], dtype=np.float64)
+            state = (node_text(node), tuple(np.round(center, 5)), nid in matches, radius)
+            if self._nodes.get(nid) == state:
+                continue
+            text, _, hl, _ = state
+            color = HIGHLIGHT_RGB if hl else label_color_uint8(nid)
+            r = radius * (1.6 if hl else 1.0)
+            if nid in self._node_handles:
+                label, sphere = self._node_handles[nid]
+                label.text = ("★ " + text) if hl else text
+                label.position = center
+                label.font_screen_scale = 1.3 if hl else 1.0
+                sphere.position = center
+                sphere.color = color
+                sphere.scale = (r / radius,) * 3
+            else:
+                label = self.scene.add_label(
+                    f"/graph/nodes/{nid}/label",
+                    ("★ " + text) if hl else text,
+                    position=center,
+                    anchor="bottom-center",
+                    font_screen_scale=1.3 if hl else 1.0,
+                    visible=st.show_nodes,
+                )
+                sphere = self.scene.add_icosphere(
+                    f"/graph/nodes/{nid}/marker",
+                    radius=radius,
+                    color=color,
+                    subdivisions=2,
+                    position=center,
+                    scale=(r / radius,) * 3,
+                    visible=st.show_nodes,
+                )
+                if self.on_node_click is not None:
+                    cb = self.on_node_click
+                    sphere.on_click(lambda _event, nid=nid, cb=cb: cb(nid))
+                self._node_handles[nid] = (label, sphere)
+            self._nodes[nid] = state
+        self._update_edges(graph, nodes, st)
+        self._update_highlight(nodes, matches)
+
+    def _update_edges(self, graph: dict | None, nodes: dict[int, dict], st: ViewerSettings) -> None:
+        edges = [
+            e
+            for e in (graph or {}).get("edges", [])
+            if int(e.get("source", -1)) in nodes and int(e.get("target", -1)) in nodes
+        ]
+        key = tuple(
+            (
+                int(e["source"]),
+                int(e["target"]),
+                str(e.get("relation", "")),
+                tuple(nodes[int(e["source"])]["center"]),
+                tuple(nodes[int(e["target"])]["center"]),
+            )
+            for e in edges
+        )
+        if key == self._edges_key:
+            return
+        for h in self._edge_handles:
+            h.remove()
+        self._edge_handles = []
+        self._edges_key = key
+        if not edges:
+            return
+        src = np.array([nodes[int(e["source"])]["center"] for e in edges], dtype=np.float32)
+        dst = np.array([nodes[int(e["target"])]["center"] for e in edges], dtype=np.float32)
+        self._edge_handles.append(
+            self.scene.add_line_segments(
+                "/graph/edges",
+                points=np.stack([src, dst], axis=1),
+                colors=EDGE_RGB,
+                thickness=1.5,
+                thickness_units="screen",
+                visible=st.show_edges,
+            )
+        )
+        mid = 0.5 * (src + dst)
+        for i, e in enumerate(edges[: st.max_edge_labels]):
+            rel = str(e.get("relation") or "").strip()
+            if not rel:
+                continue
+            self._edge_handles.append(
+                self.scene.add_label(
+                    f"/graph/edge_labels/{i}",
+                    rel,
+                    position=mid[i],
+                    anchor="center-center",
+                    font_screen_scale=0.75,
+                    visible=st.show_edges and st.show_edge_labels,
+                )
+            )
+
+    def _update_highlight(self, nodes: dict[int, dict], matches: set[int]) -> None:
+        boxes = [
+            (np.asarray(nodes[i]["bbox_min"], float), np.asarray(nodes[i]["bbox_max"], float))
+            for i in sorted(matches)
+            if i in nodes and "bbox_min" in nodes[i] and "bbox_max" in nodes[i]
+        ]
+        key = tuple((tuple(lo), tuple(hi)) for lo, hi in boxes)
+        if key == self._highlight_key:
+            return
+        if self._highlight_handle is not None:
+            self._highlight_handle.remove()
+            self._highlight_handle = None
+        self._highlight_key = key
+        good = [
+            (lo, hi)
+            for lo, hi in boxes
+            if lo.shape == (3,) and hi.shape == (3,) and np.isfinite([lo, hi]).all()
+        ]
+        if good:
+            seg = np.concatenate([_box_segments(lo, hi) for lo, hi in good]).astype(np.float32)
+            self._highlight_handle = self.scene.add_line_segments(
+                "/graph/highlight", points=seg, colors=HIGHLIGHT_RGB, thickness=3.0, thickness_units="screen"
+            )
+
+    @property
+    def shown_nodes(self) -> int:
+        return len(self._node_handles)
+
+    @property
+    def shown_edges(self) -> int:
+        return len(self._edges_key or ())
+
+    # ------------------------------------------------------------------ visibility
+    def apply_visibility(self, st: ViewerSettings) -> None:
+        """Show/hide layers without re-sending their data."""
+        if self._gauss_handle is not None:
+            self._gauss_handle.visible = st.show_gaussians
+        if self._traj_handle is not None:
+            self._traj_handle.visible = st.show_trajectory
+        if self._frustum is not None:
+            self._frustum.visible = st.show_camera
+        for label, sphere in self._node_handles.values():
+            label.visible = st.show_nodes
+            sphere.visible = st.show_nodes
+        for i, h in enumerate(self._edge_handles):
+            h.visible = st.show_edges and (i == 0 or st.show_edge_labels)
+
+
+__all__ = [
+    "COLOR_MODES",
+    "RENDER_MODES",
+    "SceneLayers",
+    "ViewerSettings",
+    "drawable_graph",
+    "node_matches",
+    "node_text",
+    "scene_bounds",
+]

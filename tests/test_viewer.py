@@ -1,0 +1,716 @@
+"""Viewer pieces without a browser: colours, snapshot math, run reading, scene layers, live session, CLI."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from ogscene3d.errors import ConfigError, DataError
+from ogscene3d.gaussians import GaussianMap
+from ogscene3d.viewer.colors import confidence_colors, label_colors, turbo
+from ogscene3d.viewer.runs import load_run, read_graph_json
+from ogscene3d.viewer.scene import SceneLayers, ViewerSettings, node_matches, node_text
+from ogscene3d.viewer.snapshot import (
+    MapSnapshot,
+    covariances,
+    decimate_indices,
+    quat_to_rotmat,
+    rotmat_to_wxyz,
+    snapshot_from_mapper,
+)
+
+# Object colours of the test scene: saturated, so that a screenshot can be checked for them.
+GREEN = (0.1, 0.85, 0.1)
+BLUE = (0.1, 0.15, 0.95)
+
+
+def make_scene(n_per_object: int = 400, seed: int = 0, objects: int = 3) -> MapSnapshot:
+    """A small scene: ``objects`` flat-ish blobs (alternately green and blue) on the x axis, one label
+    each, a graph node per object, "next to" edges between neighbours and a short camera trajectory."""
+    rng = np.random.default_rng(seed)
+    means, colors, labels, nodes = [], [], [], []
+    for k in range(objects):
+        c = np.array([1.2 * k, 0.0, 0.0])
+        m = c + rng.normal(size=(n_per_object, 3)) * np.array([0.25, 0.25, 0.05])
+        means.append(m)
+        colors.append(np.tile(GREEN if k % 2 == 0 else BLUE, (n_per_object, 1)))
+        labels.append(np.full(n_per_object, k))
+        nodes.append(
+            {
+                "id": k,
+                "label": k,
+                "tag": ["sofa", "table", "lamp", "shelf"][k % 4],
+                "caption": f"a test object number {k}",
+                "confidence": 0.5 + 0.1 * k,
+                "center": c.tolist(),
+                "bbox_min": (c - 0.5).tolist(),
+                "bbox_max": (c + 0.5).tolist(),
+                "num_gaussians": n_per_object,
+            }
+        )
+    means = np.concatenate(means)
+    n = len(means)
+    edges = [{"source": k, "target": k + 1, "relation": "next to", "score": 0.5} for k in range(objects - 1)]
+    traj = np.tile(np.eye(4), (5, 1, 1))
+    traj[:, 0, 3] = np.linspace(-1.0, 1.0, 5)
+    traj[:, 2, 3] = -3.0
+    return MapSnapshot(
+        means=means,
+        quats=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
+        scales=np.full((n, 3), 0.04),
+        opacities=np.full(n, 0.95),
+        colors=np.concatenate(colors),
+        labels=np.concatenate(labels),
+        confidences=rng.random(n),
+        trajectory=traj,
+        pose=traj[-1],
+        K=np.array([[100.0, 0, 80], [0, 100.0, 60], [0, 0, 1]]),
+        image=np.full((120, 160, 3), 128, np.uint8),
+        graph={"version": 1, "nodes": nodes, "edges": edges},
+        counts={"frames": 5, "keyframes": 5},
+        timings={"init": 1.5, "optimize": 20.0},
+        map_rev=objects,
+        status="test",
+    )
+
+
+# ------------------------------------------------------------------------------ colours
+
+
+def test_label_colors_stable_distinct_and_grey_for_unlabeled():
+    labels = np.array([0, 1, 2, 3, 0, -1, 1000, 1001], dtype=np.int32)
+    c = label_colors(labels)
+    assert c.shape == (8, 3) and c.dtype == np.float32
+    assert np.all((c >= 0) & (c <= 1))
+    np.testing.assert_array_equal(c[0], c[4])  # same label, same colour
+    np.testing.assert_array_equal(label_colors(np.array([1000]))[0], c[6])  # independent of the batch
+    assert np.allclose(c[5], 0.62)  # unlabeled -> grey
+    # neighbouring labels differ clearly
+    for a, b in [(0, 1), (1, 2), (2, 3), (6, 7)]:
+        assert np.abs(c[a] - c[b]).max() > 0.1
+    with pytest.raises(ValueError):
+        label_colors(np.array([0.5]))
+
+
+def test_turbo_and_confidence_colors():
+    ends = turbo(np.array([0.0, 1.0, np.nan, 2.0, 0.1, 0.5, 0.9]))
+    assert ends.shape == (7, 3)
+    assert ends[4, 2] > 2 * ends[4, 0]  # low confidence is blue
+    assert ends[5, 1] > ends[5, 0] and ends[5, 1] > ends[5, 2]  # middle is green
+    assert ends[6, 0] > 2 * ends[6, 2]  # high confidence is red
+    np.testing.assert_allclose(ends[2], ends[0])  # NaN -> 0
+    np.testing.assert_allclose(ends[3], ends[1])  # clipped
+    cc = confidence_colors(np.array([0.9, 0.9]), np.array([3, -1]))
+    assert np.allclose(cc[1], 0.62) and not np.allclose(cc[0], 0.62)
+
+
+# ------------------------------------------------------------------------------ snapshot math
+
+
+def test_covariances_have_the_scales_as_principal_axes():
+    rng = np.random.default_rng(1)
+    q = rng.normal(size=(50, 4))
+    s = rng.uniform(0.01, 0.3, size=(50, 3))
+    R = quat_to_rotmat(q)
+    np.testing.assert_allclose(R @ R.transpose(0, 2, 1), np.broadcast_to(np.eye(3), R.shape), atol=1e-9)
+    np.testing.assert_allclose(np.linalg.det(R), 1.0, atol=1e-9)
+    cov = covariances(q, s).astype(np.float64)
+    np.testing.assert_allclose(cov, cov.transpose(0, 2, 1), atol=1e-7)
+    # Σ R_k = s_k² R_k: the columns of R are eigenvectors with eigenvalues s².
+    np.testing.assert_allclose(cov @ R, R * (s**2)[:, None, :], atol=1e-6)
+    # a quaternion and its negation are the same rotation; zero quaternion -> identity
+    np.testing.assert_allclose(quat_to_rotmat(-q), R, atol=1e-12)
+    np.testing.assert_allclose(quat_to_rotmat(np.zeros((1, 4)))[0], np.eye(3))
+    # wxyz convention: 90 degrees about z maps x to y
+    qz = np.array([[np.cos(np.pi / 4), 0.0, 0.0, np.sin(np.pi / 4)]])
+    np.testing.assert_allclose(quat_to_rotmat(qz)[0] @ [1.0, 0, 0], [0, 1.0, 0], atol=1e-12)
+
+
+def test_rotmat_to_wxyz_round_trip():
+    rng = np.random.default_rng(2)
+    q = rng.normal(size=(200, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    R = quat_to_rotmat(q)
+    for i in range(len(q)):
+        back = quat_to_rotmat(rotmat_to_wxyz(R[i])[None])[0]
+        np.testing.assert_allclose(back, R[i], atol=1e-9)
+
+
+def test_decimate_indices_is_a_deterministic_uniform_subset():
+    assert decimate_indices(10, 10) is None
+    idx = decimate_indices(10_000, 1000)
+    assert idx is not None and len(idx) == 1000 and len(np.unique(idx)) == 1000
+    assert np.all(np.diff(idx) > 0) and idx.max() < 10_000
+    np.testing.assert_array_equal(idx, decimate_indices(10_000, 1000))
+    # spread over the whole range (each tenth gets some)
+    assert np.bincount(idx // 1000, minlength=10).min() > 50
+    with pytest.raises(ValueError):
+        decimate_indices(5, 0)
+
+
+def test_snapshot_validates_shapes_and_drops_non_finite():
+    snap = make_scene(10, objects=2)
+    assert len(snap) == 20 and snap.total_gaussians == 20 and snap.image_size == (160, 120)
+    with pytest.raises(ValueError, match="quats"):
+        MapSnapshot(
+            snap.means,
+            snap.quats[:5],
+            snap.scales,
+            snap.opacities,
+            snap.colors,
+            snap.labels,
+            snap.confidences,
+        )
+    with pytest.raises(ValueError, match="image"):
+        MapSnapshot(
+            snap.means,
+            snap.quats,
+            snap.scales,
+            snap.opacities,
+            snap.colors,
+            snap.labels,
+            snap.confidences,
+            image=np.zeros((4, 4), np.uint8),
+        )
+    snap.means[3, 1] = np.nan
+    snap.scales[7, 0] = np.inf
+    clean = snap.finite()
+    assert len(clean) == 18 and np.isfinite(clean.means).all() and np.isfinite(clean.scales).all()
+
+
+# ------------------------------------------------------------------------------ runs
+
+
+class FakeMapper:
+    """The Mapper's public surface, with a trivial map update: each frame adds a blob of Gaussians."""
+
+    def __init__(self, per_frame: int = 50, fail_at: int | None = None) -> None:
+        self.map = GaussianMap("cpu")
+        self.frames_seen = 0
+        self.keyframe_count = 0
+        self.per_frame = per_frame
+        self.fail_at = fail_at
+        self.finalized = False
+        self.saved: list[Path] = []
+        self._graph = None
+
+        class _T:
+            def as_dict(inner):
+                return {"ms_per_keyframe": {"init": 1.0, "optimize": 9.0}, "counts": {"labels": 2}}
+
+        self.timings = _T()
+
+    def process(self, frame) -> bool:
+        if self.fail_at is not None and self.frames_seen == self.fail_at:
+            raise RuntimeError("synthetic failure")
+        self.frames_seen += 1
+        g = torch.Generator().manual_seed(self.frames_seen)
+        m = self.per_frame
+        self.map.append(
+            torch.randn(m, 3, generator=g) * 0.2 + torch.tensor(frame.pose[:3, 3], dtype=torch.float32),
+            torch.rand(m, 3, generator=g),
+            torch.full((m, 3), -3.0),
+            labels=torch.full((m,), self.frames_seen % 2, dtype=torch.int32),
+            confidences=torch.full((m,), 0.7),
+        )
+        self.keyframe_count += 1
+        if self.keyframe_count == 2:
+            self._graph = {
+                "version": 1,
+                "nodes": [{"id": 0, "tag": "chair", "center": [0.0, 0.0, 0.0]}],
+                "edges": [],
+            }
+        return True
+
+    def finalize(self) -> None:
+        self.finalized = True
+
+    def save(self, out_dir) -> Path:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        self.map.export_ply(out / "gaussians.ply")
+        (out / "graph.json").write_text(json.dumps(self._graph or {"version": 1, "nodes": [], "edges": []}))
+        self.saved.append(out)
+        return out
+
+
+def _frames(n: int):
+    from ogscene3d.frame import Frame
+
+    out = []
+    for i in range(n):
+        pose = np.eye(4)
+        pose[0, 3] = 0.3 * i
+        out.append(
+            Frame(
+                i,
+                np.full((12, 16, 3), 40 * i % 255, np.uint8),
+                np.ones((12, 16), np.float32),
+                np.array([[10, 0, 8], [0, 10, 6], [0, 0, 1]], np.float32),
+                pose,
+            )
+        )
+    return out
+
+
+def test_snapshot_from_mapper_decimates_and_activates():
+    mapper = FakeMapper(per_frame=300)
+    for f in _frames(4):
+        mapper.process(f)
+    full = snapshot_from_mapper(mapper, budget=10_000)
+    assert len(full) == 1200 and full.total_gaussians == 1200
+    np.testing.assert_allclose(full.scales, np.exp(-3.0), rtol=1e-6)
+    np.testing.assert_allclose(full.opacities, 0.5, rtol=1e-6)  # default logit 0
+    np.testing.assert_allclose(full.means, mapper.map.means.numpy())
+    assert full.graph["nodes"][0]["tag"] == "chair"
+    assert full.timings == {"init": 1.0, "optimize": 9.0}
+    assert full.counts["keyframes"] == 4 and full.counts["labels"] == 2
+    small = snapshot_from_mapper(mapper, budget=100, frame=_frames(1)[0])
+    assert len(small) == 100 and small.total_gaussians == 1200
+    idx = decimate_indices(1200, 100)
+    np.testing.assert_allclose(small.means, full.means[idx])
+    np.testing.assert_array_equal(small.labels, full.labels[idx])
+    assert small.image is not None and small.image_size == (16, 12)
+
+
+def test_load_run_reads_the_mapper_ply_and_graph(tmp_path):
+    gm = GaussianMap("cpu")
+    rng = np.random.default_rng(3)
+    n = 64
+    colors = rng.uniform(0.05, 0.95, (n, 3)).astype(np.float32)
+    log_scales = np.log(rng.uniform(0.01, 0.1, (n, 3))).astype(np.float32)
+    opac = rng.uniform(0.1, 0.9, n).astype(np.float32)
+    quats = rng.normal(size=(n, 4)).astype(np.float32)
+    labels = rng.integers(-1, 5, n).astype(np.int32)
+    conf = rng.uniform(0, 1, n).astype(np.float32)
+    gm.append(
+        torch.from_numpy(rng.normal(size=(n, 3)).astype(np.float32)),
+        torch.from_numpy(colors),
+        torch.from_numpy(log_scales),
+        labels=torch.from_numpy(labels),
+        confidences=torch.from_numpy(conf),
+        quats=torch.from_numpy(quats),
+        opacity_logits=torch.logit(torch.from_numpy(opac)),
+    )
+    gm.export_ply(tmp_path / "gaussians.ply")
+    scene = make_scene(5)
+    (tmp_path / "graph.json").write_text(json.dumps(scene.graph))
+    (tmp_path / "timings.json").write_text(
+        json.dumps({"ms_per_keyframe": {"optimize": 12.5}, "counts": {"keyframes": 7}})
+    )
+    (tmp_path / "config.yaml").write_text("graph:\n  up_axis: [0.0, -2.0, 0.0]\n")
+    snap, info = load_run(tmp_path)
+    np.testing.assert_allclose(snap.means, gm.means.numpy(), atol=1e-6)
+    np.testing.assert_allclose(snap.colors, colors, atol=1e-5)
+    np.testing.assert_allclose(snap.scales, np.exp(log_scales), rtol=1e-5)
+    np.testing.assert_allclose(snap.opacities, opac, atol=1e-5)
+    np.testing.assert_allclose(
+        np.abs(np.sum(snap.quats * quats, 1)) / np.linalg.norm(quats, axis=1), 1.0, atol=1e-5
+    )
+    np.testing.assert_array_equal(snap.labels, labels)
+    np.testing.assert_allclose(snap.confidences, conf)
+    assert len(snap.graph["nodes"]) == 3 and len(snap.graph["edges"]) == 2
+    assert snap.timings == {"optimize": 12.5} and snap.counts["keyframes"] == 7
+    np.testing.assert_allclose(info.up, [0.0, -1.0, 0.0])
+
+
+def test_load_run_errors_name_the_file(tmp_path):
+    with pytest.raises(DataError, match="does not exist"):
+        load_run(tmp_path / "nope")
+    with pytest.raises(DataError, match="no gaussians.ply"):
+        load_run(tmp_path)
+    (tmp_path / "gaussians.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 10\n")
+    with pytest.raises(DataError, match="gaussians.ply"):
+        load_run(tmp_path)
+    bad = tmp_path / "graph.json"
+    bad.write_text('{"nodes": [{"id": 1, "center": [0, 0, 0]}], "edges": [{"source": 1, "target": 2}]}')
+    with pytest.raises(DataError, match="edge 0"):
+        read_graph_json(bad)
+    bad.write_text('{"nodes": [{"id": 1, "center": [0, 0]}]}')
+    with pytest.raises(DataError, match="bad center"):
+        read_graph_json(bad)
+    bad.write_text("{not json")
+    with pytest.raises(DataError, match="graph.json"):
+        read_graph_json(bad)
+
+
+# ------------------------------------------------------------------------------ scene layers
+
+
+@pytest.fixture(scope="module")
+def server():
+    import viser
+
+    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    yield srv
+    srv.stop()
+
+
+def test_node_text_and_query_matching():
+    assert node_text({"id": 3, "tag": "chair", "caption": "a red chair"}) == "chair"
+    assert node_text({"id": 3, "tag": "", "caption": "one two three four five"}) == "one two three four..."
+    assert node_text({"id": 3}) == "#3"
+    node = {"id": 12, "tag": "Coffee table", "caption": "a low wooden table"}
+    assert node_matches(node, "TABLE") and node_matches(node, "wooden") and node_matches(node, "#12")
+    assert not node_matches(node, "chair") and not node_matches(node, "   ")
+
+
+def test_drawable_graph_drops_malformed_entries():
+    from ogscene3d.viewer.scene import drawable_graph
+
+    g = {
+        "version": 1,
+        "nodes": [
+            {"id": 1, "center": [0, 0, 0]},
+            {"id": 2, "center": [0, float("nan"), 0]},
+            {"id": "x", "center": [0, 0, 0]},
+            {"center": [1, 1, 1]},
+            {"id": 3, "center": [1, 2]},
+            {"id": 4, "center": [1, 2, 3]},
+        ],
+        "edges": [
+            {"source": 1, "target": 4, "relation": "on"},
+            {"source": 1, "target": 2},
+            {"source": "a", "target": 4},
+            {"target": 4},
+        ],
+    }
+    out = drawable_graph(g)
+    assert [n["id"] for n in out["nodes"]] == [1, 4] and out["edges"] == [g["edges"][0]]
+    assert drawable_graph(None) is None and drawable_graph([1, 2]) is None
+
+
+def test_layers_switch_between_splats_and_points_by_budget(server):
+    layers = SceneLayers(server)
+    snap = make_scene(200)  # 600 Gaussians
+    st = ViewerSettings(max_splats=1000, max_points=250)
+    layers.update_bounds(snap)
+    layers.update_map(snap, st, None)
+    assert layers.shown_kind == "splats" and layers.shown_gaussians == 600
+    handle = layers._gauss_handle
+    assert handle.buffer.shape == (600, 8)
+    layers.update_map(snap, ViewerSettings(max_splats=500, max_points=250), None)  # auto -> points, decimated
+    assert layers.shown_kind == "points" and layers.shown_gaussians == 250
+    assert layers._gauss_handle is not handle and handle._impl.removed
+    layers.update_map(snap, ViewerSettings(render="splats", max_splats=100), None)
+    assert layers.shown_kind == "splats" and layers.shown_gaussians == 100
+    layers.update_map(snap.subset(np.zeros(len(snap), bool)), st, None)
+    assert layers.shown_gaussians == 0 and layers._gauss_handle is None
+
+
+def test_layers_color_modes_and_query_dimming(server):
+    layers = SceneLayers(server)
+    snap = make_scene(50)
+    layers.update_map(snap, ViewerSettings(color_mode="semantic"), None)
+    rgba = layers._gauss_handle.rgbs.astype(float) / 255
+    np.testing.assert_allclose(rgba, label_colors(snap.labels), atol=1 / 255 + 1e-6)
+    layers.update_map(snap, ViewerSettings(color_mode="confidence"), None)
+    np.testing.assert_allclose(
+        layers._gauss_handle.rgbs.astype(float) / 255,
+        confidence_colors(snap.confidences),
+        atol=1 / 255 + 1e-6,
+    )
+    layers.update_map(snap, ViewerSettings(color_mode="rgb"), {1})
+    rgb = layers._gauss_handle.rgbs.astype(float) / 255
+    hit = snap.labels == 1
+    np.testing.assert_allclose(rgb[hit], snap.colors[hit], atol=1 / 255 + 1e-6)
+    assert np.abs(rgb[~hit] - snap.colors[~hit]).max() > 0.3  # others dimmed
+
+
+def test_layers_graph_updates_only_what_changed(server):
+    layers = SceneLayers(server)
+    snap = make_scene(20, objects=4)
+    st = ViewerSettings()
+    layers.update_graph(snap.graph, st, set())
+    assert layers.shown_nodes == 4 and layers.shown_edges == 3
+    handles = dict(layers._node_handles)
+    edge_handles = list(layers._edge_handles)
+    assert len(edge_handles) == 1 + 3  # segments + one relation label per edge
+    layers.update_graph(json.loads(json.dumps(snap.graph)), st, set())  # same content: nothing re-created
+    assert all(layers._node_handles[k] is handles[k] for k in handles)
+    assert all(a is b for a, b in zip(layers._edge_handles, edge_handles, strict=True))
+    # a node changes its tag, another disappears (with its edges), a query matches one
+    g = json.loads(json.dumps(snap.graph))
+    g["nodes"][0]["tag"] = "armchair"
+    g["nodes"] = g["nodes"][:3]
+    g["edges"] = g["edges"][:2]
+    layers.update_graph(g, st, {1})
+    assert layers.shown_nodes == 3 and layers.shown_edges == 2
+    assert handles[3][0]._impl.removed and layers._node_handles[0][0] is handles[0][0]
+    assert layers._node_handles[0][0].text == "armchair"
+    assert layers._node_handles[1][0].text.endswith("table") and layers._node_handles[1][0].text.startswith(
+        "★"
+    )
+    assert layers._highlight_handle is not None and layers._highlight_handle.points.shape == (12, 2, 3)
+    layers.update_graph(None, st, set())
+    assert layers.shown_nodes == 0 and layers.shown_edges == 0 and layers._highlight_handle is None
+
+
+def test_layers_camera_trajectory_and_frustum(server):
+    layers = SceneLayers(server)
+    snap = make_scene(10)
+    st = ViewerSettings()
+    layers.update_camera(snap, st)
+    assert layers._traj_handle.points.shape == (4, 2, 3)
+    assert layers._frustum is not None
+    np.testing.assert_allclose(layers._frustum.position, snap.pose[:3, 3])
+    np.testing.assert_allclose(layers._frustum.fov, 2 * np.arctan(60 / 100))
+    traj = layers._traj_handle
+    layers.update_camera(snap, st)
+    assert layers._traj_handle is traj  # unchanged trajectory is not re-sent
+
+
+# ------------------------------------------------------------------------------ viewer + session
+
+
+@pytest.fixture
+def watched(monkeypatch):
+    """Pretend a browser is connected (the browser test covers real ones)."""
+    from ogscene3d.viewer.app import LiveViewer
+
+    monkeypatch.setattr(LiveViewer, "num_clients", property(lambda self: 1))
+
+
+def test_publish_never_waits_on_a_stuck_viewer(watched):
+    from ogscene3d.viewer.app import LiveViewer
+
+    viewer = LiveViewer(port=0, max_rate_hz=50)
+    release = threading.Event()
+    entered = threading.Event()
+    real_push = viewer._push
+
+    def stuck_push(snap, dirty):
+        entered.set()
+        release.wait(30)
+        real_push(snap, dirty)
+
+    viewer._push = stuck_push
+    try:
+        viewer.publish(make_scene(10, seed=0))
+        assert entered.wait(10)
+        for i in range(50):  # the push thread is blocked; publishing must still return at once
+            viewer.publish(make_scene(10, seed=i + 1, objects=2))
+        final = make_scene(30, seed=99, objects=2)
+        viewer.publish(final)
+        release.set()
+        assert viewer.wait_until(lambda s: s["gaussians"] == 60 and s["nodes"] == 2, timeout=20)
+        assert viewer.stats["errors"] == 0
+        # only the newest snapshot was drawn after the stuck one: two map pushes in all
+        assert viewer.stats["map_pushes"] == 2
+    finally:
+        release.set()
+        viewer.close()
+
+
+def test_unchanged_layers_are_not_resent(watched):
+    import dataclasses
+
+    from ogscene3d.viewer.app import LiveViewer
+
+    with LiveViewer(port=0, max_rate_hz=50) as viewer:
+        snap = make_scene(20)
+        viewer.publish(snap)
+        assert viewer.wait_until(lambda s: s["nodes"] == 3 and s["map_pushes"] == 1, timeout=20)
+        frustum = viewer.layers._frustum
+        pose = snap.pose.copy()
+        pose[:3, 3] += [0.5, 0.0, 0.0]
+        n = viewer.stats["pushes"]
+        # the camera moved, the map (same map_rev) and the graph (same content) did not
+        viewer.publish(dataclasses.replace(snap, pose=pose, graph=json.loads(json.dumps(snap.graph))))
+        assert viewer.wait_until(lambda s: s["pushes"] > n, timeout=20)
+        assert viewer.stats["map_pushes"] == 1 and viewer.stats["graph_pushes"] == 1
+        assert viewer.layers._frustum is frustum
+        np.testing.assert_allclose(frustum.position, pose[:3, 3])
+        viewer.publish(dataclasses.replace(snap, map_rev=snap.map_rev + 1))
+        assert viewer.wait_until(lambda s: s["map_pushes"] == 2, timeout=20)
+
+
+def test_gui_query_and_selection_update_the_panels(watched):
+    from ogscene3d.viewer.app import LiveViewer
+
+    with LiveViewer(port=0, max_rate_hz=50) as viewer:
+        viewer.publish(make_scene(20))
+        assert viewer.wait_until(lambda s: s["nodes"] == 3, timeout=20)
+        assert "| gaussians | 60 |" in viewer._md_counts.content
+        assert "optimize" in viewer._md_timings.content
+        n = viewer.stats["pushes"]
+        viewer._txt_query.value = "tab"  # what typing in the browser does
+        assert viewer.wait_until(lambda s: s["pushes"] > n and "1 match" in viewer._md_matches.content, 20)
+        assert "table" in viewer._md_matches.content
+        assert viewer._dd_node.options == ("(none)", "#1 table")  # the node list follows the query
+        n = viewer.stats["pushes"]
+        viewer._on_node_pick("#1 table")  # picking it in the GUI list
+        assert viewer.wait_until(lambda s: s["pushes"] > n and "caption" in viewer._md_selected.content, 20)
+        assert "a test object number 1" in viewer._md_selected.content
+        assert "next to" in viewer._md_selected.content
+        n = viewer.stats["pushes"]
+        viewer.select_node(0)  # a click on a node marker
+        assert viewer.wait_until(lambda s: s["pushes"] > n and "sofa" in viewer._md_selected.content, 20)
+        assert viewer._dd_node.value == "(none)"  # node 0 does not match "tab": not in the list
+        n = viewer.stats["pushes"]
+        viewer._txt_query.value = ""
+        assert viewer.wait_until(lambda s: s["pushes"] > n and len(viewer._dd_node.options) == 4, 20)
+        assert viewer._dd_node.value == "#0 sofa"
+        n = viewer.stats["map_pushes"]
+        viewer._dd_color.value = "Semantic label"
+        assert viewer.wait_until(lambda s: s["map_pushes"] > n, 20)
+        assert viewer.settings.color_mode == "semantic"
+        n = viewer.stats["map_pushes"]
+        viewer._dd_render.value = "Points"
+        viewer._sl_point.value = 2.5
+        assert viewer.wait_until(lambda s: s["render"] == "points" and s["map_pushes"] > n, 20)
+        assert viewer.wait_until(lambda s: viewer.layers._gauss_handle.point_size == 0.025, 20)
+
+
+def test_live_session_maps_pauses_saves_and_finishes(watched, tmp_path):
+    from ogscene3d.viewer.app import LiveViewer
+    from ogscene3d.viewer.live import LiveSession
+
+    mapper = FakeMapper(per_frame=40)
+    with LiveViewer(port=0, max_rate_hz=100) as viewer:
+        session = LiveSession(mapper, _frames(6), viewer, budget=100, out_dir=tmp_path / "run")
+        viewer.set_control(session)
+        session.set_paused(True)
+        session.start()
+        time.sleep(0.5)
+        assert mapper.frames_seen == 0 and not session.done  # paused before the first frame
+        assert viewer.wait_until(lambda s: viewer._btn_pause.label == "Resume mapping", timeout=10)
+        assert "(paused)" in viewer._md_status.content
+        viewer._toggle_pause()  # the GUI button
+        assert not session.paused
+        assert session.join(30) and session.error is None
+        assert mapper.frames_seen == 6 and mapper.finalized
+        assert session.saved_to == tmp_path / "run" and (tmp_path / "run" / "gaussians.ply").is_file()
+        assert viewer.wait_until(lambda s: s["gaussians"] == 100 and s["nodes"] == 1, timeout=20)
+        latest = viewer._latest
+        assert (
+            latest.total_gaussians == 240
+            and len(latest.trajectory) == 6
+            and latest.status.startswith("finished")
+        )
+        viewer._txt_out.value = str(tmp_path / "again")
+        viewer._on_save()  # the GUI's save button, after mapping
+        assert (tmp_path / "again" / "gaussians.ply").is_file()
+        assert viewer._md_save.content.startswith("Saved to") and not viewer._btn_save.disabled
+        mapper.save = lambda out: (_ for _ in ()).throw(OSError("disk full"))
+        viewer._on_save()
+        assert "Save failed" in viewer._md_save.content and "disk full" in viewer._md_save.content
+
+
+def test_live_session_reports_mapping_errors(watched):
+    from ogscene3d.viewer.app import LiveViewer
+    from ogscene3d.viewer.live import LiveSession
+
+    mapper = FakeMapper(fail_at=2)
+    with LiveViewer(port=0) as viewer:
+        session = LiveSession(mapper, _frames(5), viewer).start()
+        assert session.join(30)
+        assert isinstance(session.error, RuntimeError) and session.status.startswith("error")
+        assert viewer._latest is not None and viewer._latest.total_gaussians == 100  # the map so far is shown
+
+
+# ------------------------------------------------------------------------------ CLI
+
+
+def test_cli_argument_errors(tmp_path, capsys):
+    from ogscene3d.viewer.cli import main
+
+    assert main([]) == 2
+    assert "nothing to show" in capsys.readouterr().err
+    assert main([str(tmp_path), "--synthetic"]) == 2
+    assert "not both" in capsys.readouterr().err
+    assert main([str(tmp_path / "missing"), "--port", "0"]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["--rate", "0"])
+
+
+def _write_run(path: Path, snap: MapSnapshot) -> Path:
+    gm = GaussianMap("cpu")
+    gm.append(
+        torch.from_numpy(snap.means),
+        torch.from_numpy(snap.colors),
+        torch.from_numpy(np.log(snap.scales)),
+        labels=torch.from_numpy(snap.labels),
+        confidences=torch.from_numpy(snap.confidences),
+        opacity_logits=torch.logit(torch.from_numpy(snap.opacities)),
+    )
+    path.mkdir(parents=True, exist_ok=True)
+    gm.export_ply(path / "gaussians.ply")
+    (path / "graph.json").write_text(json.dumps(snap.graph))
+    (path / "config.yaml").write_text("graph:\n  up_axis: [0.0, -1.0, 0.0]\n")
+    return path
+
+
+def test_cli_browse_prints_the_bound_url_and_serves(tmp_path):
+    import socket
+    import urllib.request
+
+    run = _write_run(tmp_path / "run", make_scene(50))
+    # Occupy a port so that the viewer has to take another one and report it.
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen(1)
+    port = busy.getsockname()[1]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "ogscene3d.viewer.cli", str(run), "--port", str(port)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+    )
+    try:
+        url = None
+        lines = []
+        deadline = time.monotonic() + 60
+        while url is None and time.monotonic() < deadline:
+            line = proc.stdout.readline()
+            if not line:
+                break
+            lines.append(line)
+            if "open http://" in line:
+                url = line.split("open ", 1)[1].split()[0]
+        assert url is not None, "".join(lines)
+        assert url.startswith("http://127.0.0.1:") and int(url.rsplit(":", 1)[1]) != port
+        assert "150 Gaussians, 3 graph nodes" in "".join(lines)
+        with urllib.request.urlopen(url, timeout=10) as r:
+            assert r.status == 200 and b"<html" in r.read().lower()
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(30) == 0
+    finally:
+        busy.close()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def test_cli_rejects_bad_settings():
+    from ogscene3d.viewer.cli import _settings, build_parser
+
+    args = build_parser().parse_args(["x", "--max-splats", "5"])
+    assert _settings(args).max_splats == 5
+    args.color = "heat"
+    with pytest.raises(ConfigError, match="color mode"):
+        _settings(args)
+
+
+def test_cli_screenshot_without_chromium_is_a_clear_error(monkeypatch, tmp_path, capsys):
+    import ogscene3d.viewer.headless as headless
+    from ogscene3d.viewer.cli import main
+
+    monkeypatch.setattr(headless, "find_chromium", lambda: None)
+    run = _write_run(tmp_path / "run", make_scene(10))
+    assert main([str(run), "--port", "0", "--screenshot", str(tmp_path / "x.png")]) == 2
+    assert "needs chromium" in capsys.readouterr().err
+    assert not (tmp_path / "x.png").exists()

@@ -1,0 +1,104 @@
+"""The viewer in a real headless browser (Debian's chromium, driven over the DevTools protocol).
+
+Skipped where no chromium is installed; `.ci/run` installs it. Set OGSCENE3D_TEST_ARTIFACTS to a
+folder to keep the screenshot.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_viewer import make_scene
+
+from ogscene3d.viewer.headless import HeadlessBrowser, find_chromium
+
+pytestmark = pytest.mark.skipif(find_chromium() is None, reason="chromium is not installed")
+
+WIDTH, HEIGHT = 800, 600
+PANEL_WIDTH = 340  # viser's control panel on the right; the notification box sits top-left
+
+
+def scene_pixels(png: bytes) -> dict[str, int]:
+    """Counts of saturated green / blue pixels (the test objects' colours) in the 3D canvas area."""
+    import cv2
+
+    img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
+    assert img is not None, "screenshot is not a PNG"
+    b, g, r = (img[..., i].astype(int) for i in range(3))
+    h, w = img.shape[:2]
+    canvas = np.ones((h, w), bool)
+    canvas[:, w - PANEL_WIDTH :] = False
+    canvas[:170, :340] = False
+    green = (g > 150) & (r < 120) & (b < 120) & canvas
+    blue = (b > 150) & (r < 120) & (g < 120) & canvas
+    return {"green": int(green.sum()), "blue": int(blue.sum()), "std": float(img[canvas].std())}
+
+
+def _wait_clients(viewer, n: int, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if viewer.num_clients == n:
+            return True
+        time.sleep(0.1)
+    return False
+
+
+def test_browser_shows_the_streamed_map_and_graph(tmp_path):
+    from ogscene3d.viewer.app import LiveViewer
+
+    viewer = LiveViewer(port=0, max_rate_hz=10)
+    stop = threading.Event()
+
+    def stream() -> None:
+        # A growing map, as live mapping produces: 1, 2, then 3 objects.
+        for k in (1, 2, 3):
+            if stop.is_set():
+                return
+            viewer.publish(make_scene(300, objects=k))
+            time.sleep(0.3)
+
+    producer = threading.Thread(target=stream, daemon=True)
+    try:
+        with HeadlessBrowser(viewer.url, WIDTH, HEIGHT) as first:
+            producer.start()
+            ready = viewer.wait_until(
+                lambda s: s["clients"] >= 1 and s["gaussians"] == 900 and s["nodes"] == 3, 45
+            )
+            assert ready, f"scene not ready: {viewer.shown()}\n{first.log_tail()}"
+            assert viewer.shown()["edges"] == 2 and viewer.shown()["render"] == "splats"
+            # A second browser joins late and gets the whole scene; then the first one leaves.
+            with HeadlessBrowser(viewer.url, WIDTH, HEIGHT) as late:
+                assert _wait_clients(viewer, 2, 30), late.log_tail()
+                first.close()
+                assert _wait_clients(viewer, 1, 30)
+                # The stream goes on for the remaining browser: a fourth object appears.
+                viewer.publish(make_scene(300, objects=4))
+                assert viewer.wait_until(lambda s: s["gaussians"] == 1200 and s["nodes"] == 4, 30), (
+                    viewer.shown()
+                )
+                assert viewer.stats["errors"] == 0
+                # Software WebGL needs a moment to sort and fade the splats in: poll the screenshot.
+                deadline = time.monotonic() + 60
+                while True:
+                    png = late.screenshot()
+                    px = scene_pixels(png)
+                    if (px["green"] > 400 and px["blue"] > 400) or time.monotonic() > deadline:
+                        break
+                    time.sleep(1.0)
+        shot = tmp_path / "viewer.png"
+        shot.write_bytes(png)
+        if os.environ.get("OGSCENE3D_TEST_ARTIFACTS"):
+            out = Path(os.environ["OGSCENE3D_TEST_ARTIFACTS"])
+            out.mkdir(parents=True, exist_ok=True)
+            shutil.copy(shot, out / "viewer_browser.png")
+        assert px["std"] > 10, f"blank canvas: {px}"
+        assert px["green"] > 400 and px["blue"] > 400, f"splats not visible: {px}"
+    finally:
+        stop.set()
+        viewer.close()
