@@ -124,7 +124,7 @@ class MappingConfig:
     longterm_pixel_step: int = 2  # pixel grid step of the long-term pixel-to-Gaussian association
     longterm_knn_k: int = 5  # Gaussians associated with each back-projected memory pixel (within knn_radius)
     fill_unlabeled: bool = True  # unlabeled Gaussians under a labeled segment take its label (local.fill_unlabeled)
-    refine_unlabeled: bool = True  # individual refinement also labels unlabeled Gaussians (their confidence is 0)
+    refine_unlabeled: bool = False  # individual refinement also labels unlabeled Gaussians (confidence 0)
 
 
 @dataclass

@@ -1,0 +1,782 @@
+"""The progressive 3D scene graph of paper Sec. III-D.
+
+Interface for the mapper (it needs nothing else from this package)::
+
+    graph = SceneGraph(config.graph, out_path=run_dir / "graph.json")
+    for every keyframe k (0-based keyframe counter):
+        graph.observe(k, frame, label_map)            # label_map: int32 [H, W] scene labels, -1 = none
+        if graph.is_due(k):                            # cheap; lets the mapper skip the GPU->CPU copy
+            graph.update(k, means, labels, confidences, colors)
+    graph.finalize(k_last, means, labels, confidences, colors)   # last update of pending nodes, save
+    graph.save(run_dir / "graph.json")
+
+``update`` follows the paper's schedule: the graph is initialised once ``init_keyframes`` keyframes have
+been seen (every node captioned, scored and connected); after that, every ``update_every`` keyframes,
+only the nodes with C_i < ``tau_update`` and the new nodes are re-captioned and re-scored, and only
+their edges are re-evaluated (Eqs. 20-21 against all nodes). Node geometry (centre, bounds, thinned
+point set) is refreshed for all nodes at every update; nodes whose label vanished from the map (merged by
+global refinement) are removed with their edges.
+
+Edge candidates are the pairs with R_ij > tau_e (Eqs. 20-21, computed on each node's points thinned to one
+per theta_e/2 voxel) and, unless ``graph.support_edges`` is false, pairs where one node's bottom or top
+band rests against the other (an extension: R_ij misses a sofa on a floor because it normalises by the
+whole node). Relations come from the configured :class:`RelationPredictor`.
+
+Robustness: exceptions raised by the captioner, the relation predictor, the confidence model or the
+writing of graph.json are logged and never propagate to the mapper; with ``graph.background: true`` the
+update runs on a worker thread (a due update is deferred while the previous one still runs).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import re
+import threading
+import time
+from collections.abc import Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..atomic import atomic_path, atomic_write_text
+from ..config import GraphConfig
+from ..errors import ConfigError, DataError, OGSceneError
+from ..frame import Frame
+from .captioner import Captioner, HeuristicCaptioner, build_captioner
+from .confidence import MeanConfidence, NodeConfidence, build_confidence
+from .geometry import directed_ratios, proximate_points, unit_up
+from .relations import GeometricRelations, RelationPredictor, build_relations
+from .types import CaptionRequest, ObservationSet, SceneContext, SceneEdge, SceneNode, node_geometry
+
+log = logging.getLogger(__name__)
+
+GRAPH_JSON_VERSION = 1
+
+#: Offline query synonyms: a query matching any word of a group also matches the others.
+SYNONYM_GROUPS: tuple[frozenset[str], ...] = tuple(
+    frozenset(g)
+    for g in (
+        {"sofa", "couch", "settee", "loveseat"},
+        {"tv", "television", "monitor", "screen", "display"},
+        {"cup", "mug"},
+        {"trash can", "trash bin", "garbage can", "bin", "wastebasket", "waste bin", "dustbin"},
+        {"rug", "carpet", "mat"},
+        {"picture", "painting", "photo", "photograph", "poster", "artwork", "picture frame"},
+        {"cabinet", "cupboard", "dresser", "sideboard", "wardrobe"},
+        {"shelf", "shelves", "bookshelf", "bookcase", "shelving"},
+        {"table", "desk"},
+        {"lamp", "light", "light fixture"},
+        {"chair", "seat", "stool", "armchair"},
+        {"plant", "potted plant", "houseplant", "flower pot"},
+        {"pillow", "cushion"},
+        {"blinds", "curtain", "drape", "window shade"},
+        {"laptop", "computer", "notebook computer"},
+        {"phone", "telephone", "cellphone", "mobile phone"},
+        {"refrigerator", "fridge"},
+        {"sink", "basin", "washbasin"},
+        {"floor", "ground", "flooring"},
+        {"book", "books"},
+    )
+)
+
+
+def _to_numpy(x: Any, name: str) -> np.ndarray:
+    if hasattr(x, "detach"):  # torch tensor, on any device
+        x = x.detach().cpu().numpy()
+    return np.array(x, copy=True)
+
+
+class SceneGraph:
+    """Nodes (one per scene label with at least ``min_gaussians`` Gaussians) and directed relation edges.
+
+    ``captioner``, ``relations`` and ``node_confidence`` default to what ``config`` selects
+    (``graph.captioner.kind``, ``graph.relations.kind``, ``graph.confidence.kind``); ``label_names`` /
+    ``class_names`` feed the ground-truth captioner. ``out_path``: graph.json rewritten (atomically) after
+    every update. Thread-safe: ``observe`` may run while a background update is in flight.
+    """
+
+    def __init__(
+        self,
+        config: GraphConfig | None = None,
+        captioner: Captioner | None = None,
+        relations: RelationPredictor | None = None,
+        node_confidence: NodeConfidence | None = None,
+        out_path: str | Path | None = None,
+        label_names: Mapping[int, str] | None = None,
+        class_names: Mapping[int, str] | None = None,
+    ) -> None:
+        self.config = config or GraphConfig()
+        c = self.config
+        try:
+            self.up = unit_up(c.up_axis)
+        except ValueError as e:
+            raise ConfigError(str(e)) from None
+        for key in (
+            "init_keyframes",
+            "update_every",
+            "min_gaussians",
+            "max_points_per_node",
+            "max_masked_views",
+            "crop_max_side",
+        ):
+            if getattr(c, key) < 1:
+                raise ConfigError(f"graph.{key} must be >= 1, got {getattr(c, key)}")
+        if not c.theta_e > 0 or not 0 <= c.tau_e < 1 or c.context_pad < 0 or c.edge_voxel < 0:
+            raise ConfigError(
+                f"graph: need theta_e > 0, 0 <= tau_e < 1, context_pad >= 0, edge_voxel >= 0 (got "
+                f"{c.theta_e}, {c.tau_e}, {c.context_pad}, {c.edge_voxel})"
+            )
+        if not c.support_band > 0 or not 0 < c.support_ratio <= 1:
+            raise ConfigError(
+                f"graph: need support_band > 0 and 0 < support_ratio <= 1 "
+                f"(got {c.support_band}, {c.support_ratio})"
+            )
+        self.captioner: Captioner = captioner or build_captioner(c.captioner, label_names, class_names)
+        self.relations: RelationPredictor = relations or build_relations(c.relations, c.up_axis)
+        self.node_confidence: NodeConfidence = node_confidence or build_confidence(c.confidence)
+        self._fallback_captioner = HeuristicCaptioner()
+        self._fallback_relations = GeometricRelations(c.relations, c.up_axis)
+        self.out_path = Path(out_path) if out_path is not None else None
+
+        self.nodes: dict[int, SceneNode] = {}
+        self.edges: dict[tuple[int, int], SceneEdge] = {}  # key: (min id, max id), one relation per pair
+        self._obs: dict[int, ObservationSet] = {}
+        self._gt_class_votes: dict[int, dict[int, int]] = {}
+        self._gt_instance_votes: dict[int, dict[int, int]] = {}
+        self._lock = threading.RLock()
+        self._initialized = False
+        self._last_update_count = 0  # keyframe count at the last update
+        self.num_updates = 0
+        self.last_update_keyframe = -1
+        self.timings: dict[str, dict[str, float]] = {}
+        self._executor: ThreadPoolExecutor | None = None
+        self._future: Future | None = None
+        self._embed_cache: dict[str, np.ndarray] = {}
+        self._query_encoder: Any = None
+
+    # ----------------------------------------------------------------------------------------- observe
+
+    def observe(self, keyframe_index: int, frame: Frame, label_map: np.ndarray) -> None:
+        """Record the keyframe's views of every labelled region into the observation sets O_i.
+
+        ``label_map``: int [H, W] scene labels of the keyframe (e.g. the rendered semantic labels or the
+        segments mapped to scene labels), -1 where none; H, W as ``frame.rgb``. Crops (context crop with
+        ``context_pad`` margin, masked view with everything but the region blacked out) are made only when
+        they enter O_i, downscaled to ``crop_max_side``. With ground-truth maps in ``frame``
+        (synthetic scenes), the overlap votes label -> GT class / instance are accumulated too.
+        """
+        if not self.config.enabled:
+            return
+        lm = np.asarray(label_map)
+        H, W = frame.rgb.shape[:2]
+        if lm.shape != (H, W):
+            raise ValueError(
+                f"SceneGraph.observe: label_map shape {lm.shape} differs from the frame's {(H, W)}"
+            )
+        if not np.issubdtype(lm.dtype, np.integer):
+            raise ValueError(f"SceneGraph.observe: label_map must be an integer array, got {lm.dtype}")
+        t0 = time.perf_counter()
+        flat = lm.reshape(-1)
+        pix = np.nonzero(flat >= 0)[0]
+        if len(pix) == 0:
+            return
+        vals = flat[pix].astype(np.int64)
+        top = int(vals.max())
+        if top < 4 * len(flat) + 1024:  # labels small enough for counting (the usual case): no sort
+            counts = np.bincount(vals, minlength=top + 1)
+            labs = np.nonzero(counts)[0]
+            area = counts[labs]
+            lut = np.zeros(top + 1, np.int64)
+            lut[labs] = np.arange(len(labs))
+            inv = lut[vals]
+        else:
+            labs, inv, area = np.unique(vals, return_inverse=True, return_counts=True)
+        ys, xs = np.divmod(pix, W)
+        # Bounding boxes from per-(label, row) and per-(label, column) occupancy: two bincounts.
+        L = len(labs)
+        rows = np.bincount(inv * H + ys, minlength=L * H).reshape(L, H) > 0
+        cols = np.bincount(inv * W + xs, minlength=L * W).reshape(L, W) > 0
+        r0, r1 = rows.argmax(axis=1), H - 1 - rows[:, ::-1].argmax(axis=1)
+        c0, c1 = cols.argmax(axis=1), W - 1 - cols[:, ::-1].argmax(axis=1)
+        c = self.config
+        with self._lock:
+            for k in np.nonzero(area >= c.min_obs_pixels)[0]:
+                lab, a = int(labs[k]), int(area[k])
+                obs = self._obs.setdefault(lab, ObservationSet())
+                want_ctx, want_mask = obs.wants(keyframe_index, a, c.max_masked_views)
+                if not (want_ctx or want_mask):
+                    continue
+                y0, y1, x0, x1 = int(r0[k]), int(r1[k]) + 1, int(c0[k]), int(c1[k]) + 1
+                ctx = masked = None
+                if want_ctx:
+                    py, px = round(c.context_pad * (y1 - y0)), round(c.context_pad * (x1 - x0))
+                    ctx = self._downscale(
+                        frame.rgb[max(0, y0 - py) : min(H, y1 + py), max(0, x0 - px) : min(W, x1 + px)]
+                    )
+                if want_mask:
+                    sub = frame.rgb[y0:y1, x0:x1].copy()
+                    sub[lm[y0:y1, x0:x1] != lab] = 0
+                    masked = self._downscale(sub)
+                obs.add(keyframe_index, a, ctx, masked, c.max_masked_views)
+            for gt, votes in (
+                (frame.gt_classes, self._gt_class_votes),
+                (frame.gt_instances, self._gt_instance_votes),
+            ):
+                if gt is None or gt.shape != (H, W):
+                    continue
+                g = np.asarray(gt).reshape(-1)[pix].astype(np.int64)
+                ok = g >= 0
+                if not ok.any():
+                    continue
+                gmax = int(g[ok].max()) + 1
+                codes, counts = np.unique(inv[ok].astype(np.int64) * gmax + g[ok], return_counts=True)
+                for code, n in zip(codes.tolist(), counts.tolist()):
+                    li, gi = divmod(code, gmax)
+                    d = votes.setdefault(int(labs[li]), {})
+                    d[gi] = d.get(gi, 0) + n
+        self._time("observe", time.perf_counter() - t0)
+
+    def _downscale(self, img: np.ndarray) -> np.ndarray:
+        import cv2
+
+        h, w = img.shape[:2]
+        s = self.config.crop_max_side / max(h, w)
+        if s >= 1.0:
+            return np.ascontiguousarray(img)
+        return cv2.resize(img, (max(1, round(w * s)), max(1, round(h * s))), interpolation=cv2.INTER_AREA)
+
+    def observations(self, node_id: int) -> ObservationSet:
+        """A copy of O_i for ``node_id`` (empty when never observed)."""
+        with self._lock:
+            obs = self._obs.get(int(node_id))
+            return obs.copy() if obs is not None else ObservationSet()
+
+    def majority_gt(self, kind: str = "class") -> dict[int, int]:
+        """Scene label -> ground-truth class (``kind="class"``) or instance id with the largest pixel overlap
+        seen in :meth:`observe` (synthetic scenes; evaluation only)."""
+        votes = {"class": self._gt_class_votes, "instance": self._gt_instance_votes}.get(kind)
+        if votes is None:
+            raise ValueError(f"majority_gt: kind must be 'class' or 'instance', got {kind!r}")
+        with self._lock:
+            return {lab: max(v.items(), key=lambda kv: (kv[1], -kv[0]))[0] for lab, v in votes.items() if v}
+
+    # ------------------------------------------------------------------------------------------ update
+
+    def is_due(self, keyframe_index: int) -> bool:
+        """Whether :meth:`update` at 0-based keyframe ``keyframe_index`` would run (paper schedule)."""
+        if not self.config.enabled:
+            return False
+        count = keyframe_index + 1
+        if not self._initialized:
+            return count >= self.config.init_keyframes
+        return count - self._last_update_count >= self.config.update_every
+
+    def update(
+        self,
+        keyframe_index: int,
+        means: np.ndarray,
+        labels: np.ndarray,
+        confidences: np.ndarray,
+        colors: np.ndarray | None = None,
+        force: bool = False,
+    ) -> bool:
+        """Run a graph update if due (or ``force``): returns whether one ran (or was started in background).
+
+        ``means`` [N,3] float world metres, ``labels`` [N] int scene labels (-1 unlabeled), ``confidences``
+        [N] float in [0, 1], ``colors`` [N,3] float RGB in [0, 1] (None: grey). numpy arrays or torch
+        tensors (copied). Gaussians with non-finite means are ignored. Shape mismatches raise ValueError
+        (a caller bug); failures inside the update are logged and never raised.
+        """
+        if not self.config.enabled or not (force or self.is_due(keyframe_index)):
+            return False
+        arrays = self._check_arrays(means, labels, confidences, colors)
+        if self.config.background:
+            if self._future is not None and not self._future.done():
+                log.info(
+                    "scene graph: previous update still running; deferring the one due at keyframe %d",
+                    keyframe_index,
+                )
+                return False
+            if self._executor is None:
+                self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="scenegraph")
+            self._last_update_count = keyframe_index + 1
+            self._future = self._executor.submit(self._safe_update, keyframe_index, *arrays)
+            return True
+        self._last_update_count = keyframe_index + 1
+        return self._safe_update(keyframe_index, *arrays)
+
+    def wait(self, timeout: float | None = None) -> None:
+        """Block until a background update (if any) has finished."""
+        fut = self._future
+        if fut is not None:
+            fut.result(timeout=timeout)
+
+    def finalize(
+        self,
+        keyframe_index: int,
+        means: np.ndarray,
+        labels: np.ndarray,
+        confidences: np.ndarray,
+        colors: np.ndarray | None = None,
+    ) -> bool:
+        """End of the run: wait for a background update, then run one last update (in this thread) for new
+        and low-confidence nodes, and write graph.json if ``out_path`` is set."""
+        if not self.config.enabled:
+            return False
+        self.wait()
+        arrays = self._check_arrays(means, labels, confidences, colors)
+        self._last_update_count = keyframe_index + 1
+        ok = self._safe_update(keyframe_index, *arrays)
+        self.close()
+        return ok
+
+    def close(self) -> None:
+        """Stop the background worker (waits for a running update)."""
+        if self._executor is not None:
+            self._executor.shutdown(wait=True)
+            self._executor = None
+
+    @staticmethod
+    def _check_arrays(means, labels, confidences, colors) -> tuple[np.ndarray, ...]:
+        m = _to_numpy(means, "means").astype(np.float64)
+        lab = _to_numpy(labels, "labels")
+        conf = _to_numpy(confidences, "confidences").astype(np.float64)
+        if m.ndim != 2 or m.shape[1] != 3:
+            raise ValueError(f"SceneGraph.update: means must be [N, 3], got {m.shape}")
+        n = len(m)
+        if lab.shape != (n,) or not np.issubdtype(lab.dtype, np.integer):
+            raise ValueError(f"SceneGraph.update: labels must be integer [{n}], got {lab.dtype} {lab.shape}")
+        if conf.shape != (n,):
+            raise ValueError(f"SceneGraph.update: confidences must be [{n}], got {conf.shape}")
+        if colors is None:
+            col = np.full((n, 3), 0.5)
+        else:
+            col = _to_numpy(colors, "colors").astype(np.float64)
+            if col.shape != (n, 3):
+                raise ValueError(f"SceneGraph.update: colors must be [{n}, 3], got {col.shape}")
+        return m, lab.astype(np.int64), conf, col
+
+    def _safe_update(self, kf: int, means, labels, confs, colors) -> bool:
+        try:
+            self._update(kf, means, labels, confs, colors)
+            return True
+        except Exception:
+            log.exception("scene graph update at keyframe %d failed; mapping continues", kf)
+            return False
+
+    def _time(self, key: str, seconds: float, count: int = 1) -> None:
+        t = self.timings.setdefault(key, {"seconds": 0.0, "count": 0})
+        t["seconds"] += seconds
+        t["count"] += count
+
+    def _geometry(self, kf: int, means, labels, confs, colors) -> dict[int, dict]:
+        finite = np.all(np.isfinite(means), axis=1)
+        if not finite.all():
+            log.warning("scene graph: ignoring %d Gaussians with non-finite means", int((~finite).sum()))
+        sel = np.nonzero(finite & (labels >= 0))[0]
+        order = sel[np.argsort(labels[sel], kind="stable")]
+        ulab, starts, counts = np.unique(labels[order], return_index=True, return_counts=True)
+        cap = self.config.max_points_per_node
+        voxel = self.config.edge_voxel if self.config.edge_voxel > 0 else self.config.theta_e / 2
+        out: dict[int, dict] = {}
+        for lab, s, n in zip(ulab.tolist(), starts.tolist(), counts.tolist()):
+            if n < self.config.min_gaussians:
+                continue
+            idx = order[s : s + n]
+            out[lab] = node_geometry(lab, means[idx], colors[idx], confs[idx], cap, voxel)
+        return out
+
+    def _update(self, kf: int, means, labels, confs, colors) -> None:
+        t_start = time.perf_counter()
+        geo = self._geometry(kf, means, labels, confs, colors)
+        with self._lock:
+            gone = [i for i in self.nodes if i not in geo]
+            for i in gone:
+                del self.nodes[i]
+            if gone:
+                self.edges = {
+                    k: e for k, e in self.edges.items() if k[0] in self.nodes and k[1] in self.nodes
+                }
+                log.info("scene graph: %d node(s) left the map: %s", len(gone), gone[:10])
+            new = []
+            for lab, g in geo.items():
+                node = self.nodes.get(lab)
+                if node is None:
+                    self.nodes[lab] = SceneNode(id=lab, first_seen=kf, last_updated=kf, **g)
+                    new.append(lab)
+                else:
+                    for k, v in g.items():
+                        setattr(node, k, v)
+                    node._shape = None
+            if not self._initialized:
+                todo = sorted(self.nodes)
+            else:
+                low = [
+                    i for i, n in self.nodes.items() if n.confidence < self.config.tau_update and i not in new
+                ]
+                todo = sorted(set(new) | set(low))
+            ctx = self._scene_context()
+            requests = [
+                CaptionRequest(
+                    node=self.nodes[i],
+                    observations=self._obs[i].copy() if i in self._obs else ObservationSet(),
+                    context=ctx,
+                    gt_class_votes=dict(self._gt_class_votes.get(i, {})),
+                    gt_instance_votes=dict(self._gt_instance_votes.get(i, {})),
+                )
+                for i in todo
+            ]
+        self._time("graph_geometry", time.perf_counter() - t_start)
+
+        # Node captioning (slow, possibly remote) outside the lock.
+        t0 = time.perf_counter()
+        try:
+            descs = self.captioner.describe(requests) if requests else {}
+        except Exception as e:
+            log.warning("scene graph: captioner failed (%s); nodes keep their previous captions", e)
+            descs = {}
+        need = [r for r in requests if r.node.id not in descs and not r.node.caption]
+        if need:
+            descs.update(self._fallback_captioner.describe(need))
+        with self._lock:
+            for r in requests:
+                d = descs.get(r.node.id)
+                if d is not None:
+                    r.node.caption, r.node.tag, r.node.caption_source = d.caption, d.tag, d.source
+                r.node.last_updated = kf
+            # Heuristic captions cost nothing and describe geometry that keeps growing, so they follow it
+            # at every update (the selective schedule exists to save VLM calls, not to freeze captions).
+            done = {r.node.id for r in requests}
+            stale = [n for i, n in self.nodes.items() if n.caption_source == "heuristic" and i not in done]
+            if stale:
+                fresh = self._fallback_captioner.describe(
+                    [CaptionRequest(n, ObservationSet(), ctx) for n in stale]
+                )
+                for n in stale:
+                    d = fresh[n.id]
+                    n.caption, n.tag = d.caption, d.tag
+        self._time("graph_caption", time.perf_counter() - t0, len(requests))
+
+        t0 = time.perf_counter()
+        try:
+            scores = self.node_confidence.score(requests) if requests else {}
+        except Exception as e:
+            log.warning("scene graph: node confidence failed (%s); using mean Gaussian confidence", e)
+            scores = MeanConfidence().score(requests)
+        with self._lock:
+            for r in requests:
+                s = scores.get(r.node.id)
+                if s is not None and math.isfinite(s):
+                    r.node.confidence = float(s)
+        self._time("graph_confidence", time.perf_counter() - t0, len(requests))
+
+        t0 = time.perf_counter()
+        self._update_edges([r.node.id for r in requests])
+        self._time("graph_edges", time.perf_counter() - t0)
+
+        self._initialized = True
+        self.num_updates += 1
+        self.last_update_keyframe = kf
+        log.info(
+            "scene graph update at keyframe %d: %d nodes (%d new, %d re-captioned), %d edges, %.2f s",
+            kf,
+            len(self.nodes),
+            len(new),
+            len(requests) - len(new),
+            len(self.edges),
+            time.perf_counter() - t_start,
+        )
+        if self.out_path is not None:
+            try:
+                self.save(self.out_path)
+            except Exception as e:
+                log.warning("scene graph: could not write %s (%s)", self.out_path, e)
+
+    def _scene_context(self) -> SceneContext:
+        if not self.nodes:
+            return SceneContext(self.up, 0.0, 0.0)
+        shapes = [n.shape(self.up) for n in self.nodes.values()]
+        return SceneContext(self.up, min(s.h_lo for s in shapes), max(s.h_hi for s in shapes))
+
+    def _edge_candidates(self, clouds: list[np.ndarray], query: list[int]) -> list[tuple[int, int, float]]:
+        """Candidate pairs (a < b, indices into ``clouds``) with R_ab (paper Eq. 21): R_ab > tau_e, plus,
+        with ``support_edges``, pairs where one node's bottom or top band (``support_band`` metres along
+        up) has at least ``support_ratio`` of its points within theta_e of the other node."""
+        c = self.config
+        sizes = np.array([len(p) for p in clouds], dtype=np.int64)
+        pt, other = proximate_points(clouds, c.theta_e, query=query)
+        ratios: dict[tuple[int, int], float] = {}
+        for (i, j), r in directed_ratios(pt, other, sizes).items():
+            key = (min(i, j), max(i, j))
+            ratios[key] = max(ratios.get(key, 0.0), r)
+        chosen = {k for k, r in ratios.items() if r > c.tau_e}
+        if c.support_edges and len(pt):
+            h = np.concatenate(clouds) @ self.up
+            owner = np.repeat(np.arange(len(clouds)), sizes)
+            lo = np.full(len(clouds), np.inf)
+            hi = np.full(len(clouds), -np.inf)
+            np.minimum.at(lo, owner, h)
+            np.maximum.at(hi, owner, h)
+            for band in (h <= lo[owner] + c.support_band, h >= hi[owner] - c.support_band):
+                for (i, j), r in directed_ratios(pt, other, sizes, band).items():
+                    if r >= c.support_ratio:
+                        chosen.add((min(i, j), max(i, j)))
+        return sorted((a, b, ratios[(a, b)]) for a, b in chosen)
+
+    def _update_edges(self, updated: Sequence[int]) -> None:
+        with self._lock:
+            ids = sorted(self.nodes)
+            upd = set(updated) & set(ids)
+            self.edges = {k: e for k, e in self.edges.items() if k[0] not in upd and k[1] not in upd}
+            if not upd:
+                return
+            pos = {i: k for k, i in enumerate(ids)}
+            clouds = [np.asarray(self.nodes[i].points, dtype=np.float64).reshape(-1, 3) for i in ids]
+            cands = self._edge_candidates(clouds, [pos[i] for i in sorted(upd)])
+            cands = [(ids[a], ids[b], r) for a, b, r in cands]
+            pairs = [(self.nodes[a], self.nodes[b]) for a, b, _ in cands]
+        if not pairs:
+            return
+        try:
+            rels = self.relations.predict(pairs)
+            if len(rels) != len(pairs):
+                raise ValueError(f"relation predictor returned {len(rels)} relations for {len(pairs)} pairs")
+        except Exception as e:
+            log.warning("scene graph: relation predictor failed (%s); using geometric relations", e)
+            rels = self._fallback_relations.predict(pairs)
+        with self._lock:
+            for (a, b, r), rel in zip(cands, rels):
+                if a in self.nodes and b in self.nodes and {rel.source, rel.target} == {a, b}:
+                    self.edges[(a, b)] = SceneEdge(
+                        rel.source, rel.target, rel.relation, float(r), rel.predictor
+                    )
+
+    # ------------------------------------------------------------------------------------------ output
+
+    def to_json(self) -> dict:
+        """The graph.json document (DESIGN.md "Files"): version, nodes sorted by id, edges."""
+        with self._lock:
+            return {
+                "version": GRAPH_JSON_VERSION,
+                "nodes": [self.nodes[i].to_dict() for i in sorted(self.nodes)],
+                "edges": [self.edges[k].to_dict() for k in sorted(self.edges)],
+            }
+
+    def to_dict(self) -> dict:
+        """Alias of :meth:`to_json` (the graph.json document as a dict)."""
+        return self.to_json()
+
+    def save(self, path: str | Path) -> None:
+        """Write graph.json atomically (never a half-written file)."""
+        atomic_write_text(path, json.dumps(self.to_json(), indent=1))
+
+    @classmethod
+    def load(cls, path: str | Path, config: GraphConfig | None = None) -> SceneGraph:
+        """Read a graph.json (for queries and export). Node point subsamples and observations are not stored
+        in the file, so geometric predicates on a loaded graph use node centres only."""
+        p = Path(path)
+        if not p.is_file():
+            raise DataError(f"scene graph file {str(p)!r} does not exist")
+        try:
+            doc = json.loads(p.read_text(encoding="utf-8"))
+        except (json.JSONDecodeError, UnicodeDecodeError) as e:
+            raise DataError(f"scene graph file {str(p)!r} is not valid JSON: {e}") from None
+        return cls.from_json(doc, config, source=str(p))
+
+    @classmethod
+    def from_json(cls, doc: Any, config: GraphConfig | None = None, source: str = "graph.json") -> SceneGraph:
+        """Build a graph from a graph.json document (see :meth:`load`); DataError naming ``source``."""
+        cfg = config or GraphConfig()
+        g = cls(
+            cfg,
+            captioner=HeuristicCaptioner(),
+            relations=GeometricRelations(cfg.relations, cfg.up_axis),
+            node_confidence=MeanConfidence(),
+        )
+        if not isinstance(doc, dict) or doc.get("version") != GRAPH_JSON_VERSION:
+            raise DataError(f"{source}: not a version-{GRAPH_JSON_VERSION} scene graph document")
+        if not isinstance(doc.get("nodes"), list) or not isinstance(doc.get("edges"), list):
+            raise DataError(f"{source}: 'nodes' and 'edges' must be lists")
+
+        def vec(d: dict, key: str, shape: tuple[int, ...], k: int, default: Any = None) -> np.ndarray:
+            v = d.get(key, default)
+            try:
+                a = np.asarray(v, dtype=np.float64)
+            except (TypeError, ValueError):
+                a = np.zeros(0)
+            if a.shape != shape or not np.all(np.isfinite(a)):
+                raise DataError(
+                    f"{source}: node #{k} field {key!r} must be {len(shape)}-D finite numbers {shape}"
+                )
+            return a
+
+        for k, d in enumerate(doc["nodes"]):
+            if not isinstance(d, dict) or not isinstance(d.get("id"), int):
+                raise DataError(f"{source}: node #{k} has no integer 'id'")
+            center = vec(d, "center", (3,), k)
+            node = SceneNode(
+                id=d["id"],
+                center=center,
+                bbox_min=vec(d, "bbox_min", (3,), k),
+                bbox_max=vec(d, "bbox_max", (3,), k),
+                obb_center=vec(d, "obb_center", (3,), k, center.tolist()),
+                obb_axes=vec(d, "obb_axes", (3, 3), k, np.eye(3).tolist()),
+                obb_extent=vec(d, "obb_extent", (3,), k, [0.0, 0.0, 0.0]),
+                num_gaussians=int(d.get("num_gaussians", 0)),
+                first_seen=int(d.get("first_seen", -1)),
+                last_updated=int(d.get("last_updated", -1)),
+                caption=str(d.get("caption", "")),
+                tag=str(d.get("tag", "")),
+                caption_source=str(d.get("caption_source", "")),
+                confidence=float(d.get("confidence", 0.0)),
+            )
+            g.nodes[node.id] = node
+        for k, e in enumerate(doc["edges"]):
+            try:
+                s, t, rel = int(e["source"]), int(e["target"]), str(e["relation"])
+                score = float(e.get("score", 0.0))
+            except (KeyError, TypeError, ValueError):
+                raise DataError(
+                    f"{source}: edge #{k} needs integer 'source'/'target' and a 'relation'"
+                ) from None
+            if s not in g.nodes or t not in g.nodes:
+                raise DataError(f"{source}: edge #{k} refers to a node that is not in the graph ({s} -> {t})")
+            g.edges[(min(s, t), max(s, t))] = SceneEdge(s, t, rel, score, str(e.get("predictor", "")))
+        g._initialized = True
+        return g
+
+    def to_networkx(self):
+        """A ``networkx.DiGraph``: node attributes caption, tag, confidence, center_x/y/z, num_gaussians,
+        first_seen, last_updated, caption_source; edge attributes relation, score, predictor.
+        networkx is optional (``pip install networkx``)."""
+        try:
+            import networkx as nx
+        except ImportError:
+            raise OGSceneError(
+                "exporting the scene graph to networkx/GraphML needs networkx: pip install networkx"
+            ) from None
+        G = nx.DiGraph()
+        with self._lock:
+            for i in sorted(self.nodes):
+                n = self.nodes[i]
+                G.add_node(
+                    int(i),
+                    caption=n.caption,
+                    tag=n.tag,
+                    confidence=float(n.confidence),
+                    center_x=float(n.center[0]),
+                    center_y=float(n.center[1]),
+                    center_z=float(n.center[2]),
+                    num_gaussians=int(n.num_gaussians),
+                    first_seen=int(n.first_seen),
+                    last_updated=int(n.last_updated),
+                    caption_source=n.caption_source,
+                )
+            for k in sorted(self.edges):
+                e = self.edges[k]
+                G.add_edge(
+                    int(e.source),
+                    int(e.target),
+                    relation=e.relation,
+                    score=float(e.score),
+                    predictor=e.predictor,
+                )
+        return G
+
+    def save_graphml(self, path: str | Path) -> None:
+        """Write the graph as GraphML (atomically; needs networkx)."""
+        import networkx as nx
+
+        G = self.to_networkx()
+        with atomic_path(path) as tmp:
+            nx.write_graphml(G, str(tmp))
+
+    # ------------------------------------------------------------------------------------------- query
+
+    def query(self, text: str, top_k: int | None = None) -> list[SceneNode]:
+        """Nodes matching ``text``, best first (see :meth:`query_scored`)."""
+        return [n for n, _ in self.query_scored(text, top_k)]
+
+    def query_scored(self, text: str, top_k: int | None = None) -> list[tuple[SceneNode, float]]:
+        """``[(node, score)]`` for nodes whose tag or caption match ``text``, best first.
+
+        Offline matching: whole-word (plural-tolerant) matches of the query or of its synonyms
+        (:data:`SYNONYM_GROUPS`) in the tag (score 1.0 for the exact tag, 0.9 inside it) or the caption
+        (0.6); synonym matches count 0.9 times. When ``graph.query_embedding`` is "clip" or "openai", the
+        cosine similarity between the query and "tag: caption" embeddings is also used (kept when at least
+        ``graph.query_min_similarity``); a node's score is the larger of the two.
+        """
+        q = " ".join(str(text).lower().split())
+        if not q:
+            raise ValueError("SceneGraph.query: empty query")
+        terms = {q: 1.0}
+        for group in SYNONYM_GROUPS:
+            if q in group:
+                for w in group:
+                    terms.setdefault(w, 0.9)
+        with self._lock:
+            nodes = [self.nodes[i] for i in sorted(self.nodes)]
+        pats = [(term, w, re.compile(r"\b" + re.escape(term) + r"(?:s|es)?\b")) for term, w in terms.items()]
+        scores: dict[int, float] = {}
+        for n in nodes:
+            best = 0.0
+            tag, cap = n.tag.lower().strip(), n.caption.lower()
+            for term, w, pat in pats:
+                s = 1.0 if tag == term else 0.9 if pat.search(tag) else 0.6 if pat.search(cap) else 0.0
+                best = max(best, s * w)
+            if best > 0:
+                scores[n.id] = best
+        if self.config.query_embedding != "none" and nodes:
+            try:
+                sims = self._embedding_scores(q, nodes)
+                for n, s in zip(nodes, sims):
+                    if s >= self.config.query_min_similarity:
+                        scores[n.id] = max(scores.get(n.id, 0.0), float(s))
+            except Exception as e:
+                log.warning(
+                    "scene graph query: embedding similarity unavailable (%s); using text matching", e
+                )
+        by_id = {n.id: n for n in nodes}
+        ranked = sorted(scores.items(), key=lambda kv: (-kv[1], kv[0]))
+        if top_k is not None:
+            ranked = ranked[:top_k]
+        return [(by_id[i], s) for i, s in ranked]
+
+    def _embed(self, texts: list[str]) -> np.ndarray:
+        kind = self.config.query_embedding
+        if self._query_encoder is None:
+            if kind == "clip":
+                from .confidence import ClipConfidence
+
+                enc = self.node_confidence if isinstance(self.node_confidence, ClipConfidence) else None
+                self._query_encoder = enc or ClipConfidence.from_config(self.config.confidence)
+            elif kind == "openai":
+                from .openai_client import ChatClient
+
+                cc = self.config.captioner
+                self._query_encoder = ChatClient(
+                    cc.base_url,
+                    self.config.embedding_model or cc.model,
+                    cc.api_key_env,
+                    cc.timeout_s,
+                    cc.max_retries,
+                    cc.backoff_s,
+                )
+            else:
+                raise ConfigError(f"graph.query_embedding must be none, clip or openai, got {kind!r}")
+        enc = self._query_encoder
+        out = enc.embed_texts(texts) if kind == "clip" else enc.embed(texts)
+        return out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
+
+    def _embedding_scores(self, q: str, nodes: Sequence[SceneNode]) -> np.ndarray:
+        docs = [f"{n.tag}: {n.caption}" for n in nodes]
+        missing = [d for d in dict.fromkeys(docs) if d not in self._embed_cache]
+        if missing:
+            for d, e in zip(missing, self._embed(missing)):
+                self._embed_cache[d] = e
+        qe = self._embed([q])[0]
+        return np.array([float(self._embed_cache[d] @ qe) for d in docs])

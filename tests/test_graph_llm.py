@@ -1,0 +1,349 @@
+"""OpenAI-compatible endpoints against a real HTTP server on 127.0.0.1 (no network beyond loopback).
+
+Covers: ONE batched chat-completions call for all candidate edges, the edge / caption / tag prompt
+contents, parsing of good and malformed replies with geometric fallback, timeouts, retries with backoff,
+non-retried client errors, and that the API key is sent but never logged or written.
+"""
+
+import base64
+import json
+import logging
+import threading
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+import cv2
+import numpy as np
+import pytest
+from test_graph_helpers import box_surface, plane, table, to_world
+
+from ogscene3d import Frame
+from ogscene3d.config import GraphConfig, RelationsConfig
+from ogscene3d.errors import ModelError
+from ogscene3d.graph import (
+    ChatClient,
+    GeometricRelations,
+    LLMRelations,
+    MeanConfidence,
+    OpenAICaptioner,
+    SceneGraph,
+    SceneNode,
+)
+
+UP = (0.0, -1.0, 0.0)
+SECRET = "sk-test-DO-NOT-LEAK-123456"
+
+
+class FakeServer:
+    """A chat-completions server whose replies are scripted per request by ``respond(body) -> behaviour``.
+
+    A behaviour is ``(status, text, delay_s)``: the assistant message ``text`` (status 200) or an error
+    body, sent after ``delay_s`` seconds.
+    """
+
+    def __init__(self, respond):
+        self.requests: list[dict] = []
+        self.headers: list[dict] = []
+        self.respond = respond
+        server = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def log_message(self, *args):  # keep pytest output clean
+                pass
+
+            def do_POST(self):
+                body = json.loads(self.rfile.read(int(self.headers["Content-Length"])))
+                server.requests.append({"path": self.path, "body": body})
+                server.headers.append(dict(self.headers))
+                status, text, delay = server.respond(body, len(server.requests))
+                if delay:
+                    threading.Event().wait(delay)
+                if status == 200 and self.path.endswith("/embeddings"):
+                    payload = json.dumps(text).encode()
+                elif status == 200:
+                    payload = json.dumps(
+                        {
+                            "id": "x",
+                            "object": "chat.completion",
+                            "choices": [{"index": 0, "message": {"role": "assistant", "content": text}}],
+                        }
+                    ).encode()
+                else:
+                    payload = text.encode()
+                try:
+                    self.send_response(status)
+                    self.send_header("Content-Type", "application/json")
+                    if status == 429:
+                        self.send_header("Retry-After", "0")
+                    self.send_header("Content-Length", str(len(payload)))
+                    self.end_headers()
+                    self.wfile.write(payload)
+                except (BrokenPipeError, ConnectionResetError):
+                    pass  # the client gave up (timeout test)
+
+        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.httpd.daemon_threads = True
+        self.thread = threading.Thread(target=self.httpd.serve_forever, args=(0.05,), daemon=True)
+        self.thread.start()
+        self.base_url = f"http://127.0.0.1:{self.httpd.server_address[1]}/v1"
+
+    def close(self):
+        self.httpd.shutdown()
+        self.httpd.server_close()
+
+
+@pytest.fixture
+def server_factory():
+    servers = []
+
+    def make(respond):
+        s = FakeServer(respond)
+        servers.append(s)
+        return s
+
+    yield make
+    for s in servers:
+        s.close()
+
+
+def _client(server, **kw):
+    args = dict(api_key_env="OGS_TEST_KEY", timeout_s=2.0, max_retries=2, backoff_s=0.01)
+    args.update(kw)
+    return ChatClient(server.base_url, "test-model", **args)
+
+
+def _scene():
+    """cup on table, picture on wall, chair next to table (tags set as a captioner would)."""
+    rng = np.random.default_rng(0)
+
+    def node(i, pts, tag):
+        n = SceneNode.from_points(i, to_world(pts, UP))
+        n.tag = tag
+        return n
+
+    t = node(1, table(rng), "table")
+    cup = node(2, box_surface([0.5, 0.35, 0.75], [0.58, 0.43, 0.85], rng), "cup")
+    wall = node(3, plane([2.0, -2, 0], [2.0, 2, 2.5], rng), "wall")
+    pic = node(4, box_surface([1.96, -0.3, 1.2], [1.99, 0.3, 1.6], rng), "picture")
+    chair = node(5, box_surface([1.25, 0.2, 0.0], [1.7, 0.65, 0.9], rng), "chair")
+    return [(cup, t), (wall, pic), (t, chair)]
+
+
+def _edge_reply(entries):
+    return json.dumps({"relations": entries})
+
+
+def test_one_batched_call_for_all_edges_with_synonyms(server_factory, monkeypatch):
+    monkeypatch.setenv("OGS_TEST_KEY", SECRET)
+    reply = _edge_reply(
+        [
+            {"pair": 0, "subject": 2, "relation": "resting on", "object": 1},
+            {"pair": 1, "subject": 4, "relation": "mounted on", "object": 3},  # reversed w.r.t. the pair
+            {"pair": 2, "subject": 1, "relation": "beside", "object": 5},
+        ]
+    )
+    srv = server_factory(lambda body, n: (200, "```json\n" + reply + "\n```", 0))
+    pairs = _scene()
+    rels = LLMRelations(_client(srv), GeometricRelations(RelationsConfig(), UP), UP).predict(pairs)
+    assert len(srv.requests) == 1  # ONE request for all three pairs
+    req = srv.requests[0]
+    assert req["path"] == "/v1/chat/completions" and req["body"]["model"] == "test-model"
+    prompt = req["body"]["messages"][-1]["content"]
+    for tag in ("table", "cup", "wall", "picture", "chair"):
+        assert f'"{tag}"' in prompt
+    for rel in ("on", "under", "above", "below", "next to", "in", "attached to"):
+        assert f'"{rel}"' in prompt
+    cup, tbl = pairs[0]
+    c, v = cup.center, tbl.center - cup.center
+    assert f"[{c[0]:.2f}, {c[1]:.2f}, {c[2]:.2f}]" in prompt  # centres
+    assert f"vector [{v[0]:.2f}, {v[1]:.2f}, {v[2]:.2f}]" in prompt  # centre-to-centre vector
+    assert "[0.00, -1.00, 0.00]" in prompt  # the configured up axis
+    assert [(r.source, r.relation, r.target, r.predictor) for r in rels] == [
+        (2, "on", 1, "llm"),
+        (4, "attached to", 3, "llm"),
+        (1, "next to", 5, "llm"),
+    ]
+    assert srv.headers[0]["Authorization"] == f"Bearer {SECRET}"
+
+
+def test_malformed_replies_fall_back_per_pair(server_factory, caplog):
+    pairs = _scene()
+    geo = GeometricRelations(RelationsConfig(), UP)
+    expected_geo = geo.predict(pairs)
+    # partially good: one unknown relation, one missing pair, one bad index
+    reply = _edge_reply(
+        [
+            {"pair": 0, "subject": 2, "relation": "on top of", "object": 1},
+            {"pair": 1, "subject": 4, "relation": "dances with", "object": 3},
+            {"pair": 9, "relation": "on"},
+            "garbage",
+        ]
+    )
+    srv = server_factory(lambda body, n: (200, reply, 0))
+    with caplog.at_level(logging.WARNING):
+        rels = LLMRelations(_client(srv), geo, UP).predict(pairs)
+    assert len(srv.requests) == 1
+    assert (rels[0].relation, rels[0].predictor) == ("on", "llm")
+    assert rels[1] == expected_geo[1] and rels[2] == expected_geo[2]
+    assert "dances with" in caplog.text and "bad pair index" in caplog.text
+    # entirely malformed: not JSON at all -> every pair from geometry, no retry for a bad reply
+    srv2 = server_factory(lambda body, n: (200, "Sure! The cup is on the table.", 0))
+    rels2 = LLMRelations(_client(srv2), geo, UP).predict(pairs)
+    assert rels2 == expected_geo and len(srv2.requests) == 1
+
+
+def test_timeout_then_success_is_retried(server_factory):
+    ok = _edge_reply([{"pair": 0, "subject": 2, "relation": "on", "object": 1}])
+    srv = server_factory(lambda body, n: (200, ok, 1.5 if n == 1 else 0))
+    client = _client(srv, timeout_s=0.3, max_retries=2)
+    rels = LLMRelations(client, GeometricRelations(RelationsConfig(), UP), UP).predict(_scene()[:1])
+    assert client.calls == 2 and len(srv.requests) == 2
+    assert rels[0].predictor == "llm"
+
+
+def test_server_errors_retried_then_fallback_and_key_never_logged(server_factory, monkeypatch, caplog):
+    monkeypatch.setenv("OGS_TEST_KEY", SECRET)
+    srv = server_factory(lambda body, n: (503, '{"error": "overloaded"}', 0))
+    client = _client(srv, max_retries=2)
+    with caplog.at_level(logging.DEBUG):
+        with pytest.raises(ModelError, match="HTTP 503") as exc:
+            client.chat([{"role": "user", "content": "hi"}])
+        assert len(srv.requests) == 3  # 1 + max_retries
+        rels = LLMRelations(client, GeometricRelations(RelationsConfig(), UP), UP).predict(_scene())
+    assert all(r.predictor == "geometric" for r in rels)
+    assert SECRET not in caplog.text and SECRET not in str(exc.value) and SECRET not in repr(client)
+    # 429 with Retry-After is retried; a 400 is a caller error and is not
+    seq = iter([(429, "slow down", 0), (200, "fine", 0)])
+    srv2 = server_factory(lambda body, n: next(seq))
+    assert _client(srv2).chat([{"role": "user", "content": "x"}]) == "fine" and len(srv2.requests) == 2
+    srv3 = server_factory(lambda body, n: (400, '{"error": "bad model"}', 0))
+    with pytest.raises(ModelError, match="HTTP 400"):
+        _client(srv3).chat([{"role": "user", "content": "x"}])
+    assert len(srv3.requests) == 1
+
+
+def test_connection_refused_is_bounded():
+    import socket
+
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()  # nothing listens there now
+    client = ChatClient(f"http://127.0.0.1:{port}/v1", "m", timeout_s=0.5, max_retries=1, backoff_s=0.01)
+    with pytest.raises(ModelError, match="connection failed"):
+        client.chat([{"role": "user", "content": "x"}])
+    assert client.calls == 2
+
+
+def _caption_responder(fail_captions=False):
+    def respond(body, n):
+        content = body["messages"][-1]["content"]
+        if isinstance(content, list):  # caption request with images
+            if fail_captions:
+                return 500, "boom", 0
+            n_img = sum(1 for p in content if p.get("type") == "image_url")
+            return 200, json.dumps({"caption": f"a red box seen in {n_img} images"}), 0
+        ids = [line.split(":")[0] for line in content.splitlines() if line[:1].isdigit()]
+        return 200, json.dumps({"tags": {i: "red box" for i in ids}}), 0
+
+    return respond
+
+
+def test_openai_captioner_in_scene_graph(server_factory, tmp_path, monkeypatch):
+    monkeypatch.setenv("OGS_TEST_KEY", SECRET)
+    srv = server_factory(_caption_responder())
+    cap = OpenAICaptioner(_client(srv), concurrency=2)
+    out = tmp_path / "graph.json"
+    g = SceneGraph(
+        GraphConfig(min_obs_pixels=4), captioner=cap, node_confidence=MeanConfidence(), out_path=out
+    )
+    H, W = 48, 64
+    rgb = np.zeros((H, W, 3), np.uint8)
+    rgb[..., 0] = 220
+    for kf in range(4):
+        lm = np.full((H, W), -1, np.int32)
+        lm[4 : 12 + 4 * kf, 4 : 20 + 4 * kf] = 0
+        lm[30:40, 40:60] = 1
+        g.observe(kf, Frame(kf, rgb, np.ones((H, W), np.float32), np.eye(3)), lm)
+    rng = np.random.default_rng(0)
+    means = np.concatenate(
+        [
+            rng.uniform(0, 0.3, (100, 3)),
+            rng.uniform(0, 0.3, (100, 3)) + [0.3, 0, 0],
+            rng.uniform(0, 0.3, (100, 3)) + [0.6, 0, 0],
+        ]
+    )
+    labels = np.repeat(np.array([0, 1, 2], np.int32), 100)
+    g.update(11, means, labels, np.full(300, 0.2, np.float32))
+    cap_reqs = [r for r in srv.requests if isinstance(r["body"]["messages"][-1]["content"], list)]
+    tag_reqs = [r for r in srv.requests if not isinstance(r["body"]["messages"][-1]["content"], list)]
+    assert len(cap_reqs) == 2  # nodes 0 and 1 were observed; node 2 never was
+    assert len(tag_reqs) == 1  # tags for all captions in ONE call
+    parts = cap_reqs[0]["body"]["messages"][-1]["content"]
+    assert "masked" in parts[0]["text"] and "context" in parts[0]["text"]
+    urls = [p["image_url"]["url"] for p in parts[1:]]
+    assert 2 <= len(urls) <= 4 and all(u.startswith("data:image/jpeg;base64,") for u in urls)
+    img = cv2.imdecode(np.frombuffer(base64.b64decode(urls[0].split(",", 1)[1]), np.uint8), cv2.IMREAD_COLOR)
+    assert img is not None and img.shape[2] == 3 and img[..., 2].mean() > 150  # red survives (BGR)
+    assert g.nodes[0].tag == "red box" and g.nodes[0].caption_source == "vlm"
+    assert g.nodes[2].caption_source == "heuristic"  # nothing to show the VLM: offline fallback
+    before = {i: n.caption for i, n in g.nodes.items()}
+    # the endpoint now fails: captions are kept, the update still completes
+    srv.respond = _caption_responder(fail_captions=True)
+    g.update(23, means, labels, np.full(300, 0.2, np.float32))
+    assert {i: n.caption for i, n in g.nodes.items()} == before
+    assert SECRET not in out.read_text()
+
+
+@pytest.mark.parametrize(
+    "reply,expected",
+    [
+        ('{"caption": "a  red\\n mug"}', "a red mug"),
+        ('```json\n{"caption": "a lamp"}\n```', "a lamp"),
+        ("A wooden chair with four legs.", "A wooden chair with four legs."),  # plain prose accepted
+        ('{"description": "no caption key"}', None),
+        ('{"caption": 42}', None),
+        ("[1, 2]", None),
+        ("   ", None),
+        ("x" * 2000, None),
+    ],
+)
+def test_parse_caption_reply(reply, expected):
+    from ogscene3d.graph.captioner import parse_caption_reply
+
+    assert parse_caption_reply(reply) == expected
+
+
+def test_parse_tag_reply_ignores_bad_entries():
+    from ogscene3d.graph.captioner import parse_tag_reply, tag_from_caption
+
+    reply = '{"tags": {"1": "Coffee  Table", "2": 7, "3": "", "x": "chair", "9": "not asked"}}'
+    assert parse_tag_reply(reply, [1, 2, 3]) == {1: "coffee table"}
+    assert parse_tag_reply('[{"id": 4, "tag": "lamp"}]', [4]) == {4: "lamp"}
+    assert parse_tag_reply("no json here", [1]) == {}
+    assert tag_from_caption("A grey fabric couch, with cushions.") == "grey fabric couch"
+
+
+def test_query_with_openai_embeddings(server_factory):
+    vocab = {"sofa": [1.0, 0.0], "couch": [0.9, 0.1], "lamp": [0.0, 1.0]}
+
+    def respond(body, n):
+        vecs = [
+            [sum(v[k] for w, v in vocab.items() if w in t.lower()) + 1e-3 for k in range(2)]
+            for t in body["input"]
+        ]
+        return 200, {"data": [{"index": i, "embedding": v} for i, v in enumerate(vecs)]}, 0
+
+    srv = server_factory(respond)
+    cfg = GraphConfig(query_embedding="openai", embedding_model="emb", query_min_similarity=0.8)
+    cfg.captioner.base_url = srv.base_url
+    g = SceneGraph(cfg, node_confidence=MeanConfidence())
+    for i, (tag, cap) in enumerate([("seat", "a big couch"), ("light", "a floor lamp")]):
+        n = SceneNode.from_points(i, np.zeros((3, 3)))
+        n.tag, n.caption = tag, cap
+        g.nodes[i] = n
+    hits = g.query_scored("sofa")  # no word overlap with node 0: only the embedding finds it
+    assert [n.id for n, _ in hits] == [0] and hits[0][1] > 0.9
+    assert srv.requests[0]["path"] == "/v1/embeddings" and srv.requests[0]["body"]["model"] == "emb"
+    n_req = len(srv.requests)
+    g.query_scored("lamp")  # node embeddings are cached: one request for the query only
+    assert len(srv.requests) == n_req + 1
