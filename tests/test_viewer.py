@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 import torch
 
+from ogscene3d.colors import confidence_colors, label_colors, turbo
 from ogscene3d.errors import ConfigError, DataError
 from ogscene3d.gaussians import GaussianMap
-from ogscene3d.viewer.colors import confidence_colors, label_colors, turbo
 from ogscene3d.viewer.runs import load_run, read_graph_json
 from ogscene3d.viewer.scene import SceneLayers, ViewerSettings, node_matches, node_text
 from ogscene3d.viewer.snapshot import (

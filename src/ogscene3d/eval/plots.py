@@ -16,36 +16,15 @@ import cv2
 import numpy as np
 
 from ..atomic import atomic_write_bytes
+from ..colors import label_colors as _palette
 
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
 
 
 def label_colors(labels: Any) -> np.ndarray:
-    """Stable RGB colour per label: [N] ints -> [N, 3] uint8 (label < 0 -> black)."""
+    """Stable RGB per label, as in the viewer: [N] ints -> [N, 3] uint8 (label < 0 -> black)."""
     lab = np.asarray(labels, dtype=np.int64).reshape(-1)
-    h = lab.astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
-    h ^= h >> np.uint64(29)
-    h *= np.uint64(0xBF58476D1CE4E5B9)
-    h ^= h >> np.uint64(32)
-    hue = (h & np.uint64(0xFFFF)).astype(np.float64) / 65536.0
-    sat = 0.6 + ((h >> np.uint64(16)) & np.uint64(0xFF)).astype(np.float64) / 255.0 * 0.4
-    val = 0.7 + ((h >> np.uint64(24)) & np.uint64(0xFF)).astype(np.float64) / 255.0 * 0.3
-    # HSV -> RGB in numpy (cv2.cvtColor rounds differently in its SIMD body and tail, which would
-    # make a label's colour depend on its position in the array).
-    i = np.floor(hue * 6.0).astype(np.int64) % 6
-    f = hue * 6.0 - np.floor(hue * 6.0)
-    p, q, t = val * (1 - sat), val * (1 - f * sat), val * (1 - (1 - f) * sat)
-    choices = np.stack(
-        [
-            np.stack([val, t, p], 1),
-            np.stack([q, val, p], 1),
-            np.stack([p, val, t], 1),
-            np.stack([p, q, val], 1),
-            np.stack([t, p, val], 1),
-            np.stack([val, p, q], 1),
-        ]
-    )
-    rgb = np.round(choices[i, np.arange(lab.size)] * 255).astype(np.uint8)
+    rgb = np.round(_palette(lab) * 255).astype(np.uint8)
     rgb[lab < 0] = 0
     return rgb
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .colors import confidence_colors, dim, label_color_uint8, label_colors
+from ..colors import confidence_colors, dim, label_color_uint8, label_colors
 from .snapshot import MapSnapshot, covariances, decimate_indices, rotmat_to_wxyz
 
 log = logging.getLogger(__name__)

@@ -1,4 +1,4 @@
-"""Colour schemes of the viewer: stable per-label colours and a confidence colormap (all vectorised).
+"""Colour schemes shared by the viewer and the evaluation pictures: stable per-label colours, colormaps.
 
 Every function maps arrays to float32 RGB in [0, 1] with shape ``[..., 3]``.
 """
