@@ -22,6 +22,8 @@ _COMMAND_MODULES = [
     "ogscene3d.mapping.run_cli",
     "ogscene3d.tracking",
     "ogscene3d.graph.graph_cli",
+    "ogscene3d.batch",
+    "ogscene3d.segmentation.segment_cli",
 ]
 
 

@@ -1,0 +1,368 @@
+"""GaussianMap: the semantic 3D Gaussian map as struct-of-arrays torch tensors on one device.
+
+Each Gaussian i has a centre ``means[i]`` (metres, world frame), a rotation ``quats[i]`` (wxyz, not
+necessarily normalised; the renderer normalises), ``log_scales[i]`` (the renderer takes ``exp``),
+an opacity logit (the renderer takes ``sigmoid``), a plain RGB colour in [0, 1] (no SH), a scene label
+(int32, -1 = unlabeled), a semantic confidence in [0, 1] and the index of the keyframe that created it.
+
+Storage grows with amortised capacity: the backing tensors are over-allocated (doubling) so appending
+a keyframe's Gaussians is O(new) and never reallocates on every call. All public accessors return views
+of the first ``len(map)`` rows. ``next_label`` is the next unused scene label (labels are never reused).
+
+Files: ``save_npz``/``load_npz`` hold everything needed to resume mapping; ``export_ply`` writes the
+3DGS vertex layout at SH degree 0 plus ``label`` and ``confidence`` (DESIGN.md "Files").
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .atomic import atomic_path
+from .errors import DataError
+
+SH_C0 = 0.28209479177387814
+
+# Per-Gaussian fields: name -> (trailing shape, dtype).
+FIELDS: dict[str, tuple[tuple[int, ...], torch.dtype]] = {
+    "means": ((3,), torch.float32),
+    "quats": ((4,), torch.float32),
+    "log_scales": ((3,), torch.float32),
+    "opacity_logits": ((), torch.float32),
+    "colors": ((3,), torch.float32),
+    "labels": ((), torch.int32),
+    "confidences": ((), torch.float32),
+    "origin_kf": ((), torch.int32),
+}
+_FLOAT_FIELDS = [k for k, (_, dt) in FIELDS.items() if dt.is_floating_point]
+NPZ_VERSION = 1
+
+PLY_PROPERTIES: list[tuple[str, str]] = (
+    [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
+    + [(f"f_dc_{i}", "<f4") for i in range(3)]
+    + [("opacity", "<f4")]
+    + [(f"scale_{i}", "<f4") for i in range(3)]
+    + [(f"rot_{i}", "<f4") for i in range(4)]
+    + [("label", "<i4"), ("confidence", "<f4")]
+)
+
+
+def _logit(p: torch.Tensor | float) -> torch.Tensor:
+    p = torch.as_tensor(p, dtype=torch.float32).clamp(1e-6, 1 - 1e-6)
+    return torch.log(p) - torch.log1p(-p)
+
+
+class GaussianMap:
+    """Struct-of-arrays semantic Gaussians on ``device`` with amortised-capacity growth."""
+
+    def __init__(self, device: str | torch.device = "cpu", capacity: int = 1024) -> None:
+        self.device = torch.device(device)
+        self._n = 0
+        self.next_label = 0
+        cap = max(int(capacity), 1)
+        self._data: dict[str, torch.Tensor] = {
+            k: torch.zeros((cap, *shape), dtype=dt, device=self.device) for k, (shape, dt) in FIELDS.items()
+        }
+
+    # ------------------------------------------------------------------ access
+    def __len__(self) -> int:
+        return self._n
+
+    @property
+    def capacity(self) -> int:
+        return int(self._data["means"].shape[0])
+
+    def _view(self, name: str) -> torch.Tensor:
+        return self._data[name][: self._n]
+
+    @property
+    def means(self) -> torch.Tensor:
+        """[N, 3] float32 world-frame centres (metres)."""
+        return self._view("means")
+
+    @property
+    def quats(self) -> torch.Tensor:
+        """[N, 4] float32 rotations, wxyz."""
+        return self._view("quats")
+
+    @property
+    def log_scales(self) -> torch.Tensor:
+        """[N, 3] float32 log of the per-axis standard deviations (metres)."""
+        return self._view("log_scales")
+
+    @property
+    def opacity_logits(self) -> torch.Tensor:
+        """[N] float32 opacity logits."""
+        return self._view("opacity_logits")
+
+    @property
+    def colors(self) -> torch.Tensor:
+        """[N, 3] float32 RGB in [0, 1]."""
+        return self._view("colors")
+
+    @property
+    def labels(self) -> torch.Tensor:
+        """[N] int32 scene labels, -1 = unlabeled."""
+        return self._view("labels")
+
+    @property
+    def confidences(self) -> torch.Tensor:
+        """[N] float32 semantic confidences in [0, 1]."""
+        return self._view("confidences")
+
+    @property
+    def origin_kf(self) -> torch.Tensor:
+        """[N] int32 index of the keyframe that created each Gaussian."""
+        return self._view("origin_kf")
+
+    @property
+    def scales(self) -> torch.Tensor:
+        """[N, 3] activated scales (``exp(log_scales)``)."""
+        return self.log_scales.exp()
+
+    @property
+    def opacities(self) -> torch.Tensor:
+        """[N] activated opacities (``sigmoid(opacity_logits)``)."""
+        return torch.sigmoid(self.opacity_logits)
+
+    def field(self, name: str) -> torch.Tensor:
+        if name not in FIELDS:
+            raise KeyError(f"unknown Gaussian field {name!r}; known: {sorted(FIELDS)}")
+        return self._view(name)
+
+    def new_labels(self, count: int) -> torch.Tensor:
+        """Reserve ``count`` fresh scene labels (int32 tensor on the map's device)."""
+        start = self.next_label
+        self.next_label += int(count)
+        return torch.arange(start, start + int(count), dtype=torch.int32, device=self.device)
+
+    # ------------------------------------------------------------------ growth
+    def _reserve(self, total: int) -> None:
+        cap = self.capacity
+        if total <= cap:
+            return
+        new_cap = max(total, 2 * cap)
+        for k, t in self._data.items():
+            grown = torch.zeros((new_cap, *t.shape[1:]), dtype=t.dtype, device=self.device)
+            grown[: self._n] = t[: self._n]
+            self._data[k] = grown
+
+    def append(
+        self,
+        means: torch.Tensor,
+        colors: torch.Tensor,
+        log_scales: torch.Tensor,
+        labels: torch.Tensor | None = None,
+        confidences: torch.Tensor | None = None,
+        quats: torch.Tensor | None = None,
+        opacity_logits: torch.Tensor | None = None,
+        origin_kf: int | torch.Tensor = 0,
+    ) -> slice:
+        """Append M Gaussians; returns the slice of their rows.
+
+        means [M,3], colors [M,3] in [0,1], log_scales [M,3] or [M] (isotropic), labels [M] int (default -1),
+        confidences [M] (default 0), quats [M,4] wxyz (default identity), opacity_logits [M] (default
+        logit(0.5)). Non-finite values are rejected.
+        """
+        means = torch.as_tensor(means, dtype=torch.float32, device=self.device)
+        if means.ndim != 2 or means.shape[1] != 3:
+            raise ValueError(f"append: means must be [M, 3], got {tuple(means.shape)}")
+        m = means.shape[0]
+
+        def prep(x, name: str, default) -> torch.Tensor:
+            shape, dt = FIELDS[name]
+            if x is None:
+                x = default
+            x = torch.as_tensor(x, device=self.device)
+            if x.ndim == 0:
+                x = x.expand(m, *shape)
+            elif name == "log_scales" and x.ndim == 1 and x.shape[0] == m:
+                x = x[:, None].expand(m, 3)  # isotropic
+            x = x.to(dt)
+            if tuple(x.shape) != (m, *shape):
+                raise ValueError(f"append: {name} must have shape {(m, *shape)}, got {tuple(x.shape)}")
+            if dt.is_floating_point and not bool(torch.isfinite(x).all()):
+                raise ValueError(f"append: {name} contains NaN or inf")
+            return x
+
+        identity = torch.tensor([1.0, 0.0, 0.0, 0.0], device=self.device)
+        rows = {
+            "means": prep(means, "means", None),
+            "colors": prep(colors, "colors", None),
+            "log_scales": prep(log_scales, "log_scales", None),
+            "labels": prep(labels, "labels", -1),
+            "confidences": prep(confidences, "confidences", 0.0),
+            "quats": prep(quats, "quats", identity.expand(m, 4)),
+            "opacity_logits": prep(opacity_logits, "opacity_logits", 0.0),
+            "origin_kf": prep(origin_kf, "origin_kf", 0),
+        }
+        if m and int(rows["labels"].max()) >= self.next_label:
+            self.next_label = int(rows["labels"].max()) + 1
+        start = self._n
+        self._reserve(start + m)
+        for k, v in rows.items():
+            self._data[k][start : start + m] = v
+        self._n = start + m
+        return slice(start, start + m)
+
+    def keep(self, mask: torch.Tensor) -> None:
+        """Keep the Gaussians where ``mask`` [N] bool is True (order preserved, capacity unchanged)."""
+        mask = torch.as_tensor(mask, device=self.device)
+        if mask.dtype != torch.bool or mask.shape != (self._n,):
+            raise ValueError(f"keep: mask must be bool [{self._n}], got {mask.dtype} {tuple(mask.shape)}")
+        idx = torch.nonzero(mask).squeeze(1)
+        m = int(idx.numel())
+        for t in self._data.values():
+            t[:m] = t[idx]
+        self._n = m
+
+    def prune(self, min_opacity: float, max_scale: float) -> int:
+        """Remove transparent (opacity < min_opacity) or oversized (max scale > max_scale m; 0 = off)
+        Gaussians and any with non-finite parameters. Returns how many were removed."""
+        if self._n == 0:
+            return 0
+        bad = self.opacities < min_opacity
+        if max_scale > 0:
+            bad |= self.log_scales.max(dim=1).values > math.log(max_scale)
+        for k in _FLOAT_FIELDS:
+            v = self._view(k)
+            bad |= ~torch.isfinite(v.reshape(self._n, -1)).all(dim=1)
+        removed = int(bad.sum())
+        if removed:
+            self.keep(~bad)
+        return removed
+
+    def to(self, device: str | torch.device) -> GaussianMap:
+        out = GaussianMap(device, capacity=max(self._n, 1))
+        for k in FIELDS:
+            out._data[k][: self._n] = self._view(k).to(out.device)
+        out._n = self._n
+        out.next_label = self.next_label
+        return out
+
+    def memory_bytes(self) -> int:
+        """Bytes held by the backing tensors (capacity, not just the used rows)."""
+        return sum(t.numel() * t.element_size() for t in self._data.values())
+
+    # ------------------------------------------------------------------ files
+    def state_dict(self) -> dict[str, np.ndarray]:
+        out = {k: self._view(k).detach().cpu().numpy() for k in FIELDS}
+        out["next_label"] = np.array(self.next_label, dtype=np.int64)
+        out["version"] = np.array(NPZ_VERSION, dtype=np.int64)
+        return out
+
+    @classmethod
+    def from_state_dict(
+        cls, state: dict[str, np.ndarray], device: str | torch.device = "cpu", what: str = "state"
+    ) -> GaussianMap:
+        missing = [k for k in FIELDS if k not in state]
+        if missing:
+            raise DataError(f"{what}: missing Gaussian fields {missing}")
+        n = int(np.asarray(state["means"]).shape[0])
+        gm = cls(device, capacity=max(n, 1))
+        for k, (shape, dt) in FIELDS.items():
+            arr = np.asarray(state[k])
+            if arr.shape != (n, *shape):
+                raise DataError(f"{what}: field {k!r} has shape {arr.shape}, expected {(n, *shape)}")
+            t = torch.from_numpy(np.ascontiguousarray(arr)).to(dtype=dt)
+            if dt.is_floating_point and not bool(torch.isfinite(t).all()):
+                raise DataError(f"{what}: field {k!r} contains NaN or inf")
+            gm._data[k][:n] = t.to(gm.device)
+        gm._n = n
+        labels_max = int(gm.labels.max()) + 1 if n else 0
+        gm.next_label = max(int(state.get("next_label", labels_max)), labels_max)
+        return gm
+
+    def save_npz(self, path: str | Path, extra: dict[str, np.ndarray] | None = None) -> None:
+        """Write the map (and optional extra arrays, e.g. mapper state) to an npz file atomically."""
+        arrays = self.state_dict()
+        for k, v in (extra or {}).items():
+            if k in arrays:
+                raise ValueError(f"save_npz: extra key {k!r} clashes with a map field")
+            arrays[k] = np.asarray(v)
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as f:
+                np.savez(f, **arrays)
+
+    @classmethod
+    def load_npz(cls, path: str | Path, device: str | torch.device = "cpu") -> GaussianMap:
+        """Load a map written by ``save_npz`` (extra arrays are ignored; read them with ``np.load``)."""
+        p = Path(path)
+        if not p.is_file():
+            raise DataError(f"{p}: map file does not exist")
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                state = {k: z[k] for k in z.files}
+        except (OSError, ValueError, EOFError) as e:
+            raise DataError(f"{p}: cannot read map npz ({e})") from e
+        return cls.from_state_dict(state, device, what=str(p))
+
+    def export_ply(self, path: str | Path) -> None:
+        """Write the 3DGS PLY (binary little-endian, SH degree 0, + label int32 + confidence float32)."""
+        n = self._n
+        vert = np.zeros(n, dtype=np.dtype(PLY_PROPERTIES))
+        means = self.means.detach().cpu().numpy()
+        vert["x"], vert["y"], vert["z"] = means[:, 0], means[:, 1], means[:, 2]
+        dc = (self.colors.detach().cpu().numpy() - 0.5) / SH_C0
+        for i in range(3):
+            vert[f"f_dc_{i}"] = dc[:, i]
+            vert[f"scale_{i}"] = self.log_scales[:, i].detach().cpu().numpy()
+        vert["opacity"] = self.opacity_logits.detach().cpu().numpy()
+        q = torch.nn.functional.normalize(self.quats.detach(), dim=1).cpu().numpy()
+        for i in range(4):
+            vert[f"rot_{i}"] = q[:, i]
+        vert["label"] = self.labels.cpu().numpy()
+        vert["confidence"] = self.confidences.detach().cpu().numpy()
+        header = ["ply", "format binary_little_endian 1.0", f"element vertex {n}"]
+        ply_types = {"<f4": "float", "<i4": "int"}
+        header += [f"property {ply_types[t]} {name}" for name, t in PLY_PROPERTIES]
+        header.append("end_header")
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as f:
+                f.write(("\n".join(header) + "\n").encode("ascii"))
+                f.write(vert.tobytes())
+
+    @classmethod
+    def read_ply(cls, path: str | Path, device: str | torch.device = "cpu") -> GaussianMap:
+        """Read a PLY written by ``export_ply`` (or any 3DGS PLY; missing label/confidence -> -1 / 0)."""
+        from plyfile import PlyData
+
+        p = Path(path)
+        if not p.is_file():
+            raise DataError(f"{p}: PLY file does not exist")
+        try:
+            v = PlyData.read(str(p))["vertex"].data
+        except Exception as e:  # plyfile raises several unrelated types on corrupt input
+            raise DataError(f"{p}: cannot read PLY ({e})") from e
+        names = v.dtype.names or ()
+        need = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity"] + [f"scale_{i}" for i in range(3)]
+        need += [f"rot_{i}" for i in range(4)]
+        missing = [k for k in need if k not in names]
+        if missing:
+            raise DataError(f"{p}: PLY vertex lacks 3DGS properties {missing}")
+        n = len(v)
+
+        def col(*keys: str) -> np.ndarray:
+            return np.stack([np.asarray(v[k], dtype=np.float32) for k in keys], axis=1)
+
+        state = {
+            "means": col("x", "y", "z"),
+            "colors": np.clip(col("f_dc_0", "f_dc_1", "f_dc_2") * SH_C0 + 0.5, 0.0, 1.0),
+            "log_scales": col("scale_0", "scale_1", "scale_2"),
+            "quats": col("rot_0", "rot_1", "rot_2", "rot_3"),
+            "opacity_logits": np.asarray(v["opacity"], dtype=np.float32),
+            "labels": np.asarray(v["label"], dtype=np.int32)
+            if "label" in names
+            else np.full(n, -1, np.int32),
+            "confidences": np.asarray(v["confidence"], dtype=np.float32)
+            if "confidence" in names
+            else np.zeros(n, np.float32),
+            "origin_kf": np.zeros(n, np.int32),
+        }
+        return cls.from_state_dict(state, device, what=str(p))
+
+
+__all__ = ["GaussianMap", "FIELDS", "SH_C0", "PLY_PROPERTIES"]

@@ -1,0 +1,251 @@
+"""Local 3D optimization (paper Sec. III-B.2): spatial-semantic association of a keyframe's segments.
+
+For every new (probe) Gaussian of segment m we find its k nearest *labeled* scene Gaussians within
+``knn_radius`` (Warp hash grid). Over all matches of the segment, c1(m), c2(m) are the counts of the most
+and second most frequent scene labels and l*_m the most frequent one (Eq. 4):
+
+    r(m) = c2(m) / c1(m)          (0 when the segment has no match at all)
+    p(m) = |{G_i in G_m : l^_i = l*_m}| / |G_m|
+
+where l^_i, the KNN-matched label of probe i, is the majority label of its own k matches (ties go to the
+nearer match) and |G_m| counts every probe of the segment, matched or not. Cases:
+(i) r >= tau_valid: unlabeled (-1); (ii) r < tau_valid and p >= tau_p: label l*_m;
+(iii) r < tau_valid and p < tau_p: a novel label.
+
+Confidence (Sec. III-B.2): new Gaussians start at the rescaled SAM score; scene Gaussians that are the
+nearest match of a probe of a case-(ii) segment get the Eq. 5 update, each from its nearest such probe:
+conf' = conf + c_sam * p(m) * (1 - conf) when its label equals the segment's label, else
+conf' = conf - c_sam * p(m) * conf. Matches of case-(i) and case-(iii) segments update nothing.
+
+The naive baseline (ablation) takes l*_m when the segment has any match and a new label otherwise, with
+no ambiguity test and no confidence updates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from .neighbors import knn
+
+CASE_AMBIGUOUS = 0
+CASE_MATCHED = 1
+CASE_NOVEL = 2
+
+
+def rescale_sam_scores(
+    scores: torch.Tensor,
+    score_range: tuple[float, float] = (0.88, 1.0),
+    conf_range: tuple[float, float] = (0.5, 1.0),
+) -> torch.Tensor:
+    """Map SAM predicted-IoU scores linearly from ``score_range`` to ``conf_range``, clamped."""
+    s0, s1 = float(score_range[0]), float(score_range[1])
+    c0, c1 = float(conf_range[0]), float(conf_range[1])
+    if s1 <= s0:
+        raise ValueError(f"sam score range must be increasing, got {score_range}")
+    t = ((scores.to(torch.float32) - s0) / (s1 - s0)).clamp(0.0, 1.0)
+    return c0 + t * (c1 - c0)
+
+
+def eq5_update(
+    conf: torch.Tensor, c_sam: torch.Tensor, p: torch.Tensor, consistent: torch.Tensor
+) -> torch.Tensor:
+    """Paper Eq. 5 for matched scene Gaussians (all [M]): increase towards 1 when ``consistent``,
+    decrease towards 0 otherwise. Stays in [0, 1] for inputs in [0, 1]."""
+    step = c_sam * p
+    up = conf + step * (1.0 - conf)
+    down = conf - step * conf
+    return torch.where(consistent, up, down).clamp(0.0, 1.0)
+
+
+def group_top2(groups: torch.Tensor, values: torch.Tensor, num_groups: int) -> tuple[torch.Tensor, ...]:
+    """Per group g in [0, num_groups): the most and second most frequent value among ``values[groups == g]``.
+
+    Returns (top1 value [G] (-1 if none), c1 [G], top2 value [G] (-1 if none), c2 [G]) with int64 counts.
+    Ties are broken towards the smaller value. Fully vectorised (unique + sort), no loop over groups.
+    """
+    dev = groups.device
+    top1 = torch.full((num_groups,), -1, dtype=torch.int64, device=dev)
+    top2 = top1.clone()
+    c1 = torch.zeros(num_groups, dtype=torch.int64, device=dev)
+    c2 = c1.clone()
+    if groups.numel() == 0:
+        return top1, c1, top2, c2
+    groups = groups.long()
+    values = values.long()
+    vmin = int(values.min())
+    span = int(values.max()) - vmin + 1
+    pairs, counts = torch.unique(groups * span + (values - vmin), return_counts=True)
+    g = pairs // span
+    v = pairs % span + vmin
+    # order by group, then by count descending, then by value ascending (unique already sorted by value)
+    order = torch.argsort(-counts, stable=True)
+    order = order[torch.argsort(g[order], stable=True)]
+    g, v, counts = g[order], v[order], counts[order]
+    first = torch.ones_like(g, dtype=torch.bool)
+    first[1:] = g[1:] != g[:-1]
+    start = torch.nonzero(first).squeeze(1)
+    top1[g[start]] = v[start]
+    c1[g[start]] = counts[start]
+    second = start + 1
+    has2 = second < g.numel()
+    has2[has2.clone()] = g[second[has2]] == g[start[has2]]
+    top2[g[start[has2]]] = v[second[has2]]
+    c2[g[start[has2]]] = counts[second[has2]]
+    return top1, c1, top2, c2
+
+
+def row_majority(labels: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """Majority of each row of ``labels`` [P,k] over ``valid`` entries (ties -> the earliest column,
+    i.e. the nearest match); -1 for rows without a valid entry."""
+    same = (labels[:, :, None] == labels[:, None, :]) & valid[:, None, :] & valid[:, :, None]
+    counts = same.sum(dim=2)
+    best = counts.argmax(dim=1)  # argmax returns the first maximum
+    out = labels.gather(1, best[:, None]).squeeze(1)
+    return torch.where(valid.any(dim=1), out, torch.full_like(out, -1))
+
+
+def fill_unlabeled(
+    probe_means: torch.Tensor,
+    probe_seg: torch.Tensor,
+    probe_conf: torch.Tensor,
+    seg_labels: torch.Tensor,
+    scene_means: torch.Tensor,
+    scene_labels: torch.Tensor,
+    scene_conf: torch.Tensor,
+    radius: float,
+) -> int:
+    """Give unlabeled scene Gaussians the label of the segment that now observes them.
+
+    A probe of segment m stands for a new Gaussian of G_m; where the map already explains its pixel, no
+    Gaussian is added and the existing one plays its role. Labeled ones are handled by the association and
+    Eq. 5; an *unlabeled* one (from an earlier ambiguous segment or a pixel outside every segment) takes the
+    label and confidence that the new Gaussian would have got: the label of the segment of its nearest
+    probe within ``radius`` (if that segment was given a label). In place; returns the count."""
+    unl = torch.nonzero(scene_labels < 0).squeeze(1)
+    if unl.numel() == 0 or probe_means.shape[0] == 0:
+        return 0
+    idx, _ = knn(probe_means, scene_means[unl], 1, radius)
+    hit = idx[:, 0] >= 0
+    if not bool(hit.any()):
+        return 0
+    src = idx[hit, 0]
+    lab = seg_labels[probe_seg[src]]
+    ok = lab >= 0
+    tgt = unl[hit][ok]
+    scene_labels[tgt] = lab[ok].to(scene_labels.dtype)
+    scene_conf[tgt] = probe_conf[src[ok]]
+    return int(tgt.numel())
+
+
+@dataclass
+class Association:
+    """Result of associating one keyframe's segments with the scene (all tensors on the map's device)."""
+
+    seg_labels: torch.Tensor  # [S] int32 final label per segment (-1 = unlabeled)
+    seg_case: torch.Tensor  # [S] int64 CASE_* per segment
+    r: torch.Tensor  # [S] float32 ambiguity ratio
+    p: torch.Tensor  # [S] float32 spatial-semantic coherence
+    top_label: torch.Tensor  # [S] int64 l*_m (-1 when no match)
+    updated: torch.Tensor  # [U] int64 scene Gaussian indices whose confidence was updated (Eq. 5)
+    filled: int = 0  # unlabeled scene Gaussians that took a segment's label (``fill_unlabeled``)
+
+    def counts(self) -> dict[str, int]:
+        return {
+            "ambiguous": int((self.seg_case == CASE_AMBIGUOUS).sum()),
+            "matched": int((self.seg_case == CASE_MATCHED).sum()),
+            "novel": int((self.seg_case == CASE_NOVEL).sum()),
+            "conf_updates": int(self.updated.numel()),
+            "filled": self.filled,
+        }
+
+
+def associate_segments(
+    probe_means: torch.Tensor,
+    probe_seg: torch.Tensor,
+    probe_conf: torch.Tensor,
+    num_segments: int,
+    scene_means: torch.Tensor,
+    scene_labels: torch.Tensor,
+    scene_conf: torch.Tensor,
+    new_labels,
+    *,
+    k: int = 5,
+    radius: float = 0.05,
+    tau_valid: float = 0.25,
+    tau_p: float = 0.15,
+    naive: bool = False,
+    fill: bool = False,
+) -> Association:
+    """Associate segments with the scene and update scene confidences in place (Eq. 5).
+
+    probe_means [P,3] world positions of the keyframe's new Gaussians of segments 0..S-1, ``probe_seg`` [P]
+    their segment index, ``probe_conf`` [P] their rescaled SAM confidence. scene_* [N] describe the map;
+    ``scene_conf`` is modified in place (unless ``naive``). With ``fill``, unlabeled scene Gaussians under a
+    labeled segment take its label (``fill_unlabeled``; ``scene_labels`` is then modified in place too).
+    ``new_labels(count) -> int tensor`` reserves
+    fresh scene labels for novel segments.
+    """
+    dev = probe_means.device
+    S = int(num_segments)
+    probe_seg = probe_seg.long()
+    labeled = torch.nonzero(scene_labels >= 0).squeeze(1)
+    idx, dist = knn(scene_means[labeled], probe_means, k, radius)
+    valid = idx >= 0
+    none = torch.full_like(idx, -1)
+    if labeled.numel():
+        scene_idx = torch.where(valid, labeled[idx.clamp(min=0)], none)
+        match_lab = torch.where(valid, scene_labels.long()[scene_idx.clamp(min=0)], none)
+    else:
+        scene_idx, match_lab = none, none
+
+    # c1, c2, l*: over all (segment, matched label) pairs of the segment
+    pair_seg = probe_seg[:, None].expand_as(idx)[valid]
+    top1, c1, _, c2 = group_top2(pair_seg, match_lab[valid], S)
+    r = torch.where(c1 > 0, c2.float() / c1.clamp(min=1).float(), torch.zeros(S, device=dev))
+    # p(m): fraction of the segment's probes whose own matched label is l*_m
+    hat = row_majority(match_lab, valid)
+    agree = (hat == top1[probe_seg]) & (hat >= 0)
+    size = torch.bincount(probe_seg, minlength=S).float()
+    p = torch.bincount(probe_seg, weights=agree.float(), minlength=S) / size.clamp(min=1)
+
+    if naive:
+        case = torch.where(c1 > 0, CASE_MATCHED, CASE_NOVEL)
+    else:
+        case = torch.where(r >= tau_valid, CASE_AMBIGUOUS, torch.where(p >= tau_p, CASE_MATCHED, CASE_NOVEL))
+    seg_labels = torch.full((S,), -1, dtype=torch.int32, device=dev)
+    matched = case == CASE_MATCHED
+    seg_labels[matched] = top1[matched].int()
+    novel = torch.nonzero(case == CASE_NOVEL).squeeze(1)
+    if novel.numel():
+        seg_labels[novel] = new_labels(int(novel.numel())).to(dev, torch.int32)
+
+    updated = torch.zeros(0, dtype=torch.int64, device=dev)
+    if not naive:
+        # Eq. 5: the scene Gaussians that are the nearest match of a probe of a case-(ii) segment (the
+        # probe's correspondence); each is updated once, from its nearest such probe. The other k-1 matches
+        # count towards c1/c2 but are not correspondences: near object boundaries they mostly belong to
+        # the neighbouring object and would lower its confidence at every keyframe.
+        use = valid[:, 0] & matched[probe_seg]
+        pj = scene_idx[use, 0]
+        pd = dist[use, 0]
+        pp = torch.nonzero(use).squeeze(1)
+        if pj.numel():
+            order = torch.argsort(pd, stable=True)
+            order = order[torch.argsort(pj[order], stable=True)]
+            pj, pp = pj[order], pp[order]
+            first = torch.ones_like(pj, dtype=torch.bool)
+            first[1:] = pj[1:] != pj[:-1]
+            pj, pp = pj[first], pp[first]
+            seg = probe_seg[pp]
+            consistent = scene_labels[pj].long() == seg_labels[seg].long()
+            scene_conf[pj] = eq5_update(scene_conf[pj], probe_conf[pp], p[seg], consistent)
+            updated = pj
+    filled = 0
+    if fill:
+        fconf = torch.ones_like(probe_conf) if naive else probe_conf
+        filled = fill_unlabeled(
+            probe_means, probe_seg, fconf, seg_labels, scene_means, scene_labels, scene_conf, radius
+        )
+    return Association(seg_labels, case, r, p, top1, updated, filled)

@@ -1,0 +1,533 @@
+"""The incremental semantic mapper: runs the paper's per-keyframe loop on a stream of frames.
+
+Per keyframe (DESIGN.md "Mapping loop"):
+1. segments (the frame's precomputed ones, else the optional segmenter; none -> geometry only);
+2. render the map at the frame's pose (alpha + expected depth) to find the pixels it does not explain;
+3. probes: grid-subsampled back-projected pixels per segment (``init.make_probes``);
+4. local 3D optimization: KNN association, r(m)/p(m), three cases, Eq. 5 (``local.associate_segments``);
+   unlabeled Gaussians under a now-labeled segment take its label (``mapping.fill_unlabeled``);
+5. the unexplained probes become Gaussians with their segment's label and rescaled SAM confidence
+   (unlabeled Gaussians, from ambiguous segments or pixels outside every segment, get confidence 0, so
+   the individual refinement may label them: ``mapping.refine_unlabeled``);
+6. geometry/appearance optimization over the keyframe + memory frames, then pruning;
+7. memory buffer update (frustum + overlap criteria);
+8. every ``longterm_every`` keyframes the long-term Eq. 16 update over a few memory views, then every
+   ``refine_every`` keyframes the global refinement (Alg. 1): the long-term step lowers confidences of
+   inconsistent Gaussians and the refinement relabels them in the same keyframe;
+9. scene-graph observation/update when ``config.graph.enabled`` (failures there never stop mapping).
+
+Ablations (``mapping.ablation``): "naive" (majority label of the KNN matches or a new label, no ambiguity
+test, all confidences 1, no refinement, no long-term), "local", "local+global", "full".
+Per-module wall time and counts are kept in ``timings`` (written to ``timings.json``).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import time
+from collections import deque
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import torch
+import yaml
+
+from ..atomic import atomic_write_text
+from ..config import Config, config_to_dict
+from ..device import resolve_device
+from ..errors import ConfigError, DataError
+from ..frame import Frame
+from ..gaussians import GaussianMap
+from .init import make_probes
+from .keyframes import KeyframeSelector
+from .local import associate_segments
+from .longterm import MemoryBuffer, MemoryEntry, longterm_view_update
+from .optimize import View, optimize_map
+from .refine import global_refinement
+
+log = logging.getLogger(__name__)
+
+ABLATIONS = ("naive", "local", "local+global", "full")
+
+
+class Timings:
+    """Accumulated wall time (s) and call counts per module, plus free-form counters."""
+
+    def __init__(self, device: torch.device) -> None:
+        self.device = device
+        self.seconds: dict[str, float] = {}
+        self.calls: dict[str, int] = {}
+        self.counts: dict[str, float] = {}
+
+    @contextmanager
+    def section(self, name: str):
+        sync = self.device.type == "cuda"
+        if sync:
+            torch.cuda.synchronize(self.device)
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            if sync:
+                torch.cuda.synchronize(self.device)
+            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t0
+            self.calls[name] = self.calls.get(name, 0) + 1
+
+    def add(self, name: str, value: float = 1) -> None:
+        self.counts[name] = self.counts.get(name, 0) + value
+
+    def as_dict(self) -> dict:
+        kf = max(1, int(self.counts.get("keyframes", 0)))
+        return {
+            "seconds": {k: round(v, 6) for k, v in self.seconds.items()},
+            "calls": dict(self.calls),
+            "ms_per_keyframe": {k: round(1000 * v / kf, 3) for k, v in self.seconds.items()},
+            "counts": {k: (int(v) if float(v).is_integer() else v) for k, v in self.counts.items()},
+        }
+
+    def table(self) -> str:
+        """A per-module timing table (text)."""
+        kf = max(1, int(self.counts.get("keyframes", 0)))
+        rows = [f"{'module':<14}{'calls':>7}{'total s':>10}{'ms/keyframe':>13}"]
+        for k, v in sorted(self.seconds.items(), key=lambda kv: -kv[1]):
+            rows.append(f"{k:<14}{self.calls.get(k, 0):>7}{v:>10.2f}{1000 * v / kf:>13.1f}")
+        return "\n".join(rows)
+
+
+class Mapper:
+    """Incremental semantic Gaussian mapper: ``process(frame)`` per frame, ``finalize()``, ``save(dir)``."""
+
+    def __init__(self, config: Config, device: str | torch.device | None = None, segmenter=None) -> None:
+        self.config = config
+        self.cfg = cfg = config.mapping
+        if cfg.ablation not in ABLATIONS:
+            raise ConfigError(f"mapping.ablation must be one of {ABLATIONS}, got {cfg.ablation!r}")
+        if cfg.pixels_per_gaussian < 1 or cfg.knn_k < 1 or cfg.knn_radius <= 0 or cfg.r_search <= 0:
+            raise ConfigError(
+                "mapping: pixels_per_gaussian and knn_k must be >= 1, knn_radius and r_search > 0"
+            )
+        self.device = resolve_device(device if device is not None else config.device)
+        self.segmenter = segmenter
+        self.map = GaussianMap(self.device)
+        self.keyframes = KeyframeSelector(
+            cfg.keyframe_every, cfg.keyframe_translation, cfg.keyframe_rotation_deg
+        )
+        self.memory = MemoryBuffer(cfg.tau_long, cfg.r_search, cfg.memory_max, cfg.memory_point_step)
+        self.recent: deque[MemoryEntry] = deque(maxlen=max(1, cfg.opt_memory_frames))
+        self.timings = Timings(self.device)
+        self.frames_seen = 0
+        self.keyframe_count = 0
+        self.rng = np.random.default_rng(config.seed)
+        self._graph = None
+        self._graph_failed = False
+        self._warned_no_segments = False
+        self._checkpoint_dir: Path | None = None
+
+    # ------------------------------------------------------------------ switches
+    @property
+    def naive(self) -> bool:
+        return self.cfg.ablation == "naive"
+
+    @property
+    def use_refine(self) -> bool:
+        return self.cfg.ablation in ("local+global", "full")
+
+    @property
+    def use_longterm(self) -> bool:
+        return self.cfg.ablation == "full"
+
+    def set_checkpoint_dir(self, out_dir: str | Path | None) -> None:
+        """Where ``checkpoint_every`` writes ``map.npz`` during mapping."""
+        self._checkpoint_dir = Path(out_dir) if out_dir is not None else None
+
+    # ------------------------------------------------------------------ per frame
+    def _segments(self, frame: Frame) -> tuple[np.ndarray | None, dict[int, float]]:
+        if frame.segments is not None:
+            return np.asarray(frame.segments), dict(frame.segment_scores)
+        if self.segmenter is not None:
+            with self.timings.section("segment"):
+                seg = self.segmenter(frame.rgb, frame.depth)
+            return np.asarray(seg.ids), dict(seg.scores)
+        if not self._warned_no_segments:
+            log.warning("frames carry no segments and no segmenter was given: mapping geometry only")
+            self._warned_no_segments = True
+        return None, {}
+
+    def _render_check(self, frame: Frame) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+        if len(self.map) == 0:
+            return None, None
+        from ..render import rasterization
+
+        gm = self.map
+        viewmat = torch.as_tensor(np.linalg.inv(frame.pose), dtype=torch.float32, device=self.device)[None]
+        K = torch.as_tensor(frame.K, dtype=torch.float32, device=self.device)[None]
+        with torch.no_grad():
+            depth, alpha, _ = rasterization(
+                gm.means,
+                gm.quats,
+                gm.scales,
+                gm.opacities,
+                gm.colors[:, :1],
+                viewmat,
+                K,
+                frame.width,
+                frame.height,
+                render_mode="ED",
+            )
+        return alpha[0, ..., 0], depth[0, ..., 0]
+
+    def process(self, frame: Frame) -> bool:
+        """Map one frame. Returns True when it was a keyframe (non-keyframes are only counted)."""
+        if frame.pose is None:
+            raise DataError(
+                f"frame {frame.index} ({frame.name or 'unnamed'}): no camera pose; "
+                "use a dataset with poses or enable tracking"
+            )
+        if not np.all(np.isfinite(frame.depth)):
+            raise DataError(f"frame {frame.index} ({frame.name or 'unnamed'}): depth contains NaN or inf")
+        self.frames_seen += 1
+        self.timings.add("frames")
+        if not self.keyframes(frame.pose):
+            return False
+        cfg = self.cfg
+        kf = self.keyframe_count
+        self.keyframe_count += 1
+        self.timings.add("keyframes")
+        segments, scores = self._segments(frame)
+
+        with self.timings.section("render_check"):
+            alpha, depth = self._render_check(frame)
+        with self.timings.section("init"):
+            probes = make_probes(
+                frame,
+                segments,
+                scores,
+                self.device,
+                step=max(1, round(math.sqrt(cfg.pixels_per_gaussian))),
+                score_range=tuple(self.config.segmentation.sam_score_range),
+                conf_range=tuple(self.config.segmentation.conf_range),
+                rendered_alpha=alpha,
+                rendered_depth=depth,
+                alpha_thresh=cfg.init_alpha_thresh,
+                depth_margin=cfg.init_depth_margin,
+                min_depth=self.config.data.min_depth,
+                max_depth=self.config.data.max_depth,
+            )
+        seg_to_label = None
+        with self.timings.section("local"):
+            labels = torch.full((len(probes),), -1, dtype=torch.int32, device=self.device)
+            conf = torch.zeros(len(probes), dtype=torch.float32, device=self.device)
+            S = int(probes.seg_ids.numel())
+            in_seg = probes.seg >= 0
+            if S and bool(in_seg.any()):
+                sel = torch.nonzero(in_seg).squeeze(1)
+                res = associate_segments(
+                    probes.means[sel],
+                    probes.seg[sel],
+                    probes.conf[sel],
+                    S,
+                    self.map.means,
+                    self.map.labels,
+                    self.map.confidences,
+                    self.map.new_labels,
+                    k=cfg.knn_k,
+                    radius=cfg.knn_radius,
+                    tau_valid=cfg.tau_valid,
+                    tau_p=cfg.tau_p,
+                    naive=self.naive,
+                    fill=cfg.fill_unlabeled,
+                )
+                labels[sel] = res.seg_labels[probes.seg[sel]]
+                seg_to_label = (probes.seg_ids.cpu().numpy(), res.seg_labels.cpu().numpy())
+                for name, v in res.counts().items():
+                    self.timings.add(f"segments_{name}", v)
+                conf = torch.where(labels >= 0, 1.0 if self.naive else probes.conf, conf)
+        with self.timings.section("add"):
+            new = probes.new
+            self.map.append(
+                probes.means[new],
+                probes.colors[new],
+                probes.log_scales[new],
+                labels=labels[new],
+                confidences=conf[new],
+                opacity_logits=math.log(cfg.init_opacity / (1 - cfg.init_opacity)),
+                origin_kf=kf,
+            )
+            self.timings.add("gaussians_added", int(new.sum()))
+
+        entry = MemoryEntry(
+            kf, frame.rgb, frame.depth.astype(np.float32), frame.K, frame.pose, segments, scores
+        )
+        with self.timings.section("optimize"):
+            views = [View.from_arrays(frame.rgb, frame.depth, frame.pose, frame.K, self.device)]
+            pool = list(self.recent) + [e for e in self.memory.entries if e not in self.recent]
+            pool = [e for e in pool if e.depth.shape == frame.depth.shape]
+            if pool and cfg.opt_memory_frames > 0:
+                pick = self.rng.choice(len(pool), size=min(cfg.opt_memory_frames, len(pool)), replace=False)
+                views += [
+                    View.from_arrays(pool[i].rgb, pool[i].depth, pool[i].pose, pool[i].K, self.device)
+                    for i in sorted(pick)
+                ]
+            opt = optimize_map(self.map, views, cfg)
+            removed = self.map.prune(cfg.prune_opacity, cfg.prune_scale)
+            self.timings.add("gaussians_pruned", removed)
+            if opt["iters"]:
+                self.timings.counts["last_loss"] = opt["loss_last"]
+        self.recent.append(entry)
+        with self.timings.section("memory"):
+            if self.memory.consider(entry, self.device):
+                self.timings.add("memory_added")
+
+        if self.use_longterm and cfg.longterm_every > 0 and self.keyframe_count % cfg.longterm_every == 0:
+            with self.timings.section("longterm"):
+                self._longterm()
+        if self.use_refine and cfg.refine_every > 0 and self.keyframe_count % cfg.refine_every == 0:
+            with self.timings.section("refine"):
+                st = global_refinement(
+                    self.map.means,
+                    self.map.labels,
+                    self.map.confidences,
+                    tau_low=cfg.tau_low,
+                    tau_high=cfg.tau_high,
+                    r_search=cfg.r_search,
+                    cluster_radius=cfg.refine_cluster_radius,
+                    graph_k=cfg.refine_graph_k,
+                    include_unlabeled=cfg.refine_unlabeled,
+                )
+                for k, v in st.as_dict().items():
+                    self.timings.add(f"refine_{k}", v)
+        if self.config.graph.enabled and not self._graph_failed:
+            with self.timings.section("graph"):
+                self._graph_step(kf, frame, segments, seg_to_label)
+        self.timings.counts["gaussians"] = len(self.map)
+        self.timings.counts["labels"] = int(torch.unique(self.map.labels[self.map.labels >= 0]).numel())
+        self.timings.counts["memory_size"] = len(self.memory)
+        if (
+            cfg.checkpoint_every > 0
+            and self._checkpoint_dir is not None
+            and self.keyframe_count % cfg.checkpoint_every == 0
+        ):
+            with self.timings.section("checkpoint"):
+                self.save_checkpoint(self._checkpoint_dir / "map.npz")
+        return True
+
+    def _longterm(self) -> None:
+        cfg = self.cfg
+        for entry in self.memory.next_views(cfg.longterm_views):
+            st = longterm_view_update(
+                self.map,
+                entry,
+                k=cfg.longterm_knn_k,
+                radius=cfg.knn_radius,
+                pixel_step=cfg.longterm_pixel_step,
+            )
+            for k, v in st.as_dict().items():
+                if k != "mean_iou":
+                    self.timings.add(f"longterm_{k}", v)
+
+    # ------------------------------------------------------------------ scene graph
+    def _graph_step(
+        self,
+        kf: int,
+        frame: Frame,
+        segments: np.ndarray | None,
+        seg_to_label: tuple[np.ndarray, np.ndarray] | None,
+    ) -> None:
+        """Feed the scene graph; any failure there disables it for the run, mapping goes on.
+
+        The keyframe's label map is its segmentation with each segment replaced by the scene label it was
+        given (exact SAM boundaries); without segments, the map's rendered labels."""
+        try:
+            if self._graph is None:
+                from ..graph import SceneGraph
+
+                self._graph = SceneGraph(self.config.graph)
+            if segments is not None and seg_to_label is not None:
+                ids, labs = seg_to_label
+                lut = np.full(int(max(ids.max(initial=0), segments.max(initial=0))) + 1, -1, dtype=np.int32)
+                lut[ids] = labs
+                label_map = lut[np.asarray(segments)]
+            else:
+                label_map = self._render_labels(frame)
+            self._graph.observe(kf, frame, label_map)
+            if self._graph.is_due(kf):
+                gm = self.map
+                self._graph.update(kf, gm.means, gm.labels, gm.confidences, gm.colors)
+        except Exception as e:  # noqa: BLE001 - the graph is optional; mapping must go on
+            log.warning("scene graph disabled for this run after an error: %s: %s", type(e).__name__, e)
+            self._graph_failed = True
+            self.timings.add("graph_errors")
+
+    def _render_labels(self, frame: Frame) -> np.ndarray:
+        from ..render import render_semantics
+
+        gm = self.map
+        viewmat = torch.as_tensor(np.linalg.inv(frame.pose), dtype=torch.float32, device=self.device)[None]
+        K = torch.as_tensor(frame.K, dtype=torch.float32, device=self.device)[None]
+        with torch.no_grad():
+            sem = render_semantics(
+                gm.means,
+                gm.quats,
+                gm.scales,
+                gm.opacities,
+                gm.labels,
+                gm.confidences,
+                viewmat,
+                K,
+                frame.width,
+                frame.height,
+            )
+        return sem.labels[0].cpu().numpy()
+
+    # ------------------------------------------------------------------ end, files
+    def finalize(self) -> None:
+        """End of stream: one last long-term pass and refinement (per the ablation), then pruning."""
+        cfg = self.cfg
+        if self.keyframe_count == 0:
+            return
+        if self.use_longterm:
+            with self.timings.section("longterm"):
+                self._longterm()
+        if self.use_refine:
+            with self.timings.section("refine"):
+                global_refinement(
+                    self.map.means,
+                    self.map.labels,
+                    self.map.confidences,
+                    tau_low=cfg.tau_low,
+                    tau_high=cfg.tau_high,
+                    r_search=cfg.r_search,
+                    cluster_radius=cfg.refine_cluster_radius,
+                    graph_k=cfg.refine_graph_k,
+                    include_unlabeled=cfg.refine_unlabeled,
+                )
+        self.map.prune(cfg.prune_opacity, cfg.prune_scale)
+        if self._graph is not None and not self._graph_failed:
+            try:
+                gm = self.map
+                self._graph.finalize(self.keyframe_count - 1, gm.means, gm.labels, gm.confidences, gm.colors)
+            except Exception as e:  # noqa: BLE001
+                log.warning("final scene-graph update failed: %s: %s", type(e).__name__, e)
+                self._graph_failed = True
+        self.timings.counts["gaussians"] = len(self.map)
+
+    def _state_extra(self) -> dict[str, np.ndarray]:
+        extra = {
+            "mapper_frames_seen": np.array(self.frames_seen),
+            "mapper_keyframe_count": np.array(self.keyframe_count),
+            "mapper_memory_cursor": np.array(self.memory._cursor),
+        }
+        extra.update(self.keyframes.state())
+        mem = self.memory.entries
+        if mem and len({e.depth.shape for e in mem}) == 1:
+            extra["mem_keyframe"] = np.array([e.keyframe for e in mem])
+            extra["mem_rgb"] = np.stack([e.rgb for e in mem])
+            extra["mem_depth"] = np.stack([e.depth for e in mem])
+            extra["mem_K"] = np.stack([e.K for e in mem])
+            extra["mem_pose"] = np.stack([e.pose for e in mem])
+            extra["mem_segments"] = np.stack(
+                [e.segments if e.segments is not None else np.zeros(e.depth.shape, np.int32) for e in mem]
+            )
+            extra["mem_scores"] = np.array(
+                json.dumps([{str(k): v for k, v in e.scores.items()} for e in mem])
+            )
+        return extra
+
+    def save_checkpoint(self, path: str | Path) -> None:
+        """Write ``map.npz``: the Gaussians plus the mapper state needed to resume (atomically)."""
+        self.map.save_npz(path, extra=self._state_extra())
+
+    def load_checkpoint(self, path: str | Path) -> None:
+        """Restore the map and mapper state from ``map.npz`` (written by ``save``/``save_checkpoint``)."""
+        p = Path(path)
+        self.map = GaussianMap.load_npz(p, self.device)
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                self.frames_seen = int(z["mapper_frames_seen"])
+                self.keyframe_count = int(z["mapper_keyframe_count"])
+                self.keyframes.load_state({k: z[k] for k in ("kf_since_last", "kf_last_pose")})
+                self.memory.entries = []
+                if "mem_keyframe" in z.files:
+                    scores = json.loads(str(z["mem_scores"]))
+                    for i, kf in enumerate(z["mem_keyframe"]):
+                        entry = MemoryEntry(
+                            int(kf),
+                            z["mem_rgb"][i],
+                            z["mem_depth"][i],
+                            z["mem_K"][i],
+                            z["mem_pose"][i],
+                            z["mem_segments"][i],
+                            {int(k): float(v) for k, v in scores[i].items()},
+                        )
+                        self.memory.restore(entry, self.device)
+                    self.memory._cursor = int(z["mapper_memory_cursor"]) % max(1, len(self.memory.entries))
+        except KeyError as e:
+            raise DataError(f"{p}: not a mapper checkpoint (missing {e})") from e
+        self.timings.counts["keyframes"] = self.keyframe_count
+        self.timings.counts["frames"] = self.frames_seen
+
+    def save(self, out_dir: str | Path) -> Path:
+        """Write the run directory: gaussians.ply, map.npz, graph.json, timings.json, config.yaml."""
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        self.map.export_ply(out / "gaussians.ply")
+        self.save_checkpoint(out / "map.npz")
+        atomic_write_text(out / "config.yaml", yaml.safe_dump(config_to_dict(self.config), sort_keys=False))
+        timings = self.timings.as_dict()
+        timings["device"] = str(self.device)
+        timings["ablation"] = self.cfg.ablation
+        atomic_write_text(out / "timings.json", json.dumps(timings, indent=2))
+        self._save_graph(out / "graph.json")
+        return out
+
+    def _save_graph(self, path: Path) -> None:
+        graph = None
+        if self._graph is not None and not self._graph_failed:
+            try:
+                graph = self._graph.to_dict()
+            except Exception as e:  # noqa: BLE001
+                log.warning("could not serialise the scene graph: %s: %s", type(e).__name__, e)
+        if graph is None:
+            graph = {"version": 1, "nodes": self._label_nodes(), "edges": []}
+        atomic_write_text(path, json.dumps(graph, indent=1))
+
+    def _label_nodes(self) -> list[dict]:
+        """Graph nodes straight from the map's labels (used when no scene graph was built)."""
+        gm = self.map
+        lab = gm.labels
+        if not bool((lab >= 0).any()):
+            return []
+        ids, inv, cnt = torch.unique(lab[lab >= 0], return_inverse=True, return_counts=True)
+        pts = gm.means[lab >= 0]
+        conf = gm.confidences[lab >= 0]
+        n = ids.numel()
+        center = torch.zeros(n, 3, device=gm.device).index_add_(0, inv, pts) / cnt[:, None]
+        mean_conf = torch.zeros(n, device=gm.device).index_add_(0, inv, conf) / cnt
+        lo = torch.full((n, 3), float("inf"), device=gm.device).scatter_reduce(
+            0, inv[:, None].expand(-1, 3), pts, reduce="amin"
+        )
+        hi = torch.full((n, 3), float("-inf"), device=gm.device).scatter_reduce(
+            0, inv[:, None].expand(-1, 3), pts, reduce="amax"
+        )
+        first = torch.full((n,), 2**30, dtype=torch.int64, device=gm.device).scatter_reduce(
+            0, inv, gm.origin_kf[lab >= 0].long(), reduce="amin"
+        )
+        return [
+            {
+                "id": int(ids[i]),
+                "label": int(ids[i]),
+                "caption": "",
+                "tag": "",
+                "confidence": float(mean_conf[i]),
+                "center": center[i].tolist(),
+                "bbox_min": lo[i].tolist(),
+                "bbox_max": hi[i].tolist(),
+                "num_gaussians": int(cnt[i]),
+                "first_seen": int(first[i]),
+                "last_updated": self.keyframe_count - 1,
+            }
+            for i in range(n)
+        ]

@@ -1,0 +1,132 @@
+"""Torch API over the Warp hash-grid neighbour kernels (``ogscene3d.kernels.knn``).
+
+``knn``: for each query, the (up to) k nearest points within ``radius``, sorted by distance;
+missing slots hold index -1 and distance inf. ``count_within``/``any_within``: how many points lie
+within ``radius`` of each query. Both are exact (every point within the radius is examined).
+"""
+
+from __future__ import annotations
+
+import torch
+
+from ..device import warp_stream
+
+_GRID_DIM = 128
+_grids: dict[str, object] = {}
+
+GROUP_MODES = {None: 0, "same": 1, "different": 2}
+
+
+def _grid_for(wdev) -> object:
+    import warp as wp
+
+    key = str(wdev)
+    g = _grids.get(key)
+    if g is None:
+        g = wp.HashGrid(_GRID_DIM, _GRID_DIM, _GRID_DIM, device=wdev)
+        _grids[key] = g
+    return g
+
+
+def _check_points(x: torch.Tensor, name: str) -> torch.Tensor:
+    if not isinstance(x, torch.Tensor) or x.ndim != 2 or x.shape[1] != 3:
+        raise ValueError(f"{name} must be a [N, 3] tensor, got {getattr(x, 'shape', type(x))}")
+    return x.detach().to(torch.float32).contiguous()
+
+
+def knn(
+    points: torch.Tensor,
+    queries: torch.Tensor,
+    k: int,
+    radius: float,
+    point_groups: torch.Tensor | None = None,
+    query_groups: torch.Tensor | None = None,
+    group_mode: str | None = None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """k nearest ``points`` [N,3] within ``radius`` (metres) of each of ``queries`` [Q,3].
+
+    ``group_mode``: None; "same" (only points whose ``point_groups`` equals the query's ``query_groups``)
+    or "different". Returns (indices [Q,k] int64, -1 = none; distances [Q,k] float32, inf = none),
+    each row sorted by increasing distance. Both tensors are on the queries' device.
+    """
+    import warp as wp
+
+    from ogscene3d.kernels.knn import launch_knn
+
+    if k < 1:
+        raise ValueError(f"knn: k must be >= 1, got {k}")
+    if not radius > 0:
+        raise ValueError(f"knn: radius must be > 0, got {radius}")
+    if group_mode not in GROUP_MODES:
+        raise ValueError(f"knn: group_mode must be None, 'same' or 'different', got {group_mode!r}")
+    points = _check_points(points, "points")
+    queries = _check_points(queries, "queries")
+    dev = queries.device
+    points = points.to(dev)
+    q = queries.shape[0]
+    idx = torch.full((q, k), -1, dtype=torch.int32, device=dev)
+    dist = torch.full((q, k), float("inf"), dtype=torch.float32, device=dev)
+    if q == 0 or points.shape[0] == 0:
+        return idx.long(), dist
+    mode = GROUP_MODES[group_mode]
+    if mode:
+        if point_groups is None or query_groups is None:
+            raise ValueError("knn: group_mode needs point_groups and query_groups")
+        if point_groups.shape != (points.shape[0],) or query_groups.shape != (q,):
+            raise ValueError("knn: point_groups must be [N] and query_groups [Q]")
+        pg = point_groups.to(dev, torch.int32).contiguous()
+        qg = query_groups.to(dev, torch.int32).contiguous()
+    else:
+        pg = torch.zeros(1, dtype=torch.int32, device=dev)
+        qg = pg
+    with warp_stream(dev) as wdev:
+        grid = _grid_for(wdev)
+        wp_points = wp.from_torch(points, dtype=wp.vec3)
+        grid.build(wp_points, float(radius))
+        launch_knn(
+            grid,
+            wp_points,
+            wp.from_torch(queries, dtype=wp.vec3),
+            wp.from_torch(pg),
+            wp.from_torch(qg),
+            mode,
+            radius,
+            k,
+            wp.from_torch(idx),
+            wp.from_torch(dist),
+            wdev,
+        )
+    return idx.long(), dist
+
+
+def count_within(
+    points: torch.Tensor, queries: torch.Tensor, radius: float, stop_at: int = 2**30
+) -> torch.Tensor:
+    """Number of ``points`` [N,3] within ``radius`` of each query [Q,3] (int32 [Q]), counting stops at
+    ``stop_at`` (use 1 for a pure any-within test)."""
+    import warp as wp
+
+    from ogscene3d.kernels.knn import launch_count_within
+
+    if not radius > 0:
+        raise ValueError(f"count_within: radius must be > 0, got {radius}")
+    points = _check_points(points, "points")
+    queries = _check_points(queries, "queries")
+    dev = queries.device
+    points = points.to(dev)
+    out = torch.zeros(queries.shape[0], dtype=torch.int32, device=dev)
+    if queries.shape[0] == 0 or points.shape[0] == 0:
+        return out
+    with warp_stream(dev) as wdev:
+        grid = _grid_for(wdev)
+        wp_points = wp.from_torch(points, dtype=wp.vec3)
+        grid.build(wp_points, float(radius))
+        launch_count_within(
+            grid, wp_points, wp.from_torch(queries, dtype=wp.vec3), radius, stop_at, wp.from_torch(out), wdev
+        )
+    return out
+
+
+def any_within(points: torch.Tensor, queries: torch.Tensor, radius: float) -> torch.Tensor:
+    """Bool [Q]: whether any of ``points`` lies within ``radius`` of each query."""
+    return count_within(points, queries, radius, stop_at=1) > 0

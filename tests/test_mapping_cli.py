@@ -1,0 +1,67 @@
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from ogscene3d.cli import main
+from ogscene3d.segmentation.precomputed import write_segments
+
+W, H = 32, 24
+
+
+def _replica_scene(root, frames: int = 3):
+    """A tiny Replica-layout scene: a two-coloured wall 2 m ahead, camera moving 0.2 m per frame."""
+    res = root / "results"
+    res.mkdir(parents=True)
+    f = 24.0
+    cam = {"camera": {"w": W, "h": H, "fx": f, "fy": f, "cx": W / 2, "cy": H / 2, "scale": 6553.5}}
+    (root / "cam_params.json").write_text(json.dumps(cam))
+    lines = []
+    for i in range(frames):
+        pose = np.eye(4)
+        pose[0, 3] = 0.2 * i
+        lines.append(" ".join(f"{v:.6f}" for v in pose.reshape(-1)))
+        u = (np.arange(W) + 0.5 - W / 2) / f * 2.0 + pose[0, 3]
+        left = np.broadcast_to(u[None, :] < 0, (H, W))
+        rgb = np.where(left[..., None], np.uint8([30, 30, 200]), np.uint8([200, 30, 30])).astype(np.uint8)
+        cv2.imwrite(str(res / f"frame{i:06d}.jpg"), rgb)
+        cv2.imwrite(str(res / f"depth{i:06d}.png"), np.full((H, W), round(2.0 * 6553.5), np.uint16))
+        write_segments(
+            root / "segs", f"frame{i:06d}", np.where(left, 1 + i, 10 + i), {1 + i: 0.95, 10 + i: 0.9}
+        )
+    (root / "traj.txt").write_text("\n".join(lines) + "\n")
+    return root
+
+
+def test_run_and_resume(tmp_path, capsys):
+    scene = _replica_scene(tmp_path / "scene")
+    out = tmp_path / "run"
+    common = ["--data", str(scene), "--segments", str(scene / "segs"), "--out", str(out), "--device", "cpu",
+              "--no-progress", "--set", "mapping.opt_iters=1", "--set", "graph.enabled=false",
+              "--set", "mapping.knn_radius=0.1"]  # fmt: skip
+    assert main(["run", *common, "--max-frames", "2", "--ablation", "local+global"]) == 0
+    for name in ("gaussians.ply", "map.npz", "graph.json", "timings.json", "config.yaml"):
+        assert (out / name).is_file()
+    t = json.loads((out / "timings.json").read_text())
+    assert t["counts"]["frames"] == 2 and t["ablation"] == "local+global"
+    assert main(["run", *common, "--resume", "--ablation", "local+global"]) == 0
+    t = json.loads((out / "timings.json").read_text())
+    assert t["counts"]["frames"] == 3 and t["counts"]["keyframes"] == 3
+    graph = json.loads((out / "graph.json").read_text())
+    assert {n["label"] for n in graph["nodes"]} == {0, 1}
+    assert "mapped 1 frames" in capsys.readouterr().out
+
+
+def test_run_errors(tmp_path, capsys):
+    assert (
+        main(["run", "--data", str(tmp_path / "missing"), "--out", str(tmp_path / "o"), "--no-progress"]) == 2
+    )
+    assert "missing" in capsys.readouterr().err
+    scene = _replica_scene(tmp_path / "scene", frames=1)
+    assert (
+        main(["run", "--data", str(scene), "--out", str(tmp_path / "o2"), "--resume", "--no-progress"]) == 2
+    )
+    assert "resume" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["run", "--out", str(tmp_path / "o3"), "--ablation", "bogus"])

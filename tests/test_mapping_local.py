@@ -1,0 +1,160 @@
+import pytest
+import torch
+
+from ogscene3d.mapping.local import (
+    CASE_AMBIGUOUS,
+    CASE_MATCHED,
+    CASE_NOVEL,
+    associate_segments,
+    eq5_update,
+    group_top2,
+    rescale_sam_scores,
+)
+
+
+def _patch(x0: float, n: int = 4, spacing: float = 0.05) -> torch.Tensor:
+    """n x n points on the z=0 plane starting at (x0, 0)."""
+    u = torch.arange(n, dtype=torch.float32) * spacing
+    xx, yy = torch.meshgrid(u + x0, u, indexing="ij")
+    return torch.stack([xx.reshape(-1), yy.reshape(-1), torch.zeros(n * n)], 1)
+
+
+class _Labels:
+    def __init__(self, start: int) -> None:
+        self.next = start
+
+    def __call__(self, count: int) -> torch.Tensor:
+        out = torch.arange(self.next, self.next + count, dtype=torch.int32)
+        self.next += count
+        return out
+
+
+def _scene(device):
+    a = _patch(0.0)  # label 3
+    b = _patch(1.0)  # label 4
+    means = torch.cat([a, b]).to(device)
+    labels = torch.cat([torch.full((16,), 3), torch.full((16,), 4)]).int().to(device)
+    conf = torch.full((32,), 0.6, device=device)
+    return means, labels, conf
+
+
+def test_three_association_cases(device):
+    means, labels, conf = _scene(device)
+    eps = torch.tensor([0.0, 0.0, 0.005])
+    probes = torch.cat(
+        [
+            _patch(0.0) + eps,  # segment 0: on top of label 3 -> case (ii)
+            _patch(0.0, n=2) + eps,  # segment 1: half on label 3 ...
+            _patch(1.0, n=2) + eps,  # ... and half on label 4 -> r = 1 -> case (i)
+            _patch(5.0) + eps,  # segment 2: nowhere near the scene -> case (iii)
+        ]
+    ).to(device)
+    seg = torch.tensor([0] * 16 + [1] * 8 + [2] * 16, device=device)
+    pconf = torch.full((40,), 0.9, device=device)
+    res = associate_segments(probes, seg, pconf, 3, means, labels, conf, _Labels(10), k=1, radius=0.02)
+    assert res.seg_case.tolist() == [CASE_MATCHED, CASE_AMBIGUOUS, CASE_NOVEL]
+    assert res.seg_labels.tolist() == [3, -1, 10]
+    torch.testing.assert_close(res.r.cpu(), torch.tensor([0.0, 1.0, 0.0]))
+    torch.testing.assert_close(res.p.cpu(), torch.tensor([1.0, 0.5, 0.0]))
+    # Eq. 5 only for the Gaussians matched by the case-(ii) segment: all 16 of label 3, consistent
+    assert sorted(res.updated.tolist()) == list(range(16))
+    torch.testing.assert_close(conf[:16].cpu(), torch.full((16,), 0.6 + 0.9 * 1.0 * 0.4))
+    torch.testing.assert_close(conf[16:].cpu(), torch.full((16,), 0.6))  # case (i) updates nothing
+    assert res.counts() == {"ambiguous": 1, "matched": 1, "novel": 1, "conf_updates": 16, "filled": 0}
+
+
+def test_low_coherence_is_novel(device):
+    """A segment mostly in empty space with a few consistent matches: r = 0 but p < tau_p -> new label."""
+    means, labels, conf = _scene(device)
+    probes = torch.cat([_patch(0.0, n=1), _patch(3.0, n=4)]).to(device)  # 1 of 17 probes matched
+    seg = torch.zeros(17, dtype=torch.long, device=device)
+    res = associate_segments(
+        probes, seg, torch.ones(17, device=device), 1, means, labels, conf, _Labels(7), k=1, radius=0.02
+    )
+    assert res.seg_case.tolist() == [CASE_NOVEL] and res.seg_labels.tolist() == [7]
+    torch.testing.assert_close(res.p.cpu(), torch.tensor([1 / 17]))
+    assert res.updated.numel() == 0 and torch.all(conf == 0.6)
+
+
+def test_eq5_inconsistent_matches_lose_confidence(device):
+    """10 matches of label 3 and 1 of label 4: r = 0.1 < tau_valid, p = 10/11 -> label 3; the label-4 scene
+    Gaussian loses confidence by c_sam * p * conf, the label-3 ones gain c_sam * p * (1 - conf)."""
+    a = _patch(0.0)[:10]
+    b = torch.tensor([[0.5, 0.5, 0.0]])
+    means = torch.cat([a, b]).to(device)
+    labels = torch.tensor([3] * 10 + [4], dtype=torch.int32, device=device)
+    conf = torch.tensor([0.4] * 10 + [0.8], device=device)
+    probes = means + torch.tensor([0.0, 0.0, 0.001], device=device)
+    seg = torch.zeros(11, dtype=torch.long, device=device)
+    c_sam = torch.full((11,), 0.75, device=device)
+    res = associate_segments(probes, seg, c_sam, 1, means, labels, conf, _Labels(5), k=1, radius=0.02)
+    p = 10 / 11
+    assert res.seg_labels.tolist() == [3]
+    torch.testing.assert_close(res.r.cpu(), torch.tensor([0.1]))
+    torch.testing.assert_close(conf[:10].cpu(), torch.full((10,), 0.4 + 0.75 * p * 0.6))
+    torch.testing.assert_close(conf[10:].cpu(), torch.tensor([0.8 - 0.75 * p * 0.8]))
+
+
+def test_naive_takes_majority_without_ambiguity_test(device):
+    means, labels, conf = _scene(device)
+    probes = torch.cat([_patch(0.0, n=3), _patch(1.0, n=2), _patch(8.0, n=2)]).to(device)
+    seg = torch.tensor([0] * 13 + [1] * 4, device=device)
+    res = associate_segments(
+        probes,
+        seg,
+        torch.ones(17, device=device),
+        2,
+        means,
+        labels,
+        conf,
+        _Labels(9),
+        k=1,
+        radius=0.02,
+        naive=True,
+    )
+    # segment 0: 9 matches of 3 and 4 of 4 -> majority 3 (the paper's test would call r = 4/9 ambiguous)
+    assert res.seg_labels.tolist() == [3, 9]
+    assert torch.all(conf == 0.6)
+
+
+def test_eq5_formula_and_bounds():
+    conf = torch.tensor([0.2, 0.2, 1.0, 0.0])
+    c = torch.tensor([1.0, 0.5, 1.0, 1.0])
+    p = torch.tensor([0.5, 0.5, 1.0, 1.0])
+    cons = torch.tensor([True, False, True, False])
+    out = eq5_update(conf, c, p, cons)
+    torch.testing.assert_close(out, torch.tensor([0.2 + 0.5 * 0.8, 0.2 - 0.25 * 0.2, 1.0, 0.0]))
+
+
+def test_rescale_sam_scores():
+    s = torch.tensor([0.5, 0.88, 0.94, 1.0, 1.2])
+    torch.testing.assert_close(rescale_sam_scores(s), torch.tensor([0.5, 0.5, 0.75, 1.0, 1.0]))
+    with pytest.raises(ValueError):
+        rescale_sam_scores(s, (1.0, 0.88))
+
+
+def test_group_top2():
+    g = torch.tensor([0, 0, 0, 1, 1, 2, 0])
+    v = torch.tensor([5, 5, 3, 7, 7, 1, 3])
+    top1, c1, top2, c2 = group_top2(g, v, 4)
+    assert top1.tolist() == [3, 7, 1, -1] and c1.tolist() == [2, 2, 1, 0]
+    assert top2.tolist() == [5, -1, -1, -1] and c2.tolist() == [2, 0, 0, 0]
+
+
+def test_fill_unlabeled(device):
+    """Unlabeled scene Gaussians under a labeled segment take its label and confidence; under an ambiguous
+    segment or far from every probe they stay unlabeled."""
+    means, labels, conf = _scene(device)
+    extra = torch.cat([_patch(0.2, n=2), _patch(3.0, n=2)]).to(device)  # beside label 3 / far away
+    means = torch.cat([means, extra])
+    labels = torch.cat([labels, torch.full((8,), -1, dtype=torch.int32, device=device)])
+    conf = torch.cat([conf, torch.zeros(8, device=device)])
+    probes = torch.cat([_patch(0.0, n=6)]).to(device) + torch.tensor([0.0, 0.0, 0.005], device=device)
+    seg = torch.zeros(36, dtype=torch.long, device=device)
+    c_sam = torch.full((36,), 0.8, device=device)
+    res = associate_segments(
+        probes, seg, c_sam, 1, means, labels, conf, _Labels(9), k=1, radius=0.02, fill=True
+    )
+    assert res.seg_labels.tolist() == [3] and res.filled == 4
+    assert labels[32:].tolist() == [3, 3, 3, 3, -1, -1, -1, -1]
+    torch.testing.assert_close(conf[32:36].cpu(), torch.full((4,), 0.8))

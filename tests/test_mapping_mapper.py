@@ -1,0 +1,150 @@
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from ogscene3d.config import load_config
+from ogscene3d.errors import ConfigError, DataError
+from ogscene3d.frame import Frame
+from ogscene3d.mapping.keyframes import KeyframeSelector
+from ogscene3d.mapping.mapper import Mapper
+
+W, H, F = 32, 24, 24.0
+K = np.array([[F, 0, W / 2], [0, F, H / 2], [0, 0, 1]], dtype=np.float32)
+
+
+def _frame(i: int, ids: tuple[int, int] = (1, 2), with_segments: bool = True) -> Frame:
+    """A fronto-parallel wall 2 m ahead: a red object left of x = 0 and a blue one right of it, seen from
+    a camera shifted 20 cm per frame along x."""
+    tx = 0.2 * i
+    pose = np.eye(4)
+    pose[0, 3] = tx
+    u = (np.arange(W) + 0.5 - W / 2) / F * 2.0 + tx  # world x of each column on the wall
+    left = np.broadcast_to(u[None, :] < 0, (H, W))
+    rgb = np.where(left[..., None], np.array([200, 30, 30], np.uint8), np.array([30, 30, 200], np.uint8))
+    seg = np.where(left, ids[0], ids[1]).astype(np.int32)
+    return Frame(
+        i,
+        np.ascontiguousarray(rgb),
+        np.full((H, W), 2.0, np.float32),
+        K,
+        pose,
+        name=f"f{i}",
+        segments=seg if with_segments else None,
+        segment_scores={ids[0]: 0.97, ids[1]: 0.91},
+    )
+
+
+def _config(*overrides: str):
+    return load_config(
+        None, ["graph.enabled=false", "mapping.opt_iters=2", "mapping.knn_radius=0.1", *overrides]
+    )
+
+
+def test_labels_stay_consistent_across_frames(device):
+    m = Mapper(_config("mapping.ablation=local"), device)
+    for i, ids in enumerate([(1, 2), (7, 3), (2, 9)]):  # per-frame ids are arbitrary
+        assert m.process(_frame(i, ids))
+    gm = m.map
+    labels = gm.labels.cpu()
+    assert len(gm) > 0 and int(gm.origin_kf.max()) >= 1  # later keyframes added the newly seen strip
+    assert sorted(torch.unique(labels).tolist()) == [0, 1]
+    left = gm.means[:, 0].cpu() < -0.05
+    right = gm.means[:, 0].cpu() > 0.05
+    assert len(set(labels[left].tolist())) == 1 and len(set(labels[right].tolist())) == 1
+    assert labels[left][0] != labels[right][0]
+    # matched observations raised the confidences above their initial rescaled SAM scores
+    assert float(gm.confidences[left].max()) > 0.5 + 0.5 * (0.97 - 0.88) / 0.12 + 1e-3
+    c = m.timings.as_dict()["counts"]
+    assert c["keyframes"] == 3 and c["segments_matched"] == 4 and c["segments_novel"] == 2
+
+
+def test_naive_confidences_are_one(device):
+    m = Mapper(_config("mapping.ablation=naive"), device)
+    for i in range(2):
+        m.process(_frame(i))
+    assert torch.all(m.map.confidences[m.map.labels >= 0] == 1.0)
+
+
+def test_keyframe_rule():
+    sel = KeyframeSelector(every=3)
+    assert [sel(np.eye(4)) for _ in range(7)] == [True, False, False, True, False, False, True]
+    sel = KeyframeSelector(every=0, translation=0.1)
+    poses = [np.eye(4) for _ in range(4)]
+    for i, p in enumerate(poses):
+        p[0, 3] = 0.06 * i
+    assert [sel(p) for p in poses] == [True, False, True, False]
+    with pytest.raises(ValueError):
+        KeyframeSelector(every=0)
+
+
+def test_save_and_resume(tmp_path, device):
+    cfg = _config("mapping.ablation=local+global", "mapping.refine_every=2")
+    m = Mapper(cfg, device)
+    for i in range(2):
+        m.process(_frame(i))
+    m.save(tmp_path)
+    for name in ("gaussians.ply", "map.npz", "graph.json", "timings.json", "config.yaml"):
+        assert (tmp_path / name).is_file(), name
+    timings = json.loads((tmp_path / "timings.json").read_text())
+    assert timings["calls"]["refine"] == 1 and timings["counts"]["keyframes"] == 2
+    graph = json.loads((tmp_path / "graph.json").read_text())
+    assert graph["version"] == 1 and {n["label"] for n in graph["nodes"]} == {0, 1}
+
+    r = Mapper(cfg, device)
+    r.load_checkpoint(tmp_path / "map.npz")
+    assert (r.frames_seen, r.keyframe_count, len(r.memory)) == (2, 2, len(m.memory))
+    torch.testing.assert_close(r.map.means, m.map.means)
+    assert r.map.next_label == m.map.next_label
+    r.process(_frame(2, (4, 5)))
+    m.process(_frame(2, (4, 5)))
+    assert torch.equal(r.map.labels, m.map.labels)
+
+
+def test_geometry_only_without_segments(device):
+    m = Mapper(_config(), device)
+    m.process(_frame(0, with_segments=False))
+    assert len(m.map) > 0 and torch.all(m.map.labels == -1)
+
+
+def test_bad_input(device):
+    with pytest.raises(ConfigError, match="ablation"):
+        Mapper(_config("mapping.ablation=everything"), device)
+    m = Mapper(_config(), device)
+    f = _frame(0)
+    f.pose = None
+    with pytest.raises(DataError, match="pose"):
+        m.process(f)
+    with pytest.raises(DataError, match="map.npz"):
+        m.load_checkpoint(_missing := __import__("pathlib").Path("/nonexistent/map.npz"))
+    assert _missing.name == "map.npz"
+
+
+def test_full_ablation_runs_longterm_and_refinement(device):
+    cfg = _config("mapping.ablation=full", "mapping.refine_every=2", "mapping.longterm_every=2")
+    m = Mapper(cfg, device)
+    for i, ids in enumerate([(1, 2), (3, 4), (5, 6), (7, 8)]):
+        m.process(_frame(i, ids))
+    m.finalize()
+    t = m.timings.as_dict()
+    assert t["calls"]["longterm"] == 3 and t["calls"]["refine"] == 3  # keyframes 2, 4 and finalize
+    assert t["counts"]["longterm_updated"] > 0
+    assert sorted(torch.unique(m.map.labels).tolist()) == [0, 1]
+    assert bool(((m.map.confidences >= 0) & (m.map.confidences <= 1)).all())
+
+
+def test_scene_graph_is_fed(tmp_path, device):
+    cfg = load_config(
+        None,
+        ["mapping.opt_iters=1", "mapping.knn_radius=0.1", "graph.init_keyframes=2", "graph.update_every=1",
+         "graph.min_gaussians=5"],
+    )  # fmt: skip
+    m = Mapper(cfg, device)
+    for i in range(3):
+        m.process(_frame(i, (1 + i, 5 + i)))
+    m.finalize()
+    m.save(tmp_path)
+    assert m.timings.counts.get("graph_errors", 0) == 0
+    graph = json.loads((tmp_path / "graph.json").read_text())
+    assert {n["id"] for n in graph["nodes"]} == {0, 1}
