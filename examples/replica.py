@@ -20,7 +20,6 @@ from pathlib import Path
 from ogscene3d.config import load_config
 from ogscene3d.datasets import open_dataset
 from ogscene3d.mapping.mapper import Mapper
-from ogscene3d.mapping.run_cli import make_segmenter
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -45,9 +44,7 @@ def main() -> None:
     mapper = Mapper(cfg, args.device)
     t0 = time.perf_counter()
     for frame in ds:
-        if frame.segments is None and mapper.segmenter is None:
-            mapper.segmenter = make_segmenter(cfg, frame.K)
-        mapper.process(frame)
+        mapper.process(frame)  # frames without segments go through the config's segmenter
         print(
             f"\rframe {frame.index + 1}/{len(ds)}  keyframes {mapper.keyframe_count}  "
             f"Gaussians {len(mapper.map)}",

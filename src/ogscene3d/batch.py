@@ -250,7 +250,6 @@ def map_scene(
     from .config import load_config
     from .datasets import make_synthetic_scene, open_dataset
     from .mapping.mapper import Mapper
-    from .mapping.run_cli import make_segmenter
 
     t_start = time.perf_counter()
     ov = [*overrides, *spec.overrides]
@@ -287,10 +286,7 @@ def map_scene(
         indices = tqdm(indices, desc=spec.name, unit="frame")
     t0 = time.perf_counter()
     for i in indices:
-        frame = ds[i]
-        if frame.segments is None and mapper.segmenter is None:
-            mapper.segmenter = make_segmenter(cfg, frame.K)
-        mapper.process(frame)
+        mapper.process(ds[i])
     mapper.finalize()
     if dev.type == "cuda":
         torch.cuda.synchronize(dev)

@@ -27,7 +27,8 @@ class DataConfig:
     start: int = 0
     max_frames: int | None = None
     depth_scale: float | None = None  # raw depth units per metre; None = the dataset's own
-    depth_format: str = "auto"  # auto (the layout's) | linear (raw / scale) | shift3 (APC: (raw >> 3) / scale)
+    # auto (the layout's) | linear (raw / scale) | shift3 (APC: (raw >> 3) / scale)
+    depth_format: str = "auto"
     intrinsics: list[float] | None = None  # [fx, fy, cx, cy] overriding the dataset's
     min_depth: float = 0.0
     max_depth: float = 0.0  # 0 = no limit
@@ -47,7 +48,9 @@ class SyntheticConfig:
 
 @dataclass
 class SegmentationConfig:
-    backend: str = "precomputed"  # precomputed | sam | sam+detector | classical | simulated
+    # Used for frames that carry no precomputed segments: precomputed (-> classical, with a warning) |
+    # sam | sam+detector | classical | simulated | none (map geometry only, every Gaussian unlabelled)
+    backend: str = "precomputed"
     sam_encoder: str | None = None
     sam_decoder: str | None = None
     detector: str | None = None
@@ -115,15 +118,15 @@ class MappingConfig:
     prune_scale: float = 0.5
     checkpoint_every: int = 0  # keyframes; 0 = only at the end
     init_opacity: float = 0.9  # opacity of newly added Gaussians
-    init_alpha_thresh: float = 0.5  # a pixel whose rendered alpha is below this is unexplained -> new Gaussian
-    init_depth_margin: float = 0.1  # metres; observed depth this far in front of the rendered one -> new Gaussian
+    init_alpha_thresh: float = 0.5  # a pixel rendered with less alpha is unexplained -> new Gaussian
+    init_depth_margin: float = 0.1  # metres; observed depth this far in front of the render -> new Gaussian
     refine_cluster_radius: float = 0.3  # metres; search radius of the cluster-level refinement
     refine_graph_k: int = 8  # same-label neighbours linked per Gaussian when building clusters
     memory_max: int = 64  # long-term memory buffer capacity (frames)
     memory_point_step: int = 4  # pixel grid step of the memory point clouds (overlap criterion)
     longterm_pixel_step: int = 2  # pixel grid step of the long-term pixel-to-Gaussian association
     longterm_knn_k: int = 5  # Gaussians associated with each back-projected memory pixel (within knn_radius)
-    fill_unlabeled: bool = True  # unlabeled Gaussians under a labeled segment take its label (local.fill_unlabeled)
+    fill_unlabeled: bool = True  # unlabeled Gaussians under a labeled segment take its label
     refine_unlabeled: bool = False  # individual refinement also labels unlabeled Gaussians (confidence 0)
 
 

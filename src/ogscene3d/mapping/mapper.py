@@ -29,6 +29,7 @@ import math
 import time
 from collections import deque
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -111,6 +112,7 @@ class Mapper:
             )
         self.device = resolve_device(device if device is not None else config.device)
         self.segmenter = segmenter
+        self._tracker = None
         self.map = GaussianMap(self.device)
         self.keyframes = KeyframeSelector(
             cfg.keyframe_every, cfg.keyframe_translation, cfg.keyframe_rotation_deg
@@ -147,14 +149,39 @@ class Mapper:
     def _segments(self, frame: Frame) -> tuple[np.ndarray | None, dict[int, float]]:
         if frame.segments is not None:
             return np.asarray(frame.segments), dict(frame.segment_scores)
+        if self.segmenter is None:
+            self.segmenter = _default_segmenter(self.config, frame.K)
         if self.segmenter is not None:
             with self.timings.section("segment"):
-                seg = self.segmenter(frame.rgb, frame.depth)
+                if hasattr(self.segmenter, "segment_frame"):  # the simulated segmenter reads ground truth
+                    seg = self.segmenter.segment_frame(frame)
+                else:
+                    seg = self.segmenter(frame.rgb, frame.depth)
             return np.asarray(seg.ids), dict(seg.scores)
         if not self._warned_no_segments:
             log.warning("frames carry no segments and no segmenter was given: mapping geometry only")
             self._warned_no_segments = True
         return None, {}
+
+    def _track(self, frame: Frame) -> bool:
+        """With ``tracking.poses: odometry``, replace the frame's pose by the tracked one (False: skip it)."""
+        if self.config.tracking.poses == "gt":
+            return True
+        if self.config.tracking.poses != "odometry":
+            raise ConfigError(
+                f"tracking.poses must be 'gt' or 'odometry', got {self.config.tracking.poses!r}"
+            )
+        if self._tracker is None:
+            from ..tracking import Tracker
+
+            self._tracker = Tracker(self.config.tracking, device=None)  # Open3D's CUDA when it has it
+        with self.timings.section("tracking"):
+            pose = self._tracker.step(frame)
+        if pose is None:
+            self.timings.add("frames_untracked")
+            return False
+        frame.pose = pose
+        return True
 
     def _render_check(self, frame: Frame) -> tuple[torch.Tensor | None, torch.Tensor | None]:
         if len(self.map) == 0:
@@ -181,6 +208,8 @@ class Mapper:
 
     def process(self, frame: Frame) -> bool:
         """Map one frame. Returns True when it was a keyframe (non-keyframes are only counted)."""
+        if not self._track(frame):
+            return False
         if frame.pose is None:
             raise DataError(
                 f"frame {frame.index} ({frame.name or 'unnamed'}): no camera pose; "
@@ -531,3 +560,16 @@ class Mapper:
             }
             for i in range(n)
         ]
+
+
+def _default_segmenter(config: Config, K: np.ndarray):
+    """The live segmenter for frames that carry no precomputed segments (None: map geometry only)."""
+    from ..segmentation import make_segmenter
+
+    backend = config.segmentation.backend
+    if backend == "none":
+        return None
+    if backend == "precomputed":
+        log.warning("frames carry no precomputed segments: falling back to the classical segmenter")
+        return make_segmenter(replace(config.segmentation, backend="classical"), K)
+    return make_segmenter(config.segmentation, K)

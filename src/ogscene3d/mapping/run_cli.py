@@ -9,6 +9,7 @@ from pathlib import Path
 
 from ..config import load_config
 from ..errors import DataError
+from ..tracking import add_poses_argument
 
 log = logging.getLogger(__name__)
 
@@ -46,35 +47,9 @@ def add_parser(subparsers) -> None:
         metavar="KEY=VALUE",
         help="config override, repeatable (e.g. --set mapping.opt_iters=5)",
     )
+    add_poses_argument(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
-
-
-class _DepthAwareSegmenter:
-    """Adapts segmenters that want the focal length (the classical one) to ``seg(rgb, depth)``."""
-
-    def __init__(self, seg, fx: float, fy: float) -> None:
-        self.seg, self.fx, self.fy = seg, fx, fy
-
-    def __call__(self, rgb, depth=None):
-        return self.seg(rgb, depth, fx=self.fx, fy=self.fy)
-
-
-def make_segmenter(config, K):
-    """The live segmenter for frames without precomputed segments (None: map geometry only)."""
-    backend = config.segmentation.backend
-    if backend in ("classical", "precomputed"):
-        # "precomputed" with frames lacking segments falls back to the weight-free classical segmenter
-        from ..segmentation.classical import ClassicalSegmenter
-
-        if backend == "precomputed":
-            log.warning("frames carry no precomputed segments: using the classical segmenter")
-        return _DepthAwareSegmenter(ClassicalSegmenter(), float(K[0, 0]), float(K[1, 1]))
-    try:
-        from ..segmentation import make_segmenter as factory  # type: ignore[attr-defined]
-    except ImportError as e:
-        raise DataError(f"segmentation backend {backend!r} is not available in this build") from e
-    return factory(config.segmentation)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -87,6 +62,8 @@ def run(args: argparse.Namespace) -> int:
     if args.device:
         overrides.append(f"device={args.device}")
     cfg = load_config(args.config, overrides)
+    if args.poses:
+        cfg.tracking.poses = args.poses
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
@@ -139,10 +116,7 @@ def run(args: argparse.Namespace) -> int:
         indices = tqdm(indices, desc="mapping", unit="frame")
     t0 = time.perf_counter()
     for i in indices:
-        frame = ds[i]
-        if frame.segments is None and mapper.segmenter is None:
-            mapper.segmenter = make_segmenter(cfg, frame.K)
-        mapper.process(frame)
+        mapper.process(ds[i])
         if hasattr(indices, "set_postfix"):
             indices.set_postfix(gaussians=len(mapper.map), kf=mapper.keyframe_count)
     mapper.finalize()

@@ -290,12 +290,6 @@ def _start_live(args: argparse.Namespace):
         raise DataError(f"{data}: the dataset has no frames")
     mapper = Mapper(cfg, cfg.device)
 
-    def prepare(frame) -> None:
-        if frame.segments is None and mapper.segmenter is None:
-            from ..mapping.run_cli import make_segmenter
-
-            mapper.segmenter = make_segmenter(cfg, frame.K)
-
     up = args.up or _up_from_config(cfg)
     viewer = LiveViewer(
         args.host,
@@ -311,7 +305,6 @@ def _start_live(args: argparse.Namespace):
         viewer,
         budget=max(args.max_points, args.max_splats),
         out_dir=args.out,
-        prepare=prepare,
     )
     viewer.set_control(session)
     session.start()

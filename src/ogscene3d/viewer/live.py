@@ -31,8 +31,7 @@ class LiveSession:
     snapshot. ``max_overhead``: the largest fraction of the mapping thread's time spent building
     snapshots (each one costs O(budget)); after a snapshot that took t seconds the next one waits at
     least t / max_overhead. ``out_dir``: where the run is saved at the end of the stream (None: only
-    on request); it is also the default of the GUI's save box. ``prepare(frame)`` runs before each
-    frame (e.g. to attach a segmenter lazily).
+    on request); it is also the default of the GUI's save box.
     """
 
     def __init__(
@@ -45,7 +44,6 @@ class LiveSession:
         max_overhead: float = 0.1,
         out_dir: str | Path | None = None,
         finalize: bool = True,
-        prepare: Any = None,
     ) -> None:
         if budget < 1:
             raise ValueError(f"budget must be >= 1, got {budget}")
@@ -61,7 +59,6 @@ class LiveSession:
         self.budget = int(budget)
         self.out_dir = Path(out_dir) if out_dir is not None else None
         self.finalize_at_end = finalize
-        self.prepare = prepare
         self._lock = threading.Lock()  # held while the mapper changes (process/finalize) or is saved
         self._run = threading.Event()
         self._run.set()
@@ -152,8 +149,6 @@ class LiveSession:
                 if self._stop.is_set():
                     self.status = "stopped"
                     break
-                if self.prepare is not None:
-                    self.prepare(frame)
                 with self._lock:
                     is_kf = self.mapper.process(frame)
                 if frame.pose is not None:
