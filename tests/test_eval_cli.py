@@ -135,6 +135,16 @@ def test_eval_overlap_mapping_and_ignore_override(scene):
     assert res.semantic["hovsg"].num_evaluated == 3 and res.semantic["hovsg"].miou == pytest.approx(1.0)
 
 
+def test_auto_mapping_ignores_heuristic_tags(scene):
+    run, scene_dir = scene
+    graph = json.loads((run / "graph.json").read_text())
+    for n in graph["nodes"]:
+        n["caption_source"] = "heuristic"  # e.g. "wall" from geometry: names no object class reliably
+    (run / "graph.json").write_text(json.dumps(graph))
+    res = evaluate_run(run, scene_dir, protocols=["hovsg"], ignore=[])
+    assert res.report["label_mapping"]["method"] == "overlap"
+
+
 def test_labelled_ply_ground_truth_with_class_table(scene, tmp_path):
     run, _ = scene
     arr = np.zeros(3, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("label", "<i4")])

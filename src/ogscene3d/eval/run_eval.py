@@ -54,19 +54,23 @@ def build_label_mapping(
 ) -> tuple[dict[int, int], dict[str, Any]]:
     """Scene label -> GT class index, and a JSON-safe description of how it was built.
 
-    ``auto`` uses text matching when ``graph.json`` has node tags and at least one of them names a
-    class, and majority overlap otherwise. ``assoc`` (Gaussian -> GT point index, -1 = none) is
+    ``auto`` uses text matching when ``graph.json`` has node tags from a real captioner (not the offline
+    heuristic one, whose "floor"/"wall"/"small red object" tags name no objects) and at least one of them
+    names a class, and majority overlap otherwise. ``assoc`` (Gaussian -> GT point index, -1 = none) is
     needed for the overlap method.
     """
     tags: dict[int, str] = {}
+    heuristic: set[int] = set()
     if run.graph is not None:
         for n in run.graph["nodes"]:
             tag = n.get("tag") or ""
             if isinstance(tag, str) and tag.strip():
                 tags[int(n["id"])] = tag
+                if n.get("caption_source") == "heuristic":
+                    heuristic.add(int(n["id"]))
     labels_present = np.unique(run.labels[run.labels >= 0])
     text = text_label_mapping(tags, gt.class_names, embedder=embedder) if tags else {}
-    n_text = sum(1 for m in text.values() if m.class_index >= 0)
+    n_text = sum(1 for k, m in text.items() if m.class_index >= 0 and k not in heuristic)
     if method == "auto":
         method = "text" if n_text > 0 else "overlap"
     if method == "text":
