@@ -202,7 +202,7 @@ class FakeMapper:
         self.fail_at = fail_at
         self.finalized = False
         self.saved: list[Path] = []
-        self._graph = None
+        self.graph = None
 
         class _T:
             def as_dict(inner):
@@ -225,7 +225,7 @@ class FakeMapper:
         )
         self.keyframe_count += 1
         if self.keyframe_count == 2:
-            self._graph = {
+            self.graph = {
                 "version": 1,
                 "nodes": [{"id": 0, "tag": "chair", "center": [0.0, 0.0, 0.0]}],
                 "edges": [],
@@ -239,7 +239,7 @@ class FakeMapper:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         self.map.export_ply(out / "gaussians.ply")
-        (out / "graph.json").write_text(json.dumps(self._graph or {"version": 1, "nodes": [], "edges": []}))
+        (out / "graph.json").write_text(json.dumps(self.graph or {"version": 1, "nodes": [], "edges": []}))
         self.saved.append(out)
         return out
 

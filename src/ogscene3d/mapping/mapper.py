@@ -141,6 +141,11 @@ class Mapper:
     def use_longterm(self) -> bool:
         return self.cfg.ablation == "full"
 
+    @property
+    def graph(self):
+        """The scene graph (``ogscene3d.graph.SceneGraph``) once the first keyframe built it, else None."""
+        return self._graph
+
     def set_checkpoint_dir(self, out_dir: str | Path | None) -> None:
         """Where ``checkpoint_every`` writes ``map.npz`` during mapping."""
         self._checkpoint_dir = Path(out_dir) if out_dir is not None else None

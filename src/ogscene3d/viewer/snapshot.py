@@ -228,7 +228,7 @@ def snapshot_from_mapper(
     """Build a snapshot from a live :class:`~ogscene3d.mapping.mapper.Mapper` (call on its thread).
 
     Reads ``mapper.map`` (GaussianMap), ``mapper.timings``, ``mapper.frames_seen``,
-    ``mapper.keyframe_count`` and the scene graph (``mapper.graph`` if public, else ``mapper._graph``).
+    ``mapper.keyframe_count`` and the scene graph (``mapper.graph``).
     At most ``budget`` Gaussians are copied off the device (a stratified random subset), so the cost
     does not grow with the map. ``frame`` (the last Frame) gives the current pose, K and image;
     ``trajectory`` [T,4,4] the poses so far (the mapper keeps none).
@@ -261,8 +261,6 @@ def snapshot_from_mapper(
 
     timings = mapper.timings.as_dict() if hasattr(mapper.timings, "as_dict") else {}
     graph_obj = getattr(mapper, "graph", None)
-    if graph_obj is None:
-        graph_obj = getattr(mapper, "_graph", None)
     try:
         graph = graph_document(graph_obj)
     except Exception as e:  # noqa: BLE001 - a graph that cannot be read must not stop the viewer
