@@ -46,6 +46,7 @@ from typing import Any, Literal
 import yaml
 
 from .atomic import atomic_write_text
+from .config import add_override_argument
 from .errors import ConfigError, DataError, OGSceneError
 
 log = logging.getLogger(__name__)
@@ -868,14 +869,7 @@ def add_parser(subparsers: Any) -> None:
         "--out", required=True, type=Path, help="batch output folder (one run directory per scene)"
     )
     p.add_argument("--config", default=None, help="YAML config for every scene (e.g. configs/replica.yaml)")
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="config override for every scene, repeatable (e.g. --set mapping.opt_iters=5)",
-    )
+    add_override_argument(p, "mapping.opt_iters=5")
     _add_executor_args(p)
     g = p.add_argument_group("evaluation (with --eval)")
     g.add_argument("--eval", action="store_true", help="evaluate each run right after mapping (same task)")

@@ -358,6 +358,18 @@ def load_config(path: str | Path | None = None, overrides: list[str] | None = No
     return config_from_dict(values)
 
 
+def add_override_argument(parser: Any, example: str = "mapping.opt_iters=5") -> None:
+    """The ``--set KEY=VALUE`` option every command that reads a config offers (parsed by ``load_config``)."""
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help=f"config override, repeatable (e.g. --set {example})",
+    )
+
+
 def config_to_dict(cfg: Any) -> dict:
     return dataclasses.asdict(cfg)
 

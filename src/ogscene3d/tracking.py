@@ -86,7 +86,7 @@ import cv2
 import numpy as np
 
 from .camera import Camera
-from .config import TrackingConfig
+from .config import TrackingConfig, add_override_argument
 from .errors import ConfigError, OGSceneError
 from .frame import Frame, check_pose
 
@@ -788,10 +788,7 @@ def add_parser(subparsers: Any) -> None:
         "--device", default=None, help="cpu, cuda or cuda:N (default: config, else CUDA if usable)"
     )
     p.add_argument("--max-frames", type=int, default=None, help="track at most this many frames")
-    p.add_argument(
-        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-        help="config override, e.g. tracking.max_width=320 (repeatable)",
-    )  # fmt: skip
+    add_override_argument(p, "tracking.max_width=320")
     p.set_defaults(func=run)
 
 

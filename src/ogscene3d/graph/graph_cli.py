@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..config import load_config
+from ..config import add_override_argument, load_config
 from ..errors import DataError
 from .scenegraph import SceneGraph
 
@@ -22,7 +22,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--top-k", type=int, default=5, help="results per query (default 5)")
     p.add_argument("--graphml", help="write the graph as GraphML to this path (needs networkx)")
     p.add_argument("--config", help="YAML config (for graph.query_embedding and its endpoint)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    add_override_argument(p, "graph.query_embedding.model=...")
     p.add_argument("--edges", action="store_true", help="list every edge")
     p.set_defaults(func=run)
 

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 from ..atomic import atomic_write_text
-from ..config import load_config
+from ..config import add_override_argument, load_config
 from ..errors import ConfigError, DataError
 from .base import Segmentation
 from .precomputed import segments_paths, write_segments
@@ -55,14 +55,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--points-per-side", type=int, default=None, help="SAM grid prompts per side (default 32)")
     p.add_argument("--provider", default=None, choices=["auto", "cpu", "cuda"], help="onnxruntime provider")
     p.add_argument("--config", default=None, help="YAML config; its `segmentation` and `data` sections apply")
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="config override, repeatable (e.g. --set segmentation.pred_iou_thresh=0.9)",
-    )
+    add_override_argument(p, "segmentation.pred_iou_thresh=0.9")
     p.add_argument("--kind", default="auto", help="dataset layout (default: detected)")
     p.add_argument("--stride", type=int, default=None, help="use every N-th frame")
     p.add_argument("--max-frames", type=int, default=None, help="segment at most this many frames")

@@ -17,6 +17,7 @@ import threading
 import time
 from pathlib import Path
 
+from ..config import add_override_argument
 from ..errors import ConfigError, DataError, OGSceneError
 
 log = logging.getLogger(__name__)
@@ -73,14 +74,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="where --synthetic writes its scene (default: OUT/scene, else outputs/live-synthetic)",
     )
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="config override, repeatable (e.g. --set mapping.opt_iters=5)",
-    )
+    add_override_argument(p, "mapping.opt_iters=5")
     p.add_argument(
         "--host", default="127.0.0.1", help="address to bind (0.0.0.0 exposes the viewer to the network)"
     )
