@@ -158,3 +158,24 @@ def test_fill_unlabeled(device):
     assert res.seg_labels.tolist() == [3] and res.filled == 4
     assert labels[32:].tolist() == [3, 3, 3, 3, -1, -1, -1, -1]
     torch.testing.assert_close(conf[32:36].cpu(), torch.full((4,), 0.8))
+
+
+def test_probe_radius_matches_sparser_far_probes(device):
+    """Probes 4 cm above the label-3 patch: outside the 2 cm fixed radius (a novel segment), inside a
+    per-probe radius of 5 cm (the same object: case ii). A per-probe radius below ``radius`` never
+    shrinks it."""
+    means, labels, conf = _scene(device)
+    probes = (_patch(0.0) + torch.tensor([0.0, 0.0, 0.04])).to(device)
+    seg = torch.zeros(16, dtype=torch.long, device=device)
+    pconf = torch.full((16,), 0.9, device=device)
+    args = (probes, seg, pconf, 1, means, labels, conf.clone(), _Labels(10))
+    fixed = associate_segments(*args, k=1, radius=0.02)
+    assert fixed.seg_case.tolist() == [CASE_NOVEL] and fixed.seg_labels.tolist() == [10]
+    wide = associate_segments(*args, k=1, radius=0.02, probe_radius=torch.full((16,), 0.05, device=device))
+    assert wide.seg_case.tolist() == [CASE_MATCHED] and wide.seg_labels.tolist() == [3]
+    torch.testing.assert_close(wide.p.cpu(), torch.tensor([1.0]))
+    # half of the probes get a wide radius: p = 0.5 >= tau_p, still matched; the others find nothing
+    half = torch.tensor([0.05] * 8 + [0.001] * 8, device=device)
+    res = associate_segments(*args, k=1, radius=0.02, probe_radius=half)
+    assert res.seg_labels.tolist() == [3]
+    torch.testing.assert_close(res.p.cpu(), torch.tensor([0.5]))

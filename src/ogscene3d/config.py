@@ -95,6 +95,7 @@ class MappingConfig:
     pixels_per_gaussian: int = 4  # subsampling of back-projected pixels per segment
     knn_k: int = 5
     knn_radius: float = 0.05
+    knn_radius_spacing: float = 0.0  # >0: per-probe KNN radius max(knn_radius, this x probe grid spacing)
     tau_valid: float = 0.25
     tau_p: float = 0.15
     tau_high: float = 0.7

@@ -1,7 +1,11 @@
 """Local 3D optimization (paper Sec. III-B.2): spatial-semantic association of a keyframe's segments.
 
 For every new (probe) Gaussian of segment m we find its k nearest *labeled* scene Gaussians within
-``knn_radius`` (Warp hash grid). Over all matches of the segment, c1(m), c2(m) are the counts of the most
+``knn_radius`` (Warp hash grid), or within a per-probe radius where that is larger: the paper gives no
+radius for this KNN, and a fixed one smaller than the probe grid spacing (far or grazing surfaces at low
+resolution) leaves most probes of an already-mapped surface unmatched, so p(m) falls below tau_p, the
+surface gets a second label and every later view of it is ambiguous (case i) between the two.
+Over all matches of the segment, c1(m), c2(m) are the counts of the most
 and second most frequent scene labels and l*_m the most frequent one (Eq. 4):
 
     r(m) = c2(m) / c1(m)          (0 when the segment has no match at all)
@@ -177,6 +181,7 @@ def associate_segments(
     tau_p: float = 0.15,
     naive: bool = False,
     fill: bool = False,
+    probe_radius: torch.Tensor | None = None,
 ) -> Association:
     """Associate segments with the scene and update scene confidences in place (Eq. 5).
 
@@ -185,13 +190,23 @@ def associate_segments(
     ``scene_conf`` is modified in place (unless ``naive``). With ``fill``, unlabeled scene Gaussians under a
     labeled segment take its label (``fill_unlabeled``; ``scene_labels`` is then modified in place too).
     ``new_labels(count) -> int tensor`` reserves
-    fresh scene labels for novel segments.
+    fresh scene labels for novel segments. ``probe_radius`` [P] (metres, optional): a per-probe KNN radius
+    used instead of ``radius`` where it is larger (matches the sampling density at the probe's depth).
     """
     dev = probe_means.device
     S = int(num_segments)
     probe_seg = probe_seg.long()
     labeled = torch.nonzero(scene_labels >= 0).squeeze(1)
-    idx, dist = knn(scene_means[labeled], probe_means, k, radius)
+    if probe_radius is None:
+        idx, dist = knn(scene_means[labeled], probe_means, k, radius)
+    else:
+        # the k nearest within r_i are a prefix of the k nearest within max(r): one query, then a cut
+        pr = probe_radius.to(probe_means.device, torch.float32).clamp(min=radius)
+        r_max = float(pr.max()) if pr.numel() else radius
+        idx, dist = knn(scene_means[labeled], probe_means, k, r_max)
+        far = dist > pr[:, None]
+        idx = idx.masked_fill(far, -1)
+        dist = dist.masked_fill(far, float("inf"))
     valid = idx >= 0
     none = torch.full_like(idx, -1)
     if labeled.numel():

@@ -273,6 +273,12 @@ class Mapper:
                     tau_p=cfg.tau_p,
                     naive=self.naive,
                     fill=cfg.fill_unlabeled,
+                    # a probe's log-scale is log(grid spacing at its depth): see init.make_probes
+                    probe_radius=(
+                        torch.exp(probes.log_scales[sel]) * cfg.knn_radius_spacing
+                        if cfg.knn_radius_spacing > 0
+                        else None
+                    ),
                 )
                 labels[sel] = res.seg_labels[probes.seg[sel]]
                 seg_to_label = (probes.seg_ids.cpu().numpy(), res.seg_labels.cpu().numpy())
