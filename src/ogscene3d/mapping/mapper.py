@@ -325,20 +325,7 @@ class Mapper:
             with self.timings.section("longterm"):
                 self._longterm()
         if self.use_refine and cfg.refine_every > 0 and self.keyframe_count % cfg.refine_every == 0:
-            with self.timings.section("refine"):
-                st = global_refinement(
-                    self.map.means,
-                    self.map.labels,
-                    self.map.confidences,
-                    tau_low=cfg.tau_low,
-                    tau_high=cfg.tau_high,
-                    r_search=cfg.r_search,
-                    cluster_radius=cfg.refine_cluster_radius,
-                    graph_k=cfg.refine_graph_k,
-                    include_unlabeled=cfg.refine_unlabeled,
-                )
-                for k, v in st.as_dict().items():
-                    self.timings.add(f"refine_{k}", v)
+            self._refine()
         if self.config.graph.enabled and not self._graph_failed:
             with self.timings.section("graph"):
                 self._graph_step(kf, frame, segments, seg_to_label)
@@ -423,6 +410,24 @@ class Mapper:
         return sem.labels[0].cpu().numpy()
 
     # ------------------------------------------------------------------ end, files
+    def _refine(self) -> None:
+        """Global 3D refinement (Algorithm 1), with its relabelling counts added to the timings."""
+        cfg = self.cfg
+        with self.timings.section("refine"):
+            st = global_refinement(
+                self.map.means,
+                self.map.labels,
+                self.map.confidences,
+                tau_low=cfg.tau_low,
+                tau_high=cfg.tau_high,
+                r_search=cfg.r_search,
+                cluster_radius=cfg.refine_cluster_radius,
+                graph_k=cfg.refine_graph_k,
+                include_unlabeled=cfg.refine_unlabeled,
+            )
+        for k, v in st.as_dict().items():
+            self.timings.add(f"refine_{k}", v)
+
     def finalize(self) -> None:
         """End of stream: one last long-term pass and refinement (per the ablation), then pruning."""
         cfg = self.cfg
@@ -432,18 +437,7 @@ class Mapper:
             with self.timings.section("longterm"):
                 self._longterm()
         if self.use_refine:
-            with self.timings.section("refine"):
-                global_refinement(
-                    self.map.means,
-                    self.map.labels,
-                    self.map.confidences,
-                    tau_low=cfg.tau_low,
-                    tau_high=cfg.tau_high,
-                    r_search=cfg.r_search,
-                    cluster_radius=cfg.refine_cluster_radius,
-                    graph_k=cfg.refine_graph_k,
-                    include_unlabeled=cfg.refine_unlabeled,
-                )
+            self._refine()
         self.map.prune(cfg.prune_opacity, cfg.prune_scale)
         if self._graph is not None and not self._graph_failed:
             try:

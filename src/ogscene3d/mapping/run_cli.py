@@ -7,7 +7,7 @@ import logging
 import time
 from pathlib import Path
 
-from ..config import load_config
+from ..config import add_override_argument, load_config
 from ..errors import DataError
 from ..tracking import add_poses_argument
 
@@ -39,14 +39,7 @@ def add_parser(subparsers) -> None:
         help="which semantic modules run (default: the config's, 'full')",
     )
     p.add_argument("--resume", action="store_true", help="continue from OUT/map.npz")
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="config override, repeatable (e.g. --set mapping.opt_iters=5)",
-    )
+    add_override_argument(p)
     add_poses_argument(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
