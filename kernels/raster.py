@@ -16,8 +16,10 @@ T_MIN = 1e-4
 
 
 @wp.func
-def pixel_of(tid: int, tile_size: int, tiles_x: int, tiles_per_cam: int) -> wp.vec4i:
-    """(camera, tile index within camera, px, py) for a thread id in tile-major order."""
+def tile_pixel(
+    tid: int, tile_size: int, tiles_x: int, tiles_per_cam: int, width: int, height: int
+) -> wp.vec4i:
+    """(output pixel index or -1 outside the image, camera-tile index, x, y) of a tile-major thread id."""
     per_tile = tile_size * tile_size
     ct = tid // per_tile
     local = tid - ct * per_tile
@@ -25,7 +27,11 @@ def pixel_of(tid: int, tile_size: int, tiles_x: int, tiles_per_cam: int) -> wp.v
     tile = ct - cam * tiles_per_cam
     ty = tile // tiles_x
     tx = tile - ty * tiles_x
-    return wp.vec4i(cam, tile, tx * tile_size + local % tile_size, ty * tile_size + local // tile_size)
+    x = tx * tile_size + local % tile_size
+    y = ty * tile_size + local // tile_size
+    if x >= width or y >= height:
+        return wp.vec4i(-1, ct, x, y)
+    return wp.vec4i((cam * height + y) * width + x, ct, x, y)
 
 
 @wp.func
@@ -69,17 +75,14 @@ def raster_kernels(channels: int):
         out_alphas: wp.array(dtype=float),
         last_ids: wp.array(dtype=wp.int32),
     ):
-        tid = wp.tid()
-        pix = pixel_of(tid, tile_size, tiles_x, tiles_per_cam)
-        cam = pix[0]
-        x = pix[2]
-        y = pix[3]
-        if x >= width or y >= height:
+        pix = tile_pixel(wp.tid(), tile_size, tiles_x, tiles_per_cam, width, height)
+        out = pix[0]
+        if out < 0:
             return
-        out = (cam * height + y) * width + x
-        px = float(x) + 0.5
-        py = float(y) + 0.5
-        ct = cam * tiles_per_cam + pix[1]
+        ct = pix[1]
+        cam = ct // tiles_per_cam
+        px = float(pix[2]) + 0.5
+        py = float(pix[3]) + 0.5
         T = float(1.0)
         acc = vec()
         last = int(-1)
@@ -126,20 +129,17 @@ def raster_kernels(channels: int):
         v_opacities: wp.array(dtype=float),
     ):
         """Back to front from the last contributor, undoing the transmittance one Gaussian at a time."""
-        tid = wp.tid()
-        pix = pixel_of(tid, tile_size, tiles_x, tiles_per_cam)
-        cam = pix[0]
-        x = pix[2]
-        y = pix[3]
-        if x >= width or y >= height:
+        pix = tile_pixel(wp.tid(), tile_size, tiles_x, tiles_per_cam, width, height)
+        out = pix[0]
+        if out < 0:
             return
-        out = (cam * height + y) * width + x
+        ct = pix[1]
+        cam = ct // tiles_per_cam
         last = last_ids[out]
         if last < 0:
             return
-        px = float(x) + 0.5
-        py = float(y) + 0.5
-        ct = cam * tiles_per_cam + pix[1]
+        px = float(pix[2]) + 0.5
+        py = float(pix[3]) + 0.5
         T_final = 1.0 - out_alphas[out]
         T = T_final
         v_c = v_out_colors[out]

@@ -12,7 +12,7 @@ import functools
 
 import warp as wp
 
-from .raster import T_MIN, gaussian_alpha, pixel_of
+from .raster import T_MIN, gaussian_alpha, tile_pixel
 
 
 @functools.cache
@@ -43,17 +43,13 @@ def semantic_kernels(buffer_size: int):
         out_weights: wp.array(dtype=float),
         overflows: wp.array(dtype=wp.int32),
     ):
-        tid = wp.tid()
-        pix = pixel_of(tid, tile_size, tiles_x, tiles_per_cam)
-        cam = pix[0]
-        x = pix[2]
-        y = pix[3]
-        if x >= width or y >= height:
+        pix = tile_pixel(wp.tid(), tile_size, tiles_x, tiles_per_cam, width, height)
+        out = pix[0]
+        if out < 0:
             return
-        out = (cam * height + y) * width + x
-        px = float(x) + 0.5
-        py = float(y) + 0.5
-        ct = cam * tiles_per_cam + pix[1]
+        ct = pix[1]
+        px = float(pix[2]) + 0.5
+        py = float(pix[3]) + 0.5
         T = float(1.0)
         labs = veci(-1)
         ws = vecf(0.0)
@@ -125,20 +121,16 @@ def semantic_kernels(buffer_size: int):
         denominator: wp.array(dtype=float),
     ):
         """Accumulate sum_p w_ip R_p[l_i] and sum_p w_ip per Gaussian (dL_sq/ds_i and dL_lin/ds_i)."""
-        tid = wp.tid()
-        pix = pixel_of(tid, tile_size, tiles_x, tiles_per_cam)
-        cam = pix[0]
-        x = pix[2]
-        y = pix[3]
-        if x >= width or y >= height:
+        pix = tile_pixel(wp.tid(), tile_size, tiles_x, tiles_per_cam, width, height)
+        out = pix[0]
+        if out < 0:
             return
-        out = (cam * height + y) * width + x
+        ct = pix[1]
         if use_mask != 0:
             if pixel_mask[out] == wp.uint8(0):
                 return
-        px = float(x) + 0.5
-        py = float(y) + 0.5
-        ct = cam * tiles_per_cam + pix[1]
+        px = float(pix[2]) + 0.5
+        py = float(pix[3]) + 0.5
         labs = buf_labels[out]
         ws = buf_weights[out]
         T = float(1.0)
