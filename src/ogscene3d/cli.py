@@ -15,15 +15,15 @@ from .errors import OGSceneError
 
 # Modules that register a subcommand, in the order they appear in --help.
 _COMMAND_MODULES = [
-    "ogscene3d.render_demo",
-    "ogscene3d.eval.eval_cli",
-    "ogscene3d.datasets.synth_cli",
-    "ogscene3d.viewer.cli",
-    "ogscene3d.mapping.run_cli",
-    "ogscene3d.tracking",
-    "ogscene3d.graph.graph_cli",
-    "ogscene3d.batch",
-    "ogscene3d.segmentation.segment_cli",
+    "ogscene3d.mapping.run_cli",  # run
+    "ogscene3d.eval.eval_cli",  # eval
+    "ogscene3d.viewer.cli",  # live
+    "ogscene3d.datasets.synth_cli",  # synth
+    "ogscene3d.segmentation.segment_cli",  # segment
+    "ogscene3d.tracking",  # track
+    "ogscene3d.graph.graph_cli",  # graph
+    "ogscene3d.batch",  # run-batch, eval-batch
+    "ogscene3d.render_demo",  # render-demo
 ]
 
 
