@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 from collections.abc import Iterator
 
 import torch
@@ -23,27 +24,23 @@ def resolve_device(device: str | torch.device | None = None) -> torch.device:
     return dev
 
 
-_WARP_READY = False
+@functools.cache
+def init_warp():
+    """Initialise Warp once and return the module. Warp logs a line per module load; keep the console for
+    our own progress (users can lower the log level again)."""
+    import warp as wp
 
-
-def _mark_ready() -> None:
-    global _WARP_READY
-    _WARP_READY = True
+    if hasattr(wp, "LOG_WARNING"):
+        wp.config.log_level = wp.LOG_WARNING
+    else:
+        wp.config.quiet = True
+    wp.init()
+    return wp
 
 
 def warp_device(device: torch.device):
     """The Warp device for a torch device (initialises Warp on first use)."""
-    import warp as wp
-
-    # Warp logs a line per module load; keep the console for our own progress (users can lower it again).
-    if not _WARP_READY:
-        if hasattr(wp, "LOG_WARNING"):
-            wp.config.log_level = wp.LOG_WARNING
-        else:
-            wp.config.quiet = True
-        wp.init()
-        _mark_ready()
-    return wp.device_from_torch(device)
+    return init_warp().device_from_torch(device)
 
 
 @contextlib.contextmanager

@@ -14,7 +14,7 @@ from typing import Any
 import torch
 
 from ._validate import check_image_size, check_tensor
-from .device import warp_stream
+from .device import init_warp, warp_stream
 
 RENDER_MODES = ("RGB", "D", "ED", "RGB+D", "RGB+ED")
 # Channels blended per kernel pass; wider inputs are blended in chunks (each chunk is its own Warp
@@ -23,12 +23,7 @@ MAX_CHANNELS_PER_PASS = 32
 
 
 def _wp():
-    import warp as wp
-
-    from .device import warp_device
-
-    warp_device(torch.device("cpu"))  # one-time Warp initialisation (quiet logging)
-    return wp
+    return init_warp()
 
 
 def _kernels():

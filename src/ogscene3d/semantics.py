@@ -285,4 +285,4 @@ def _semantic_render(bins: TileBins, buffer_size: int, outputs, return_buffer: b
     )
 
 
-__all__ = ["SemanticRender", "render_semantics", "rendering_contribution", "TileBins"]
+__all__ = ["SemanticRender", "render_semantics", "rendering_contribution"]
