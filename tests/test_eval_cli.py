@@ -237,3 +237,35 @@ def test_eval_cli_on_a_generated_synthetic_scene(tmp_path, monkeypatch, capsys):
     import cv2
 
     assert cv2.imread(str(pic)).shape == (36 + 22, 4 * 48 + 3 * 4, 3)
+
+
+def test_unobserved_gt_points_are_void_unless_asked_for(scene, monkeypatch):
+    """gt/points.ply's ``observed`` flag: points no frame saw are left out by default (--gt-points all
+    keeps them). Here the table is never seen and the map labels its Gaussians as chairs."""
+    run, scene_dir = scene
+    ply = scene_dir / "gt" / "points.ply"
+    v = PlyData.read(str(ply))["vertex"].data
+    arr = np.zeros(len(v), dtype=v.dtype.descr + [("observed", "u1")])
+    for n in v.dtype.names:
+        arr[n] = v[n]
+    arr["observed"] = np.asarray(v["instance"]) != 2
+    _write_ply(ply, arr)
+    g = PlyData.read(str(run / "gaussians.ply"))["vertex"].data.copy()
+    g["label"] = [7] * 10 + [9] * 5  # the table's Gaussians carry the chair label
+    _write_ply(run / "gaussians.ply", g)
+    gt = load_ground_truth(scene_dir)
+    assert gt.observed.tolist() == [True] * 5 + [False] * 5 + [True] * 5
+    seen = evaluate_run(run, scene_dir, protocols=["hovsg"], ignore=["wall"], mapping="overlap")
+    every = evaluate_run(
+        run, scene_dir, protocols=["hovsg"], ignore=["wall"], mapping="overlap", gt_points="all"
+    )
+    assert seen.report["gt_points"] == {"points": "observed", "num_scored": 10, "observed_fraction": 2 / 3}
+    assert every.report["gt_points"]["points"] == "all"
+    # observed: the chair is exact and the table is not scored; all: the unseen table counts as chair
+    assert seen.semantic["hovsg"].miou == pytest.approx(1.0)
+    assert every.semantic["hovsg"].miou == pytest.approx((5 / 10 + 0.0) / 2)
+    with pytest.raises(ValueError, match="gt_points"):
+        evaluate_run(run, scene_dir, gt_points="some")
+    argv = ["eval", str(run), "--gt", str(scene_dir), "--mapping", "overlap", "--gt-points", "all"]
+    assert _main(argv, monkeypatch) == 0
+    assert json.loads((run / "metrics.json").read_text())["gt_points"]["points"] == "all"

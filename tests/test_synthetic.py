@@ -15,7 +15,7 @@ from test_datasets import reprojection_error
 
 from ogscene3d.datasets import load_instances, make_synthetic_scene, open_dataset
 from ogscene3d.datasets.procedural import RELATION_VOCABULARY, STRUCTURAL_CLASSES, build_room
-from ogscene3d.datasets.synthetic import MeshRenderer, intrinsics_for
+from ogscene3d.datasets.synthetic import MeshRenderer, intrinsics_for, observed_in_frame
 from ogscene3d.errors import DataError
 from ogscene3d.segmentation.precomputed import read_segments
 
@@ -159,7 +159,7 @@ def test_ply_and_json_formats(scene):
     gt = json.loads((scene / "gt" / "instances.json").read_text())
     pts = PlyData.read(str(scene / "gt" / "points.ply"))["vertex"]
     names = [p.name for p in pts.properties]
-    assert names == ["x", "y", "z", "red", "green", "blue", "instance", "class"]
+    assert names == ["x", "y", "z", "red", "green", "blue", "instance", "class", "observed"]
     counts = np.bincount(np.asarray(pts["instance"]))
     for k, v in gt["instances"].items():
         assert counts[int(k)] == v["num_points"] >= 300
@@ -171,6 +171,38 @@ def test_ply_and_json_formats(scene):
     mesh = PlyData.read(str(scene / "gt" / "mesh.ply"))
     assert {p.name for p in mesh["face"].properties} == {"vertex_indices", "instance", "class"}
     assert set(np.unique(mesh["face"]["instance"]).tolist()) == {int(k) for k in gt["instances"]}
+
+
+def test_observed_flag_marks_the_points_some_frame_sees(scene):
+    ds = open_dataset(scene)
+    pts = PlyData.read(str(scene / "gt" / "points.ply"))["vertex"]
+    xyz = np.stack([pts["x"], pts["y"], pts["z"]], 1).astype(np.float64)
+    inst = np.asarray(pts["instance"])
+    observed = np.asarray(pts["observed"]).astype(bool)
+    assert 0.1 < observed.mean() < 0.95  # 8 frames see part of the room, never all of it
+    again = np.zeros_like(observed)
+    seen_ids: set[int] = set()
+    for f in ds:
+        again |= observed_in_frame(xyz, inst, f.pose, f.K, f.depth, f.gt_instances)
+        seen_ids |= set(np.unique(f.gt_instances).tolist())
+    # the written depth is quantised to 1/5000 m and the points to float32: a few borderline points flip
+    assert (again != observed).mean() < 1e-3
+    # an instance has observed points exactly when some frame shows it (the smallest show a few pixels)
+    assert set(np.unique(inst[observed]).tolist()) <= seen_ids
+    big = [i for i in seen_ids if (ds[0].gt_instances == i).sum() > 50]
+    assert all(observed[inst == i].any() for i in big)
+
+
+def test_observed_in_frame_checks_depth_and_instance():
+    K = np.array([[10.0, 0, 5], [0, 10.0, 5], [0, 0, 1]])
+    depth = np.full((10, 10), 2.0)
+    inst = np.ones((10, 10), dtype=np.int32)
+    inst[:, 5:] = 2
+    pts = np.array([[-0.5, 0, 2.0], [-0.5, 0, 3.0], [0.5, 0, 2.0], [-0.5, 0, -2.0], [5.0, 0, 2.0]])
+    ids = np.array([1, 1, 1, 1, 1])
+    # seen / occluded (behind the surface) / wrong instance at that pixel / behind the camera / outside
+    seen = observed_in_frame(pts, ids, np.eye(4), K, depth, inst)
+    assert seen.tolist() == [True, False, False, False, False]
 
 
 def test_objects_appear_progressively(scene):

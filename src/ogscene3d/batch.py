@@ -220,6 +220,7 @@ class EvalOptions:
     assoc_radius: float | None = 0.1
     num_views: int = 0
     plots: bool = True
+    gt_points: str = "observed"
 
 
 def _peak_rss_mb() -> float:
@@ -364,6 +365,7 @@ def evaluate_scene(
         num_views=opts.num_views,
         out_dir=run if opts.plots else None,
         device=device,
+        gt_points=opts.gt_points,  # type: ignore[arg-type]
     )
     report = res.report
     if opts.plots:
@@ -834,6 +836,12 @@ def _add_eval_args(p: Any) -> None:
         "--views", type=int, default=0, help="also render this many views per synthetic scene (2D)"
     )
     p.add_argument("--no-plots", action="store_true", help="write no PNG")
+    p.add_argument(
+        "--gt-points",
+        default="observed",
+        choices=["observed", "all"],
+        help="score only GT points some frame saw, where the GT says so (synthetic; default), or all",
+    )
 
 
 def _eval_options(args: argparse.Namespace) -> EvalOptions:
@@ -852,6 +860,7 @@ def _eval_options(args: argparse.Namespace) -> EvalOptions:
         min_opacity=args.min_opacity,
         num_views=args.views,
         plots=not args.no_plots,
+        gt_points=args.gt_points,
     )
 
 

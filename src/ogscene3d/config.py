@@ -129,6 +129,11 @@ class MappingConfig:
     longterm_knn_k: int = 5  # Gaussians associated with each back-projected memory pixel (within knn_radius)
     fill_unlabeled: bool = True  # unlabeled Gaussians under a labeled segment take its label
     refine_unlabeled: bool = False  # individual refinement also labels unlabeled Gaussians (confidence 0)
+    # Beyond the paper (mapping/merge.py): an ambiguous segment that contains two labels' whole visible
+    # extent (>= merge_contain each) with SAM score >= merge_min_score merges them (one object, two labels).
+    merge_duplicates: bool = True
+    merge_contain: float = 0.8
+    merge_min_score: float = 0.95
 
 
 @dataclass

@@ -45,7 +45,11 @@ the table, pictures over furniture). "under"/"below" never appear; they are the 
 "on"/"above" ("B under A" == "A on B"). "next to" is symmetric (stored with the smaller id first).
 
 ``gt/points.ply`` (binary little-endian) vertex properties: ``x y z`` float32 (world, metres),
-``red green blue`` uint8 (albedo), ``instance`` int32, ``class`` int32 (class id as above).
+``red green blue`` uint8 (albedo), ``instance`` int32, ``class`` int32 (class id as above),
+``observed`` uint8 (1 when some frame of the sequence sees the point: it projects into the image onto a
+pixel of its own instance whose ray-cast depth agrees within ``OBSERVED_TOLERANCE`` plus two pixel
+footprints). The evaluation leaves unobserved points out by default, as a scanned GT mesh does: a
+ceiling no frame looks at cannot be mapped by any method, and counting it only adds noise.
 Points are sampled uniformly on the surfaces (``POINTS_PER_M2`` per square metre, at least
 ``MIN_POINTS_PER_INSTANCE`` per instance). ``gt/mesh.ply``: vertices ``x y z red green blue`` and
 faces ``vertex_indices`` plus ``instance`` / ``class`` int32 per face.
@@ -85,8 +89,9 @@ log = logging.getLogger(__name__)
 REPLICA_DEPTH_SCALE = 6553.5
 POINTS_PER_M2 = 1000.0
 MIN_POINTS_PER_INSTANCE = 300
+OBSERVED_TOLERANCE = 0.02  # metres, plus two pixel footprints (see ``observed_in_frame``)
 HFOV_DEG = 75.0
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 2  # 2: gt/points.ply carries the per-point "observed" flag
 
 
 # --------------------------------------------------------------------------------------- trajectory
@@ -276,19 +281,49 @@ def _write_ply(path: Path, elements: list) -> None:
         atomic_write_bytes(path, buf.getvalue())
 
 
-def write_points_ply(path: Path, pts: dict[str, np.ndarray], classes_of: np.ndarray) -> None:
+def observed_in_frame(
+    xyz: np.ndarray,
+    instance: np.ndarray,
+    pose: np.ndarray,
+    K: np.ndarray,
+    depth: np.ndarray,
+    inst: np.ndarray,
+) -> np.ndarray:
+    """Bool [M]: the points ``xyz`` (world) that the frame (c2w ``pose``, clean ray-cast ``depth`` and
+    instance map ``inst``) sees: in the image, on a pixel of their own instance, at the pixel's depth."""
+    h, w = depth.shape
+    w2c = np.linalg.inv(pose)
+    p = xyz @ w2c[:3, :3].T + w2c[:3, 3]
+    z = p[:, 2]
+    front = z > 1e-6
+    zs = np.where(front, z, 1.0)
+    u = np.floor(K[0, 0] * p[:, 0] / zs + K[0, 2]).astype(np.int64)
+    v = np.floor(K[1, 1] * p[:, 1] / zs + K[1, 2]).astype(np.int64)
+    ok = front & (u >= 0) & (v >= 0) & (u < w) & (v < h)
+    seen = np.zeros(len(xyz), dtype=bool)
+    uu, vv, zz = u[ok], v[ok], z[ok]
+    # a pixel spans z / f metres: surfaces seen at a grazing angle differ by about that much in depth
+    tol = OBSERVED_TOLERANCE + 2.0 * zz / K[0, 0]
+    seen[ok] = (inst[vv, uu] == instance[ok]) & (np.abs(depth[vv, uu] - zz) < tol)
+    return seen
+
+
+def write_points_ply(
+    path: Path, pts: dict[str, np.ndarray], classes_of: np.ndarray, observed: np.ndarray | None = None
+) -> None:
     from plyfile import PlyElement
 
     n = len(pts["xyz"])
     arr = np.empty(
         n,
         dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1"),
-               ("instance", "<i4"), ("class", "<i4")],
+               ("instance", "<i4"), ("class", "<i4"), ("observed", "u1")],
     )  # fmt: skip
     arr["x"], arr["y"], arr["z"] = pts["xyz"].T
     arr["red"], arr["green"], arr["blue"] = pts["rgb"].T
     arr["instance"] = pts["instance"]
     arr["class"] = classes_of[pts["instance"]]
+    arr["observed"] = 1 if observed is None else observed.astype(np.uint8)
     _write_ply(path, [PlyElement.describe(arr, "vertex")])
 
 
@@ -473,8 +508,11 @@ def make_synthetic_scene(
     elif callable(progress):
         steps = iter(progress(range(frames)))
     max_depth = 65535.0 / REPLICA_DEPTH_SCALE
+    pts = sample_surface_points(room, seed)
+    observed = np.zeros(len(pts["xyz"]), dtype=bool)
     for i in steps:
         rgb, depth, inst = renderer.render(poses[i], K, width, height)
+        observed |= observed_in_frame(pts["xyz"], pts["instance"], poses[i], K, depth, inst)
         valid = depth > 0
         if depth_noise > 0:
             depth = depth + noise_rng.normal(0.0, depth_noise, depth.shape).astype(np.float32)
@@ -492,8 +530,7 @@ def make_synthetic_scene(
         _encode(out / "gt" / f"instance{stem}.png", inst.astype(np.uint16))
         write_segments(out / "segments", f"frame{stem}", seg.ids, seg.scores)
 
-    pts = sample_surface_points(room, seed)
-    write_points_ply(out / "gt" / "points.ply", pts, classes_of)
+    write_points_ply(out / "gt" / "points.ply", pts, classes_of, observed)
     write_mesh_ply(out / "gt" / "mesh.ply", room, classes_of)
     num_points = np.bincount(pts["instance"], minlength=len(room.objects) + 1)
     atomic_write_text(

@@ -67,6 +67,13 @@ def add_parser(subparsers: Any) -> None:
         help="metres; Gaussians farther from the GT take no part in overlap mapping and node matching "
         "(default 0.1; 0 = no limit)",
     )
+    p.add_argument(
+        "--gt-points",
+        default="observed",
+        choices=["observed", "all"],
+        help="score only GT points some frame saw, where the GT says so (synthetic scenes; default), "
+        "or all of them",
+    )
     p.add_argument("--min-node-iou", type=float, default=0.1, help="IoU for a node to match a GT instance")
     p.add_argument(
         "--traj",
@@ -157,6 +164,7 @@ def _run(args: argparse.Namespace) -> int:
         view_frames=_int_list(args.view_frames),
         out_dir=None if args.no_plots else (args.out or args.run_dir),
         device=args.device,
+        gt_points=args.gt_points,
     )
     report = result.report
     if traj is not None:

@@ -62,6 +62,7 @@ class GroundTruth:
     inverse_relations: list[tuple[str, str]] | None = None
     class_ids: list[int] | None = None  # the dataset's own id of each class (for its 2D label maps)
     source: str = ""
+    observed: np.ndarray | None = None  # [M] bool, seen by some frame (synthetic scenes); None = unknown
 
     def class_index_of_ids(self, ids: Any) -> np.ndarray:
         """Dataset class ids (e.g. a GT class image) -> indices into ``class_names``, -1 if unknown."""
@@ -326,6 +327,7 @@ def _load_instance_gt(folder: Path, inst_json: Path) -> GroundTruth:
             f"{ply}: no instance field ({'/'.join(_INSTANCE_FIELDS)}) to join with {inst_json.name}"
         )
     inst = _int_field(v, inst_field, ply)
+    observed = _int_field(v, "observed", ply).astype(bool) if "observed" in names else None
     if table.class_table:
         class_ids: list[int] | None = sorted(table.class_table)
         class_names = [table.class_table[i] for i in class_ids]
@@ -365,6 +367,7 @@ def _load_instance_gt(folder: Path, inst_json: Path) -> GroundTruth:
         inverse_relations=table.inverses,
         class_ids=class_ids,
         source=str(folder),
+        observed=observed,
     )
 
 

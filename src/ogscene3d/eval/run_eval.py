@@ -135,6 +135,7 @@ def evaluate_run(
     view_frames: Sequence[int] | None = None,
     out_dir: str | Path | None = None,
     device: str = "cpu",
+    gt_points: Literal["observed", "all"] = "observed",
 ) -> EvalResult:
     """Evaluate ``run_dir`` against ``gt_path`` (see the module docstring).
 
@@ -154,7 +155,12 @@ def evaluate_run(
             report 2D semantic metrics ("semantic_2d"); 0 / None = no rendering.
         out_dir: where the side-by-side view PNGs go (None = no pictures).
         device: rendering device.
+        gt_points: "observed" scores only the GT points that some frame of the sequence saw, when the
+            ground truth says which (synthetic scenes: ``observed`` in gt/points.ply; unobserved points
+            become void); "all" scores every point, as HOV-SG does on its meshes.
     """
+    if gt_points not in ("observed", "all"):
+        raise ValueError(f"gt_points must be 'observed' or 'all', got {gt_points!r}")
     for p in protocols:
         if p not in PROTOCOLS:
             raise ValueError(f"unknown protocol {p!r}; expected one of {PROTOCOLS}")
@@ -184,13 +190,25 @@ def evaluate_run(
             f"'{mapping_info['method']}' label mapping; the others count as unassigned"
         )
 
+    gt_classes = gt.classes
+    gt_block: dict[str, Any] = {"points": "all", "num_scored": int((gt.classes >= 0).sum())}
+    if gt_points == "observed" and gt.observed is not None:
+        gt_classes = np.where(gt.observed, gt.classes, -1)
+        gt_block = {
+            "points": "observed",
+            "num_scored": int((gt_classes >= 0).sum()),
+            "observed_fraction": float(gt.observed.mean()) if gt.observed.size else 0.0,
+        }
+    elif gt_points == "observed":
+        notes.append("the ground truth does not say which points were observed: every GT point is scored")
+
     semantic: dict[str, SegmentationMetrics] = {}
     for p in protocols:
         semantic[p] = evaluate_semantic_3d(
             run.means,
             pred_classes,
             gt.points,
-            gt.classes,
+            gt_classes,
             gt.class_names,
             protocol=p,  # type: ignore[arg-type]
             ignore=ignore,
@@ -239,6 +257,7 @@ def evaluate_run(
         "ground_truth": gt.source,
         "num_gaussians_evaluated": int(run.means.shape[0]),
         "num_gt_points": int(gt.points.shape[0]),
+        "gt_points": gt_block,
         "label_mapping": mapping_info,
         "semantic_3d": {p: m.to_dict() for p, m in semantic.items()},
         "semantic_2d": semantic_2d,

@@ -40,12 +40,15 @@ def run_ablation(
     device: str | None = None,
     protocols: Sequence[str] = ("hovsg",),
     max_frames: int | None = None,
+    gt_points: Sequence[str] = ("observed",),
 ) -> dict[str, dict]:
     """Map ``data`` once per ablation into ``out_root/<ablation>`` and evaluate against ``gt``.
 
-    Returns {ablation: {"miou", "fmiou", "macc" (per protocol, in [0,1]), "seconds", "gaussians",
-    "labels"}}. Scene labels are named by majority overlap with the GT instances (an oracle naming that
-    is the same for every ablation, so differences come from the mapping alone).
+    Returns {ablation: {protocol: {"miou", "fmiou", "macc"} (in [0,1]), "seconds", "gaussians",
+    "labels"}}; the protocol entries score the GT points chosen by ``gt_points[0]`` ("observed" or "all",
+    see :func:`ogscene3d.eval.evaluate_run`), and every choice is also under "<protocol>/<choice>".
+    Scene labels are named by majority overlap with the GT instances (an oracle naming that is the same
+    for every ablation, so differences come from the mapping alone).
     """
     from ..datasets import open_dataset
     from ..eval.run_eval import evaluate_run
@@ -62,14 +65,18 @@ def run_ablation(
         t0 = time.perf_counter()
         mapper = map_sequence(cfg, ds, out, device)
         seconds = time.perf_counter() - t0
-        ev = evaluate_run(out, gt, protocols=tuple(protocols), mapping="overlap")
         row: dict = {
             "seconds": seconds,
             "gaussians": len(mapper.map),
             "labels": int(mapper.timings.counts.get("labels", 0)),
         }
-        for proto, m in ev.semantic.items():
-            row[proto] = {"miou": m.miou, "fmiou": m.fmiou, "macc": m.macc}
+        for i, gp in enumerate(gt_points):
+            ev = evaluate_run(out, gt, protocols=tuple(protocols), mapping="overlap", gt_points=gp)  # type: ignore[arg-type]
+            for proto, m in ev.semantic.items():
+                scores = {"miou": m.miou, "fmiou": m.fmiou, "macc": m.macc}
+                row[f"{proto}/{gp}"] = scores
+                if i == 0:
+                    row[proto] = scores
         results[abl] = row
     return results
 

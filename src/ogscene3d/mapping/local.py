@@ -152,6 +152,7 @@ class Association:
     r: torch.Tensor  # [S] float32 ambiguity ratio
     p: torch.Tensor  # [S] float32 spatial-semantic coherence
     top_label: torch.Tensor  # [S] int64 l*_m (-1 when no match)
+    second_label: torch.Tensor  # [S] int64 the second most frequent matched label (-1 when none)
     updated: torch.Tensor  # [U] int64 scene Gaussian indices whose confidence was updated (Eq. 5)
     filled: int = 0  # unlabeled scene Gaussians that took a segment's label (``fill_unlabeled``)
 
@@ -217,7 +218,7 @@ def associate_segments(
 
     # c1, c2, l*: over all (segment, matched label) pairs of the segment
     pair_seg = probe_seg[:, None].expand_as(idx)[valid]
-    top1, c1, _, c2 = group_top2(pair_seg, match_lab[valid], S)
+    top1, c1, top2, c2 = group_top2(pair_seg, match_lab[valid], S)
     r = torch.where(c1 > 0, c2.float() / c1.clamp(min=1).float(), torch.zeros(S, device=dev))
     # p(m): fraction of the segment's probes whose own matched label is l*_m
     hat = row_majority(match_lab, valid)
@@ -263,4 +264,4 @@ def associate_segments(
         filled = fill_unlabeled(
             probe_means, probe_seg, fconf, seg_labels, scene_means, scene_labels, scene_conf, radius
         )
-    return Association(seg_labels, case, r, p, top1, updated, filled)
+    return Association(seg_labels, case, r, p, top1, top2, updated, filled)

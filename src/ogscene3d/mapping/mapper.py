@@ -44,8 +44,9 @@ from ..frame import Frame
 from ..gaussians import GaussianMap
 from .init import make_probes
 from .keyframes import KeyframeSelector
-from .local import associate_segments
+from .local import CASE_AMBIGUOUS, CASE_MATCHED, associate_segments, fill_unlabeled
 from .longterm import MemoryBuffer, MemoryEntry, longterm_view_update
+from .merge import duplicate_label_pairs, merge_labels
 from .optimize import View, optimize_map
 from .refine import global_refinement
 
@@ -258,6 +259,7 @@ class Mapper:
             in_seg = probes.seg >= 0
             if S and bool(in_seg.any()):
                 sel = torch.nonzero(in_seg).squeeze(1)
+                merging = self._merging(segments)
                 res = associate_segments(
                     probes.means[sel],
                     probes.seg[sel],
@@ -272,7 +274,7 @@ class Mapper:
                     tau_valid=cfg.tau_valid,
                     tau_p=cfg.tau_p,
                     naive=self.naive,
-                    fill=cfg.fill_unlabeled,
+                    fill=cfg.fill_unlabeled and not merging,
                     # a probe's log-scale is log(grid spacing at its depth): see init.make_probes
                     probe_radius=(
                         torch.exp(probes.log_scales[sel]) * cfg.knn_radius_spacing
@@ -280,6 +282,19 @@ class Mapper:
                         else None
                     ),
                 )
+                if merging:
+                    self._merge_duplicates(frame, segments, scores, probes, res)
+                    if cfg.fill_unlabeled:
+                        res.filled = fill_unlabeled(
+                            probes.means[sel],
+                            probes.seg[sel],
+                            probes.conf[sel],
+                            res.seg_labels,
+                            self.map.means,
+                            self.map.labels,
+                            self.map.confidences,
+                            cfg.knn_radius,
+                        )
                 labels[sel] = res.seg_labels[probes.seg[sel]]
                 seg_to_label = (probes.seg_ids.cpu().numpy(), res.seg_labels.cpu().numpy())
                 for name, v in res.counts().items():
@@ -341,6 +356,61 @@ class Mapper:
                 self.save_checkpoint(self._checkpoint_dir / "map.npz")
         return True
 
+    def _merging(self, segments: np.ndarray | None) -> bool:
+        return (
+            self.cfg.merge_duplicates
+            and not self.naive
+            and segments is not None
+            and bool((self.map.labels >= 0).any())
+        )
+
+    def _merge_duplicates(
+        self, frame: Frame, segments: np.ndarray, scores: dict[int, float], probes, res
+    ) -> None:
+        """Merge scene labels that one confident ambiguous segment shows to be one object (``merge.py``);
+        the segment then takes the merged label (case ii), and this keyframe's segment labels follow."""
+        cfg = self.cfg
+        seg_ids = probes.seg_ids
+        score = torch.tensor(
+            [scores.get(int(i), 1.0) for i in seg_ids.tolist()], dtype=torch.float32, device=self.device
+        )
+        amb = torch.nonzero((res.seg_case == CASE_AMBIGUOUS) & (score >= cfg.merge_min_score)).squeeze(1)
+        if amb.numel() == 0:
+            return
+        with self.timings.section("merge"):
+            ids = torch.as_tensor(np.asarray(segments), dtype=torch.int64, device=self.device)
+            lut = torch.full(
+                (int(max(int(ids.max()), int(seg_ids.max()))) + 1,), -1, dtype=torch.int64, device=self.device
+            )
+            lut[seg_ids] = torch.arange(seg_ids.numel(), device=self.device)
+            rendered = self._render_labels(frame)
+            pairs = duplicate_label_pairs(
+                lut[ids.clamp(min=0)].masked_fill(ids <= 0, -1),
+                rendered.to(self.device),
+                amb,
+                res.top_label,
+                res.second_label,
+                cfg.merge_contain,
+            )
+            mapping = merge_labels(self.map.labels, pairs)
+            if not mapping:
+                return
+
+            def follow(x: torch.Tensor) -> torch.Tensor:
+                out = x.clone()
+                for a, b in mapping.items():
+                    out[x == a] = b
+                return out
+
+            res.top_label = follow(res.top_label)
+            res.second_label = follow(res.second_label)
+            res.seg_labels = follow(res.seg_labels.long()).to(torch.int32)
+            merged = amb[res.top_label[amb] == res.second_label[amb]]
+            res.seg_labels[merged] = res.top_label[merged].to(torch.int32)
+            res.seg_case[merged] = CASE_MATCHED
+            self.timings.add("labels_merged", len(mapping))
+            self.timings.add("segments_merged", int(merged.numel()))
+
     def _longterm(self) -> None:
         cfg = self.cfg
         for entry in self.memory.next_views(cfg.longterm_views):
@@ -378,7 +448,7 @@ class Mapper:
                 lut[ids] = labs
                 label_map = lut[np.asarray(segments)]
             else:
-                label_map = self._render_labels(frame)
+                label_map = self._render_labels(frame).cpu().numpy()
             self._graph.observe(kf, frame, label_map)
             if self._graph.is_due(kf):
                 gm = self.map
@@ -388,7 +458,8 @@ class Mapper:
             self._graph_failed = True
             self.timings.add("graph_errors")
 
-    def _render_labels(self, frame: Frame) -> np.ndarray:
+    def _render_labels(self, frame: Frame) -> torch.Tensor:
+        """The map's label per pixel [H,W] (-1 where nothing labeled renders) at the frame's pose."""
         from ..render import render_semantics
 
         gm = self.map
@@ -407,7 +478,7 @@ class Mapper:
                 frame.width,
                 frame.height,
             )
-        return sem.labels[0].cpu().numpy()
+        return sem.labels[0]
 
     # ------------------------------------------------------------------ end, files
     def _refine(self) -> None:

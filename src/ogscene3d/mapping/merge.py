@@ -1,0 +1,108 @@
+"""Merging duplicate scene labels (an extension beyond the paper, ``mapping.merge_duplicates``).
+
+The paper's local association leaves a segment unlabeled when its KNN matches are split between two
+scene labels (case i, r(m) >= tau_valid). Two situations produce that: the segment covers two objects
+(SAM under-segmentation), or one object carries two labels, because an earlier view over-segmented it or
+its probes found no match. The paper has no way out of the second: every later view of that object is
+ambiguous again and all Gaussians added there stay unlabeled.
+
+We tell the two apart in the keyframe's own view. The map is rendered at the keyframe pose (the label
+map S, before this keyframe's Gaussians are added); for an ambiguous segment m with top labels l1, l2,
+the visible extent of each label is |S = l| and the part inside the segment |S = l, seg = m|. When both
+labels lie almost entirely inside one confident segment (each containment >= ``tau_contain``, SAM score
+>= ``min_score``), the segment sees one object that carries two labels, and l2 is merged into l1 (the
+label with more Gaussians keeps its id). A segment covering two distinct objects that are each visible
+elsewhere in the view fails the containment test; two small objects that SAM fused are usually scored
+low, and the score gate keeps them apart.
+"""
+
+from __future__ import annotations
+
+import torch
+
+
+def duplicate_label_pairs(
+    seg_index: torch.Tensor,
+    rendered: torch.Tensor,
+    candidates: torch.Tensor,
+    top1: torch.Tensor,
+    top2: torch.Tensor,
+    tau_contain: float = 0.8,
+) -> torch.Tensor:
+    """Label pairs [P,2] (l1, l2) that a candidate segment shows to be one object.
+
+    seg_index [H,W] int: segment index per pixel (-1 outside every segment); rendered [H,W] int: the map's
+    label per pixel (-1 none); candidates [C]: segment indices to test, with their two most frequent
+    matched labels top1[c], top2[c] (both >= 0). A pair is returned when, for both labels, at least
+    ``tau_contain`` of the label's rendered pixels lie inside the segment.
+    """
+    dev = seg_index.device
+    empty = torch.zeros((0, 2), dtype=torch.int64, device=dev)
+    if candidates.numel() == 0:
+        return empty
+    seg = seg_index.reshape(-1).long()
+    ren = rendered.reshape(-1).long()
+    l1 = top1[candidates].long()
+    l2 = top2[candidates].long()
+    ok = (l1 >= 0) & (l2 >= 0) & (l1 != l2)
+    if not bool(ok.any()):
+        return empty
+    cand, l1, l2 = candidates[ok].long(), l1[ok], l2[ok]
+    # visible extent |S = l| of the few labels involved, and the joint counts |S = l, seg = m|
+    labels = torch.unique(torch.cat([l1, l2]))
+    nl = labels.numel()
+    pos = torch.searchsorted(labels, ren.clamp(min=0)).clamp(max=nl - 1)
+    hit = (ren >= 0) & (labels[pos] == ren)
+    extent = torch.bincount(pos[hit], minlength=nl)
+    both = hit & (seg >= 0)
+    keys, counts = torch.unique(seg[both] * nl + pos[both], return_counts=True)
+
+    def inside(lab: torch.Tensor) -> torch.Tensor:
+        li = torch.searchsorted(labels, lab)
+        want = cand * nl + li
+        if keys.numel() == 0:
+            return torch.zeros(want.shape, device=dev)
+        j = torch.searchsorted(keys, want).clamp(max=keys.numel() - 1)
+        n = torch.where(keys[j] == want, counts[j], torch.zeros_like(counts[j]))
+        return n.float() / extent[li].clamp(min=1).float()
+
+    keep = (inside(l1) >= tau_contain) & (inside(l2) >= tau_contain)
+    return torch.stack([l1[keep], l2[keep]], 1)
+
+
+def merge_labels(labels: torch.Tensor, pairs: torch.Tensor) -> dict[int, int]:
+    """Merge each pair's labels in ``labels`` [N] (in place); the label with more Gaussians keeps its id.
+
+    Chains (a~b, b~c) collapse into one label. Returns {dropped label: kept label}."""
+    if pairs.numel() == 0:
+        return {}
+    parent: dict[int, int] = {}
+
+    def find(x: int) -> int:
+        while parent.get(x, x) != x:
+            x = parent[x]
+        return x
+
+    # a handful of pairs per keyframe: a union-find over them in Python is cheap
+    for a, b in pairs.tolist():
+        ra, rb = find(a), find(b)
+        if ra != rb:
+            parent[rb] = ra
+    groups: dict[int, list[int]] = {}
+    for x in set(parent) | set(parent.values()):
+        groups.setdefault(find(x), []).append(x)
+    mapping: dict[int, int] = {}
+    for members in groups.values():
+        ids = torch.tensor(sorted(set(members)), dtype=labels.dtype, device=labels.device)
+        counts = (labels[:, None] == ids[None, :]).sum(0)
+        keep = int(ids[int(torch.argmax(counts))])
+        for m in ids.tolist():
+            if m != keep:
+                mapping[int(m)] = keep
+    if mapping:
+        src = torch.tensor(list(mapping), dtype=labels.dtype, device=labels.device)
+        dst = torch.tensor(list(mapping.values()), dtype=labels.dtype, device=labels.device)
+        hit = labels[:, None] == src[None, :]
+        rows, cols = torch.nonzero(hit, as_tuple=True)
+        labels[rows] = dst[cols]
+    return mapping

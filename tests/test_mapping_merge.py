@@ -1,0 +1,128 @@
+"""Merging duplicate scene labels (mapping/merge.py): the 2D containment test, the merge itself, and the
+mapper using it on a wall whose left object was first over-segmented."""
+
+import numpy as np
+import torch
+
+from ogscene3d.config import load_config
+from ogscene3d.frame import Frame
+from ogscene3d.mapping.mapper import Mapper
+from ogscene3d.mapping.merge import duplicate_label_pairs, merge_labels
+
+W, H, F = 32, 24, 24.0
+K = np.array([[F, 0, W / 2], [0, F, H / 2], [0, 0, 1]], dtype=np.float32)
+
+
+def test_containment_decides_which_pairs_merge(device):
+    # rendered labels: 5 on columns 0-3, 6 on columns 4-7, 7 on columns 8-15 (8 rows)
+    rendered = torch.full((8, 16), 7, dtype=torch.int64)
+    rendered[:, :4] = 5
+    rendered[:, 4:8] = 6
+    seg = torch.full((8, 16), -1, dtype=torch.int64)
+    seg[:, :8] = 0  # segment 0 holds all of labels 5 and 6
+    seg[:, 8:11] = 1  # segment 1 holds 3 of label 7's 8 columns ...
+    top1 = torch.tensor([5, 7])
+    top2 = torch.tensor([6, 6])  # ... and none of label 6
+    pairs = duplicate_label_pairs(
+        seg.to(device), rendered.to(device), torch.tensor([0, 1], device=device), top1.to(device),
+        top2.to(device), tau_contain=0.8,
+    )  # fmt: skip
+    assert pairs.cpu().tolist() == [[5, 6]]
+    # a label that spills out of the segment does not merge
+    rendered[0, 12] = 5
+    rendered[:4, 8] = 5  # label 5 now has 32 + 5 pixels, 5 of them outside segment 0 (86% inside)
+    assert duplicate_label_pairs(seg, rendered, torch.tensor([0]), top1, top2, 0.9).shape == (0, 2)
+    assert duplicate_label_pairs(seg, rendered, torch.tensor([0]), top1, top2, 0.8).tolist() == [[5, 6]]
+    # no candidates, or a candidate without a second label
+    assert duplicate_label_pairs(seg, rendered, torch.tensor([], dtype=torch.int64), top1, top2).shape == (
+        0,
+        2,
+    )
+    assert duplicate_label_pairs(seg, rendered, torch.tensor([0]), top1, torch.tensor([-1, -1])).shape == (
+        0,
+        2,
+    )
+
+
+def test_merge_keeps_the_larger_label_and_follows_chains(device):
+    labels = torch.tensor([1, 1, 2, 2, 2, 3, 4, 4, -1], dtype=torch.int32, device=device)
+    mapping = merge_labels(labels, torch.tensor([[1, 2], [3, 1]], device=device))
+    assert mapping == {1: 2, 3: 2}
+    assert labels.cpu().tolist() == [2, 2, 2, 2, 2, 2, 4, 4, -1]
+    assert merge_labels(labels, torch.zeros((0, 2), dtype=torch.int64)) == {}
+
+
+def _frame(i: int, seg: np.ndarray, scores: dict[int, float] | None = None) -> Frame:
+    """The fronto-parallel wall 2 m ahead, seen from the same pose: red object left, blue one right."""
+    left = np.broadcast_to(np.arange(W)[None, :] < W // 2, (H, W))
+    rgb = np.where(left[..., None], np.array([200, 30, 30], np.uint8), np.array([30, 30, 200], np.uint8))
+    ids = np.unique(seg[seg > 0])
+    return Frame(
+        i,
+        np.ascontiguousarray(rgb),
+        np.full((H, W), 2.0, np.float32),
+        K,
+        np.eye(4),
+        name=f"f{i}",
+        segments=seg.astype(np.int32),
+        segment_scores=scores or {int(s): 0.97 for s in ids},
+    )
+
+
+def _halves() -> np.ndarray:
+    seg = np.full((H, W), 2, np.int32)
+    seg[:, : W // 2] = 1
+    return seg
+
+
+def _mapper(device, *overrides: str) -> Mapper:
+    cfg = load_config(
+        None,
+        [
+            "graph.enabled=false",
+            "mapping.opt_iters=0",
+            "mapping.knn_radius=0.1",
+            "mapping.ablation=local",
+            *overrides,
+        ],
+    )
+    return Mapper(cfg, device)
+
+
+def test_mapper_merges_the_labels_of_an_over_segmented_object(device):
+    first = _halves()
+    first[H // 2 :, : W // 2] = 3  # the left object comes in two pieces: two novel labels
+    for merge in (True, False):
+        m = _mapper(device, f"mapping.merge_duplicates={str(merge).lower()}")
+        m.process(_frame(0, first))
+        assert torch.unique(m.map.labels).numel() == 3
+        m.process(_frame(1, _halves()))  # one confident segment now holds the left object whole
+        left = m.map.means[:, 0].cpu() < 0
+        labels = m.map.labels.cpu()
+        c = m.timings.as_dict()["counts"]
+        if merge:
+            assert c["labels_merged"] == 1 and c["segments_merged"] == 1
+            assert torch.unique(labels[left]).numel() == 1 and torch.unique(labels).numel() == 2
+        else:  # the paper's rule: the segment is ambiguous and both labels stay
+            assert "labels_merged" not in c and c["segments_ambiguous"] == 1
+            assert torch.unique(labels[left]).numel() == 2
+
+
+def test_mapper_keeps_objects_apart_when_a_segment_spills_over(device):
+    m = _mapper(device)
+    m.process(_frame(0, _halves()))
+    spill = np.full((H, W), 2, np.int32)
+    spill[:, : 3 * W // 4] = 1  # segment 1: the left object and a third of the right one
+    m.process(_frame(1, spill))
+    c = m.timings.as_dict()["counts"]
+    assert c["segments_ambiguous"] >= 1 and "labels_merged" not in c
+    assert torch.unique(m.map.labels[m.map.labels >= 0]).numel() == 2
+
+
+def test_low_scored_segments_do_not_merge(device):
+    first = _halves()
+    first[H // 2 :, : W // 2] = 3
+    m = _mapper(device)
+    m.process(_frame(0, first))
+    m.process(_frame(1, _halves(), {1: 0.9, 2: 0.97}))  # below mapping.merge_min_score (0.95)
+    assert "labels_merged" not in m.timings.as_dict()["counts"]
