@@ -4,7 +4,8 @@
         [--ablations naive,local,local+global,full] [--set mapping.opt_iters=3 ...]
 
 The four rows are the paper's ablation (Tab. "Ablation study") plus the naive baseline: 3D semantic
-segmentation scored with the HOV-SG protocol on the scene's ground-truth surface points.
+segmentation scored with the HOV-SG protocol on the scene's ground-truth surface points that some frame
+saw (``gt/points.ply`` ``observed``; the ceiling and the backs of objects are never in view).
 """
 
 from __future__ import annotations

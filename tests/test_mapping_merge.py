@@ -7,7 +7,7 @@ import torch
 from ogscene3d.config import load_config
 from ogscene3d.frame import Frame
 from ogscene3d.mapping.mapper import Mapper
-from ogscene3d.mapping.merge import duplicate_label_pairs, merge_labels
+from ogscene3d.mapping.merge import duplicate_label_pairs, merge_labels, visible_pixels
 
 W, H, F = 32, 24, 24.0
 K = np.array([[F, 0, W / 2], [0, F, H / 2], [0, 0, 1]], dtype=np.float32)
@@ -42,6 +42,29 @@ def test_containment_decides_which_pairs_merge(device):
         0,
         2,
     )
+
+
+def test_visible_pixels_drop_occluded_and_outside_gaussians(device):
+    depth = torch.full((H, W), 2.0)
+    depth[0, 0] = 0.0  # no depth there
+    c2w = torch.eye(4)
+    c2w[0, 3] = 1.0  # camera 1 m along +x
+    x0 = 1.0 + (0.5 - W / 2) / F * 2.0  # world x of the centre of column 0 at 2 m
+    means = torch.tensor(
+        [
+            [1.0 + 0.5 / F * 2.0, 0.5 / F * 2.0, 2.0],  # on the surface: pixel (12, 16)
+            [1.0, 0.0, 2.5],  # behind the observed surface: occluded
+            [1.0, 0.0, 1.5],  # in front of it (a floater, or the surface moved)
+            [1.0, 0.0, -2.0],  # behind the camera
+            [9.0, 0.0, 2.0],  # outside the image
+            [x0, (0.5 - H / 2) / F * 2.0, 2.0],  # pixel (0, 0): no depth
+            [x0, (1.5 - H / 2) / F * 2.0, 2.05],  # pixel (1, 0), 5 cm off: within the margin
+        ]
+    )
+    pix = visible_pixels(
+        means.to(device), c2w.to(device), torch.as_tensor(K).to(device), depth.to(device), 0.1
+    )
+    assert pix.cpu().tolist() == [12 * W + 16, -1, -1, -1, -1, -1, 1 * W + 0]
 
 
 def test_merge_keeps_the_larger_label_and_follows_chains(device):

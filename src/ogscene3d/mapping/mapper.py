@@ -46,7 +46,7 @@ from .init import make_probes
 from .keyframes import KeyframeSelector
 from .local import CASE_AMBIGUOUS, CASE_MATCHED, associate_segments, fill_unlabeled
 from .longterm import MemoryBuffer, MemoryEntry, longterm_view_update
-from .merge import duplicate_label_pairs, merge_labels
+from .merge import duplicate_label_pairs, merge_labels, visible_pixels
 from .optimize import View, optimize_map
 from .refine import global_refinement
 
@@ -379,14 +379,23 @@ class Mapper:
             return
         with self.timings.section("merge"):
             ids = torch.as_tensor(np.asarray(segments), dtype=torch.int64, device=self.device)
-            lut = torch.full(
-                (int(max(int(ids.max()), int(seg_ids.max()))) + 1,), -1, dtype=torch.int64, device=self.device
-            )
+            top = max(int(ids.max()), int(seg_ids.max())) + 1
+            lut = torch.full((top,), -1, dtype=torch.int64, device=self.device)
             lut[seg_ids] = torch.arange(seg_ids.numel(), device=self.device)
-            rendered = self._render_labels(frame)
+            seg_index = lut[ids.clamp(min=0)].masked_fill(ids <= 0, -1).reshape(-1)
+            involved = torch.cat([res.top_label[amb], res.second_label[amb]])
+            pick = torch.nonzero(torch.isin(self.map.labels.long(), involved[involved >= 0])).squeeze(1)
+            pix = visible_pixels(
+                self.map.means[pick],
+                torch.as_tensor(frame.pose, dtype=torch.float32, device=self.device),
+                torch.as_tensor(frame.K, dtype=torch.float32, device=self.device),
+                torch.as_tensor(frame.depth, dtype=torch.float32, device=self.device),
+                cfg.init_depth_margin,
+            )
+            vis = pix >= 0
             pairs = duplicate_label_pairs(
-                lut[ids.clamp(min=0)].masked_fill(ids <= 0, -1),
-                rendered.to(self.device),
+                seg_index[pix[vis]],
+                self.map.labels[pick[vis]],
                 amb,
                 res.top_label,
                 res.second_label,

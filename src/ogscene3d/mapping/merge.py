@@ -6,14 +6,17 @@ scene labels (case i, r(m) >= tau_valid). Two situations produce that: the segme
 its probes found no match. The paper has no way out of the second: every later view of that object is
 ambiguous again and all Gaussians added there stay unlabeled.
 
-We tell the two apart in the keyframe's own view. The map is rendered at the keyframe pose (the label
-map S, before this keyframe's Gaussians are added); for an ambiguous segment m with top labels l1, l2,
-the visible extent of each label is |S = l| and the part inside the segment |S = l, seg = m|. When both
-labels lie almost entirely inside one confident segment (each containment >= ``tau_contain``, SAM score
->= ``min_score``), the segment sees one object that carries two labels, and l2 is merged into l1 (the
-label with more Gaussians keeps its id). A segment covering two distinct objects that are each visible
-elsewhere in the view fails the containment test; two small objects that SAM fused are usually scored
-low, and the score gate keeps them apart.
+We tell the two apart in the keyframe's own view. The map's Gaussians of the two labels l1, l2 of an
+ambiguous segment m are projected into the keyframe (before its own Gaussians are added); those that land
+on a pixel whose observed depth agrees with theirs are visible, and the others are occluded or out of
+view. The visible extent of a label is its count of visible Gaussians, and its containment in m the
+fraction of them whose pixel lies in m. When both labels lie almost entirely inside one confident
+segment (each containment >= ``tau_contain``, SAM score >= ``min_score``), the segment sees one object
+that carries two labels, and the labels are merged (the one with more Gaussians keeps its id). A
+segment that spills over onto a neighbouring object fails the containment test for that object's label;
+two small objects that SAM fused are usually scored low, and the score gate keeps them apart. Counting
+Gaussians rather than rendering a label map keeps the check to one projection of the two labels'
+Gaussians, and independent of the confidences that weight a semantic render.
 """
 
 from __future__ import annotations
@@ -21,9 +24,30 @@ from __future__ import annotations
 import torch
 
 
+def visible_pixels(
+    means: torch.Tensor, c2w: torch.Tensor, K: torch.Tensor, depth: torch.Tensor, margin: float
+) -> torch.Tensor:
+    """Flat pixel index (v * W + u) of each Gaussian centre ``means`` [N,3] in the view (c2w [4,4],
+    K [3,3], observed ``depth`` [H,W] metres), or -1 where it is behind the camera, outside the image, on a
+    pixel without depth, or more than ``margin`` metres off the observed depth (occluded, or in front of
+    the surface)."""
+    h, w = depth.shape
+    R = c2w[:3, :3].to(means.dtype)
+    p = (means - c2w[:3, 3].to(means.dtype)) @ R  # world -> camera: R^T (x - t)
+    z = p[:, 2]
+    zs = torch.where(z > 1e-6, z, torch.ones_like(z))
+    u = torch.floor(K[0, 0] * p[:, 0] / zs + K[0, 2]).long()
+    v = torch.floor(K[1, 1] * p[:, 1] / zs + K[1, 2]).long()
+    inside = (z > 1e-6) & (u >= 0) & (v >= 0) & (u < w) & (v < h)
+    pix = torch.where(inside, v * w + u, torch.zeros_like(u))
+    d = depth.reshape(-1)[pix]
+    ok = inside & (d > 0) & ((z - d).abs() <= margin)
+    return torch.where(ok, pix, torch.full_like(pix, -1))
+
+
 def duplicate_label_pairs(
     seg_index: torch.Tensor,
-    rendered: torch.Tensor,
+    item_labels: torch.Tensor,
     candidates: torch.Tensor,
     top1: torch.Tensor,
     top2: torch.Tensor,
@@ -31,17 +55,18 @@ def duplicate_label_pairs(
 ) -> torch.Tensor:
     """Label pairs [P,2] (l1, l2) that a candidate segment shows to be one object.
 
-    seg_index [H,W] int: segment index per pixel (-1 outside every segment); rendered [H,W] int: the map's
-    label per pixel (-1 none); candidates [C]: segment indices to test, with their two most frequent
-    matched labels top1[c], top2[c] (both >= 0). A pair is returned when, for both labels, at least
-    ``tau_contain`` of the label's rendered pixels lie inside the segment.
+    Items are what a label's visible extent is counted in: the visible Gaussians (``visible_pixels``) or
+    the pixels of a rendered label map. seg_index [M] int: the segment index at each item (-1 outside every
+    segment); item_labels [M] int: the item's scene label (-1 none); candidates [C]: segment indices to
+    test, with their two most frequent matched labels top1[c], top2[c] (both >= 0). A pair is returned
+    when, for both labels, at least ``tau_contain`` of the label's items lie inside the segment.
     """
     dev = seg_index.device
     empty = torch.zeros((0, 2), dtype=torch.int64, device=dev)
     if candidates.numel() == 0:
         return empty
     seg = seg_index.reshape(-1).long()
-    ren = rendered.reshape(-1).long()
+    ren = item_labels.reshape(-1).long()
     l1 = top1[candidates].long()
     l2 = top2[candidates].long()
     ok = (l1 >= 0) & (l2 >= 0) & (l1 != l2)
