@@ -10,7 +10,7 @@ check on long runs: ``--frames 2000``).
 
 ``modules``: the semantic modules alone at a given image size on a map of ``--gaussians`` Gaussians (random
 points on the walls of a 6 x 3 x 6 m box, 50 labels): local 3D optimization (probe association + Eq. 5 + the
-duplicate-label check of every segment, one semantic render), global refinement (Alg. 1) and long-term
+duplicate-label check of every segment), global refinement (Alg. 1) and long-term
 optimization (one memory view), averaged over ``--repeat`` runs, in ms. This is the "local + global + long-
 term per keyframe" figure (the paper: 323 ms on an RTX 4090).
 
@@ -34,9 +34,8 @@ from ogscene3d.mapping.init import make_probes
 from ogscene3d.mapping.local import associate_segments
 from ogscene3d.mapping.longterm import MemoryEntry, longterm_view_update
 from ogscene3d.mapping.mapper import Mapper
-from ogscene3d.mapping.merge import duplicate_label_pairs
+from ogscene3d.mapping.merge import duplicate_label_pairs, visible_pixels
 from ogscene3d.mapping.refine import global_refinement
-from ogscene3d.render import render_semantics
 
 
 def _sync(dev: torch.device) -> None:
@@ -161,18 +160,20 @@ def modules(args) -> dict:
             tau_p=cfg.tau_p,
         )
         # duplicate-label check (mapping.merge_duplicates), as if every segment were ambiguous: the worst case
-        rendered = render_semantics(
-            gm.means, gm.quats, gm.scales, gm.opacities, gm.labels, gm.confidences,
-            torch.eye(4, device=dev)[None], torch.as_tensor(K, device=dev)[None], w, h,
-        ).labels[0]  # fmt: skip
-        seg_index = torch.as_tensor(seg, device=dev).long() - 1
+        amb = torch.arange(int(probes.seg_ids.numel()), device=dev)
+        involved = torch.cat([res.top_label, res.second_label])
+        pick = torch.nonzero(torch.isin(gm.labels.long(), involved[involved >= 0])).squeeze(1)
+        pix = visible_pixels(
+            gm.means[pick],
+            torch.eye(4, device=dev),
+            torch.as_tensor(K, device=dev),
+            torch.as_tensor(depth, device=dev),
+            cfg.init_depth_margin,
+        )
+        vis = pix >= 0
+        seg_index = torch.as_tensor(seg, device=dev).long().reshape(-1) - 1
         duplicate_label_pairs(
-            seg_index,
-            rendered,
-            torch.arange(int(probes.seg_ids.numel()), device=dev),
-            res.top_label,
-            res.second_label,
-            cfg.merge_contain,
+            seg_index[pix[vis]], gm.labels[pick[vis]], amb, res.top_label, res.second_label, cfg.merge_contain
         )
         _sync(dev)
         t1 = time.perf_counter()
