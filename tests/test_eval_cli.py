@@ -239,7 +239,7 @@ def test_eval_cli_on_a_generated_synthetic_scene(tmp_path, monkeypatch, capsys):
     assert cv2.imread(str(pic)).shape == (36 + 22, 4 * 48 + 3 * 4, 3)
 
 
-def test_unobserved_gt_points_are_void_unless_asked_for(scene, monkeypatch):
+def test_unobserved_gt_points_are_void_unless_asked_for(scene, monkeypatch, capsys):
     """gt/points.ply's ``observed`` flag: points no frame saw are left out by default (--gt-points all
     keeps them). Here the table is never seen and the map labels its Gaussians as chairs."""
     run, scene_dir = scene
@@ -266,6 +266,9 @@ def test_unobserved_gt_points_are_void_unless_asked_for(scene, monkeypatch):
     assert every.semantic["hovsg"].miou == pytest.approx((5 / 10 + 0.0) / 2)
     with pytest.raises(ValueError, match="gt_points"):
         evaluate_run(run, scene_dir, gt_points="some")
-    argv = ["eval", str(run), "--gt", str(scene_dir), "--mapping", "overlap", "--gt-points", "all"]
+    argv = ["eval", str(run), "--gt", str(scene_dir), "--mapping", "overlap", "--no-plots"]
     assert _main(argv, monkeypatch) == 0
+    assert "scored on the 10 labelled GT points some frame saw (67% of all" in capsys.readouterr().out
+    assert _main(argv + ["--gt-points", "all"], monkeypatch) == 0
+    assert "some frame saw" not in capsys.readouterr().out
     assert json.loads((run / "metrics.json").read_text())["gt_points"]["points"] == "all"

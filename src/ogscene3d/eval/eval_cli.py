@@ -178,6 +178,12 @@ def _run(args: argparse.Namespace) -> int:
         f"({m['num_mapped_labels']}/{m['num_scene_labels']} scene labels named); "
         f"{report['num_gaussians_evaluated']} Gaussians, {report['num_gt_points']} GT points"
     )
+    gp = report["gt_points"]
+    if gp["points"] == "observed":
+        print(
+            f"scored on the {gp['num_scored']} labelled GT points some frame saw "
+            f"({100 * gp['observed_fraction']:.0f}% of all; --gt-points all scores every point)"
+        )
     for name, metrics in result.semantic.items():
         print()
         print(format_metrics_table(metrics))
