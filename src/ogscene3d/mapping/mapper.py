@@ -5,7 +5,9 @@ Per keyframe (DESIGN.md "Mapping loop"):
 2. render the map at the frame's pose (alpha + expected depth) to find the pixels it does not explain;
 3. probes: grid-subsampled back-projected pixels per segment (``init.make_probes``);
 4. local 3D optimization: KNN association, r(m)/p(m), three cases, Eq. 5 (``local.associate_segments``);
-   unlabeled Gaussians under a now-labeled segment take its label (``mapping.fill_unlabeled``);
+   beyond the paper, an ambiguous confident segment that holds the whole visible extent of its two labels
+   merges them (``merge.py``, ``mapping.merge_duplicates``); unlabeled Gaussians under a now-labeled
+   segment take its label (``mapping.fill_unlabeled``);
 5. the unexplained probes become Gaussians with their segment's label and rescaled SAM confidence
    (unlabeled Gaussians, from ambiguous segments or pixels outside every segment, get confidence 0, so
    the individual refinement may label them: ``mapping.refine_unlabeled``);
