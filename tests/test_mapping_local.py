@@ -7,6 +7,7 @@ from ogscene3d.mapping.local import (
     CASE_NOVEL,
     associate_segments,
     eq5_update,
+    fill_unlabeled,
     group_top2,
     rescale_sam_scores,
 )
@@ -152,10 +153,9 @@ def test_fill_unlabeled(device):
     probes = torch.cat([_patch(0.0, n=6)]).to(device) + torch.tensor([0.0, 0.0, 0.005], device=device)
     seg = torch.zeros(36, dtype=torch.long, device=device)
     c_sam = torch.full((36,), 0.8, device=device)
-    res = associate_segments(
-        probes, seg, c_sam, 1, means, labels, conf, _Labels(9), k=1, radius=0.02, fill=True
-    )
-    assert res.seg_labels.tolist() == [3] and res.filled == 4
+    res = associate_segments(probes, seg, c_sam, 1, means, labels, conf, _Labels(9), k=1, radius=0.02)
+    filled = fill_unlabeled(probes, seg, c_sam, res.seg_labels, means, labels, conf, 0.02)
+    assert res.seg_labels.tolist() == [3] and filled == 4
     assert labels[32:].tolist() == [3, 3, 3, 3, -1, -1, -1, -1]
     torch.testing.assert_close(conf[32:36].cpu(), torch.full((4,), 0.8))
 

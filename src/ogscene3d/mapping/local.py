@@ -154,7 +154,7 @@ class Association:
     top_label: torch.Tensor  # [S] int64 l*_m (-1 when no match)
     second_label: torch.Tensor  # [S] int64 the second most frequent matched label (-1 when none)
     updated: torch.Tensor  # [U] int64 scene Gaussian indices whose confidence was updated (Eq. 5)
-    filled: int = 0  # unlabeled scene Gaussians that took a segment's label (``fill_unlabeled``)
+    filled: int = 0  # unlabeled scene Gaussians that took a segment's label (set by the caller's fill)
 
     def counts(self) -> dict[str, int]:
         return {
@@ -181,16 +181,14 @@ def associate_segments(
     tau_valid: float = 0.25,
     tau_p: float = 0.15,
     naive: bool = False,
-    fill: bool = False,
     probe_radius: torch.Tensor | None = None,
 ) -> Association:
     """Associate segments with the scene and update scene confidences in place (Eq. 5).
 
     probe_means [P,3] world positions of the keyframe's new Gaussians of segments 0..S-1, ``probe_seg`` [P]
     their segment index, ``probe_conf`` [P] their rescaled SAM confidence. scene_* [N] describe the map;
-    ``scene_conf`` is modified in place (unless ``naive``). With ``fill``, unlabeled scene Gaussians under a
-    labeled segment take its label (``fill_unlabeled``; ``scene_labels`` is then modified in place too).
-    ``new_labels(count) -> int tensor`` reserves
+    ``scene_conf`` is modified in place (unless ``naive``); ``scene_labels`` is not (the caller may then
+    merge duplicate labels and run ``fill_unlabeled``). ``new_labels(count) -> int tensor`` reserves
     fresh scene labels for novel segments. ``probe_radius`` [P] (metres, optional): a per-probe KNN radius
     used instead of ``radius`` where it is larger (matches the sampling density at the probe's depth).
     """
@@ -258,10 +256,4 @@ def associate_segments(
             consistent = scene_labels[pj].long() == seg_labels[seg].long()
             scene_conf[pj] = eq5_update(scene_conf[pj], probe_conf[pp], p[seg], consistent)
             updated = pj
-    filled = 0
-    if fill:
-        fconf = torch.ones_like(probe_conf) if naive else probe_conf
-        filled = fill_unlabeled(
-            probe_means, probe_seg, fconf, seg_labels, scene_means, scene_labels, scene_conf, radius
-        )
-    return Association(seg_labels, case, r, p, top1, top2, updated, filled)
+    return Association(seg_labels, case, r, p, top1, top2, updated)

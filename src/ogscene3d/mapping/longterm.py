@@ -260,14 +260,7 @@ def longterm_view_update(
         c2w = torch.as_tensor(entry.pose, dtype=torch.float32, device=dev)
         pts = torch.stack([x, y, z], 1) @ c2w[:3, :3].T + c2w[:3, 3]
         hit, p2d3d, consistent = associate_pixels(
-            gm.means,
-            gm.labels,
-            pts,
-            p_pix[vv, uu],
-            remapped[vv, uu],
-            k,
-            radius,
-            rendered[vv, uu],
+            gm.means, gm.labels, pts, p_pix[vv, uu], remapped[vv, uu], k, radius, rendered[vv, uu]
         )
         keep = gm.labels[hit] >= 0
         hit, p2d3d, consistent = hit[keep], p2d3d[keep], consistent[keep]

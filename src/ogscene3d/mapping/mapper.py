@@ -261,7 +261,6 @@ class Mapper:
             in_seg = probes.seg >= 0
             if S and bool(in_seg.any()):
                 sel = torch.nonzero(in_seg).squeeze(1)
-                merging = self._merging(segments)
                 res = associate_segments(
                     probes.means[sel],
                     probes.seg[sel],
@@ -276,7 +275,6 @@ class Mapper:
                     tau_valid=cfg.tau_valid,
                     tau_p=cfg.tau_p,
                     naive=self.naive,
-                    fill=cfg.fill_unlabeled and not merging,
                     # a probe's log-scale is log(grid spacing at its depth): see init.make_probes
                     probe_radius=(
                         torch.exp(probes.log_scales[sel]) * cfg.knn_radius_spacing
@@ -284,19 +282,20 @@ class Mapper:
                         else None
                     ),
                 )
-                if merging:
+                if self._merging(segments):
                     self._merge_duplicates(frame, segments, scores, probes, res)
-                    if cfg.fill_unlabeled:
-                        res.filled = fill_unlabeled(
-                            probes.means[sel],
-                            probes.seg[sel],
-                            probes.conf[sel],
-                            res.seg_labels,
-                            self.map.means,
-                            self.map.labels,
-                            self.map.confidences,
-                            cfg.knn_radius,
-                        )
+                if cfg.fill_unlabeled:
+                    pconf = probes.conf[sel]
+                    res.filled = fill_unlabeled(
+                        probes.means[sel],
+                        probes.seg[sel],
+                        torch.ones_like(pconf) if self.naive else pconf,  # naive: every confidence is 1
+                        res.seg_labels,
+                        self.map.means,
+                        self.map.labels,
+                        self.map.confidences,
+                        cfg.knn_radius,
+                    )
                 labels[sel] = res.seg_labels[probes.seg[sel]]
                 seg_to_label = (probes.seg_ids.cpu().numpy(), res.seg_labels.cpu().numpy())
                 for name, v in res.counts().items():
@@ -459,7 +458,7 @@ class Mapper:
                 lut[ids] = labs
                 label_map = lut[np.asarray(segments)]
             else:
-                label_map = self._render_labels(frame).cpu().numpy()
+                label_map = self._render_labels(frame)
             self._graph.observe(kf, frame, label_map)
             if self._graph.is_due(kf):
                 gm = self.map
@@ -469,8 +468,7 @@ class Mapper:
             self._graph_failed = True
             self.timings.add("graph_errors")
 
-    def _render_labels(self, frame: Frame) -> torch.Tensor:
-        """The map's label per pixel [H,W] (-1 where nothing labeled renders) at the frame's pose."""
+    def _render_labels(self, frame: Frame) -> np.ndarray:
         from ..render import render_semantics
 
         gm = self.map
@@ -489,7 +487,7 @@ class Mapper:
                 frame.width,
                 frame.height,
             )
-        return sem.labels[0]
+        return sem.labels[0].cpu().numpy()
 
     # ------------------------------------------------------------------ end, files
     def _refine(self) -> None:
