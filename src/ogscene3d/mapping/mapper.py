@@ -48,7 +48,7 @@ from .init import make_probes
 from .keyframes import KeyframeSelector
 from .local import CASE_AMBIGUOUS, CASE_MATCHED, associate_segments, fill_unlabeled
 from .longterm import MemoryBuffer, MemoryEntry, longterm_view_update
-from .merge import duplicate_label_pairs, merge_labels, visible_pixels
+from .merge import duplicate_label_pairs, merge_labels, relabel, visible_pixels
 from .optimize import View, optimize_map
 from .refine import global_refinement
 
@@ -405,16 +405,9 @@ class Mapper:
             mapping = merge_labels(self.map.labels, pairs)
             if not mapping:
                 return
-
-            def follow(x: torch.Tensor) -> torch.Tensor:
-                out = x.clone()
-                for a, b in mapping.items():
-                    out[x == a] = b
-                return out
-
-            res.top_label = follow(res.top_label)
-            res.second_label = follow(res.second_label)
-            res.seg_labels = follow(res.seg_labels.long()).to(torch.int32)
+            res.top_label = relabel(res.top_label, mapping)
+            res.second_label = relabel(res.second_label, mapping)
+            res.seg_labels = relabel(res.seg_labels, mapping)
             merged = amb[res.top_label[amb] == res.second_label[amb]]
             res.seg_labels[merged] = res.top_label[merged].to(torch.int32)
             res.seg_case[merged] = CASE_MATCHED

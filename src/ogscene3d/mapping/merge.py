@@ -124,10 +124,17 @@ def merge_labels(labels: torch.Tensor, pairs: torch.Tensor) -> dict[int, int]:
         for m in ids.tolist():
             if m != keep:
                 mapping[int(m)] = keep
-    if mapping:
-        src = torch.tensor(list(mapping), dtype=labels.dtype, device=labels.device)
-        dst = torch.tensor(list(mapping.values()), dtype=labels.dtype, device=labels.device)
-        hit = labels[:, None] == src[None, :]
-        rows, cols = torch.nonzero(hit, as_tuple=True)
-        labels[rows] = dst[cols]
+    labels.copy_(relabel(labels, mapping))
     return mapping
+
+
+def relabel(labels: torch.Tensor, mapping: dict[int, int]) -> torch.Tensor:
+    """A copy of ``labels`` with every key of ``mapping`` replaced by its value (one pass, any shape)."""
+    out = labels.clone()
+    if not mapping:
+        return out
+    src = torch.tensor(list(mapping), dtype=labels.dtype, device=labels.device)
+    dst = torch.tensor(list(mapping.values()), dtype=labels.dtype, device=labels.device)
+    rows, cols = torch.nonzero(labels.reshape(-1)[:, None] == src[None, :], as_tuple=True)
+    out.view(-1)[rows] = dst[cols]
+    return out
