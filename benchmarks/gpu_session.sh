@@ -1,0 +1,56 @@
+#!/usr/bin/env bash
+# Everything a borrowed GPU session should measure, in one command, with every log kept.
+#
+#   bash benchmarks/gpu_session.sh OUTDIR          # on the GPU machine: CUDA tests + the three benchmarks
+#   DEVICE=cpu SMALL=1 bash benchmarks/gpu_session.sh /tmp/dry   # dry run of the same steps on a CPU
+#
+# Steps (each one's log goes to OUTDIR/<step>.log; a failing step does not stop the others):
+#   tests      the kernel, semantic and mapping tests (they run on cuda when torch sees a GPU)
+#   rasterize  ours vs gsplat, forward and forward+backward, 50k..2M Gaussians at 1200x680 (issue #2)
+#   semantic   semantic render + contribution vs a colour forward pass, 500k at 1200x680 (issue #3)
+#   mapping    per-keyframe module times at 1200x680 with ~1M Gaussians (issue #5), also as JSON
+# OUTDIR/summary.txt lists each step's exit status and wall time.
+set -uo pipefail
+out=${1:?usage: gpu_session.sh OUTDIR}
+device=${DEVICE:-cuda}
+mkdir -p "$out"
+cd "$(dirname "$0")/.."
+
+if [[ "${SMALL:-0}" == 1 ]]; then
+  size=160x120; w=160; h=120; counts=5k; sem_counts=5k; gaussians=20000; iters=2
+else
+  size=1200x680; w=1200; h=680; counts=50k,200k,500k,1M,2M; sem_counts=500k; gaussians=1000000; iters=20
+fi
+
+: > "$out/summary.txt"
+step() {
+  local name=$1; shift
+  local t0=$SECONDS
+  "$@" > "$out/$name.log" 2>&1
+  local rc=$?
+  printf '%-10s rc=%-3s %5ss  %s\n' "$name" "$rc" "$((SECONDS - t0))" "$*" | tee -a "$out/summary.txt"
+}
+
+python - > "$out/environment.txt" 2>&1 <<'PY'
+import platform, torch, warp as wp
+wp.config.quiet = True
+wp.init()
+print("python", platform.python_version(), "torch", torch.__version__, "warp", wp.__version__)
+print("cuda", torch.cuda.is_available(), torch.cuda.get_device_name(0) if torch.cuda.is_available() else "-")
+try:
+    import gsplat
+    print("gsplat", gsplat.__version__)
+except ImportError as e:
+    print("gsplat not importable:", e)
+PY
+
+step tests python -m pytest -q -x -p no:cacheprovider \
+  tests/test_rasterization.py tests/test_rasterization_edges.py tests/test_semantics.py tests/test_knn.py \
+  tests/test_gaussians.py tests/test_mapping_local.py tests/test_mapping_refine.py \
+  tests/test_mapping_longterm.py tests/test_mapping_merge.py tests/test_mapping_mapper.py
+step rasterize python benchmarks/rasterize.py --device "$device" --width "$w" --height "$h" \
+  --counts "$counts" --iters "$iters"
+step semantic python benchmarks/semantic.py --device "$device" --width "$w" --height "$h" \
+  --counts "$sem_counts" --iters "$iters"
+step mapping python benchmarks/mapping.py modules --device "$device" --size "$size" \
+  --gaussians "$gaussians" --json "$out/mapping_modules.json"
