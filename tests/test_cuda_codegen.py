@@ -12,17 +12,20 @@ import importlib
 import pkgutil
 
 import pytest
-import warp as wp
 from ogscene3d.kernels.raster import raster_kernels
 from ogscene3d.kernels.semantic import semantic_kernels
 
 from ogscene3d import kernels
+from ogscene3d.device import init_warp
+from ogscene3d.render import MAX_CHANNELS_PER_PASS
+from ogscene3d.semantics import DEFAULT_BUFFER_SIZE
 
+wp = init_warp()
 TARGET_ARCHS = (89, 90)
+FACTORY_FILES = ("raster", "semantic")  # kernels built per channel count / buffer size, compiled below
 
 
 def _archs() -> list[int]:
-    wp.init()
     supported = set(wp.get_cuda_supported_archs())
     return [a for a in TARGET_ARCHS if a in supported]
 
@@ -42,7 +45,7 @@ def _compile(module, arch: int, tmp_path) -> None:
 
 @needs_nvrtc
 @pytest.mark.parametrize("arch", ARCHS)
-@pytest.mark.parametrize("name", [n for n in _module_kernel_files() if n not in ("raster", "semantic")])
+@pytest.mark.parametrize("name", [n for n in _module_kernel_files() if n not in FACTORY_FILES])
 def test_module_kernels_compile_for_cuda(name: str, arch: int, tmp_path) -> None:
     module = importlib.import_module(f"ogscene3d.kernels.{name}")
     _compile(module, arch, tmp_path)
@@ -50,7 +53,7 @@ def test_module_kernels_compile_for_cuda(name: str, arch: int, tmp_path) -> None
 
 @needs_nvrtc
 @pytest.mark.parametrize("arch", ARCHS)
-@pytest.mark.parametrize("channels", [1, 3, 32])  # depth, RGB, and a full chunk of render.py
+@pytest.mark.parametrize("channels", [1, 3, MAX_CHANNELS_PER_PASS])  # depth, RGB, a full render.py chunk
 def test_raster_kernels_compile_for_cuda(channels: int, arch: int, tmp_path) -> None:
     for kernel in raster_kernels(channels):
         _compile(kernel.module, arch, tmp_path)
@@ -58,7 +61,7 @@ def test_raster_kernels_compile_for_cuda(channels: int, arch: int, tmp_path) -> 
 
 @needs_nvrtc
 @pytest.mark.parametrize("arch", ARCHS)
-@pytest.mark.parametrize("buffer_size", [1, 8, 64])  # the bounds semantics.py accepts, and its default
+@pytest.mark.parametrize("buffer_size", [1, DEFAULT_BUFFER_SIZE, 64])  # bounds and default
 def test_semantic_kernels_compile_for_cuda(buffer_size: int, arch: int, tmp_path) -> None:
     for kernel in semantic_kernels(buffer_size):
         _compile(kernel.module, arch, tmp_path)
@@ -66,8 +69,7 @@ def test_semantic_kernels_compile_for_cuda(buffer_size: int, arch: int, tmp_path
 
 def test_every_kernel_file_is_covered() -> None:
     # a new kernels/ file is compiled by the first test automatically; factories need listing above
-    factories = {"raster", "semantic"}
     for name in _module_kernel_files():
         module = importlib.import_module(f"ogscene3d.kernels.{name}")
         has_module_kernels = any(isinstance(v, wp.Kernel) for v in vars(module).values())
-        assert has_module_kernels or name in factories, f"kernels/{name}.py has no kernels to compile"
+        assert has_module_kernels or name in FACTORY_FILES, f"kernels/{name}.py has no kernels to compile"
