@@ -93,7 +93,10 @@ class MappingConfig:
     keyframe_translation: float = 0.0  # metres; 0 = unused
     keyframe_rotation_deg: float = 0.0  # 0 = unused
     pixels_per_gaussian: int = 4  # subsampling of back-projected pixels per segment
-    knn_k: int = 5
+    # Neighbours per probe in the association (the paper gives no k). Each probe votes once, for its nearest
+    # labelled Gaussian: with k=5 the few boundary matches of a mostly new segment (a door in a wall) drew
+    # votes from every neighbouring object, r(m) >= tau_valid, and the object stayed unlabelled (see local.py)
+    knn_k: int = 1
     knn_radius: float = 0.05
     knn_radius_spacing: float = 0.0  # >0: per-probe KNN radius max(knn_radius, this x probe grid spacing)
     tau_valid: float = 0.25
