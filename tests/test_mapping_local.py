@@ -77,6 +77,38 @@ def test_low_coherence_is_novel(device):
     assert res.updated.numel() == 0 and torch.all(conf == 0.6)
 
 
+def test_new_object_matched_only_at_its_border_gets_a_label(device):
+    """A door in a wall: 16 of its 18 probes are new, its 2 border probes lie on the wall edge (label 3) with
+    a chair (label 4) a little farther. With the default k (one vote per probe) r = 0 and p < tau_p: a new
+    label. With k = 5 each border probe also votes for the chair twice, r = 0.5 >= tau_valid, and the door
+    would be left unlabelled at every view."""
+    from ogscene3d.config import MappingConfig
+
+    means = torch.tensor(
+        [
+            [0.0, 0.0, 0.0],
+            [0.0, 0.1, 0.0],
+            [0.0, 0.0, 0.016],
+            [0.0, 0.0, -0.016],
+            [0.0, 0.1, 0.016],
+            [0.0, 0.1, -0.016],
+        ]
+    ).to(device)
+    labels = torch.tensor([3, 3, 4, 4, 4, 4], dtype=torch.int32, device=device)
+    border = torch.tensor([[0.01, 0.0, 0.0], [0.01, 0.1, 0.0]])
+    probes = torch.cat([border, _patch(2.0)]).to(device)
+    seg = torch.zeros(18, dtype=torch.long, device=device)
+    out = {}
+    for k in (MappingConfig().knn_k, 5):
+        conf = torch.full((6,), 0.6, device=device)
+        out[k] = associate_segments(
+            probes, seg, torch.ones(18, device=device), 1, means, labels, conf, _Labels(7), k=k, radius=0.02
+        )
+    assert out[1].seg_case.tolist() == [CASE_NOVEL] and out[1].seg_labels.tolist() == [7]
+    assert out[5].seg_case.tolist() == [CASE_AMBIGUOUS] and out[5].seg_labels.tolist() == [-1]
+    torch.testing.assert_close(out[5].r.cpu(), torch.tensor([0.5]))
+
+
 def test_eq5_inconsistent_matches_lose_confidence(device):
     """10 matches of label 3 and 1 of label 4: r = 0.1 < tau_valid, p = 10/11 -> label 3; the label-4 scene
     Gaussian loses confidence by c_sam * p * conf, the label-3 ones gain c_sam * p * (1 - conf)."""
