@@ -98,13 +98,14 @@ def test_new_object_matched_only_at_its_border_gets_a_label(device):
     border = torch.tensor([[0.01, 0.0, 0.0], [0.01, 0.1, 0.0]])
     probes = torch.cat([border, _patch(2.0)]).to(device)
     seg = torch.zeros(18, dtype=torch.long, device=device)
+    default = MappingConfig().knn_k
     out = {}
-    for k in (MappingConfig().knn_k, 5):
+    for k in (default, 5):
         conf = torch.full((6,), 0.6, device=device)
         out[k] = associate_segments(
             probes, seg, torch.ones(18, device=device), 1, means, labels, conf, _Labels(7), k=k, radius=0.02
         )
-    assert out[1].seg_case.tolist() == [CASE_NOVEL] and out[1].seg_labels.tolist() == [7]
+    assert out[default].seg_case.tolist() == [CASE_NOVEL] and out[default].seg_labels.tolist() == [7]
     assert out[5].seg_case.tolist() == [CASE_AMBIGUOUS] and out[5].seg_labels.tolist() == [-1]
     torch.testing.assert_close(out[5].r.cpu(), torch.tensor([0.5]))
 

@@ -462,6 +462,7 @@ class Mapper:
             self.timings.add("graph_errors")
 
     def _render_labels(self, frame: Frame) -> np.ndarray:
+        """The map's label per pixel [H,W] int32 (-1 where nothing labelled renders) at the frame's pose."""
         from ..render import render_semantics
 
         gm = self.map
