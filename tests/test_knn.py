@@ -1,7 +1,10 @@
+import numpy as np
 import pytest
 import torch
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
-from ogscene3d.mapping.neighbors import any_within, count_within, knn
+from ogscene3d.mapping.neighbors import any_within, count_within, knn, knn_components
 
 
 def _brute_knn(points, queries, k, radius, pg=None, qg=None, mode=None):
@@ -76,3 +79,19 @@ def test_count_and_any_within(device):
     ref = (torch.cdist(queries, points) <= 0.12).sum(1).int()
     assert torch.equal(count_within(points.to(device), queries.to(device), 0.12).cpu(), ref)
     assert torch.equal(any_within(points.to(device), queries.to(device), 0.12).cpu(), ref > 0)
+
+
+def test_knn_components_match_a_reference(device):
+    # random sparse graphs, incl. long chains (many hops) and isolated vertices; reference: scipy's CC
+    rng = np.random.default_rng(0)
+    for v, k, density in [(1, 1, 1.0), (50, 3, 0.1), (3000, 4, 0.3), (3000, 2, 0.9)]:
+        nbr = rng.integers(0, v, size=(v, k))
+        nbr[rng.random((v, k)) > density] = -1
+        nbr[: v // 2, 0] = np.arange(1, v // 2 + 1) % v  # a chain through the first half
+        ok = nbr >= 0
+        rows = np.repeat(np.arange(v), k)[ok.reshape(-1)]
+        _, ref = connected_components(coo_matrix((np.ones(len(rows)), (rows, nbr[ok])), shape=(v, v)))
+        smallest = np.full(ref.max() + 1, v)
+        np.minimum.at(smallest, ref, np.arange(v))
+        got = knn_components(torch.as_tensor(nbr, dtype=torch.int32, device=device)).cpu().numpy()
+        np.testing.assert_array_equal(got, smallest[ref])

@@ -3,6 +3,7 @@
 ``knn``: for each query, the (up to) k nearest points within ``radius``, sorted by distance;
 missing slots hold index -1 and distance inf. ``count_within``/``any_within``: how many points lie
 within ``radius`` of each query. Both are exact (every point within the radius is examined).
+``knn_components``: connected components of a KNN graph (``ogscene3d.kernels.components``).
 """
 
 from __future__ import annotations
@@ -49,6 +50,21 @@ def knn(
     or "different". Returns (indices [Q,k] int64, -1 = none; distances [Q,k] float32, inf = none),
     each row sorted by increasing distance. Both tensors are on the queries' device.
     """
+    idx, dist = knn_int32(points, queries, k, radius, point_groups, query_groups, group_mode)
+    return idx.long(), dist
+
+
+def knn_int32(
+    points: torch.Tensor,
+    queries: torch.Tensor,
+    k: int,
+    radius: float,
+    point_groups: torch.Tensor | None = None,
+    query_groups: torch.Tensor | None = None,
+    group_mode: str | None = None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """``knn`` with the indices left int32, as the kernel writes them (no widening copy of [Q, k] for
+    callers that hand them on to another kernel)."""
     import warp as wp
 
     from ogscene3d.kernels.knn import launch_knn
@@ -67,7 +83,7 @@ def knn(
     idx = torch.full((q, k), -1, dtype=torch.int32, device=dev)
     dist = torch.full((q, k), float("inf"), dtype=torch.float32, device=dev)
     if q == 0 or points.shape[0] == 0:
-        return idx.long(), dist
+        return idx, dist
     mode = GROUP_MODES[group_mode]
     if mode:
         if point_groups is None or query_groups is None:
@@ -96,7 +112,23 @@ def knn(
             wp.from_torch(dist),
             wdev,
         )
-    return idx.long(), dist
+    return idx, dist
+
+
+def knn_components(nbr: torch.Tensor) -> torch.Tensor:
+    """Connected components of the graph on V vertices whose edges are (i, nbr[i, j]) for nbr [V, k] int32
+    (-1 = no edge; edges are undirected): per vertex, the smallest vertex of its component (int32 [V])."""
+    import warp as wp
+
+    from ogscene3d.kernels.components import launch_components
+
+    nbr = nbr.to(torch.int32).contiguous()
+    parent = torch.arange(nbr.shape[0], dtype=torch.int32, device=nbr.device)
+    if nbr.numel() == 0:
+        return parent
+    with warp_stream(nbr.device) as wdev:
+        launch_components(wp.from_torch(nbr), wp.from_torch(parent), wdev)
+    return parent
 
 
 def count_within(
