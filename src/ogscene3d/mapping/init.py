@@ -66,60 +66,73 @@ def make_probes(
     (None when the map is empty: every probe is new)."""
     if frame.pose is None:
         raise ValueError(f"frame {frame.index}: no pose; mapping needs camera-to-world poses")
-    h, w = frame.height, frame.width
-    depth = np.asarray(frame.depth, dtype=np.float32)
-    ok = grid_mask(h, w, max(1, int(step))) & np.isfinite(depth) & (depth > max(min_depth, 0.0))
+    w = frame.width
+    step = max(1, int(step))
+    o = step // 2
+    # only the grid pixels are uploaded (1/step^2 of the image): the back-projection runs on the device,
+    # in float64 as numpy did, so the probes match the host computation to the last float32 bit
+    grid = (slice(o, None, step), slice(o, None, step))
+    up = lambda a: torch.from_numpy(np.ascontiguousarray(a)).to(device)  # noqa: E731
+    depth = up(np.asarray(frame.depth, dtype=np.float32)[grid])
+    ok = torch.isfinite(depth) & (depth > max(min_depth, 0.0))
     if max_depth > 0:
         ok &= depth <= max_depth
-    vv, uu = np.nonzero(ok)
-    z = depth[vv, uu]
+    gv, gu = torch.nonzero(ok, as_tuple=True)
+    vv, uu = gv * step + o, gu * step + o
+    z32 = depth[gv, gu]
+    z = z32.double()
     K = frame.K.astype(np.float64)
-    x = (uu + 0.5 - K[0, 2]) / K[0, 0] * z
-    y = (vv + 0.5 - K[1, 2]) / K[1, 1] * z
-    pc = np.stack([x, y, z], 1)
-    pw = pc @ frame.pose[:3, :3].T + frame.pose[:3, 3]
+    x = (uu.double() + 0.5 - K[0, 2]) / K[0, 0] * z  # int + float is float32 in torch: widen first
+    y = (vv.double() + 0.5 - K[1, 2]) / K[1, 1] * z
+    pc = torch.stack([x, y, z], 1)
+    pose = torch.as_tensor(frame.pose, dtype=torch.float64, device=device)
+    pw = pc @ pose[:3, :3].T + pose[:3, 3]
     focal = 0.5 * (K[0, 0] + K[1, 1])
-    log_s = np.log(np.maximum(z * max(1, int(step)) / focal, 1e-6))
-    colors = frame.rgb[vv, uu].astype(np.float32) / 255.0
-    pix = vv.astype(np.int64) * w + uu
+    log_s = torch.log(torch.clamp(z * step / focal, min=1e-6))
+    colors = up(frame.rgb[grid])[gv, gu].float() / 255.0
+    pix = vv * w + uu
 
     if segments is not None:
-        sid = np.asarray(segments)[vv, uu].astype(np.int64)
-        seg_ids, inv = np.unique(sid, return_inverse=True)
-        inv = inv.reshape(-1)
-        # index 0 of the unique ids is "no segment" when present: shift so that it becomes -1
-        if seg_ids.size and seg_ids[0] == 0:
-            seg_ids = seg_ids[1:]
-            inv = inv - 1
-        seg_ids = seg_ids[seg_ids > 0]
-        raw = np.array([float(scores.get(int(i), 1.0)) for i in seg_ids], dtype=np.float32)
+        seg, seg_ids, raw = _probe_segments(up(np.asarray(segments)[grid].astype(np.int64))[gv, gu], scores)
     else:
-        seg_ids = np.zeros(0, dtype=np.int64)
-        inv = np.full(len(z), -1, dtype=np.int64)
+        seg_ids = torch.zeros(0, dtype=torch.int64, device=device)
+        seg = torch.full((len(z),), -1, dtype=torch.int64, device=device)
         raw = np.zeros(0, dtype=np.float32)
 
-    t = lambda a, dt=torch.float32: torch.as_tensor(np.ascontiguousarray(a), dtype=dt, device=device)  # noqa: E731
-    seg = t(inv, torch.int64)
-    seg_conf = rescale_sam_scores(t(raw), score_range, conf_range)
+    seg_conf = rescale_sam_scores(torch.as_tensor(raw, device=device), score_range, conf_range)
     conf = torch.where(
         seg >= 0, seg_conf[seg.clamp(min=0)] if len(seg_ids) else 0.0, torch.zeros_like(seg).float()
     )
-    pix_t = t(pix, torch.int64)
     if rendered_alpha is None:
         new = torch.ones(len(z), dtype=torch.bool, device=device)
     else:
-        a = rendered_alpha.reshape(-1).to(device)[pix_t]
-        d = rendered_depth.reshape(-1).to(device)[pix_t]
-        zt = t(z)
-        new = (a < alpha_thresh) | (zt < d - depth_margin)
+        a = rendered_alpha.reshape(-1).to(device)[pix]
+        d = rendered_depth.reshape(-1).to(device)[pix]
+        new = (a < alpha_thresh) | (z32 < d - depth_margin)
     return Probes(
-        means=t(pw),
-        colors=t(colors),
-        log_scales=t(log_s),
+        means=pw.float(),
+        colors=colors,
+        log_scales=log_s.float(),
         seg=seg,
         conf=conf.float(),
         new=new,
-        pix=pix_t,
-        seg_ids=t(seg_ids, torch.int64),
+        pix=pix,
+        seg_ids=seg_ids,
         seg_conf=seg_conf,
     )
+
+
+def _probe_segments(
+    sid: torch.Tensor, scores: dict[int, float]
+) -> tuple[torch.Tensor, torch.Tensor, np.ndarray]:
+    """Per probe its segment index (-1 = none) from the segment ids ``sid`` [P] (0 = none); the frame's
+    segment ids [S] (on the device) and their raw SAM scores [S] (host: the scores are a dict)."""
+    seg_ids, inv = torch.unique(sid, return_inverse=True)
+    ids = seg_ids.cpu().numpy()  # one small copy: S ids
+    # index 0 of the unique ids is "no segment" when present: shift so that it becomes -1
+    if ids.size and ids[0] == 0:
+        ids, seg_ids, inv = ids[1:], seg_ids[1:], inv - 1
+    keep = ids > 0
+    ids, seg_ids = ids[keep], seg_ids[torch.as_tensor(keep, device=sid.device)]
+    raw = np.array([float(scores.get(int(i), 1.0)) for i in ids], dtype=np.float32)
+    return inv.reshape(-1), seg_ids, raw
