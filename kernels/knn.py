@@ -1,7 +1,8 @@
 """Radius-limited k-nearest-neighbour and radius-count queries on a Warp ``HashGrid``.
 
 Each query thread walks the hash-grid cells within ``radius`` of its point and keeps the k closest
-candidates in its own output row by insertion sort (k is small: 1..32). An optional integer group per
+candidates in its own output row by insertion sort (k is small: 1..32); equidistant candidates are
+ordered by index. An optional integer group per
 point and per query filters candidates: ``group_mode`` 0 = no filter, 1 = only candidates of the same
 group as the query, 2 = only candidates of a different group (used for "same label" radius graphs and
 "nearest Gaussian outside my cluster" in the global refinement).
@@ -25,6 +26,13 @@ def _group_ok(mode: int, pg: int, qg: int) -> bool:
     if mode == 2:
         return pg != qg
     return True
+
+
+@wp.func
+def _before(d2: float, index: int, od2: float, oindex: int) -> bool:
+    """Order of candidates: by distance, equidistant ones by index, so that a row does not depend on the
+    order in which the grid cells are visited (that is, on the cell size)."""
+    return d2 < od2 or (d2 == od2 and index < oindex)
 
 
 @wp.kernel(enable_backward=False)
@@ -57,10 +65,10 @@ def knn_radius_kernel(
         if _group_ok(group_mode, pg, qg):
             d2 = wp.length_sq(points[index] - q)
             if d2 <= r2:
-                if count < k or d2 < out_dist[tid, k - 1]:
+                if count < k or _before(d2, index, out_dist[tid, k - 1], out_idx[tid, k - 1]):
                     pos = wp.min(count, k - 1)
                     # shift larger entries one slot to the right (the last one falls off when full)
-                    while pos > 0 and out_dist[tid, pos - 1] > d2:
+                    while pos > 0 and _before(d2, index, out_dist[tid, pos - 1], out_idx[tid, pos - 1]):
                         out_idx[tid, pos] = out_idx[tid, pos - 1]
                         out_dist[tid, pos] = out_dist[tid, pos - 1]
                         pos = pos - 1

@@ -50,6 +50,25 @@ def test_knn_group_filter(device, mode):
     torch.testing.assert_close(dist.cpu(), ref_dist, rtol=1e-5, atol=1e-6)
 
 
+@pytest.mark.parametrize("mode", [None, "same"])
+def test_knn_two_pass_equals_one_pass(device, mode):
+    # dense points with a sparse corner (rows that the first pass leaves incomplete) and duplicated points
+    # (equidistant candidates, ordered by index in either pass); enough queries to take the two-pass path
+    g = torch.Generator().manual_seed(5)
+    dense = torch.rand(6000, 3, generator=g) * torch.tensor([1.0, 1.0, 0.02])
+    sparse = torch.rand(200, 3, generator=g) * 0.5 + 2.0
+    points = torch.cat([dense, sparse, dense[:300]])
+    queries = torch.cat([points[::2], torch.rand(100, 3, generator=g) * 3.0])
+    pg = torch.randint(0, 3, (points.shape[0],), generator=g)
+    qg = torch.randint(0, 3, (queries.shape[0],), generator=g)
+    args = (points.to(device), queries.to(device), 6, 0.3, pg.to(device), qg.to(device), mode)
+    idx, dist = knn(*args)
+    idx2, dist2 = knn(*args, two_pass=True)
+    assert torch.equal(idx, idx2) and torch.equal(dist, dist2)
+    ref_idx, _ = _brute_knn(points, queries, 6, 0.3, pg, qg, mode)
+    assert torch.equal((idx.cpu() >= 0).sum(1), (ref_idx >= 0).sum(1))
+
+
 def test_knn_empty_and_fewer_than_k(device):
     pts = torch.tensor([[0.0, 0, 0], [0.05, 0, 0]], device=device)
     q = torch.tensor([[0.0, 0.0, 0.01], [5.0, 5.0, 5.0]], device=device)

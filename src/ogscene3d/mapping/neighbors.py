@@ -16,12 +16,16 @@ _GRID_DIM = 128
 _grids: dict[str, object] = {}
 
 GROUP_MODES = {None: 0, "same": 1, "different": 2}
+# two-pass knn: queries sampled to size the first radius, and the quantile of their k-th distance used
+_SAMPLE_QUERIES = 1024
+_FIRST_PASS_QUANTILE = 0.95
 
 
-def _grid_for(wdev) -> object:
+def _grid_for(wdev, slot: int = 0) -> object:
+    """One reusable hash grid per device and slot (slot 1: the finer grid of a two-pass ``knn``)."""
     import warp as wp
 
-    key = str(wdev)
+    key = f"{wdev}/{slot}"
     g = _grids.get(key)
     if g is None:
         g = wp.HashGrid(_GRID_DIM, _GRID_DIM, _GRID_DIM, device=wdev)
@@ -43,14 +47,16 @@ def knn(
     point_groups: torch.Tensor | None = None,
     query_groups: torch.Tensor | None = None,
     group_mode: str | None = None,
+    two_pass: bool = False,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """k nearest ``points`` [N,3] within ``radius`` (metres) of each of ``queries`` [Q,3].
 
     ``group_mode``: None; "same" (only points whose ``point_groups`` equals the query's ``query_groups``)
     or "different". Returns (indices [Q,k] int64, -1 = none; distances [Q,k] float32, inf = none),
-    each row sorted by increasing distance. Both tensors are on the queries' device.
+    each row sorted by increasing distance. Both tensors are on the queries' device. ``two_pass``: see
+    ``knn_int32`` (for dense points and a radius far beyond the k-th neighbour).
     """
-    idx, dist = knn_int32(points, queries, k, radius, point_groups, query_groups, group_mode)
+    idx, dist = knn_int32(points, queries, k, radius, point_groups, query_groups, group_mode, two_pass)
     return idx.long(), dist
 
 
@@ -62,12 +68,19 @@ def knn_int32(
     point_groups: torch.Tensor | None = None,
     query_groups: torch.Tensor | None = None,
     group_mode: str | None = None,
+    two_pass: bool = False,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """``knn`` with the indices left int32, as the kernel writes them (no widening copy of [Q, k] for
-    callers that hand them on to another kernel)."""
-    import warp as wp
+    callers that hand them on to another kernel).
 
-    from ogscene3d.kernels.knn import launch_knn
+    ``two_pass``: for dense points and a ``radius`` much larger than the k-th neighbour distance (the
+    refinement's same-label graph: 9 neighbours within about 2 cm, searched within 10 cm). A hash-grid
+    query examines every point of the cells within the radius, ~(2 r)^2 of surface; a first pass with a
+    radius r0 sized from a sample of queries (the 95% quantile of their k-th distance) examines far fewer,
+    and every row that finds k neighbours within r0 is final: no point within ``radius`` that is nearer
+    than its k-th can lie outside r0. Only the other rows are searched again within ``radius``. Same
+    result as one pass (up to the order of exactly equidistant points)."""
+    import warp as wp
 
     if k < 1:
         raise ValueError(f"knn: k must be >= 1, got {k}")
@@ -80,10 +93,9 @@ def knn_int32(
     dev = queries.device
     points = points.to(dev)
     q = queries.shape[0]
-    idx = torch.full((q, k), -1, dtype=torch.int32, device=dev)
-    dist = torch.full((q, k), float("inf"), dtype=torch.float32, device=dev)
     if q == 0 or points.shape[0] == 0:
-        return idx, dist
+        idx = torch.full((q, k), -1, dtype=torch.int32, device=dev)
+        return idx, torch.full((q, k), float("inf"), dtype=torch.float32, device=dev)
     mode = GROUP_MODES[group_mode]
     if mode:
         if point_groups is None or query_groups is None:
@@ -99,19 +111,58 @@ def knn_int32(
         grid = _grid_for(wdev)
         wp_points = wp.from_torch(points, dtype=wp.vec3)
         grid.build(wp_points, float(radius))
-        launch_knn(
-            grid,
-            wp_points,
-            wp.from_torch(queries, dtype=wp.vec3),
-            wp.from_torch(pg),
-            wp.from_torch(qg),
-            mode,
-            radius,
-            k,
-            wp.from_torch(idx),
-            wp.from_torch(dist),
-            wdev,
+        run = lambda g, qs, qgs, r: _launch(g, wp_points, qs, pg, qgs, mode, r, k, wdev)  # noqa: E731
+        r0 = (
+            _first_radius(run, grid, queries, qg, mode, radius, k)
+            if two_pass and q > _SAMPLE_QUERIES
+            else None
         )
+        if r0 is None:
+            return run(grid, queries, qg, radius)
+        fine = _grid_for(wdev, 1)
+        fine.build(wp_points, r0)
+        idx, dist = run(fine, queries, qg, r0)
+        redo = torch.nonzero(idx[:, k - 1] < 0).squeeze(1)
+        if redo.numel():
+            idx[redo], dist[redo] = run(
+                grid, queries[redo].contiguous(), qg[redo].contiguous() if mode else qg, radius
+            )
+    return idx, dist
+
+
+def _first_radius(
+    run, grid, queries: torch.Tensor, qg: torch.Tensor, mode: int, radius: float, k: int
+) -> float | None:
+    """The first-pass radius of a two-pass ``knn`` from evenly spaced sample queries, or None when it would
+    not be much smaller than ``radius`` (sparse points: one pass is cheaper)."""
+    pick = torch.linspace(0, queries.shape[0] - 1, _SAMPLE_QUERIES, device=queries.device).long()
+    _, d = run(grid, queries[pick].contiguous(), qg[pick].contiguous() if mode else qg, radius)
+    r0 = float(torch.quantile(d[:, k - 1], _FIRST_PASS_QUANTILE))  # inf when over 5% find fewer than k
+    return r0 if r0 < 0.5 * radius else None
+
+
+def _launch(grid, wp_points, queries: torch.Tensor, pg, qg, mode: int, radius: float, k: int, wdev):
+    """One knn kernel launch on a built grid: (idx [Q, k] int32, dist [Q, k]); the kernel fills both."""
+    import warp as wp
+
+    from ogscene3d.kernels.knn import launch_knn
+
+    q = queries.shape[0]
+    idx = torch.empty((q, k), dtype=torch.int32, device=queries.device)
+    dist = torch.empty((q, k), dtype=torch.float32, device=queries.device)
+    launch_knn(
+        grid,
+        wp_points,
+        wp.from_torch(queries, dtype=wp.vec3),
+        wp.from_torch(pg),
+        wp.from_torch(qg),
+        mode,
+        radius,
+        k,
+        wp.from_torch(idx),
+        wp.from_torch(dist),
+        wdev,
+    )
     return idx, dist
 
 

@@ -39,7 +39,8 @@ def connected_clusters(
         return out
     pts = means[lab]
     grp = labels[lab]
-    nbr, _ = knn_int32(pts, pts, graph_k + 1, radius, grp, grp, "same")  # +1: each point finds itself
+    # +1: each point finds itself; two passes: the k nearest lie far inside the radius on dense surfaces
+    nbr, _ = knn_int32(pts, pts, graph_k + 1, radius, grp, grp, "same", two_pass=True)
     root = knn_components(nbr).long()  # the smallest member of each component
     # compact ids in the order of the roots (as torch.unique would number them), without a sort
     is_root = root == torch.arange(m, device=dev)
@@ -114,7 +115,7 @@ def global_refinement(
         cand &= labels >= 0
     q = torch.nonzero(cand).squeeze(1)
     if q.numel() and high.numel():
-        idx, _ = knn(means[high], means[q], 1, r_search)
+        idx, _ = knn(means[high], means[q], 1, r_search, two_pass=True)
         found = idx[:, 0] >= 0
         tgt = q[found]
         labels[tgt] = labels[high[idx[found, 0]]]
