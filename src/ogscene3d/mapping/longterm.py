@@ -150,19 +150,17 @@ def class_iou_map(remapped: torch.Tensor, rendered: torch.Tensor) -> tuple[torch
     and the per-class IoUs {label: IoU}."""
     r = remapped.reshape(-1).long()
     s = rendered.reshape(-1).long()
-    classes, inv = torch.unique(torch.cat([s, r]), return_inverse=True)
-    si, ri = inv[: s.numel()], inv[s.numel() :]
-    nc = classes.numel()
+    # labels are small non-negative ints: count by label (bincount) rather than by a sort of 2 HW values
+    nc = int(torch.maximum(s.max(), r.max()).clamp(min=0)) + 1 if s.numel() else 1
     sv, rv = s >= 0, r >= 0
-    cnt_s = torch.bincount(si[sv], minlength=nc)
-    cnt_r = torch.bincount(ri[rv], minlength=nc)
-    inter = torch.bincount(si[sv & (s == r)], minlength=nc)
+    cnt_s = torch.bincount(s[sv], minlength=nc)
+    cnt_r = torch.bincount(r[rv], minlength=nc)
+    inter = torch.bincount(s[sv & (s == r)], minlength=nc)
     union = cnt_s + cnt_r - inter
     iou = inter.float() / union.clamp(min=1).float()
-    per_pix = torch.where(sv, iou[si], torch.zeros_like(iou[si]))
-    per_class = {
-        int(c): float(v) for c, v, u in zip(classes.tolist(), iou.tolist(), union.tolist()) if c >= 0 and u
-    }
+    per_pix = torch.where(sv, iou[s.clamp(min=0)], torch.zeros((), device=s.device))
+    present = torch.nonzero(union > 0).squeeze(1)
+    per_class = dict(zip(present.tolist(), iou[present].tolist()))
     return per_pix.reshape(rendered.shape), per_class
 
 
@@ -243,18 +241,21 @@ def longterm_view_update(
         # one pass gives both the view's label map S and P_conf of every Gaussian
         pconf, sem = rendering_contribution(*args, viewmat, K, w, h, return_semantics=True)
         rendered = sem.labels[0].to(dev).long()
-        seg = torch.as_tensor(entry.segments, dtype=torch.int64, device=dev)
+        seg = torch.from_numpy(np.ascontiguousarray(entry.segments)).to(dev).long()  # widened on the device
         remapped = remap_segments(seg, rendered)
         p_pix, per_class = class_iou_map(remapped, rendered)
         stats.mean_iou = float(np.mean(list(per_class.values()))) if per_class else 0.0
-        # pixels whose rendered class and remapped segment both exist, on the grid, with valid depth
-        depth = torch.as_tensor(entry.depth, dtype=torch.float32, device=dev)
-        on = torch.as_tensor(grid_mask(h, w, pixel_step), device=dev)
-        use = on & (depth > 0) & torch.isfinite(depth) & (rendered >= 0) & (remapped >= 0)
-        vv, uu = torch.nonzero(use, as_tuple=True)
-        if vv.numel() == 0:
+        # pixels whose rendered class and remapped segment both exist, on the grid, with valid depth; only
+        # the grid's depth is uploaded, and the grid is taken by slicing rather than by a full-image mask
+        o = pixel_step // 2
+        grid = (slice(o, None, pixel_step), slice(o, None, pixel_step))
+        depth = torch.from_numpy(np.ascontiguousarray(entry.depth[grid], dtype=np.float32)).to(dev)
+        use = (depth > 0) & torch.isfinite(depth) & (rendered[grid] >= 0) & (remapped[grid] >= 0)
+        gv, gu = torch.nonzero(use, as_tuple=True)
+        if gv.numel() == 0:
             return stats
-        z = depth[vv, uu]
+        z = depth[gv, gu]
+        vv, uu = gv * pixel_step + o, gu * pixel_step + o
         x = (uu.float() + 0.5 - K[0, 2]) / K[0, 0] * z
         y = (vv.float() + 0.5 - K[1, 2]) / K[1, 1] * z
         c2w = torch.as_tensor(entry.pose, dtype=torch.float32, device=dev)
