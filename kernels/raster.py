@@ -2,13 +2,27 @@
 
 The channel count is a compile-time constant (a Warp vector length), so accumulators live in registers;
 ``raster_kernels(D)`` builds and caches the pair of kernels for D channels. One thread per pixel,
-threads of a 16x16 tile consecutive, so on CUDA a thread block walks one tile's Gaussian list together.
-The same kernels run on the CPU device.
+threads of a tile consecutive, so on CUDA the warps of a block walk one tile's Gaussian list together
+(reading it 32 Gaussians at a time, see lanes.py). The same kernels run on the CPU device.
 """
 
 import functools
 
 import warp as wp
+
+from .lanes import lane_all, lane_any, lane_count, lane_max_int, lane_shfl, lane_shfl_int, lane_sum
+
+# Blending kernels: 256-thread blocks (one 16x16 tile), no grid-stride loop (the launch covers every
+# pixel), fast intrinsics for exp and division as gsplat builds with; "unique" gives each channel count /
+# buffer size its own module, which module options require.
+BLEND_BLOCK_DIM = 256
+BLEND_KERNEL_OPTIONS = {
+    "enable_backward": False,
+    "module": "unique",
+    "module_options": {"fast_math": True},
+    "launch_bounds": BLEND_BLOCK_DIM,
+    "grid_stride": False,
+}
 
 ALPHA_MAX = 0.99
 ALPHA_MIN = 1.0 / 255.0
@@ -17,19 +31,20 @@ T_MIN = 1e-4
 
 @wp.func
 def tile_pixel(
-    tid: int, tile_size: int, tiles_x: int, tiles_per_cam: int, width: int, height: int
+    tid: int, tile_size: int, tile_threads: int, tiles_x: int, tiles_per_cam: int, width: int, height: int
 ) -> wp.vec4i:
-    """(output pixel index or -1 outside the image, camera-tile index, x, y) of a tile-major thread id."""
-    per_tile = tile_size * tile_size
-    ct = tid // per_tile
-    local = tid - ct * per_tile
+    """(output pixel index or -1, camera-tile index, x, y) of a tile-major thread id. Each tile has
+    ``tile_threads`` threads (tile_size^2 rounded up to whole warps); the spare ones and those past the
+    image edge get -1."""
+    ct = tid // tile_threads
+    local = tid - ct * tile_threads
     cam = ct // tiles_per_cam
     tile = ct - cam * tiles_per_cam
     ty = tile // tiles_x
     tx = tile - ty * tiles_x
     x = tx * tile_size + local % tile_size
     y = ty * tile_size + local // tile_size
-    if x >= width or y >= height:
+    if local >= tile_size * tile_size or x >= width or y >= height:
         return wp.vec4i(-1, ct, x, y)
     return wp.vec4i((cam * height + y) * width + x, ct, x, y)
 
@@ -54,7 +69,21 @@ def raster_kernels(channels: int):
     """(forward, backward) blending kernels for ``channels`` colour channels."""
     vec = wp.types.vector(length=channels, dtype=wp.float32)
 
-    @wp.kernel(enable_backward=False, module="unique")
+    @wp.func
+    def shfl_vec(v: vec, src: int) -> vec:
+        out = vec()
+        for ch in range(channels):
+            out[ch] = lane_shfl(v[ch], src)
+        return out
+
+    @wp.func
+    def sum_vec(v: vec) -> vec:
+        out = vec()
+        for ch in range(channels):
+            out[ch] = lane_sum(v[ch])
+        return out
+
+    @wp.kernel(**BLEND_KERNEL_OPTIONS)
     def rasterize_forward(
         means2d: wp.array(dtype=wp.vec2),
         conics: wp.array(dtype=wp.vec3),
@@ -69,41 +98,70 @@ def raster_kernels(channels: int):
         width: int,
         height: int,
         tile_size: int,
+        tile_threads: int,
         tiles_x: int,
         tiles_per_cam: int,
         out_colors: wp.array(dtype=vec),
         out_alphas: wp.array(dtype=float),
         last_ids: wp.array(dtype=wp.int32),
     ):
-        pix = tile_pixel(wp.tid(), tile_size, tiles_x, tiles_per_cam, width, height)
+        tid = wp.tid()
+        pix = tile_pixel(tid, tile_size, tile_threads, tiles_x, tiles_per_cam, width, height)
         out = pix[0]
-        if out < 0:
-            return
         ct = pix[1]
         cam = ct // tiles_per_cam
         px = float(pix[2]) + 0.5
         py = float(pix[3]) + 0.5
+        W = lane_count()
+        lane = tid % W
+        end = tile_end[ct]
         T = float(1.0)
         acc = vec()
         last = int(-1)
-        for i in range(tile_start[ct], tile_end[ct]):
-            g = isect_ids[i]
-            a = gaussian_alpha(conics[g], means2d[g], opacities[g % num_gaussians], px, py)
-            alpha = a[0]
-            if alpha > 0.0:
-                next_T = T * (1.0 - alpha)
-                if next_T <= T_MIN:
-                    break
-                acc += colors[g] * (alpha * T)
-                T = next_T
-                last = i
-        if use_background != 0:
-            acc += backgrounds[cam] * T
-        out_colors[out] = acc
-        out_alphas[out] = 1.0 - T
-        last_ids[out] = last
+        done = int(0)
+        if out < 0:
+            done = 1  # pixels past the image edge still take part in the lane shuffles
+        b = tile_start[ct]
+        while b < end:
+            if lane_all(done) != 0:
+                break
+            # one Gaussian per lane, then each is broadcast to the whole warp in turn
+            j = b + lane
+            gm = wp.vec2()
+            gc = wp.vec3()
+            go = float(0.0)
+            gcol = vec()
+            if j < end:
+                g = isect_ids[j]
+                gm = means2d[g]
+                gc = conics[g]
+                go = opacities[g % num_gaussians]
+                gcol = colors[g]
+            n = wp.min(W, end - b)
+            for s in range(n):
+                m = wp.vec2(lane_shfl(gm[0], s), lane_shfl(gm[1], s))
+                con = wp.vec3(lane_shfl(gc[0], s), lane_shfl(gc[1], s), lane_shfl(gc[2], s))
+                o = lane_shfl(go, s)
+                c = shfl_vec(gcol, s)
+                if done == 0:
+                    alpha = gaussian_alpha(con, m, o, px, py)[0]
+                    if alpha > 0.0:
+                        next_T = T * (1.0 - alpha)
+                        if next_T <= T_MIN:
+                            done = 1
+                        else:
+                            acc += c * (alpha * T)
+                            T = next_T
+                            last = b + s
+            b += W
+        if out >= 0:
+            if use_background != 0:
+                acc += backgrounds[cam] * T
+            out_colors[out] = acc
+            out_alphas[out] = 1.0 - T
+            last_ids[out] = last
 
-    @wp.kernel(enable_backward=False, module="unique")
+    @wp.kernel(**BLEND_KERNEL_OPTIONS)
     def rasterize_backward(
         means2d: wp.array(dtype=wp.vec2),
         conics: wp.array(dtype=wp.vec3),
@@ -121,6 +179,7 @@ def raster_kernels(channels: int):
         width: int,
         height: int,
         tile_size: int,
+        tile_threads: int,
         tiles_x: int,
         tiles_per_cam: int,
         v_means2d: wp.array(dtype=wp.vec2),
@@ -129,61 +188,90 @@ def raster_kernels(channels: int):
         v_opacities: wp.array(dtype=float),
     ):
         """Back to front from the last contributor, undoing the transmittance one Gaussian at a time."""
-        pix = tile_pixel(wp.tid(), tile_size, tiles_x, tiles_per_cam, width, height)
+        tid = wp.tid()
+        pix = tile_pixel(tid, tile_size, tile_threads, tiles_x, tiles_per_cam, width, height)
         out = pix[0]
-        if out < 0:
-            return
         ct = pix[1]
         cam = ct // tiles_per_cam
-        last = last_ids[out]
-        if last < 0:
-            return
         px = float(pix[2]) + 0.5
         py = float(pix[3]) + 0.5
-        T_final = 1.0 - out_alphas[out]
-        T = T_final
-        v_c = v_out_colors[out]
-        v_a_out = v_out_alphas[out]
+        W = lane_count()
+        lane = tid % W
+        last = int(-1)
+        T_final = float(1.0)
+        v_c = vec()
+        v_a_out = float(0.0)
         # Blending a background adds T_final * bg, whose derivative w.r.t. each alpha is -T_final/(1-a) * bg.
         bg_dot = float(0.0)
-        if use_background != 0:
-            bg_dot = wp.dot(backgrounds[cam], v_c)
+        if out >= 0:
+            last = last_ids[out]
+            T_final = 1.0 - out_alphas[out]
+            v_c = v_out_colors[out]
+            v_a_out = v_out_alphas[out]
+            if use_background != 0:
+                bg_dot = wp.dot(backgrounds[cam], v_c)
+        T = T_final
+        start = tile_start[ct]
         behind = vec()  # sum over Gaussians behind the current one of c_j * w_j
-        for k in range(last - tile_start[ct] + 1):
-            i = last - k
-            g = isect_ids[i]
-            conic = conics[g]
-            m = means2d[g]
-            n = g % num_gaussians
-            o = opacities[n]
-            a = gaussian_alpha(conic, m, o, px, py)
-            alpha = a[0]
-            if alpha > 0.0:
-                ra = 1.0 / (1.0 - alpha)
-                T = T * ra
-                w = alpha * T
-                c = colors[g]
-                wp.atomic_add(v_colors, g, v_c * w)
-                v_alpha = wp.dot(c * T - behind * ra, v_c) + (v_a_out - bg_dot) * T_final * ra
-                behind += c * w
-                vis = a[2]
-                if o * vis <= ALPHA_MAX:
-                    v_sigma = -o * vis * v_alpha
-                    dx = m[0] - px
-                    dy = m[1] - py
-                    wp.atomic_add(
-                        v_conics,
-                        g,
-                        wp.vec3(0.5 * v_sigma * dx * dx, v_sigma * dx * dy, 0.5 * v_sigma * dy * dy),
-                    )
-                    wp.atomic_add(
-                        v_means2d,
-                        g,
-                        wp.vec2(
-                            v_sigma * (conic[0] * dx + conic[1] * dy),
-                            v_sigma * (conic[1] * dx + conic[2] * dy),
-                        ),
-                    )
-                    wp.atomic_add(v_opacities, g, vis * v_alpha)
+        b = lane_max_int(last)  # the warp walks back from its furthest last contributor
+        while b >= start:
+            j = b - lane
+            gid = int(-1)
+            gm = wp.vec2()
+            gc = wp.vec3()
+            go = float(0.0)
+            gcol = vec()
+            if j >= start:
+                gid = isect_ids[j]
+                gm = means2d[gid]
+                gc = conics[gid]
+                go = opacities[gid % num_gaussians]
+                gcol = colors[gid]
+            n = wp.min(W, b - start + 1)
+            for s in range(n):
+                m = wp.vec2(lane_shfl(gm[0], s), lane_shfl(gm[1], s))
+                con = wp.vec3(lane_shfl(gc[0], s), lane_shfl(gc[1], s), lane_shfl(gc[2], s))
+                o = lane_shfl(go, s)
+                c = shfl_vec(gcol, s)
+                hit = int(0)
+                v_col = vec()
+                v_con = wp.vec3()
+                v_m = wp.vec2()
+                v_o = float(0.0)
+                if b - s <= last:
+                    a = gaussian_alpha(con, m, o, px, py)
+                    alpha = a[0]
+                    if alpha > 0.0:
+                        hit = 1
+                        ra = 1.0 / (1.0 - alpha)
+                        T = T * ra
+                        w = alpha * T
+                        v_col = v_c * w
+                        v_alpha = wp.dot(c * T - behind * ra, v_c) + (v_a_out - bg_dot) * T_final * ra
+                        behind += c * w
+                        vis = a[2]
+                        if o * vis <= ALPHA_MAX:
+                            v_sigma = -o * vis * v_alpha
+                            dx = m[0] - px
+                            dy = m[1] - py
+                            hs = 0.5 * v_sigma
+                            v_con = wp.vec3(hs * dx * dx, v_sigma * dx * dy, hs * dy * dy)
+                            v_m = wp.vec2(
+                                v_sigma * (con[0] * dx + con[1] * dy), v_sigma * (con[1] * dx + con[2] * dy)
+                            )
+                            v_o = vis * v_alpha
+                # one atomic per warp and Gaussian: sum the lanes' gradients first
+                if lane_any(hit) != 0:
+                    g = lane_shfl_int(gid, s)
+                    v_col = sum_vec(v_col)
+                    v_con = wp.vec3(lane_sum(v_con[0]), lane_sum(v_con[1]), lane_sum(v_con[2]))
+                    v_m = wp.vec2(lane_sum(v_m[0]), lane_sum(v_m[1]))
+                    v_o = lane_sum(v_o)
+                    if lane == 0:
+                        wp.atomic_add(v_colors, g, v_col)
+                        wp.atomic_add(v_conics, g, v_con)
+                        wp.atomic_add(v_means2d, g, v_m)
+                        wp.atomic_add(v_opacities, g, v_o)
+            b -= W
 
     return rasterize_forward, rasterize_backward

@@ -12,7 +12,8 @@ import functools
 
 import warp as wp
 
-from .raster import T_MIN, gaussian_alpha, tile_pixel
+from .lanes import lane_all, lane_any, lane_count, lane_shfl, lane_shfl_int, lane_sum
+from .raster import BLEND_KERNEL_OPTIONS, T_MIN, gaussian_alpha, tile_pixel
 
 
 @functools.cache
@@ -21,7 +22,7 @@ def semantic_kernels(buffer_size: int):
     veci = wp.types.vector(length=buffer_size, dtype=wp.int32)
     vecf = wp.types.vector(length=buffer_size, dtype=wp.float32)
 
-    @wp.kernel(enable_backward=False, module="unique")
+    @wp.kernel(**BLEND_KERNEL_OPTIONS)
     def semantic_vote(
         means2d: wp.array(dtype=wp.vec2),
         conics: wp.array(dtype=wp.vec3),
@@ -35,6 +36,7 @@ def semantic_kernels(buffer_size: int):
         width: int,
         height: int,
         tile_size: int,
+        tile_threads: int,
         tiles_x: int,
         tiles_per_cam: int,
         buf_labels: wp.array(dtype=veci),
@@ -43,61 +45,90 @@ def semantic_kernels(buffer_size: int):
         out_weights: wp.array(dtype=float),
         overflows: wp.array(dtype=wp.int32),
     ):
-        pix = tile_pixel(wp.tid(), tile_size, tiles_x, tiles_per_cam, width, height)
+        tid = wp.tid()
+        pix = tile_pixel(tid, tile_size, tile_threads, tiles_x, tiles_per_cam, width, height)
         out = pix[0]
-        if out < 0:
-            return
         ct = pix[1]
         px = float(pix[2]) + 0.5
         py = float(pix[3]) + 0.5
+        W = lane_count()
+        lane = tid % W
+        end = tile_end[ct]
         T = float(1.0)
         labs = veci(-1)
         ws = vecf(0.0)
         filled = int(0)
         dropped = int(0)
-        for i in range(tile_start[ct], tile_end[ct]):
-            g = isect_ids[i]
-            n = g % num_gaussians
-            a = gaussian_alpha(conics[g], means2d[g], opacities[n], px, py)
-            ca = confidences[n] * a[0]
-            if ca > 0.0:
-                next_T = T * (1.0 - ca)
-                if next_T <= T_MIN:
-                    break
-                w = ca * T
-                T = next_T
-                lab = labels[n]
-                slot = int(-1)
-                weakest = int(0)
-                for s in range(buffer_size):
-                    if labs[s] == lab:
-                        slot = s
-                    if ws[s] < ws[weakest]:
-                        weakest = s
-                if slot >= 0:
-                    ws[slot] = ws[slot] + w
-                elif filled < buffer_size:
-                    labs[filled] = lab
-                    ws[filled] = w
-                    filled += 1
-                else:
-                    dropped += 1
-                    if w > ws[weakest]:
-                        labs[weakest] = lab
-                        ws[weakest] = w
-        best = int(-1)
-        best_w = float(0.0)
-        for s in range(buffer_size):
-            if labs[s] >= 0 and ws[s] > best_w:
-                best = labs[s]
-                best_w = ws[s]
-        buf_labels[out] = labs
-        buf_weights[out] = ws
-        out_labels[out] = best
-        out_weights[out] = best_w
-        overflows[out] = dropped
+        done = int(0)
+        if out < 0:
+            done = 1  # pixels past the image edge still take part in the lane shuffles
+        b = tile_start[ct]
+        while b < end:
+            if lane_all(done) != 0:
+                break
+            j = b + lane
+            gm = wp.vec2()
+            gc = wp.vec3()
+            go = float(0.0)
+            gconf = float(0.0)
+            glab = int(-1)
+            if j < end:
+                g = isect_ids[j]
+                n = g % num_gaussians
+                gm = means2d[g]
+                gc = conics[g]
+                go = opacities[n]
+                gconf = confidences[n]
+                glab = labels[n]
+            cnt = wp.min(W, end - b)
+            for s in range(cnt):
+                m = wp.vec2(lane_shfl(gm[0], s), lane_shfl(gm[1], s))
+                con = wp.vec3(lane_shfl(gc[0], s), lane_shfl(gc[1], s), lane_shfl(gc[2], s))
+                o = lane_shfl(go, s)
+                cf = lane_shfl(gconf, s)
+                lab = lane_shfl_int(glab, s)
+                if done == 0:
+                    ca = cf * gaussian_alpha(con, m, o, px, py)[0]
+                    if ca > 0.0:
+                        next_T = T * (1.0 - ca)
+                        if next_T <= T_MIN:
+                            done = 1
+                        else:
+                            w = ca * T
+                            T = next_T
+                            slot = int(-1)
+                            weakest = int(0)
+                            for k in range(buffer_size):
+                                if labs[k] == lab:
+                                    slot = k
+                                if ws[k] < ws[weakest]:
+                                    weakest = k
+                            if slot >= 0:
+                                ws[slot] = ws[slot] + w
+                            elif filled < buffer_size:
+                                labs[filled] = lab
+                                ws[filled] = w
+                                filled += 1
+                            else:
+                                dropped += 1
+                                if w > ws[weakest]:
+                                    labs[weakest] = lab
+                                    ws[weakest] = w
+            b += W
+        if out >= 0:
+            best = int(-1)
+            best_w = float(0.0)
+            for k in range(buffer_size):
+                if labs[k] >= 0 and ws[k] > best_w:
+                    best = labs[k]
+                    best_w = ws[k]
+            buf_labels[out] = labs
+            buf_weights[out] = ws
+            out_labels[out] = best
+            out_weights[out] = best_w
+            overflows[out] = dropped
 
-    @wp.kernel(enable_backward=False, module="unique")
+    @wp.kernel(**BLEND_KERNEL_OPTIONS)
     def semantic_contribution(
         means2d: wp.array(dtype=wp.vec2),
         conics: wp.array(dtype=wp.vec3),
@@ -115,42 +146,87 @@ def semantic_kernels(buffer_size: int):
         width: int,
         height: int,
         tile_size: int,
+        tile_threads: int,
         tiles_x: int,
         tiles_per_cam: int,
         numerator: wp.array(dtype=float),
         denominator: wp.array(dtype=float),
     ):
         """Accumulate sum_p w_ip R_p[l_i] and sum_p w_ip per Gaussian (dL_sq/ds_i and dL_lin/ds_i)."""
-        pix = tile_pixel(wp.tid(), tile_size, tiles_x, tiles_per_cam, width, height)
+        tid = wp.tid()
+        pix = tile_pixel(tid, tile_size, tile_threads, tiles_x, tiles_per_cam, width, height)
         out = pix[0]
-        if out < 0:
-            return
         ct = pix[1]
-        if use_mask != 0:
-            if pixel_mask[out] == wp.uint8(0):
-                return
         px = float(pix[2]) + 0.5
         py = float(pix[3]) + 0.5
-        labs = buf_labels[out]
-        ws = buf_weights[out]
+        W = lane_count()
+        lane = tid % W
+        end = tile_end[ct]
+        labs = veci(-1)
+        ws = vecf(0.0)
+        done = int(0)
+        if out < 0:
+            done = 1
+        else:
+            if use_mask != 0:
+                if pixel_mask[out] == wp.uint8(0):
+                    done = 1
+            labs = buf_labels[out]
+            ws = buf_weights[out]
         T = float(1.0)
-        for i in range(tile_start[ct], tile_end[ct]):
-            g = isect_ids[i]
-            n = g % num_gaussians
-            a = gaussian_alpha(conics[g], means2d[g], opacities[n], px, py)
-            ca = confidences[n] * a[0]
-            if ca > 0.0:
-                next_T = T * (1.0 - ca)
-                if next_T <= T_MIN:
-                    break
-                w = ca * T
-                T = next_T
-                lab = labels[n]
-                r = float(0.0)
-                for s in range(buffer_size):
-                    if labs[s] == lab:
-                        r = ws[s]
-                wp.atomic_add(numerator, n, w * r)
-                wp.atomic_add(denominator, n, w)
+        b = tile_start[ct]
+        while b < end:
+            if lane_all(done) != 0:
+                break
+            j = b + lane
+            gm = wp.vec2()
+            gc = wp.vec3()
+            go = float(0.0)
+            gconf = float(0.0)
+            glab = int(-1)
+            gn = int(0)
+            if j < end:
+                g = isect_ids[j]
+                gn = g % num_gaussians
+                gm = means2d[g]
+                gc = conics[g]
+                go = opacities[gn]
+                gconf = confidences[gn]
+                glab = labels[gn]
+            cnt = wp.min(W, end - b)
+            for s in range(cnt):
+                m = wp.vec2(lane_shfl(gm[0], s), lane_shfl(gm[1], s))
+                con = wp.vec3(lane_shfl(gc[0], s), lane_shfl(gc[1], s), lane_shfl(gc[2], s))
+                o = lane_shfl(go, s)
+                cf = lane_shfl(gconf, s)
+                lab = lane_shfl_int(glab, s)
+                hit = int(0)
+                v_num = float(0.0)
+                v_den = float(0.0)
+                if done == 0:
+                    ca = cf * gaussian_alpha(con, m, o, px, py)[0]
+                    if ca > 0.0:
+                        next_T = T * (1.0 - ca)
+                        if next_T <= T_MIN:
+                            done = 1
+                        else:
+                            w = ca * T
+                            T = next_T
+                            r = float(0.0)
+                            for k in range(buffer_size):
+                                if labs[k] == lab:
+                                    r = ws[k]
+                            hit = 1
+                            v_num = w * r
+                            v_den = w
+                # one atomic per warp and Gaussian: sum the lanes' shares first
+                if lane_any(hit) != 0:
+                    n = lane_shfl_int(gn, s)
+                    v_num = lane_sum(v_num)
+                    v_den = lane_sum(v_den)
+                    if lane == 0:
+                        wp.atomic_add(numerator, n, v_num)
+                        wp.atomic_add(denominator, n, v_den)
+            b += W
 
     return semantic_vote, semantic_contribution

@@ -8,11 +8,22 @@ from scenes import cameras, random_scene
 from ogscene3d import render_semantics, rendering_contribution
 
 
-def _compare(device, scene, labels, conf, width, height, pixel_mask=None, buffer_size=8):
+def _compare(device, scene, labels, conf, width, height, pixel_mask=None, buffer_size=8, tile_size=16):
     means, quats, scales, opac = scene
     vm, K = cameras(width, height, device=device)
     sem = render_semantics(
-        means, quats, scales, opac, labels, conf, vm, K, width, height, buffer_size=buffer_size
+        means,
+        quats,
+        scales,
+        opac,
+        labels,
+        conf,
+        vm,
+        K,
+        width,
+        height,
+        buffer_size=buffer_size,
+        tile_size=tile_size,
     )
     p = rendering_contribution(
         means,
@@ -27,9 +38,21 @@ def _compare(device, scene, labels, conf, width, height, pixel_mask=None, buffer
         height,
         pixel_mask=pixel_mask,
         buffer_size=buffer_size,
+        tile_size=tile_size,
     )
     ref_lab, R, _, ref_p = semantic_reference(
-        means, quats, scales, opac, labels, conf, vm[0], K[0], width, height, pixel_mask=pixel_mask
+        means,
+        quats,
+        scales,
+        opac,
+        labels,
+        conf,
+        vm[0],
+        K[0],
+        width,
+        height,
+        pixel_mask=pixel_mask,
+        tile_size=tile_size,
     )
     got = sem.labels[0].cpu().long()
     # ties aside: pixels whose two best reference votes are within 1e-5 may legitimately differ
@@ -172,6 +195,17 @@ def test_contribution_can_return_the_label_map(device):
     )
     alone = render_semantics(means, quats, scales, opac, labels, conf, vm, K, 40, 30)
     assert torch.equal(sem.labels, alone.labels) and torch.equal(sem.weights, alone.weights)
-    assert torch.equal(
+    # the same sums, in another order on CUDA (atomic adds)
+    torch.testing.assert_close(
         p, rendering_contribution(means, quats, scales, opac, labels, conf, vm[0], K[0], 40, 30)
     )
+
+
+@pytest.mark.parametrize("tile_size", [5, 32])
+def test_other_tile_sizes_match_reference(device, tile_size):
+    # on CUDA the 25 threads of a 5x5 tile are padded to a 32-lane warp, a 32x32 tile spans four blocks
+    n = 150
+    g = torch.Generator().manual_seed(17)
+    labels = torch.randint(-1, 6, (n,), generator=g, dtype=torch.int32).to(device)
+    conf = torch.rand(n, generator=g).to(device)
+    _compare(device, _scene(n, 17, device), labels, conf, 45, 37, tile_size=tile_size)

@@ -13,7 +13,7 @@ from typing import Any
 
 import torch
 
-from ._validate import check_image_size, check_tensor
+from ._validate import ValueChecks, check_image_size, check_tensor
 from .device import init_warp, warp_stream
 
 RENDER_MODES = ("RGB", "D", "ED", "RGB+D", "RGB+ED")
@@ -33,11 +33,16 @@ def _kernels():
 
 
 def _as_wp(t: torch.Tensor, dtype: Any = None):
-    """A flat (1D) Warp view of a contiguous tensor; vector/matrix dtypes consume the trailing dims."""
+    """A flat (1D) Warp launch argument viewing a contiguous tensor; vector/matrix dtypes consume the
+    trailing dims. It is Warp's bare array descriptor (cheaper to make and to launch with than a
+    ``wp.array``), which holds no reference to the memory: the tensor rides along on it so that a
+    contiguous copy lives until the launch that uses it has been queued."""
     t = t.contiguous()
     shape = getattr(dtype, "_shape_", ())
     t = t.reshape(-1, *shape) if shape else t.reshape(-1)
-    return _wp().from_torch(t, dtype=dtype, requires_grad=False)
+    arg = _wp().from_torch(t, dtype=dtype, requires_grad=False, return_ctype=True)
+    arg.tensor = t
+    return arg
 
 
 class _Project(torch.autograd.Function):
@@ -160,6 +165,16 @@ class TileBins:
     def num_intersections(self) -> int:
         return int(self.isect_ids.shape[0])
 
+    @property
+    def tile_threads(self) -> int:
+        """Threads per tile in the blending launches: tile_size^2 rounded up to whole 32-lane warps, so
+        that no warp spans two tiles (a warp's lanes share the Gaussians they read)."""
+        return (self.tile_size * self.tile_size + 31) // 32 * 32
+
+    @property
+    def blend_launch_dim(self) -> int:
+        return int(self.tile_start.numel()) * self.tile_threads
+
 
 def bin_gaussians(
     means2d: torch.Tensor,
@@ -168,8 +183,11 @@ def bin_gaussians(
     width: int,
     height: int,
     tile_size: int = 16,
+    checks: ValueChecks | None = None,
 ) -> TileBins:
-    """Assign projected Gaussians [C, N] to tiles and sort every tile's list front to back."""
+    """Assign projected Gaussians [C, N] to tiles and sort every tile's list front to back.
+
+    ``checks``: the caller's pending input checks, settled on the sync this function makes anyway."""
     wp = _wp()
     _, binning, _ = _kernels()
     C, N = radii.shape
@@ -181,6 +199,8 @@ def bin_gaussians(
     tile_end = torch.zeros(n_tiles, dtype=torch.int32, device=dev)
     counts = torch.zeros(C, N, dtype=torch.int32, device=dev)
     if C * N == 0:
+        if checks is not None:
+            checks.settle()
         empty = torch.zeros(0, dtype=torch.int32, device=dev)
         return TileBins(tile_size, tiles_x, tiles_y, tile_start, tile_end, empty, counts)
     m2d = _as_wp(means2d.detach(), wp.vec2)
@@ -194,12 +214,14 @@ def bin_gaussians(
             device=wdev,
         )
         offsets = torch.cumsum(counts.reshape(-1).to(torch.int64), 0)
-        total = int(offsets[-1].item())  # the one host sync: the sort buffers' size
-        keys = torch.zeros(2 * max(total, 1), dtype=torch.int64, device=dev)
-        values = torch.zeros(2 * max(total, 1), dtype=torch.int32, device=dev)
+        # the one host sync: the sort buffers' size (and the verdict of the caller's input checks)
+        total = (checks or ValueChecks()).settle(offsets[-1:])[0]
+        keys = torch.empty(2 * max(total, 1), dtype=torch.int64, device=dev)
+        values = torch.empty(2 * max(total, 1), dtype=torch.int32, device=dev)
         if total > 0:
             depth_bits = depths.detach().contiguous().view(torch.int32)
-            wk, wv = _as_wp(keys), _as_wp(values)
+            wk = _wp().from_torch(keys, requires_grad=False)  # radix_sort_pairs takes wp.arrays
+            wv = _wp().from_torch(values, requires_grad=False)
             wp.launch(
                 binning.emit_intersections,
                 dim=C * N,
@@ -234,12 +256,14 @@ class _Rasterize(torch.autograd.Function):
         last_ids = torch.empty(C, height, width, dtype=torch.int32, device=dev)
         common = [_as_wp(means2d.detach(), wp.vec2), _as_wp(conics.detach(), wp.vec3)]
         tiles = bins.tiles_x * bins.tiles_y
-        dim = C * tiles * bins.tile_size * bins.tile_size
+        dim = bins.blend_launch_dim
         with warp_stream(dev) as wdev:
-            for s, e in _chunks(D):
+            chunks = _chunks(D)
+            for s, e in chunks:
                 fwd, _ = raster.raster_kernels(e - s)
                 vec = wp.types.vector(length=e - s, dtype=wp.float32)
-                part = torch.empty(C, height, width, e - s, device=dev)
+                # one chunk (D <= 32, the usual case) writes the output in place
+                part = out_colors if len(chunks) == 1 else torch.empty(C, height, width, e - s, device=dev)
                 bg = backgrounds[:, s:e] if backgrounds is not None else torch.zeros(C, e - s, device=dev)
                 wp.launch(
                     fwd,
@@ -257,14 +281,16 @@ class _Rasterize(torch.autograd.Function):
                         width,
                         height,
                         bins.tile_size,
+                        bins.tile_threads,
                         bins.tiles_x,
                         tiles,
                     ],
                     outputs=[_as_wp(part, vec), _as_wp(out_alphas), _as_wp(last_ids)],
                     device=wdev,
-                    block_dim=bins.tile_size * bins.tile_size,
+                    block_dim=raster.BLEND_BLOCK_DIM,
                 )
-                out_colors[..., s:e] = part
+                if part is not out_colors:
+                    out_colors[..., s:e] = part
         ctx.save_for_backward(
             means2d,
             conics,
@@ -297,13 +323,14 @@ class _Rasterize(torch.autograd.Function):
             v_colors_out = torch.zeros(C, height, width, D, device=dev)
         v_alpha = torch.zeros(C, height, width, device=dev) if v_alphas_out is None else v_alphas_out[..., 0]
         tiles = bins.tiles_x * bins.tiles_y
-        dim = C * tiles * bins.tile_size * bins.tile_size
+        dim = bins.blend_launch_dim
         with warp_stream(dev) as wdev:
-            for chunk, (s, e) in enumerate(_chunks(D)):
+            chunks = _chunks(D)
+            for chunk, (s, e) in enumerate(chunks):
                 _, bwd = raster.raster_kernels(e - s)
                 vec = wp.types.vector(length=e - s, dtype=wp.float32)
                 bg = backgrounds[:, s:e] if ctx.has_bg else torch.zeros(C, e - s, device=dev)
-                v_part = torch.zeros(C, N, e - s, device=dev)
+                v_part = v_colors if len(chunks) == 1 else torch.zeros(C, N, e - s, device=dev)
                 # The alpha output depends on geometry only: count its gradient in one chunk.
                 v_a = v_alpha if chunk == 0 else torch.zeros_like(v_alpha)
                 wp.launch(
@@ -326,6 +353,7 @@ class _Rasterize(torch.autograd.Function):
                         width,
                         height,
                         bins.tile_size,
+                        bins.tile_threads,
                         bins.tiles_x,
                         tiles,
                     ],
@@ -336,9 +364,10 @@ class _Rasterize(torch.autograd.Function):
                         _as_wp(v_opac),
                     ],
                     device=wdev,
-                    block_dim=bins.tile_size * bins.tile_size,
+                    block_dim=raster.BLEND_BLOCK_DIM,
                 )
-                v_colors[..., s:e] = v_part
+                if v_part is not v_colors:
+                    v_colors[..., s:e] = v_part
         v_bg = None
         if ctx.has_bg and ctx.needs_input_grad[4]:
             T = (1.0 - out_alphas).unsqueeze(-1)
@@ -346,24 +375,23 @@ class _Rasterize(torch.autograd.Function):
         return v_means2d, v_conics, v_colors, v_opac.sum(0), v_bg, None, None, None
 
 
-def _check_common(means, quats, scales, opacities, viewmats, Ks, width, height):
-    check_tensor("means", means, (None, 3))
+def _check_common(means, quats, scales, opacities, viewmats, Ks, width, height, checks: ValueChecks):
+    """Shape, dtype and device checks now; value checks recorded in ``checks`` for the caller to settle."""
+    check_tensor("means", means, (None, 3), checks=checks)
     dev = means.device
     N = means.shape[0]
-    check_tensor("quats", quats, (N, 4), dev)
-    check_tensor("scales", scales, (N, 3), dev)
-    check_tensor("opacities", opacities, (N,), dev)
-    check_tensor("viewmats", viewmats, (None, 4, 4), dev)
+    check_tensor("quats", quats, (N, 4), dev, checks=checks)
+    check_tensor("scales", scales, (N, 3), dev, checks=checks)
+    check_tensor("opacities", opacities, (N,), dev, checks=checks)
+    check_tensor("viewmats", viewmats, (None, 4, 4), dev, checks=checks)
     C = viewmats.shape[0]
-    check_tensor("Ks", Ks, (C, 3, 3), dev)
+    check_tensor("Ks", Ks, (C, 3, 3), dev, checks=checks)
     if C == 0:
         raise ValueError("viewmats must hold at least one camera, got shape [0, 4, 4]")
-    if N and bool((scales <= 0).any()):
-        raise ValueError("scales must be positive (activated, e.g. exp(log_scales))")
-    if N and bool((quats.norm(dim=-1) == 0).any()):
-        raise ValueError("quats contains a zero quaternion")
-    if bool(((Ks[:, 0, 0] <= 0) | (Ks[:, 1, 1] <= 0)).any()):
-        raise ValueError("Ks must have positive focal lengths")
+    if N:
+        checks.fail_if(scales.amin() <= 0, "scales must be positive (activated, e.g. exp(log_scales))")
+        checks.fail_if((quats.abs().amax(dim=-1) == 0).any(), "quats contains a zero quaternion")
+    checks.fail_if(Ks[:, :2, :2].diagonal(dim1=1, dim2=2).amin() <= 0, "Ks must have positive focal lengths")
     return check_image_size(width, height)
 
 
@@ -397,7 +425,8 @@ def rasterization(
         tiles_per_gaussian, tile ranges, isect_ids, n_cameras, width, height, tile_size).
     Differentiable w.r.t. means, quats, scales, opacities and colors (not viewmats or Ks).
     """
-    width, height = _check_common(means, quats, scales, opacities, viewmats, Ks, width, height)
+    checks = ValueChecks()
+    width, height = _check_common(means, quats, scales, opacities, viewmats, Ks, width, height, checks)
     if render_mode not in RENDER_MODES:
         raise ValueError(f"render_mode must be one of {RENDER_MODES}, got {render_mode!r}")
     if not (isinstance(tile_size, int) and 1 <= tile_size <= 32):
@@ -411,21 +440,21 @@ def rasterization(
     dev = means.device
     N, C = means.shape[0], viewmats.shape[0]
     if colors.dim() == 2:
-        check_tensor("colors", colors, (N, None), dev)
+        check_tensor("colors", colors, (N, None), dev, checks=checks)
         colors = colors.unsqueeze(0).expand(C, N, colors.shape[-1])
     else:
-        check_tensor("colors", colors, (C, N, None), dev)
+        check_tensor("colors", colors, (C, N, None), dev, checks=checks)
     if colors.shape[-1] == 0:
         raise ValueError("colors must have at least one channel")
     D = colors.shape[-1]
     if backgrounds is not None:
-        check_tensor("backgrounds", backgrounds, (C, D), dev)
+        check_tensor("backgrounds", backgrounds, (C, D), dev, checks=checks)
 
     means2d, conics, depths, radii = _Project.apply(
         means, quats, scales, viewmats, Ks, width, height, near_plane, far_plane, eps2d
     )
     with torch.no_grad():
-        bins = bin_gaussians(means2d, radii, depths, width, height, tile_size)
+        bins = bin_gaussians(means2d, radii, depths, width, height, tile_size, checks)  # settles checks
 
     if render_mode in ("D", "ED"):
         blend, bg = depths.unsqueeze(-1), None

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from ._validate import check_tensor
+from ._validate import ValueChecks, check_tensor
 from .device import warp_stream
 from .render import TileBins, _as_wp, _check_common, _Project, _wp, bin_gaussians
 
@@ -31,15 +31,21 @@ class SemanticRender:
     meta: dict = field(default_factory=dict)
 
 
-def _check_semantic_inputs(means, quats, scales, opacities, labels, confidences, viewmats, Ks, width, height):
-    width, height = _check_common(means, quats, scales, opacities, viewmats, Ks, width, height)
+def _check_semantic_inputs(
+    means, quats, scales, opacities, labels, confidences, viewmats, Ks, width, height, checks=None
+):
+    """Raises on the first bad argument; with ``checks`` the value checks are left there to settle."""
+    own = checks if checks is not None else ValueChecks()
+    width, height = _check_common(means, quats, scales, opacities, viewmats, Ks, width, height, own)
     N = means.shape[0]
     check_tensor("labels", labels, (N,), means.device, dtypes=(torch.int32, torch.int64))
-    check_tensor("confidences", confidences, (N,), means.device)
-    if N and bool(((confidences < 0) | (confidences > 1)).any()):
-        raise ValueError("confidences must lie in [0, 1]")
-    if N and int(labels.max()) > torch.iinfo(torch.int32).max:
-        raise ValueError("labels must fit in int32")
+    check_tensor("confidences", confidences, (N,), means.device, checks=own)
+    if N:
+        own.fail_if(((confidences < 0) | (confidences > 1)).any(), "confidences must lie in [0, 1]")
+        if labels.dtype == torch.int64:
+            own.fail_if(labels.max() > torch.iinfo(torch.int32).max, "labels must fit in int32")
+    if checks is None:
+        own.settle()
     return width, height
 
 
@@ -59,9 +65,11 @@ def _vote(
     eps2d,
     tile_size,
     buffer_size,
+    checks: ValueChecks,
 ):
-    """Project and bin the labelled subset and run the voting kernel."""
+    """Project and bin the labelled subset and run the voting kernel (the binning settles ``checks``)."""
     wp = _wp()
+    from ogscene3d.kernels.raster import BLEND_BLOCK_DIM
     from ogscene3d.kernels.semantic import semantic_kernels
 
     if not (isinstance(buffer_size, int) and 1 <= buffer_size <= 64):
@@ -86,7 +94,7 @@ def _vote(
             far_plane,
             eps2d,
         )
-        bins = bin_gaussians(means2d, radii, depths, width, height, tile_size)
+        bins = bin_gaussians(means2d, radii, depths, width, height, tile_size, checks)
     buf_l = torch.full((C, height, width, buffer_size), -1, dtype=torch.int32, device=dev)
     buf_w = torch.zeros(C, height, width, buffer_size, device=dev)
     out_l = torch.full((C, height, width), -1, dtype=torch.int32, device=dev)
@@ -105,8 +113,10 @@ def _vote(
         _as_wp(bins.tile_end),
         _as_wp(bins.isect_ids),
     ]
-    dims = [max(n, 1), width, height, bins.tile_size, bins.tiles_x, bins.tiles_x * bins.tiles_y]
-    launch_dim = C * bins.tiles_x * bins.tiles_y * bins.tile_size * bins.tile_size
+    dims = [
+        max(n, 1), width, height, bins.tile_size, bins.tile_threads, bins.tiles_x, bins.tiles_x * bins.tiles_y
+    ]
+    launch_dim = bins.blend_launch_dim
     with warp_stream(dev) as wdev:
         wp.launch(
             vote,
@@ -120,7 +130,7 @@ def _vote(
                 _as_wp(overflow),
             ],
             device=wdev,
-            block_dim=bins.tile_size * bins.tile_size,
+            block_dim=BLEND_BLOCK_DIM,
         )
     return keep, bins, geometry, dims, launch_dim, (buf_l, buf_w, out_l, out_w, overflow)
 
@@ -148,8 +158,9 @@ def render_semantics(
     Shapes as in :func:`rasterization`; ``labels`` [N] int32/int64 (-1 = unlabelled), ``confidences`` [N]
     float32 in [0, 1]. Memory is O(C * H * W * buffer_size), never O(H * W * number of labels).
     """
+    checks = ValueChecks()
     width, height = _check_semantic_inputs(
-        means, quats, scales, opacities, labels, confidences, viewmats, Ks, width, height
+        means, quats, scales, opacities, labels, confidences, viewmats, Ks, width, height, checks
     )
     _, bins, _, _, _, outputs = _vote(
         means,
@@ -167,6 +178,7 @@ def render_semantics(
         eps2d,
         tile_size,
         buffer_size,
+        checks,
     )
     return _semantic_render(bins, buffer_size, outputs, return_buffer)
 
@@ -203,10 +215,12 @@ def rendering_contribution(
         viewmat = viewmat.unsqueeze(0)
     if isinstance(K, torch.Tensor) and K.dim() == 2:
         K = K.unsqueeze(0)
-    check_tensor("viewmat", viewmat, (1, 4, 4), means.device if isinstance(means, torch.Tensor) else None)
-    check_tensor("K", K, (1, 3, 3), means.device if isinstance(means, torch.Tensor) else None)
+    checks = ValueChecks()
+    dev = means.device if isinstance(means, torch.Tensor) else None
+    check_tensor("viewmat", viewmat, (1, 4, 4), dev, checks=checks)
+    check_tensor("K", K, (1, 3, 3), dev, checks=checks)
     width, height = _check_semantic_inputs(
-        means, quats, scales, opacities, labels, confidences, viewmat, K, width, height
+        means, quats, scales, opacities, labels, confidences, viewmat, K, width, height, checks
     )
     if not eps > 0:
         raise ValueError(f"eps must be > 0, got {eps}")
@@ -214,6 +228,7 @@ def rendering_contribution(
     if pixel_mask is not None:
         check_tensor("pixel_mask", pixel_mask, (height, width), dev, dtypes=(torch.bool, torch.uint8))
     wp = _wp()
+    from ogscene3d.kernels.raster import BLEND_BLOCK_DIM
     from ogscene3d.kernels.semantic import semantic_kernels
 
     keep, bins, geometry, dims, launch_dim, (buf_l, buf_w, out_l, out_w, overflow) = _vote(
@@ -232,6 +247,7 @@ def rendering_contribution(
         eps2d,
         tile_size,
         buffer_size,
+        checks,
     )
     n = int(keep.numel())
     num = torch.zeros(max(n, 1), device=dev)
@@ -258,7 +274,7 @@ def rendering_contribution(
             ],
             outputs=[_as_wp(num), _as_wp(den)],
             device=wdev,
-            block_dim=bins.tile_size * bins.tile_size,
+            block_dim=BLEND_BLOCK_DIM,
         )
     p_conf = torch.zeros(means.shape[0], device=dev)
     p_conf[keep] = (num / (den + eps))[:n]
