@@ -83,12 +83,15 @@ def rasterize(
 ):
     """Reference for ogscene3d.rasterization (same arguments, same outputs without meta)."""
     f = torch.float64
-    means, quats, scales, opacities = means.to(f), quats.to(f), scales.to(f), opacities.to(f)
-    viewmats, Ks = viewmats.to(f), Ks.to(f)
+    # on the CPU in float64 whatever the inputs' device (autograd carries gradients back to them)
+    means, quats, scales, opacities = (t.to("cpu", f) for t in (means, quats, scales, opacities))
+    viewmats, Ks = viewmats.to("cpu", f), Ks.to("cpu", f)
     C = viewmats.shape[0]
     if colors.dim() == 2:
         colors = colors.unsqueeze(0).expand(C, -1, -1)
-    colors = colors.to(f)
+    colors = colors.to("cpu", f)
+    if backgrounds is not None:
+        backgrounds = backgrounds.to("cpu", f)
     ys, xs = torch.meshgrid(torch.arange(height, dtype=f), torch.arange(width, dtype=f), indexing="ij")
     px, py = xs.reshape(-1) + 0.5, ys.reshape(-1) + 0.5
     tile_x = (xs.reshape(-1) // tile_size).long()

@@ -155,8 +155,7 @@ def test_ply_layout_plyfile_and_open3d(tmp_path):
     torch.testing.assert_close(back.opacity_logits, rows["opacity_logits"])
     torch.testing.assert_close(back.labels, rows["labels"].int())
 
-    import open3d as o3d
-
+    o3d = pytest.importorskip("open3d")  # a dependency; absent only on bare benchmark machines
     pcd = o3d.io.read_point_cloud(str(path))
     np.testing.assert_allclose(np.asarray(pcd.points), rows["means"].numpy(), rtol=1e-6)
 
