@@ -96,24 +96,33 @@ def semantic_kernels(buffer_size: int):
                         else:
                             w = ca * T
                             T = next_T
-                            slot = int(-1)
-                            weakest = int(0)
+                            # Constant-bound loops (unrolled) with predicated writes keep the buffer in
+                            # registers; indexing it by a runtime slot would move it to local memory.
+                            matched = int(0)
                             for k in range(buffer_size):
                                 if labs[k] == lab:
-                                    slot = k
-                                if ws[k] < ws[weakest]:
-                                    weakest = k
-                            if slot >= 0:
-                                ws[slot] = ws[slot] + w
-                            elif filled < buffer_size:
-                                labs[filled] = lab
-                                ws[filled] = w
-                                filled += 1
-                            else:
-                                dropped += 1
-                                if w > ws[weakest]:
-                                    labs[weakest] = lab
-                                    ws[weakest] = w
+                                    ws[k] = ws[k] + w
+                                    matched = 1
+                            if matched == 0:
+                                if filled < buffer_size:
+                                    for k in range(buffer_size):
+                                        if k == filled:
+                                            labs[k] = lab
+                                            ws[k] = w
+                                    filled += 1
+                                else:
+                                    dropped += 1
+                                    weakest = int(0)
+                                    weakest_w = ws[0]
+                                    for k in range(1, buffer_size):
+                                        if ws[k] < weakest_w:
+                                            weakest = k
+                                            weakest_w = ws[k]
+                                    if w > weakest_w:
+                                        for k in range(buffer_size):
+                                            if k == weakest:
+                                                labs[k] = lab
+                                                ws[k] = w
             b += W
         if out >= 0:
             best = int(-1)

@@ -75,17 +75,12 @@ def _vote(
     if not (isinstance(buffer_size, int) and 1 <= buffer_size <= 64):
         raise ValueError(f"buffer_size must be an int in [1, 64], got {buffer_size!r}")
     dev = means.device
-    C = viewmats.shape[0]
-    keep = torch.nonzero(labels >= 0).squeeze(1)
-    sub = [t.detach()[keep].contiguous() for t in (means, quats, scales, opacities)]
-    sub_labels = labels[keep].to(torch.int32).contiguous()
-    sub_conf = confidences.detach()[keep].contiguous()
-    n = int(keep.numel())
+    C, n = viewmats.shape[0], means.shape[0]
     with torch.no_grad():
         means2d, conics, depths, radii = _Project.apply(
-            sub[0],
-            sub[1],
-            sub[2],
+            means.detach(),
+            quats.detach(),
+            scales.detach(),
             viewmats.detach(),
             Ks.detach(),
             width,
@@ -94,6 +89,8 @@ def _vote(
             far_plane,
             eps2d,
         )
+        # unlabelled Gaussians neither vote nor occlude: a zero radius keeps them out of every tile
+        radii = torch.where(labels >= 0, radii, torch.zeros_like(radii))
         bins = bin_gaussians(means2d, radii, depths, width, height, tile_size, checks)
     buf_l = torch.full((C, height, width, buffer_size), -1, dtype=torch.int32, device=dev)
     buf_w = torch.zeros(C, height, width, buffer_size, device=dev)
@@ -106,9 +103,9 @@ def _vote(
     geometry = [
         _as_wp(means2d, wp.vec2),
         _as_wp(conics, wp.vec3),
-        _as_wp(sub[3]),
-        _as_wp(sub_labels),
-        _as_wp(sub_conf),
+        _as_wp(opacities.detach()),
+        _as_wp(labels.to(torch.int32)),
+        _as_wp(confidences.detach()),
         _as_wp(bins.tile_start),
         _as_wp(bins.tile_end),
         _as_wp(bins.isect_ids),
@@ -132,7 +129,7 @@ def _vote(
             device=wdev,
             block_dim=BLEND_BLOCK_DIM,
         )
-    return keep, bins, geometry, dims, launch_dim, (buf_l, buf_w, out_l, out_w, overflow)
+    return bins, geometry, dims, launch_dim, (buf_l, buf_w, out_l, out_w, overflow)
 
 
 def render_semantics(
@@ -162,7 +159,7 @@ def render_semantics(
     width, height = _check_semantic_inputs(
         means, quats, scales, opacities, labels, confidences, viewmats, Ks, width, height, checks
     )
-    _, bins, _, _, _, outputs = _vote(
+    bins, _, _, _, outputs = _vote(
         means,
         quats,
         scales,
@@ -231,7 +228,7 @@ def rendering_contribution(
     from ogscene3d.kernels.raster import BLEND_BLOCK_DIM
     from ogscene3d.kernels.semantic import semantic_kernels
 
-    keep, bins, geometry, dims, launch_dim, (buf_l, buf_w, out_l, out_w, overflow) = _vote(
+    bins, geometry, dims, launch_dim, (buf_l, buf_w, out_l, out_w, overflow) = _vote(
         means,
         quats,
         scales,
@@ -249,7 +246,7 @@ def rendering_contribution(
         buffer_size,
         checks,
     )
-    n = int(keep.numel())
+    n = means.shape[0]
     num = torch.zeros(max(n, 1), device=dev)
     den = torch.zeros(max(n, 1), device=dev)
     mask = (
@@ -276,9 +273,8 @@ def rendering_contribution(
             device=wdev,
             block_dim=BLEND_BLOCK_DIM,
         )
-    p_conf = torch.zeros(means.shape[0], device=dev)
-    p_conf[keep] = (num / (den + eps))[:n]
-    p_conf.clamp_(0.0, 1.0)
+    # unlabelled and unseen Gaussians have num = den = 0, hence P_conf 0
+    p_conf = (num / (den + eps))[:n].clamp_(0.0, 1.0)
     if not return_semantics:
         return p_conf
     return p_conf, _semantic_render(bins, buffer_size, (buf_l, buf_w, out_l, out_w, overflow), True)
@@ -286,10 +282,11 @@ def rendering_contribution(
 
 def _semantic_render(bins: TileBins, buffer_size: int, outputs, return_buffer: bool) -> SemanticRender:
     buf_l, buf_w, out_l, out_w, overflow = outputs
+    overflow_pixels, overflow_votes = torch.stack([(overflow > 0).sum(), overflow.sum()]).tolist()
     meta = {
         "buffer_size": buffer_size,
-        "overflow_pixels": int((overflow > 0).sum()),
-        "overflow_votes": int(overflow.sum()),
+        "overflow_pixels": overflow_pixels,
+        "overflow_votes": overflow_votes,
         "n_intersections": bins.num_intersections,
     }
     return SemanticRender(
