@@ -9,6 +9,7 @@
 #   rasterize  ours vs gsplat, forward and forward+backward, 50k..2M Gaussians at 1200x680 (issue #2)
 #   semantic   semantic render + contribution vs a colour forward pass, 500k at 1200x680 (issue #3)
 #   mapping    per-keyframe module times at 1200x680 with ~1M Gaussians (issue #5), also as JSON
+#   profile    kernel-level tables of the three (OUTDIR/profile/): device-kernel vs wall time per call
 # OUTDIR/summary.txt lists each step's exit status and wall time.
 set -uo pipefail
 out=${1:?usage: gpu_session.sh OUTDIR}
@@ -20,6 +21,8 @@ if [[ "${SMALL:-0}" == 1 ]]; then
   size=160x120; w=160; h=120; counts=5k; sem_counts=5k; gaussians=20000; iters=2
 else
   size=1200x680; w=1200; h=680; counts=50k,200k,500k,1M,2M; sem_counts=500k; gaussians=1000000; iters=20
+  # gsplat compiles its CUDA extension on first use (~90 s): use every core
+  export MAX_JOBS=${MAX_JOBS:-$(nproc)}
 fi
 
 : > "$out/summary.txt"
@@ -54,3 +57,5 @@ step semantic python benchmarks/semantic.py --device "$device" --width "$w" --he
   --counts "$sem_counts" --iters "$iters"
 step mapping python benchmarks/mapping.py modules --device "$device" --size "$size" \
   --gaussians "$gaussians" --json "$out/mapping_modules.json"
+step profile python benchmarks/kernel_profile.py --device "$device" --width "$w" --height "$h" \
+  --gaussians "$sem_counts" --map-gaussians "$gaussians" --out "$out/profile"

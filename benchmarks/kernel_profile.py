@@ -1,0 +1,199 @@
+"""Where the time goes: torch.profiler tables (device kernels and host calls) for the three GPU benchmarks.
+
+    python benchmarks/kernel_profile.py --device cuda --out OUTDIR   # 500k at 1200x680, mapping at 1M
+    python benchmarks/kernel_profile.py --device cpu --width 160 --height 120 \
+        --gaussians 5k --map-gaussians 20k
+
+Writes OUTDIR/raster.txt (ours, and gsplat when importable: forward and forward+backward),
+OUTDIR/semantic.txt (labels + P_conf in one call), OUTDIR/mapping.txt (the ``mapping.py modules`` round with
+each module inside a named range ``M:<function>``) and OUTDIR/summary.txt: per call, the device-kernel time
+(host-independent) next to the wall time, and the host time spent queueing a forward. Wall time well above
+kernel time means the call is host-bound (launch overhead, syncs).
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import sys
+import time
+from pathlib import Path
+
+import torch
+from torch.profiler import ProfilerActivity, profile, record_function
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import mapping as mapping_bench  # noqa: E402
+from _common import camera, parse_count, sync, synthetic_gaussians, time_ms  # noqa: E402
+
+from ogscene3d import rasterization, rendering_contribution  # noqa: E402
+from ogscene3d.device import resolve_device  # noqa: E402
+
+MAPPING_FUNCTIONS = (
+    "make_probes",
+    "associate_segments",
+    "visible_pixels",
+    "duplicate_label_pairs",
+    "global_refinement",
+    "longterm_view_update",
+)
+
+
+def _activities(device: torch.device) -> list:
+    return [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device.type == "cuda" else [])
+
+
+def _kernel_ms(prof) -> float:
+    """Total device-kernel time in a profile, in ms (0 on CPU)."""
+    total = 0.0
+    for evt in prof.key_averages():
+        total += getattr(evt, "self_device_time_total", getattr(evt, "self_cuda_time_total", 0.0))
+    return total / 1000.0
+
+
+def _write_tables(prof, path: Path, title: str, device: torch.device, rows: int = 30) -> None:
+    ka = prof.key_averages()
+    with path.open("a") as fh:
+        fh.write(f"\n##### {title}\n")
+        if device.type == "cuda":
+            fh.write(ka.table(sort_by="self_cuda_time_total", row_limit=rows, max_name_column_width=70))
+        fh.write(ka.table(sort_by="self_cpu_time_total", row_limit=rows, max_name_column_width=70))
+
+
+def _profiled(fn, calls: int, device: torch.device):
+    for _ in range(3):  # compile and warm the allocator first
+        fn()
+    sync(device)
+    with profile(activities=_activities(device)) as prof:
+        for _ in range(calls):
+            fn()
+        sync(device)
+    return prof
+
+
+def _host_ms(fn, device: torch.device, calls: int = 20) -> float:
+    """Milliseconds per call spent on the host queueing work (includes any syncs the call makes)."""
+    sync(device)
+    t0 = time.perf_counter()
+    for _ in range(calls):
+        fn()
+    host = (time.perf_counter() - t0) * 1000.0 / calls
+    sync(device)
+    return host
+
+
+def _render_fns(render, scene, vm, K, width, height):
+    means, quats, scales, opac, colors = scene[:5]
+    params = [t.clone().requires_grad_(True) for t in scene[:5]]
+
+    def forward():
+        with torch.no_grad():
+            return render(means, quats, scales, opac, colors, vm, K, width, height)
+
+    def forward_backward():
+        img, alpha, _ = render(*params, vm, K, width, height)
+        (img.sum() + alpha.sum()).backward()
+
+    return forward, forward_backward
+
+
+def profile_raster(args, device, out: Path, summary: list[str]) -> None:
+    n = parse_count(args.gaussians)
+    scene = synthetic_gaussians(n, device)
+    vm, K = camera(args.width, args.height, device)
+    renderers = [("ours", rasterization)]
+    try:
+        import gsplat
+
+        if device.type == "cuda":
+            renderers.append(("gsplat", gsplat.rasterization))
+    except Exception as e:  # noqa: BLE001 - any import failure means "not available"
+        summary.append(f"gsplat not available ({type(e).__name__}: {e})")
+    for name, render in renderers:
+        forward, forward_backward = _render_fns(render, scene, vm, K, args.width, args.height)
+        for label, fn in (("fwd", forward), ("fwd+bwd", forward_backward)):
+            prof = _profiled(fn, args.calls, device)
+            _write_tables(prof, out / "raster.txt", f"{name} {label} x{args.calls}", device)
+            summary.append(
+                f"raster {name:6s} {label:8s} N={n}: wall {time_ms(fn, device, iters=args.calls):.3f} ms, "
+                f"kernels {_kernel_ms(prof) / args.calls:.3f} ms per call"
+            )
+        summary.append(f"raster {name:6s} fwd host-side {_host_ms(forward, device):.3f} ms per call")
+
+
+def profile_semantic(args, device, out: Path, summary: list[str]) -> None:
+    n = parse_count(args.gaussians)
+    means, quats, scales, opac, _, labels, conf = synthetic_gaussians(n, device)
+    vm, K = camera(args.width, args.height, device)
+
+    def one_call():
+        W, H = args.width, args.height
+        return rendering_contribution(
+            means, quats, scales, opac, labels, conf, vm[0], K[0], W, H, return_semantics=True
+        )
+
+    prof = _profiled(one_call, args.calls, device)
+    _write_tables(prof, out / "semantic.txt", f"labels + P_conf x{args.calls}", device)
+    summary.append(
+        f"semantic 1call N={n}: wall {time_ms(one_call, device, iters=args.calls):.3f} ms, "
+        f"kernels {_kernel_ms(prof) / args.calls:.3f} ms per call"
+    )
+
+
+def profile_mapping(args, device, out: Path, summary: list[str]) -> None:
+    for name in MAPPING_FUNCTIONS:
+        fn = getattr(mapping_bench, name)
+
+        @functools.wraps(fn)
+        def ranged(*a, _fn=fn, _name=name, **k):
+            with record_function("M:" + _name):
+                return _fn(*a, **k)
+
+        setattr(mapping_bench, name, ranged)
+    margs = argparse.Namespace(
+        device=str(device),
+        size=f"{args.width}x{args.height}",
+        gaussians=parse_count(args.map_gaussians),
+        repeat=0,
+        seed=0,
+        config=str(Path(__file__).resolve().parents[1] / "configs" / "synthetic.yaml"),
+        overrides=[],
+    )
+    mapping_bench.modules(margs)  # compile and warm up
+    margs.repeat = 2
+    with profile(activities=_activities(device)) as prof:
+        res = mapping_bench.modules(margs)
+    ka = prof.key_averages()
+    with (out / "mapping.txt").open("w") as fh:
+        if device.type == "cuda":
+            fh.write(ka.table(sort_by="self_cuda_time_total", row_limit=40, max_name_column_width=70))
+        fh.write(ka.table(sort_by="cpu_time_total", row_limit=40, max_name_column_width=70))
+    summary.append(f"mapping modules ({margs.gaussians} Gaussians, 2 rounds, profiled): {res['ms']}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--device", default=None)
+    ap.add_argument("--out", default="runs/profile")
+    ap.add_argument("--width", type=int, default=1200)
+    ap.add_argument("--height", type=int, default=680)
+    ap.add_argument("--gaussians", default="500k", help="for the rasterizer and the semantic kernels")
+    ap.add_argument("--map-gaussians", default="1M", help="for the mapping modules")
+    ap.add_argument("--calls", type=int, default=5, help="profiled calls per table")
+    ap.add_argument("--only", choices=["raster", "semantic", "mapping"], action="append")
+    args = ap.parse_args()
+    device = resolve_device(args.device)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    for name in ("raster.txt", "semantic.txt", "mapping.txt"):
+        (out / name).unlink(missing_ok=True)
+    summary: list[str] = [f"device {device}, {args.width}x{args.height}"]
+    steps = {"raster": profile_raster, "semantic": profile_semantic, "mapping": profile_mapping}
+    for name in args.only or list(steps):
+        steps[name](args, device, out, summary)
+    (out / "summary.txt").write_text("\n".join(summary) + "\n")
+    print("\n".join(summary))
+
+
+if __name__ == "__main__":
+    main()
