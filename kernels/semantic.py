@@ -1,6 +1,6 @@
 """Confidence-weighted semantic voting (paper Eq. 3) and per-Gaussian rendering contribution (Eqs. 12-15).
 
-Only labelled Gaussians are binned (the caller projects the labelled subset), so unlabelled ones
+Only labelled Gaussians are binned (the caller zeroes the others' screen radius), so unlabelled ones
 neither vote nor occlude. Front to back, a Gaussian's effective opacity is conf * alpha:
     w_ip = conf_i * alpha_ip * prod_{j<i} (1 - conf_j * alpha_jp),   R_p[k] = sum_{i: l_i = k} w_ip.
 Labels are unbounded ints, so each pixel keeps a bounded (label, weight) buffer in registers instead of

@@ -63,16 +63,18 @@ class _Project(torch.autograd.Function):
             viewmats.detach().contiguous(),
             Ks.detach().contiguous(),
         ]
+        inputs = _project_inputs(args, N, width, height, near_plane, far_plane, eps2d)
         if C * N > 0:
             with warp_stream(dev) as wdev:
                 wp.launch(
                     projection.project_gaussians,
                     dim=C * N,
-                    inputs=_project_inputs(args, N, width, height, near_plane, far_plane, eps2d),
+                    inputs=inputs,
                     outputs=_project_outputs(means2d, conics, depths, radii),
                     device=wdev,
                 )
         ctx.save_for_backward(*args, means2d, conics, depths, radii)
+        ctx.wp_inputs = inputs  # descriptors of the saved inputs, reused by the backward launch
         ctx.params = (N, width, height, near_plane, far_plane, eps2d)
         ctx.mark_non_differentiable(radii)
         return means2d, conics, depths, radii
@@ -97,10 +99,14 @@ class _Project(torch.autograd.Function):
                 wp.launch(
                     projection.project_gaussians,
                     dim=C * N,
-                    inputs=_project_inputs(
-                        [means, quats, scales, viewmats, Ks], N, width, height, near_plane, far_plane, eps2d
+                    inputs=ctx.wp_inputs,
+                    # the adjoint replays the forward, which rewrites its outputs: give it scratch space
+                    outputs=_project_outputs(
+                        torch.empty_like(means2d),
+                        torch.empty_like(conics),
+                        torch.empty_like(depths),
+                        torch.empty_like(radii),
                     ),
-                    outputs=_project_outputs(means2d.clone(), conics.clone(), depths.clone(), radii.clone()),
                     adj_inputs=[
                         _as_wp(v_means, wp.vec3),
                         _as_wp(v_quats, wp.vec4),
@@ -213,7 +219,7 @@ def bin_gaussians(
             outputs=[_as_wp(counts)],
             device=wdev,
         )
-        offsets = torch.cumsum(counts.reshape(-1).to(torch.int64), 0)
+        offsets = torch.cumsum(counts.reshape(-1), 0, dtype=torch.int64)
         # the one host sync: the sort buffers' size (and the verdict of the caller's input checks)
         total = (checks or ValueChecks()).settle(offsets[-1:])[0]
         keys = torch.empty(2 * max(total, 1), dtype=torch.int64, device=dev)
@@ -254,9 +260,13 @@ class _Rasterize(torch.autograd.Function):
         out_colors = torch.empty(C, height, width, D, device=dev)
         out_alphas = torch.empty(C, height, width, device=dev)
         last_ids = torch.empty(C, height, width, dtype=torch.int32, device=dev)
-        common = [_as_wp(means2d.detach(), wp.vec2), _as_wp(conics.detach(), wp.vec3)]
+        # launch arguments shared by every chunk, kept for the backward launches
+        geometry = [_as_wp(means2d.detach(), wp.vec2), _as_wp(conics.detach(), wp.vec3)]
+        opac = _as_wp(opacities.detach())
+        tile_start, isect_ids = _as_wp(bins.tile_start), _as_wp(bins.isect_ids)
+        alphas_arg, last_arg = _as_wp(out_alphas), _as_wp(last_ids)
         tiles = bins.tiles_x * bins.tiles_y
-        dim = bins.blend_launch_dim
+        layout = [N, width, height, bins.tile_size, bins.tile_threads, bins.tiles_x, tiles]
         with warp_stream(dev) as wdev:
             chunks = _chunks(D)
             for s, e in chunks:
@@ -267,30 +277,25 @@ class _Rasterize(torch.autograd.Function):
                 bg = backgrounds[:, s:e] if backgrounds is not None else torch.zeros(C, e - s, device=dev)
                 wp.launch(
                     fwd,
-                    dim=dim,
+                    dim=bins.blend_launch_dim,
                     inputs=[
-                        *common,
+                        *geometry,
                         _as_wp(colors[..., s:e].detach(), vec),
-                        _as_wp(opacities.detach()),
+                        opac,
                         _as_wp(bg.detach(), vec),
                         int(backgrounds is not None),
-                        _as_wp(bins.tile_start),
+                        tile_start,
                         _as_wp(bins.tile_end),
-                        _as_wp(bins.isect_ids),
-                        N,
-                        width,
-                        height,
-                        bins.tile_size,
-                        bins.tile_threads,
-                        bins.tiles_x,
-                        tiles,
+                        isect_ids,
+                        *layout,
                     ],
-                    outputs=[_as_wp(part, vec), _as_wp(out_alphas), _as_wp(last_ids)],
+                    outputs=[_as_wp(part, vec), alphas_arg, last_arg],
                     device=wdev,
                     block_dim=raster.BLEND_BLOCK_DIM,
                 )
                 if part is not out_colors:
                     out_colors[..., s:e] = part
+        ctx.wp_args = (geometry, opac, tile_start, isect_ids, alphas_arg, last_arg, layout)
         ctx.save_for_backward(
             means2d,
             conics,
@@ -322,8 +327,7 @@ class _Rasterize(torch.autograd.Function):
         if v_colors_out is None:
             v_colors_out = torch.zeros(C, height, width, D, device=dev)
         v_alpha = torch.zeros(C, height, width, device=dev) if v_alphas_out is None else v_alphas_out[..., 0]
-        tiles = bins.tiles_x * bins.tiles_y
-        dim = bins.blend_launch_dim
+        geometry, opac, tile_start, isect_ids, alphas_arg, last_arg, layout = ctx.wp_args
         with warp_stream(dev) as wdev:
             chunks = _chunks(D)
             for chunk, (s, e) in enumerate(chunks):
@@ -335,27 +339,20 @@ class _Rasterize(torch.autograd.Function):
                 v_a = v_alpha if chunk == 0 else torch.zeros_like(v_alpha)
                 wp.launch(
                     bwd,
-                    dim=dim,
+                    dim=bins.blend_launch_dim,
                     inputs=[
-                        _as_wp(means2d.detach(), wp.vec2),
-                        _as_wp(conics.detach(), wp.vec3),
+                        *geometry,
                         _as_wp(colors[..., s:e].detach(), vec),
-                        _as_wp(opacities.detach()),
+                        opac,
                         _as_wp(bg.detach(), vec),
                         int(ctx.has_bg),
-                        _as_wp(bins.tile_start),
-                        _as_wp(bins.isect_ids),
-                        _as_wp(out_alphas),
-                        _as_wp(last_ids),
+                        tile_start,
+                        isect_ids,
+                        alphas_arg,
+                        last_arg,
                         _as_wp(v_colors_out[..., s:e], vec),
                         _as_wp(v_a),
-                        N,
-                        width,
-                        height,
-                        bins.tile_size,
-                        bins.tile_threads,
-                        bins.tiles_x,
-                        tiles,
+                        *layout,
                     ],
                     outputs=[
                         _as_wp(v_means2d, wp.vec2),

@@ -67,7 +67,8 @@ def _vote(
     buffer_size,
     checks: ValueChecks,
 ):
-    """Project and bin the labelled subset and run the voting kernel (the binning settles ``checks``)."""
+    """Project every Gaussian, bin the labelled ones and run the voting kernel (the binning settles
+    ``checks``)."""
     wp = _wp()
     from ogscene3d.kernels.raster import BLEND_BLOCK_DIM
     from ogscene3d.kernels.semantic import semantic_kernels
