@@ -162,6 +162,34 @@ def test_nan_inf_rejected(field, bad):
         rasterization(**args)
 
 
+def _set(t, index, value):
+    t = t.clone()
+    t[index] = value
+    return t
+
+
+@pytest.mark.parametrize(
+    "field,index,value,message",
+    [
+        ("means", (2, 1), math.nan, "means contains NaN"),
+        ("scales", (4, 2), 0.0, "scales must be positive"),
+        ("quats", 1, 0.0, "zero quaternion"),
+        ("Ks", (0, 1, 1), -5.0, "positive focal"),
+        ("viewmats", (0, 2, 3), math.inf, "viewmats contains"),
+        ("colors", (3, 0), math.nan, "colors contains"),
+    ],
+)
+def test_value_checks_name_the_argument(device, field, index, value, message):
+    # one kernel checks every value on the render's device; the verdict comes with the binning's sync
+    args = _args(device)
+    args[field] = _set(args[field], index, value)
+    with pytest.raises(ValueError, match=message):
+        rasterization(**args)
+    bg = torch.zeros(1, 3, device=device)
+    with pytest.raises(ValueError, match="backgrounds contains"):
+        rasterization(**_args(device), backgrounds=_set(bg, (0, 2), math.nan))
+
+
 def test_bad_mode_and_mixed_devices():
     with pytest.raises(ValueError, match="render_mode"):
         rasterization(**_args("cpu"), render_mode="RGBD")

@@ -1,5 +1,7 @@
 """Semantic voting and rendering contribution against the dense one-hot / autograd reference."""
 
+import math
+
 import pytest
 import torch
 from reference_semantic import semantic_reference
@@ -156,6 +158,19 @@ def test_more_labels_than_buffer(device):
     big = render_semantics(*scene, labels.to(device), conf.to(device), vm, K, 16, 16, buffer_size=16)
     assert big.meta["overflow_pixels"] == 0
     assert torch.equal(big.labels[0].cpu().long(), ref_lab)
+
+
+@pytest.mark.parametrize("value,message", [(1.5, "lie in"), (-0.1, "lie in"), (math.nan, "NaN")])
+def test_confidence_values_are_checked(device, value, message):
+    means, quats, scales, opac, _ = random_scene(4, device=device)
+    vm, K = cameras(8, 8, device=device)
+    conf = torch.full((4,), 0.5, device=device)
+    conf[2] = value
+    labels = torch.zeros(4, dtype=torch.int32, device=device)
+    with pytest.raises(ValueError, match=f"confidences.*{message}"):
+        render_semantics(means, quats, scales, opac, labels, conf, vm, K, 8, 8)
+    with pytest.raises(ValueError, match=f"confidences.*{message}"):
+        rendering_contribution(means, quats, scales, opac, labels, conf, vm[0], K[0], 8, 8)
 
 
 def test_bad_semantic_inputs():

@@ -8,48 +8,39 @@ import torch
 class ValueChecks:
     """Checks on the values of device tensors, settled together with one host sync.
 
-    Each ``bool(tensor)`` check stalls the CPU until the GPU has caught up, and a render call would make a
-    dozen of them. Checks are recorded in order; ``settle`` raises the first one that failed, and can carry
-    integers the caller needs on the host anyway (the rasterizer's intersection count) on the same sync.
+    Each ``bool(tensor)`` check stalls the CPU until the GPU has caught up. Checks are recorded in order;
+    ``settle`` raises the first one that failed, and can carry integers the caller needs on the host
+    anyway (the rasterizer's intersection count) on the same sync.
     """
 
     def __init__(self) -> None:
-        self._order: list[tuple[bool, str]] = []  # (is an extrema check, message)
-        self._extrema: list[torch.Tensor] = []  # [min, max] per tensor: NaN or inf shows in one of them
-        self._bad: list[torch.Tensor] = []
+        self._flags: list[torch.Tensor] = []
+        self._messages: list[str] = []
 
     def fail_if(self, bad: torch.Tensor, message: str) -> None:
         """``bad``: a one-element bool tensor, True when the check fails."""
-        self._order.append((False, message))
-        self._bad.append(bad.reshape(1))
+        self.fail_if_flags(bad.reshape(1), [message])
 
-    def finite(self, name: str, t: torch.Tensor) -> None:
-        if t.is_floating_point() and t.numel():
-            lo, hi = torch.aminmax(t)  # one reduction; NaN propagates, inf is an extreme
-            self._order.append((True, f"{name} contains NaN or inf"))
-            self._extrema.append(torch.stack([lo, hi]))
+    def fail_if_flags(self, flags: torch.Tensor, messages: list[str]) -> None:
+        """``flags`` [k] (nonzero = failed) with one message each, reported in this order."""
+        if flags.numel() != len(messages):
+            raise ValueError(f"{flags.numel()} flags but {len(messages)} messages")
+        self._flags.append(flags.reshape(-1))
+        self._messages.extend(messages)
 
     def settle(self, extra: torch.Tensor | None = None) -> list[int]:
         """Raise the first failed check; return ``extra`` (an int tensor, any shape) as a list."""
-        order, extrema, bad = self._order, self._extrema, self._bad
-        self._order, self._extrema, self._bad = [], [], []
-        parts = []
-        if extrema:
-            parts.append((~torch.isfinite(torch.stack(extrema))).any(dim=1))
-        if bad:
-            parts.append(torch.cat(bad))
-        if extra is not None:
-            parts.append(extra.reshape(-1))
+        flags, messages = self._flags, self._messages
+        self._flags, self._messages = [], []
+        parts = flags + ([extra.reshape(-1)] if extra is not None else [])
         if not parts:
             return []
         dev = parts[0].device
         values = torch.cat([p.to(dev, torch.int64) for p in parts]).tolist()  # the one sync
-        finite_failed = iter(values[: len(extrema)])
-        other_failed = iter(values[len(extrema) : len(extrema) + len(bad)])
-        for is_extrema, message in order:
-            if next(finite_failed if is_extrema else other_failed):
+        for failed, message in zip(values, messages):
+            if failed:
                 raise ValueError(message)
-        return values[len(extrema) + len(bad) :]
+        return values[len(messages) :]
 
 
 def check_tensor(
@@ -59,10 +50,9 @@ def check_tensor(
     device: torch.device | None = None,
     dtypes: tuple[torch.dtype, ...] = (torch.float32,),
     finite: bool = True,
-    checks: ValueChecks | None = None,
 ) -> torch.Tensor:
-    """``shape`` entries of None accept any size. Returns the tensor (unchanged). With ``checks`` the NaN/inf
-    test is recorded there instead of settled here."""
+    """``shape`` entries of None accept any size. Returns the tensor (unchanged). ``finite=False`` leaves the
+    NaN/inf test to the caller (the renderers test all their inputs in one kernel)."""
     if not isinstance(t, torch.Tensor):
         raise ValueError(f"{name} must be a torch.Tensor, got {type(t).__name__}")
     if t.dim() != len(shape) or any(s is not None and s != d for s, d in zip(shape, t.shape)):
@@ -72,11 +62,8 @@ def check_tensor(
         raise ValueError(f"{name} must have dtype {' or '.join(str(d) for d in dtypes)}, got {t.dtype}")
     if device is not None and t.device != device:
         raise ValueError(f"{name} is on {t.device} but the other inputs are on {device}")
-    if finite:
-        own = checks if checks is not None else ValueChecks()
-        own.finite(name, t)
-        if checks is None:
-            own.settle()
+    if finite and t.is_floating_point() and t.numel() and not bool(torch.isfinite(t).all()):
+        raise ValueError(f"{name} contains NaN or inf")
     return t
 
 

@@ -372,24 +372,78 @@ class _Rasterize(torch.autograd.Function):
         return v_means2d, v_conics, v_colors, v_opac.sum(0), v_bg, None, None, None
 
 
-def _check_common(means, quats, scales, opacities, viewmats, Ks, width, height, checks: ValueChecks):
-    """Shape, dtype and device checks now; value checks recorded in ``checks`` for the caller to settle."""
-    check_tensor("means", means, (None, 3), checks=checks)
+# kernels/validate.py flag order
+_VALUE_MESSAGES = [
+    "means contains NaN or inf",
+    "quats contains NaN or inf",
+    "scales contains NaN or inf",
+    "opacities contains NaN or inf",
+    "viewmats contains NaN or inf",
+    "Ks contains NaN or inf",
+    "scales must be positive (activated, e.g. exp(log_scales))",
+    "quats contains a zero quaternion",
+    "Ks must have positive focal lengths",
+    "colors contains NaN or inf",
+    "backgrounds contains NaN or inf",
+    "confidences contains NaN or inf",
+    "confidences must lie in [0, 1]",
+]
+
+
+def _check_shapes(means, quats, scales, opacities, viewmats, Ks, width, height):
+    """Shape, dtype and device checks (no device work); the values are checked by ``_check_values``."""
+    check_tensor("means", means, (None, 3), finite=False)
     dev = means.device
     N = means.shape[0]
-    check_tensor("quats", quats, (N, 4), dev, checks=checks)
-    check_tensor("scales", scales, (N, 3), dev, checks=checks)
-    check_tensor("opacities", opacities, (N,), dev, checks=checks)
-    check_tensor("viewmats", viewmats, (None, 4, 4), dev, checks=checks)
+    check_tensor("quats", quats, (N, 4), dev, finite=False)
+    check_tensor("scales", scales, (N, 3), dev, finite=False)
+    check_tensor("opacities", opacities, (N,), dev, finite=False)
+    check_tensor("viewmats", viewmats, (None, 4, 4), dev, finite=False)
     C = viewmats.shape[0]
-    check_tensor("Ks", Ks, (C, 3, 3), dev, checks=checks)
+    check_tensor("Ks", Ks, (C, 3, 3), dev, finite=False)
     if C == 0:
         raise ValueError("viewmats must hold at least one camera, got shape [0, 4, 4]")
-    if N:
-        checks.fail_if(scales.amin() <= 0, "scales must be positive (activated, e.g. exp(log_scales))")
-        checks.fail_if((quats.abs().amax(dim=-1) == 0).any(), "quats contains a zero quaternion")
-    checks.fail_if(Ks[:, :2, :2].diagonal(dim1=1, dim2=2).amin() <= 0, "Ks must have positive focal lengths")
     return check_image_size(width, height)
+
+
+def _check_values(
+    checks: ValueChecks,
+    means,
+    quats,
+    scales,
+    opacities,
+    viewmats,
+    Ks,
+    colors=None,
+    backgrounds=None,
+    confidences=None,
+) -> None:
+    """Queue every value check of the rendering inputs (one kernel); ``checks`` settles them later."""
+    wp = _wp()
+    from ogscene3d.kernels import validate
+
+    dev = means.device
+    flags = torch.zeros(validate.NUM_FLAGS, dtype=torch.int32, device=dev)
+    none = torch.zeros(0, device=dev)
+    flat = [t.detach() if t is not None else none for t in (colors, backgrounds, confidences)]
+    dim = max(means.shape[0], viewmats.shape[0], *(t.numel() for t in flat))
+    with warp_stream(dev) as wdev:
+        wp.launch(
+            validate.check_inputs,
+            dim=max(dim, 1),
+            inputs=[
+                _as_wp(means.detach(), wp.vec3),
+                _as_wp(quats.detach(), wp.vec4),
+                _as_wp(scales.detach(), wp.vec3),
+                _as_wp(opacities.detach()),
+                _as_wp(viewmats.detach(), wp.mat44),
+                _as_wp(Ks.detach(), wp.mat33),
+                *(_as_wp(t) for t in flat),
+            ],
+            outputs=[_as_wp(flags)],
+            device=wdev,
+        )
+    checks.fail_if_flags(flags, _VALUE_MESSAGES)
 
 
 def rasterization(
@@ -422,8 +476,7 @@ def rasterization(
         tiles_per_gaussian, tile ranges, isect_ids, n_cameras, width, height, tile_size).
     Differentiable w.r.t. means, quats, scales, opacities and colors (not viewmats or Ks).
     """
-    checks = ValueChecks()
-    width, height = _check_common(means, quats, scales, opacities, viewmats, Ks, width, height, checks)
+    width, height = _check_shapes(means, quats, scales, opacities, viewmats, Ks, width, height)
     if render_mode not in RENDER_MODES:
         raise ValueError(f"render_mode must be one of {RENDER_MODES}, got {render_mode!r}")
     if not (isinstance(tile_size, int) and 1 <= tile_size <= 32):
@@ -436,16 +489,16 @@ def rasterization(
         raise ValueError(f"eps2d must be >= 0, got {eps2d}")
     dev = means.device
     N, C = means.shape[0], viewmats.shape[0]
-    if colors.dim() == 2:
-        check_tensor("colors", colors, (N, None), dev, checks=checks)
-        colors = colors.unsqueeze(0).expand(C, N, colors.shape[-1])
-    else:
-        check_tensor("colors", colors, (C, N, None), dev, checks=checks)
+    check_tensor("colors", colors, (N, None) if colors.dim() == 2 else (C, N, None), dev, finite=False)
     if colors.shape[-1] == 0:
         raise ValueError("colors must have at least one channel")
     D = colors.shape[-1]
     if backgrounds is not None:
-        check_tensor("backgrounds", backgrounds, (C, D), dev, checks=checks)
+        check_tensor("backgrounds", backgrounds, (C, D), dev, finite=False)
+    checks = ValueChecks()
+    _check_values(checks, means, quats, scales, opacities, viewmats, Ks, colors, backgrounds)
+    if colors.dim() == 2:
+        colors = colors.unsqueeze(0).expand(C, N, D)
 
     means2d, conics, depths, radii = _Project.apply(
         means, quats, scales, viewmats, Ks, width, height, near_plane, far_plane, eps2d

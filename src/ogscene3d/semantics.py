@@ -12,7 +12,7 @@ import torch
 
 from ._validate import ValueChecks, check_tensor
 from .device import warp_stream
-from .render import TileBins, _as_wp, _check_common, _Project, _wp, bin_gaussians
+from .render import TileBins, _as_wp, _check_shapes, _check_values, _Project, _wp, bin_gaussians
 
 DEFAULT_BUFFER_SIZE = 8
 
@@ -32,20 +32,16 @@ class SemanticRender:
 
 
 def _check_semantic_inputs(
-    means, quats, scales, opacities, labels, confidences, viewmats, Ks, width, height, checks=None
+    means, quats, scales, opacities, labels, confidences, viewmats, Ks, width, height, checks: ValueChecks
 ):
-    """Raises on the first bad argument; with ``checks`` the value checks are left there to settle."""
-    own = checks if checks is not None else ValueChecks()
-    width, height = _check_common(means, quats, scales, opacities, viewmats, Ks, width, height, own)
+    """Shape checks now; the value checks are queued in ``checks`` (settled by the binning's sync)."""
+    width, height = _check_shapes(means, quats, scales, opacities, viewmats, Ks, width, height)
     N = means.shape[0]
     check_tensor("labels", labels, (N,), means.device, dtypes=(torch.int32, torch.int64))
-    check_tensor("confidences", confidences, (N,), means.device, checks=own)
-    if N:
-        own.fail_if(((confidences < 0) | (confidences > 1)).any(), "confidences must lie in [0, 1]")
-        if labels.dtype == torch.int64:
-            own.fail_if(labels.max() > torch.iinfo(torch.int32).max, "labels must fit in int32")
-    if checks is None:
-        own.settle()
+    check_tensor("confidences", confidences, (N,), means.device, finite=False)
+    _check_values(checks, means, quats, scales, opacities, viewmats, Ks, confidences=confidences)
+    if N and labels.dtype == torch.int64:
+        checks.fail_if(labels.max() > torch.iinfo(torch.int32).max, "labels must fit in int32")
     return width, height
 
 
@@ -215,8 +211,8 @@ def rendering_contribution(
         K = K.unsqueeze(0)
     checks = ValueChecks()
     dev = means.device if isinstance(means, torch.Tensor) else None
-    check_tensor("viewmat", viewmat, (1, 4, 4), dev, checks=checks)
-    check_tensor("K", K, (1, 3, 3), dev, checks=checks)
+    check_tensor("viewmat", viewmat, (1, 4, 4), dev, finite=False)  # values: with the other inputs
+    check_tensor("K", K, (1, 3, 3), dev, finite=False)
     width, height = _check_semantic_inputs(
         means, quats, scales, opacities, labels, confidences, viewmat, K, width, height, checks
     )
