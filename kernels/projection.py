@@ -29,6 +29,21 @@ def quat_wxyz_to_mat(q: wp.vec4) -> wp.mat33:
     )
 
 
+@wp.func
+def cull(
+    tid: int,
+    means2d: wp.array(dtype=wp.vec2),
+    conics: wp.array(dtype=wp.vec3),
+    depths: wp.array(dtype=float),
+    radii: wp.array(dtype=wp.int32),
+):
+    """A culled entry: radius 0 and zeros, so the outputs need no clearing before the launch."""
+    radii[tid] = 0
+    means2d[tid] = wp.vec2(0.0, 0.0)
+    conics[tid] = wp.vec3(0.0, 0.0, 0.0)
+    depths[tid] = 0.0
+
+
 @wp.kernel
 def project_gaussians(
     means: wp.array(dtype=wp.vec3),
@@ -58,7 +73,7 @@ def project_gaussians(
     p = R * means[n] + t
     z = p[2]
     if z <= near_plane or z >= far_plane:
-        radii[tid] = 0
+        cull(tid, means2d, conics, depths, radii)
         return
 
     M = quat_wxyz_to_mat(quats[n])
@@ -89,7 +104,7 @@ def project_gaussians(
     d = cov2d[1, 1] + eps2d
     det = a * d - b * b
     if det <= 0.0:
-        radii[tid] = 0
+        cull(tid, means2d, conics, depths, radii)
         return
     inv_det = 1.0 / det
     mean2d = wp.vec2(fx * p[0] * rz + cx, fy * p[1] * rz + cy)
@@ -103,7 +118,7 @@ def project_gaussians(
         or mean2d[1] + r <= 0.0
         or mean2d[1] - r >= float(height)
     ):
-        radii[tid] = 0
+        cull(tid, means2d, conics, depths, radii)
         return
 
     radii[tid] = wp.int32(r)

@@ -52,10 +52,11 @@ class _Project(torch.autograd.Function):
         projection, _, _ = _kernels()
         C, N = viewmats.shape[0], means.shape[0]
         dev = means.device
-        means2d = torch.zeros(C, N, 2, device=dev)
-        conics = torch.zeros(C, N, 3, device=dev)
-        depths = torch.zeros(C, N, device=dev)
-        radii = torch.zeros(C, N, dtype=torch.int32, device=dev)
+        # the kernel writes every entry (zeros where it culls)
+        means2d = torch.empty(C, N, 2, device=dev)
+        conics = torch.empty(C, N, 3, device=dev)
+        depths = torch.empty(C, N, device=dev)
+        radii = torch.empty(C, N, dtype=torch.int32, device=dev)
         args = [
             means.detach().contiguous(),
             quats.detach().contiguous(),
@@ -201,9 +202,8 @@ def bin_gaussians(
     tiles_x = (width + tile_size - 1) // tile_size
     tiles_y = (height + tile_size - 1) // tile_size
     n_tiles = C * tiles_x * tiles_y
-    tile_start = torch.zeros(n_tiles, dtype=torch.int32, device=dev)
-    tile_end = torch.zeros(n_tiles, dtype=torch.int32, device=dev)
-    counts = torch.zeros(C, N, dtype=torch.int32, device=dev)
+    tile_start, tile_end = torch.zeros(2, n_tiles, dtype=torch.int32, device=dev)  # empty tiles: [0, 0)
+    counts = torch.empty(C, N, dtype=torch.int32, device=dev)  # count_tiles writes every entry
     if C * N == 0:
         if checks is not None:
             checks.settle()
@@ -274,7 +274,8 @@ class _Rasterize(torch.autograd.Function):
                 vec = wp.types.vector(length=e - s, dtype=wp.float32)
                 # one chunk (D <= 32, the usual case) writes the output in place
                 part = out_colors if len(chunks) == 1 else torch.empty(C, height, width, e - s, device=dev)
-                bg = backgrounds[:, s:e] if backgrounds is not None else torch.zeros(C, e - s, device=dev)
+                # without backgrounds the kernel never reads them (use_background = 0)
+                bg = backgrounds[:, s:e] if backgrounds is not None else torch.empty(C, e - s, device=dev)
                 wp.launch(
                     fwd,
                     dim=bins.blend_launch_dim,
@@ -333,7 +334,7 @@ class _Rasterize(torch.autograd.Function):
             for chunk, (s, e) in enumerate(chunks):
                 _, bwd = raster.raster_kernels(e - s)
                 vec = wp.types.vector(length=e - s, dtype=wp.float32)
-                bg = backgrounds[:, s:e] if ctx.has_bg else torch.zeros(C, e - s, device=dev)
+                bg = backgrounds[:, s:e] if ctx.has_bg else torch.empty(C, e - s, device=dev)
                 v_part = v_colors if len(chunks) == 1 else torch.zeros(C, N, e - s, device=dev)
                 # The alpha output depends on geometry only: count its gradient in one chunk.
                 v_a = v_alpha if chunk == 0 else torch.zeros_like(v_alpha)
