@@ -49,8 +49,9 @@ def warp_stream(device: torch.device) -> Iterator[object]:
     import warp as wp
 
     wdev = warp_device(device)
-    if device.type == "cuda":
-        with wp.ScopedStream(wp.stream_from_torch(device)):
-            yield wdev
-    else:
+    if device.type != "cuda" or wdev.stream.cuda_stream == torch.cuda.current_stream(device).cuda_stream:
+        yield wdev  # CPU, or already inside (a render enters once; its steps nest): nothing to switch
+        return
+    # switching streams records and waits on an event: a few driver calls, about 20 us per entry
+    with wp.ScopedStream(wp.stream_from_torch(device)):
         yield wdev

@@ -8,6 +8,7 @@ generated adjoint) and the blending (hand-written back-to-front kernel).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -43,6 +44,20 @@ def _as_wp(t: torch.Tensor, dtype: Any = None):
     arg = _wp().from_torch(t, dtype=dtype, requires_grad=False, return_ctype=True)
     arg.tensor = t
     return arg
+
+
+def _on_torch_stream(fn):
+    """Run a public render function inside one ``warp_stream`` (a stream switch costs a few driver calls;
+    the entries of its steps then nest for free)."""
+
+    @functools.wraps(fn)
+    def wrapper(means, *args, **kwargs):
+        if not isinstance(means, torch.Tensor):
+            return fn(means, *args, **kwargs)  # its argument checks report the bad input
+        with warp_stream(means.device):
+            return fn(means, *args, **kwargs)
+
+    return wrapper
 
 
 class _Project(torch.autograd.Function):
@@ -447,6 +462,7 @@ def _check_values(
     checks.fail_if_flags(flags, _VALUE_MESSAGES)
 
 
+@_on_torch_stream
 def rasterization(
     means: torch.Tensor,
     quats: torch.Tensor,

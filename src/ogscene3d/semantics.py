@@ -12,7 +12,16 @@ import torch
 
 from ._validate import ValueChecks, check_tensor
 from .device import warp_stream
-from .render import TileBins, _as_wp, _check_shapes, _check_values, _Project, _wp, bin_gaussians
+from .render import (
+    TileBins,
+    _as_wp,
+    _check_shapes,
+    _check_values,
+    _on_torch_stream,
+    _Project,
+    _wp,
+    bin_gaussians,
+)
 
 DEFAULT_BUFFER_SIZE = 8
 
@@ -129,6 +138,7 @@ def _vote(
     return bins, geometry, dims, launch_dim, (buf_l, buf_w, out_l, out_w, overflow)
 
 
+@_on_torch_stream
 def render_semantics(
     means: torch.Tensor,
     quats: torch.Tensor,
@@ -177,6 +187,7 @@ def render_semantics(
     return _semantic_render(bins, buffer_size, outputs, return_buffer)
 
 
+@_on_torch_stream
 def rendering_contribution(
     means: torch.Tensor,
     quats: torch.Tensor,
