@@ -31,6 +31,38 @@ def synthetic_gaussians(n: int, device: torch.device, seed: int = 0, labels: int
     return [t.to(device) for t in (means, quats, scales, opacities, colors, lab, conf)]
 
 
+def synthetic_surfaces(n: int, device: torch.device, seed: int = 0, labels: int = 2000):
+    """A mapped room as a SLAM map holds it: flat Gaussians on the walls, floor and ceiling of a 8 x 5 x 8 m
+    room and on 60 boxes (furniture) inside, one label per 0.4 m patch of surface, confidences in [0.6, 1]
+    as the mapping leaves them. Same outputs as :func:`synthetic_gaussians`; the camera of :func:`camera`
+    stands inside, 1.5 m from the back wall."""
+    g = torch.Generator(device="cpu").manual_seed(seed)
+    lo, hi = torch.tensor([-4.0, -2.5, -1.5]), torch.tensor([4.0, 2.5, 6.5])
+    boxes_lo = lo + torch.rand(60, 3, generator=g) * (hi - lo - 1.0)
+    boxes_lo[:, 2] = boxes_lo[:, 2].clamp(min=0.5)
+    boxes_hi = boxes_lo + 0.2 + torch.rand(60, 3, generator=g) * 0.8
+    room = n // 2  # half on the room's six faces, half on the boxes
+    owner = torch.cat([torch.full((room,), -1), torch.randint(0, 60, (n - room,), generator=g)])
+    b_lo = torch.where(owner[:, None] < 0, lo, boxes_lo[owner.clamp(min=0)])
+    b_hi = torch.where(owner[:, None] < 0, hi, boxes_hi[owner.clamp(min=0)])
+    means = b_lo + torch.rand(n, 3, generator=g) * (b_hi - b_lo)
+    axis = torch.randint(0, 3, (n,), generator=g)
+    side = torch.randint(0, 2, (n,), generator=g).bool()
+    rows = torch.arange(n)
+    means[rows, axis] = torch.where(side, b_hi[rows, axis], b_lo[rows, axis])  # onto a face
+    scales = torch.exp(torch.randn(n, 3, generator=g) * 0.2 - 3.9)  # ~2 cm across the surface
+    scales[rows, axis] *= 0.1  # thin along the face normal
+    quats = torch.zeros(n, 4)
+    quats[:, 0] = 1.0  # axis-aligned, so the thin axis is the face normal
+    opacities = torch.rand(n, generator=g) * 0.3 + 0.7
+    colors = torch.rand(n, 3, generator=g)
+    cell = torch.floor(means / 0.4).long()
+    lab = ((cell[:, 0] * 73856093) ^ (cell[:, 1] * 19349663) ^ (cell[:, 2] * 83492791)).abs() % labels
+    lab = torch.where(torch.rand(n, generator=g) < 0.05, -1, lab).to(torch.int32)
+    conf = torch.rand(n, generator=g) * 0.4 + 0.6
+    return [t.to(device) for t in (means, quats, scales, opacities, colors, lab, conf)]
+
+
 def camera(width: int, height: int, device: torch.device):
     f = 0.5 * width / math.tan(math.radians(45.0))
     K = torch.tensor([[f, 0, width / 2], [0, f, height / 2], [0, 0, 1.0]], device=device)[None]
