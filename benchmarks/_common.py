@@ -74,6 +74,22 @@ def sync(device: torch.device) -> None:
         torch.cuda.synchronize(device)
 
 
+def render_fns(render, scene, vm, K, width, height):
+    """(forward without grad, forward + backward of sum(image) + sum(alpha)) of a gsplat-style ``render``
+    on ``scene`` (means, quats, scales, opacities, colors first); the backward's inputs are leaf copies."""
+    params = [t.clone().requires_grad_(True) for t in scene[:5]]
+
+    def forward():
+        with torch.no_grad():
+            return render(*params, vm, K, width, height)
+
+    def forward_backward():
+        img, alpha, _ = render(*params, vm, K, width, height)
+        (img.sum() + alpha.sum()).backward()
+
+    return forward, forward_backward
+
+
 def time_ms(fn: Callable[[], object], device: torch.device, warmup: int = 2, iters: int = 10) -> float:
     for _ in range(warmup):
         fn()

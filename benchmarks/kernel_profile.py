@@ -24,7 +24,7 @@ from torch.profiler import ProfilerActivity, profile, record_function
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import mapping as mapping_bench  # noqa: E402
-from _common import camera, parse_count, sync, synthetic_gaussians, time_ms  # noqa: E402
+from _common import camera, parse_count, render_fns, sync, synthetic_gaussians, time_ms  # noqa: E402
 
 from ogscene3d import rasterization, rendering_contribution  # noqa: E402
 from ogscene3d.device import resolve_device  # noqa: E402
@@ -82,21 +82,6 @@ def _host_ms(fn, device: torch.device, calls: int = 20) -> float:
     return host
 
 
-def _render_fns(render, scene, vm, K, width, height):
-    means, quats, scales, opac, colors = scene[:5]
-    params = [t.clone().requires_grad_(True) for t in scene[:5]]
-
-    def forward():
-        with torch.no_grad():
-            return render(means, quats, scales, opac, colors, vm, K, width, height)
-
-    def forward_backward():
-        img, alpha, _ = render(*params, vm, K, width, height)
-        (img.sum() + alpha.sum()).backward()
-
-    return forward, forward_backward
-
-
 def profile_raster(args, device, out: Path, summary: list[str]) -> None:
     n = parse_count(args.gaussians)
     scene = synthetic_gaussians(n, device)
@@ -110,7 +95,7 @@ def profile_raster(args, device, out: Path, summary: list[str]) -> None:
     except Exception as e:  # noqa: BLE001 - any import failure means "not available"
         summary.append(f"gsplat not available ({type(e).__name__}: {e})")
     for name, render in renderers:
-        forward, forward_backward = _render_fns(render, scene, vm, K, args.width, args.height)
+        forward, forward_backward = render_fns(render, scene, vm, K, args.width, args.height)
         for label, fn in (("fwd", forward), ("fwd+bwd", forward_backward)):
             prof = _profiled(fn, args.calls, device)
             _write_tables(prof, out / "raster.txt", f"{name} {label} x{args.calls}", device)

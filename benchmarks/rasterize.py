@@ -13,10 +13,16 @@ import argparse
 import sys
 from pathlib import Path
 
-import torch
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import camera, parse_count, peak_mb, print_table, synthetic_gaussians, time_ms  # noqa: E402
+from _common import (  # noqa: E402
+    camera,
+    parse_count,
+    peak_mb,
+    print_table,
+    render_fns,
+    synthetic_gaussians,
+    time_ms,
+)
 
 from ogscene3d import rasterization  # noqa: E402
 from ogscene3d.device import resolve_device  # noqa: E402
@@ -33,15 +39,7 @@ def _gsplat():
 
 
 def bench(fn, scene, vm, K, width, height, device, iters):
-    means, quats, scales, opac, colors = (t.clone().requires_grad_(True) for t in scene[:5])
-
-    def forward():
-        with torch.no_grad():
-            return fn(means, quats, scales, opac, colors, vm, K, width, height)
-
-    def forward_backward():
-        img, alpha, _ = fn(means, quats, scales, opac, colors, vm, K, width, height)
-        (img.sum() + alpha.sum()).backward()
+    forward, forward_backward = render_fns(fn, scene, vm, K, width, height)
 
     return {
         "fwd_ms": time_ms(forward, device, iters=iters),

@@ -99,3 +99,13 @@ def lane_any(p: int) -> int: ...
 """
 )
 def lane_all(p: int) -> int: ...
+
+
+@wp.func
+def lane_shfl_vec2(v: wp.vec2, src: int) -> wp.vec2:
+    return wp.vec2(lane_shfl(v[0], src), lane_shfl(v[1], src))
+
+
+@wp.func
+def lane_shfl_vec3(v: wp.vec3, src: int) -> wp.vec3:
+    return wp.vec3(lane_shfl(v[0], src), lane_shfl(v[1], src), lane_shfl(v[2], src))

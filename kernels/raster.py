@@ -10,7 +10,17 @@ import functools
 
 import warp as wp
 
-from .lanes import lane_all, lane_any, lane_count, lane_max_int, lane_shfl, lane_shfl_int, lane_sum
+from .lanes import (
+    lane_all,
+    lane_any,
+    lane_count,
+    lane_max_int,
+    lane_shfl,
+    lane_shfl_int,
+    lane_shfl_vec2,
+    lane_shfl_vec3,
+    lane_sum,
+)
 
 # Blending kernels: 256-thread blocks (one 16x16 tile), no grid-stride loop (the launch covers every
 # pixel), fast intrinsics for exp and division as gsplat builds with; "unique" gives each channel count /
@@ -139,8 +149,8 @@ def raster_kernels(channels: int):
                 gcol = colors[g]
             n = wp.min(W, end - b)
             for s in range(n):
-                m = wp.vec2(lane_shfl(gm[0], s), lane_shfl(gm[1], s))
-                con = wp.vec3(lane_shfl(gc[0], s), lane_shfl(gc[1], s), lane_shfl(gc[2], s))
+                m = lane_shfl_vec2(gm, s)
+                con = lane_shfl_vec3(gc, s)
                 o = lane_shfl(go, s)
                 c = shfl_vec(gcol, s)
                 if done == 0:
@@ -229,8 +239,8 @@ def raster_kernels(channels: int):
                 gcol = colors[gid]
             n = wp.min(W, b - start + 1)
             for s in range(n):
-                m = wp.vec2(lane_shfl(gm[0], s), lane_shfl(gm[1], s))
-                con = wp.vec3(lane_shfl(gc[0], s), lane_shfl(gc[1], s), lane_shfl(gc[2], s))
+                m = lane_shfl_vec2(gm, s)
+                con = lane_shfl_vec3(gc, s)
                 o = lane_shfl(go, s)
                 c = shfl_vec(gcol, s)
                 hit = int(0)

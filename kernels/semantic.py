@@ -12,7 +12,16 @@ import functools
 
 import warp as wp
 
-from .lanes import lane_all, lane_any, lane_count, lane_shfl, lane_shfl_int, lane_sum
+from .lanes import (
+    lane_all,
+    lane_any,
+    lane_count,
+    lane_shfl,
+    lane_shfl_int,
+    lane_shfl_vec2,
+    lane_shfl_vec3,
+    lane_sum,
+)
 from .raster import BLEND_KERNEL_OPTIONS, T_MIN, gaussian_alpha, tile_pixel
 
 
@@ -82,8 +91,8 @@ def semantic_kernels(buffer_size: int):
                 glab = labels[n]
             cnt = wp.min(W, end - b)
             for s in range(cnt):
-                m = wp.vec2(lane_shfl(gm[0], s), lane_shfl(gm[1], s))
-                con = wp.vec3(lane_shfl(gc[0], s), lane_shfl(gc[1], s), lane_shfl(gc[2], s))
+                m = lane_shfl_vec2(gm, s)
+                con = lane_shfl_vec3(gc, s)
                 o = lane_shfl(go, s)
                 cf = lane_shfl(gconf, s)
                 lab = lane_shfl_int(glab, s)
@@ -204,8 +213,8 @@ def semantic_kernels(buffer_size: int):
                 glab = labels[gn]
             cnt = wp.min(W, end - b)
             for s in range(cnt):
-                m = wp.vec2(lane_shfl(gm[0], s), lane_shfl(gm[1], s))
-                con = wp.vec3(lane_shfl(gc[0], s), lane_shfl(gc[1], s), lane_shfl(gc[2], s))
+                m = lane_shfl_vec2(gm, s)
+                con = lane_shfl_vec3(gc, s)
                 o = lane_shfl(go, s)
                 cf = lane_shfl(gconf, s)
                 lab = lane_shfl_int(glab, s)

@@ -11,51 +11,13 @@ from ogscene3d import render_semantics, rendering_contribution
 
 
 def _compare(device, scene, labels, conf, width, height, pixel_mask=None, buffer_size=8, tile_size=16):
-    means, quats, scales, opac = scene
     vm, K = cameras(width, height, device=device)
-    sem = render_semantics(
-        means,
-        quats,
-        scales,
-        opac,
-        labels,
-        conf,
-        vm,
-        K,
-        width,
-        height,
-        buffer_size=buffer_size,
-        tile_size=tile_size,
-    )
-    p = rendering_contribution(
-        means,
-        quats,
-        scales,
-        opac,
-        labels,
-        conf,
-        vm[0],
-        K[0],
-        width,
-        height,
-        pixel_mask=pixel_mask,
-        buffer_size=buffer_size,
-        tile_size=tile_size,
-    )
-    ref_lab, R, _, ref_p = semantic_reference(
-        means,
-        quats,
-        scales,
-        opac,
-        labels,
-        conf,
-        vm[0],
-        K[0],
-        width,
-        height,
-        pixel_mask=pixel_mask,
-        tile_size=tile_size,
-    )
+    gaussians = (*scene, labels, conf)
+    sizes = dict(buffer_size=buffer_size, tile_size=tile_size)
+    sem = render_semantics(*gaussians, vm, K, width, height, **sizes)
+    view = (vm[0], K[0], width, height)
+    p = rendering_contribution(*gaussians, *view, pixel_mask=pixel_mask, **sizes)
+    ref_lab, R, _, ref_p = semantic_reference(*gaussians, *view, pixel_mask=pixel_mask, tile_size=tile_size)
     got = sem.labels[0].cpu().long()
     # ties aside: pixels whose two best reference votes are within 1e-5 may legitimately differ
     if R.shape[1] >= 2:
