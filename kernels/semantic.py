@@ -25,6 +25,27 @@ from .lanes import (
 from .raster import BLEND_KERNEL_OPTIONS, T_MIN, gaussian_alpha, tile_pixel
 
 
+@wp.func
+def load_lane_gaussian(
+    j: int,
+    end: int,
+    isect_ids: wp.array(dtype=wp.int32),
+    num_gaussians: int,
+    means2d: wp.array(dtype=wp.vec2),
+    conics: wp.array(dtype=wp.vec3),
+    opacities: wp.array(dtype=float),
+    confidences: wp.array(dtype=float),
+    labels: wp.array(dtype=wp.int32),
+):
+    """This lane's share of a batch: the j-th intersection's (Gaussian, mean2d, conic, opacity,
+    confidence, label); past the tile's end a record that blends nothing (label -1, opacity 0)."""
+    if j < end:
+        g = isect_ids[j]
+        n = g % num_gaussians
+        return n, means2d[g], conics[g], opacities[n], confidences[n], labels[n]
+    return int(0), wp.vec2(), wp.vec3(), float(0.0), float(0.0), int(-1)
+
+
 @functools.cache
 def semantic_kernels(buffer_size: int):
     """(vote, contribution) kernels for a per-pixel buffer of ``buffer_size`` entries."""
@@ -75,20 +96,9 @@ def semantic_kernels(buffer_size: int):
         while b < end:
             if lane_all(done) != 0:
                 break
-            j = b + lane
-            gm = wp.vec2()
-            gc = wp.vec3()
-            go = float(0.0)
-            gconf = float(0.0)
-            glab = int(-1)
-            if j < end:
-                g = isect_ids[j]
-                n = g % num_gaussians
-                gm = means2d[g]
-                gc = conics[g]
-                go = opacities[n]
-                gconf = confidences[n]
-                glab = labels[n]
+            gn, gm, gc, go, gconf, glab = load_lane_gaussian(
+                b + lane, end, isect_ids, num_gaussians, means2d, conics, opacities, confidences, labels
+            )
             cnt = wp.min(W, end - b)
             for s in range(cnt):
                 m = lane_shfl_vec2(gm, s)
@@ -196,21 +206,9 @@ def semantic_kernels(buffer_size: int):
         while b < end:
             if lane_all(done) != 0:
                 break
-            j = b + lane
-            gm = wp.vec2()
-            gc = wp.vec3()
-            go = float(0.0)
-            gconf = float(0.0)
-            glab = int(-1)
-            gn = int(0)
-            if j < end:
-                g = isect_ids[j]
-                gn = g % num_gaussians
-                gm = means2d[g]
-                gc = conics[g]
-                go = opacities[gn]
-                gconf = confidences[gn]
-                glab = labels[gn]
+            gn, gm, gc, go, gconf, glab = load_lane_gaussian(
+                b + lane, end, isect_ids, num_gaussians, means2d, conics, opacities, confidences, labels
+            )
             cnt = wp.min(W, end - b)
             for s in range(cnt):
                 m = lane_shfl_vec2(gm, s)
