@@ -103,11 +103,39 @@ def test_new_object_matched_only_at_its_border_gets_a_label(device):
     for k in (default, 5):
         conf = torch.full((6,), 0.6, device=device)
         out[k] = associate_segments(
-            probes, seg, torch.ones(18, device=device), 1, means, labels, conf, _Labels(7), k=k, radius=0.02
+            probes, seg, torch.ones(18, device=device), 1, means, labels, conf, _Labels(7), k=k, radius=0.02,
+            novel_before_ambiguous=False,  # the paper's order, where k decides
         )
     assert out[default].seg_case.tolist() == [CASE_NOVEL] and out[default].seg_labels.tolist() == [7]
     assert out[5].seg_case.tolist() == [CASE_AMBIGUOUS] and out[5].seg_labels.tolist() == [-1]
     torch.testing.assert_close(out[5].r.cpu(), torch.tensor([0.5]))
+
+
+@pytest.mark.parametrize("novel_first", [True, False])
+def test_small_new_object_between_two_surfaces(device, novel_first):
+    """A bin on the floor (label 3) against a wall (label 4): 20 probes, two border probes lie on the floor
+    and one on the wall, the rest are new. r = 1/2 >= tau_valid and p = 2/20 < tau_p. The default tests
+    case (iii) first and gives the bin a new label; the paper's order leaves it unlabelled."""
+    from ogscene3d.config import MappingConfig
+
+    assert MappingConfig().novel_before_ambiguous
+    means = torch.tensor([[0.0, 0.0, 0.0], [0.05, 0.0, 0.0], [0.0, 1.0, 0.0]], device=device)
+    labels = torch.tensor([3, 3, 4], dtype=torch.int32, device=device)
+    border = torch.tensor([[0.0, 0.0, 0.005], [0.05, 0.0, 0.005], [0.0, 1.0, 0.005]])
+    probes = torch.cat([border, _patch(3.0, n=5)[:17]]).to(device)
+    seg = torch.zeros(20, dtype=torch.long, device=device)
+    conf = torch.full((3,), 0.6, device=device)
+    res = associate_segments(
+        probes, seg, torch.ones(20, device=device), 1, means, labels, conf, _Labels(9), k=1, radius=0.02,
+        novel_before_ambiguous=novel_first,
+    )
+    torch.testing.assert_close(res.r.cpu(), torch.tensor([0.5]))
+    torch.testing.assert_close(res.p.cpu(), torch.tensor([0.1]))
+    if novel_first:
+        assert res.seg_case.tolist() == [CASE_NOVEL] and res.seg_labels.tolist() == [9]
+    else:
+        assert res.seg_case.tolist() == [CASE_AMBIGUOUS] and res.seg_labels.tolist() == [-1]
+    assert res.updated.numel() == 0 and torch.all(conf == 0.6)  # neither case updates confidences
 
 
 def test_eq5_inconsistent_matches_lose_confidence(device):

@@ -9,6 +9,7 @@ from ogscene3d.mapping.longterm import (
     class_iou_map,
     eq16_update,
     frustum_ratio,
+    label_edges,
     remap_segments,
 )
 
@@ -98,15 +99,10 @@ def test_associate_pixels(device):
     assert cons.cpu().tolist() == [True, False]
 
 
-def test_longterm_view_update_eq16(device):
-    """A wall with label 0 left of x = 0 and label 1 right of it; the stored segmentation puts the band
-    0 <= x < 0.33 into the left segment, so label-1 Gaussians there become inconsistent and lose confidence
-    while all others gain. Labels never change."""
+def _wall_map(device):
+    """A wall at z = 2 of Gaussians every 5 cm, label 0 left of x = 0 and label 1 right of it, conf 0.6."""
     from ogscene3d.gaussians import GaussianMap
-    from ogscene3d.mapping.longterm import longterm_view_update
 
-    f = 24.0
-    K2 = np.array([[f, 0, 16], [0, f, 12], [0, 0, 1]], np.float32)
     xs = torch.arange(-1.3, 1.31, 0.05)
     ys = torch.arange(-0.95, 0.96, 0.05)
     xx, yy = torch.meshgrid(xs, ys, indexing="ij")
@@ -121,18 +117,53 @@ def test_longterm_view_update_eq16(device):
         confidences=torch.full((len(means),), 0.6),
         opacity_logits=torch.full((len(means),), 2.0),
     )
+    return gm, labels
+
+
+def _wall_entry(split_u: int) -> MemoryEntry:
+    """A 32x24 view of the wall (f = 24, 2 m away) whose stored segmentation splits at column ``split_u``."""
+    K2 = np.array([[24.0, 0, 16], [0, 24.0, 12], [0, 0, 1]], np.float32)
     u = np.arange(32)
-    seg = np.broadcast_to(np.where(u < 20, 1, 2)[None, :], (24, 32)).astype(np.int32)  # x = 0.33 at u = 20
-    entry = MemoryEntry(
-        0,
-        np.zeros((24, 32, 3), np.uint8),
-        np.full((24, 32), 2.0, np.float32),
-        K2,
-        np.eye(4),
-        seg,
-        {1: 0.95, 2: 0.95},
-    )
-    st = longterm_view_update(gm, entry, k=4, radius=0.08, pixel_step=1)
+    seg = np.broadcast_to(np.where(u < split_u, 1, 2)[None, :], (24, 32)).astype(np.int32)
+    depth = np.full((24, 32), 2.0, np.float32)
+    return MemoryEntry(0, np.zeros((24, 32, 3), np.uint8), depth, K2, np.eye(4), seg, {1: 0.95, 2: 0.95})
+
+
+def test_label_edges():
+    ids = torch.tensor([[1, 1, 2], [1, 1, 2], [3, 3, 3]])
+    expect = torch.tensor([[0, 1, 1], [1, 1, 1], [1, 1, 1]], dtype=torch.bool)
+    assert torch.equal(label_edges(ids), expect)
+    assert not label_edges(torch.zeros(4, 5, dtype=torch.long)).any()
+
+
+@pytest.mark.parametrize("skip_edges", [True, False])
+def test_longterm_skips_boundary_pixels(device, skip_edges):
+    """The stored segmentation splits the wall two pixels right of where the labels change (x = 0 is
+    between u = 15 and 16, SAM's boundary between u = 17 and 18). Only the columns u = 16, 17 disagree,
+    and each lies on a boundary: with ``skip_edges`` nothing loses confidence, without it the label-1
+    Gaussians there do."""
+    from ogscene3d.mapping.longterm import longterm_view_update
+
+    gm, _ = _wall_map(device)
+    st = longterm_view_update(gm, _wall_entry(18), k=4, radius=0.08, pixel_step=1, skip_edges=skip_edges)
+    assert st.updated > 0 and st.increased > 0
+    if skip_edges:
+        assert st.decreased == 0
+    else:
+        assert st.decreased > 0
+        lost = gm.confidences.cpu() < 0.6
+        assert bool((gm.labels.cpu()[lost] == 1).all())
+
+
+def test_longterm_view_update_eq16(device):
+    """A wall with label 0 left of x = 0 and label 1 right of it; the stored segmentation puts the band
+    0 <= x < 0.33 into the left segment, so label-1 Gaussians there become inconsistent and lose confidence
+    while all others gain. Labels never change."""
+    from ogscene3d.mapping.longterm import longterm_view_update
+
+    gm, labels = _wall_map(device)
+    entry = _wall_entry(20)  # x = 0.33 at u = 20
+    st = longterm_view_update(gm, entry, k=4, radius=0.08, pixel_step=1, skip_edges=False)
     assert st.updated > 0 and st.increased > 0 and st.decreased > 0
     conf = gm.confidences.cpu()
     x = gm.means[:, 0].cpu()

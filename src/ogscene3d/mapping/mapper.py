@@ -275,6 +275,7 @@ class Mapper:
                     tau_valid=cfg.tau_valid,
                     tau_p=cfg.tau_p,
                     naive=self.naive,
+                    novel_before_ambiguous=cfg.novel_before_ambiguous,
                     # a probe's log-scale is log(grid spacing at its depth): see init.make_probes
                     probe_radius=(
                         torch.exp(probes.log_scales[sel]) * cfg.knn_radius_spacing
@@ -423,6 +424,7 @@ class Mapper:
                 k=cfg.longterm_knn_k,
                 radius=cfg.knn_radius,
                 pixel_step=cfg.longterm_pixel_step,
+                skip_edges=cfg.longterm_skip_edges,
             )
             for k, v in st.as_dict().items():
                 if k != "mean_iou":
