@@ -240,3 +240,31 @@ def test_probe_radius_matches_sparser_far_probes(device):
     res = associate_segments(*args, k=1, radius=0.02, probe_radius=half)
     assert res.seg_labels.tolist() == [3]
     torch.testing.assert_close(res.p.cpu(), torch.tensor([0.5]))
+
+
+def test_probe_updates_limit_eq5_to_inner_probes(device):
+    """A table (label 3) with a cup (label 4) at its edge: the table's segment, case (ii), has one probe at
+    the cup's base whose nearest Gaussian is the cup's. Where that probe may update (no mask) the cup loses
+    confidence at every such view; with ``probe_updates`` false for it (it lies on the segment boundary)
+    only the table's Gaussians are updated."""
+    table = _patch(0.0)
+    cup = torch.tensor([[0.2, 0.0, 0.0]])
+    means = torch.cat([table, cup]).to(device)
+    labels = torch.tensor([3] * 16 + [4], dtype=torch.int32, device=device)
+    probes = torch.cat([table, cup]).to(device) + torch.tensor([0.0, 0.0, 0.005], device=device)
+    seg = torch.zeros(17, dtype=torch.long, device=device)
+    inner = torch.tensor([True] * 16 + [False], device=device)
+    out = {}
+    for name, mask in (("all", None), ("inner", inner)):
+        conf = torch.full((17,), 0.6, device=device)
+        res = associate_segments(
+            probes, seg, torch.ones(17, device=device), 1, means, labels, conf, _Labels(9), k=1, radius=0.02,
+            probe_updates=mask,
+        )
+        assert res.seg_labels.tolist() == [3]
+        out[name] = (conf.cpu(), sorted(res.updated.tolist()))
+    conf_all, upd_all = out["all"]
+    conf_inner, upd_inner = out["inner"]
+    assert upd_all == list(range(17)) and upd_inner == list(range(16))
+    assert float(conf_all[16]) < 0.6 and float(conf_inner[16]) == pytest.approx(0.6)
+    torch.testing.assert_close(conf_all[:16], conf_inner[:16])

@@ -177,3 +177,13 @@ def test_odometry_poses_replace_the_dataset_poses(tmp_path):
     for i in tracked:
         assert np.linalg.norm(frames[i].pose[:3, 3] - gt[i][:3, 3]) < 0.05
     assert len(m.map) > 0
+
+
+def test_inner_probes_are_off_segment_boundaries(device):
+    m = Mapper(_config(), device)
+    segments = np.zeros((4, 6), dtype=np.int32)
+    segments[:, 3:] = 5  # columns 2 and 3 touch the boundary
+    # flat v * 6 + u of (v, u) = (0,0) (0,2) (0,3) (0,5) (1,1) (3,4)
+    pix = torch.tensor([0, 2, 3, 5, 6 + 1, 18 + 4], device=device)
+    inner = m._inner_probes(segments, pix)
+    assert inner.tolist() == [True, False, False, True, True, True]

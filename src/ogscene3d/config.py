@@ -102,6 +102,11 @@ class MappingConfig:
     # whatever its few border matches give r; false = the paper's order (see mapping/local.py)
     novel_before_ambiguous: bool = True
     knn_radius_spacing: float = 0.0  # >0: per-probe KNN radius max(knn_radius, this x probe grid spacing)
+    # true: Eq. 5 updates come only from probes off their segment's boundary. A table segment's probes around
+    # a cup's base have the cup's Gaussians as nearest match and lower them at every view, which over a long
+    # run lets refinement give the cup the table's label; but the same boundary updates also lower wrongly
+    # labelled rims that refinement then fixes. Measured trade-off in README ("Ablation"); off by default.
+    eq5_skip_edges: bool = False
     tau_valid: float = 0.25
     tau_p: float = 0.15
     tau_high: float = 0.7

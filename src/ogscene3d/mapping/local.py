@@ -37,6 +37,8 @@ Confidence (Sec. III-B.2): new Gaussians start at the rescaled SAM score; scene 
 nearest match of a probe of a case-(ii) segment get the Eq. 5 update, each from its nearest such probe:
 conf' = conf + c_sam * p(m) * (1 - conf) when its label equals the segment's label, else
 conf' = conf - c_sam * p(m) * conf. Matches of case-(i) and case-(iii) segments update nothing.
+``probe_updates`` can restrict the updates to some probes: the mapper passes the probes off their
+segment's boundary when ``mapping.eq5_skip_edges`` is set (see config.py for the trade-off).
 
 The naive baseline (ablation) takes l*_m when the segment has any match and a new label otherwise, with
 no ambiguity test and no confidence updates.
@@ -200,6 +202,7 @@ def associate_segments(
     naive: bool = False,
     probe_radius: torch.Tensor | None = None,
     novel_before_ambiguous: bool = True,
+    probe_updates: torch.Tensor | None = None,
 ) -> Association:
     """Associate segments with the scene and update scene confidences in place (Eq. 5).
 
@@ -210,6 +213,7 @@ def associate_segments(
     fresh scene labels for novel segments. ``probe_radius`` [P] (metres, optional): a per-probe KNN radius
     used instead of ``radius`` where it is larger (matches the sampling density at the probe's depth).
     ``novel_before_ambiguous``: test case (iii) before case (i) (see the module docstring).
+    ``probe_updates`` [P] bool (optional): the probes that may make Eq. 5 updates (default all).
     """
     dev = probe_means.device
     S = int(num_segments)
@@ -263,6 +267,8 @@ def associate_segments(
         # count towards c1/c2 but are not correspondences: near object boundaries they mostly belong to
         # the neighbouring object and would lower its confidence at every keyframe.
         use = valid[:, 0] & matched[probe_seg]
+        if probe_updates is not None:
+            use &= probe_updates
         pj = scene_idx[use, 0]
         pd = dist[use, 0]
         pp = torch.nonzero(use).squeeze(1)

@@ -47,7 +47,7 @@ from ..gaussians import GaussianMap
 from .init import make_probes
 from .keyframes import KeyframeSelector
 from .local import CASE_AMBIGUOUS, CASE_MATCHED, associate_segments, fill_unlabeled
-from .longterm import MemoryBuffer, MemoryEntry, longterm_view_update
+from .longterm import MemoryBuffer, MemoryEntry, label_edges, longterm_view_update
 from .merge import duplicate_label_pairs, merge_labels, relabel, visible_pixels
 from .optimize import View, optimize_map
 from .refine import global_refinement
@@ -276,6 +276,9 @@ class Mapper:
                     tau_p=cfg.tau_p,
                     naive=self.naive,
                     novel_before_ambiguous=cfg.novel_before_ambiguous,
+                    probe_updates=(
+                        self._inner_probes(segments, probes.pix[sel]) if cfg.eq5_skip_edges else None
+                    ),
                     # a probe's log-scale is log(grid spacing at its depth): see init.make_probes
                     probe_radius=(
                         torch.exp(probes.log_scales[sel]) * cfg.knn_radius_spacing
@@ -357,6 +360,11 @@ class Mapper:
             with self.timings.section("checkpoint"):
                 self.save_checkpoint(self._checkpoint_dir / "map.npz")
         return True
+
+    def _inner_probes(self, segments: np.ndarray, pix: torch.Tensor) -> torch.Tensor:
+        """[P] bool: probes whose pixel is off every segment boundary (they may make Eq. 5 updates)."""
+        ids = torch.from_numpy(np.ascontiguousarray(segments)).to(self.device).long()
+        return ~label_edges(ids).reshape(-1)[pix]
 
     def _merging(self, segments: np.ndarray | None) -> bool:
         return (
