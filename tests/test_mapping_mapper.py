@@ -185,5 +185,6 @@ def test_inner_probes_are_off_segment_boundaries(device):
     segments[:, 3:] = 5  # columns 2 and 3 touch the boundary
     # flat v * 6 + u of (v, u) = (0,0) (0,2) (0,3) (0,5) (1,1) (3,4)
     pix = torch.tensor([0, 2, 3, 5, 6 + 1, 18 + 4], device=device)
-    inner = m._inner_probes(segments, pix)
-    assert inner.tolist() == [True, False, False, True, True, True]
+    for dtype in (np.int32, np.uint16):  # segment PNGs load as uint16
+        inner = m._inner_probes(segments.astype(dtype), pix)
+        assert inner.tolist() == [True, False, False, True, True, True]

@@ -363,7 +363,7 @@ class Mapper:
 
     def _inner_probes(self, segments: np.ndarray, pix: torch.Tensor) -> torch.Tensor:
         """[P] bool: probes whose pixel is off every segment boundary (they may make Eq. 5 updates)."""
-        ids = torch.from_numpy(np.ascontiguousarray(segments)).to(self.device).long()
+        ids = torch.from_numpy(np.ascontiguousarray(segments, dtype=np.int64)).to(self.device)
         return ~label_edges(ids).reshape(-1)[pix]
 
     def _merging(self, segments: np.ndarray | None) -> bool:
