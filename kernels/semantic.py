@@ -46,6 +46,17 @@ def load_lane_gaussian(
     return int(0), wp.vec2(), wp.vec3(), float(0.0), float(0.0), int(-1)
 
 
+@wp.func
+def lane_shfl_gaussian(gm: wp.vec2, gc: wp.vec3, go: float, gconf: float, glab: int, src: int):
+    """Lane ``src``'s record from ``load_lane_gaussian``, broadcast to every lane of the warp."""
+    return (
+        lane_shfl_vec2(gm, src),
+        lane_shfl_vec3(gc, src),
+        lane_shfl(go, src),
+        lane_shfl(gconf, src),
+        lane_shfl_int(glab, src),
+    )
+
 @functools.cache
 def semantic_kernels(buffer_size: int):
     """(vote, contribution) kernels for a per-pixel buffer of ``buffer_size`` entries."""
@@ -101,11 +112,7 @@ def semantic_kernels(buffer_size: int):
             )
             cnt = wp.min(W, end - b)
             for s in range(cnt):
-                m = lane_shfl_vec2(gm, s)
-                con = lane_shfl_vec3(gc, s)
-                o = lane_shfl(go, s)
-                cf = lane_shfl(gconf, s)
-                lab = lane_shfl_int(glab, s)
+                m, con, o, cf, lab = lane_shfl_gaussian(gm, gc, go, gconf, glab, s)
                 if done == 0:
                     ca = cf * gaussian_alpha(con, m, o, px, py)[0]
                     if ca > 0.0:
@@ -211,11 +218,7 @@ def semantic_kernels(buffer_size: int):
             )
             cnt = wp.min(W, end - b)
             for s in range(cnt):
-                m = lane_shfl_vec2(gm, s)
-                con = lane_shfl_vec3(gc, s)
-                o = lane_shfl(go, s)
-                cf = lane_shfl(gconf, s)
-                lab = lane_shfl_int(glab, s)
+                m, con, o, cf, lab = lane_shfl_gaussian(gm, gc, go, gconf, glab, s)
                 hit = int(0)
                 v_num = float(0.0)
                 v_den = float(0.0)
