@@ -7,14 +7,31 @@ sort gives tiles in order and, inside each tile, Gaussians front to back.
 
 import warp as wp
 
+from .raster import alpha_extent
+
 
 @wp.func
-def tile_rect(center: wp.vec2, radius: float, tile_size: int, tiles_x: int, tiles_y: int) -> wp.vec4i:
+def tile_rect(
+    center: wp.vec2, radius: float, ext: wp.vec2, tile_size: int, tiles_x: int, tiles_y: int
+) -> wp.vec4i:
+    """Tiles [x0, x1) x [y0, y1) of the screen radius's square, less those where the Gaussian's alpha stays
+    below ALPHA_MIN at every pixel centre (outside the ``alpha_extent`` box ``ext``): they would blend
+    nothing of it, so the image is the same and the tile lists are shorter."""
     ts = float(tile_size)
     x0 = wp.min(wp.max(0, int((center[0] - radius) / ts)), tiles_x)
     y0 = wp.min(wp.max(0, int((center[1] - radius) / ts)), tiles_y)
     x1 = wp.min(wp.max(0, int((center[0] + radius + ts - 1.0) / ts)), tiles_x)
     y1 = wp.min(wp.max(0, int((center[1] + radius + ts - 1.0) / ts)), tiles_y)
+    if ext[0] < 0.0:
+        return wp.vec4i(x0, y0, x0, y0)
+    # a tile holds pixel centres in [tx * ts + 0.5, tx * ts + ts - 0.5]: these bounds keep every tile
+    # with a centre inside [c - ext, c + ext] (clamped before the int conversion: ext may be huge)
+    hx = float(tiles_x)
+    hy = float(tiles_y)
+    x0 = wp.max(x0, int(wp.clamp(wp.floor((center[0] - ext[0]) / ts), -1.0, hx)))
+    y0 = wp.max(y0, int(wp.clamp(wp.floor((center[1] - ext[1]) / ts), -1.0, hy)))
+    x1 = wp.max(x0, wp.min(x1, int(wp.clamp(wp.floor((center[0] + ext[0]) / ts), -1.0, hx)) + 1))
+    y1 = wp.max(y0, wp.min(y1, int(wp.clamp(wp.floor((center[1] + ext[1]) / ts), -1.0, hy)) + 1))
     return wp.vec4i(x0, y0, x1, y1)
 
 
@@ -22,17 +39,25 @@ def tile_rect(center: wp.vec2, radius: float, tile_size: int, tiles_x: int, tile
 def count_tiles(
     means2d: wp.array(dtype=wp.vec2),
     radii: wp.array(dtype=wp.int32),
+    conics: wp.array(dtype=wp.vec3),
+    opacities: wp.array(dtype=float),
+    num_gaussians: int,
     tile_size: int,
     tiles_x: int,
     tiles_y: int,
     counts: wp.array(dtype=wp.int32),
+    extents: wp.array(dtype=wp.vec2),
 ):
+    """Tiles per Gaussian, and its ``alpha_extent`` for the emission and the blending kernels."""
     tid = wp.tid()
     r = radii[tid]
     if r <= 0:
         counts[tid] = 0
+        extents[tid] = wp.vec2(-1.0, -1.0)
         return
-    rect = tile_rect(means2d[tid], float(r), tile_size, tiles_x, tiles_y)
+    ext = alpha_extent(conics[tid], opacities[tid % num_gaussians])
+    extents[tid] = ext
+    rect = tile_rect(means2d[tid], float(r), ext, tile_size, tiles_x, tiles_y)
     counts[tid] = (rect[2] - rect[0]) * (rect[3] - rect[1])
 
 
@@ -40,6 +65,7 @@ def count_tiles(
 def emit_intersections(
     means2d: wp.array(dtype=wp.vec2),
     radii: wp.array(dtype=wp.int32),
+    extents: wp.array(dtype=wp.vec2),
     depth_bits: wp.array(dtype=wp.int32),
     offsets: wp.array(dtype=wp.int64),
     num_gaussians: int,
@@ -54,7 +80,7 @@ def emit_intersections(
     r = radii[tid]
     if r <= 0:
         return
-    rect = tile_rect(means2d[tid], float(r), tile_size, tiles_x, tiles_y)
+    rect = tile_rect(means2d[tid], float(r), extents[tid], tile_size, tiles_x, tiles_y)
     cam = tid // num_gaussians
     base = wp.int64(cam * tiles_x * tiles_y)
     w = rect[2] - rect[0]

@@ -101,6 +101,44 @@ def lane_any(p: int) -> int: ...
 def lane_all(p: int) -> int: ...
 
 
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+    return (int)__ballot_sync(0xffffffffu, p != 0);
+#else
+    return p != 0 ? 1 : 0;
+#endif
+"""
+)
+def lane_ballot(p: int) -> int:
+    """Bit k set where lane k's ``p`` is non-zero (the same mask in every lane)."""
+    ...
+
+
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+    return __ffs(mask) - 1;
+#else
+    return mask == 0 ? -1 : __builtin_ctz((unsigned)mask);
+#endif
+"""
+)
+def bit_lowest(mask: int) -> int:
+    """Index of the lowest set bit of a 32-bit mask, -1 if none."""
+    ...
+
+
+@wp.func_native(
+    """
+    return (int)((unsigned)mask & ~(1u << (unsigned)k));
+"""
+)
+def bit_clear(mask: int, k: int) -> int:
+    """``mask`` with bit ``k`` (0..31) cleared, without signed overflow at bit 31."""
+    ...
+
+
 @wp.func
 def lane_shfl_vec2(v: wp.vec2, src: int) -> wp.vec2:
     return wp.vec2(lane_shfl(v[0], src), lane_shfl(v[1], src))

@@ -3,7 +3,11 @@
 The channel count is a compile-time constant (a Warp vector length), so accumulators live in registers;
 ``raster_kernels(D)`` builds and caches the pair of kernels for D channels. One thread per pixel,
 threads of a tile consecutive, so on CUDA the warps of a block walk one tile's Gaussian list together
-(reading it 32 Gaussians at a time, see lanes.py). The same kernels run on the CPU device.
+(reading it 32 Gaussians at a time, see lanes.py). Of each batch a warp broadcasts and evaluates only the
+Gaussians that reach one of its pixels (``gaussian_reaches``, on the box the binning computed with
+``alpha_extent``): a 16x16 tile's list holds every Gaussian that touches the tile, but one warp covers a
+16x2 strip of it. The same kernels run on the CPU device,
+where a warp is one pixel.
 """
 
 import functools
@@ -11,8 +15,11 @@ import functools
 import warp as wp
 
 from .lanes import (
+    bit_clear,
+    bit_lowest,
     lane_all,
     lane_any,
+    lane_ballot,
     lane_count,
     lane_max_int,
     lane_shfl,
@@ -60,6 +67,63 @@ def tile_pixel(
 
 
 @wp.func
+def warp_rect(
+    tid: int, tile_size: int, tile_threads: int, tiles_x: int, tiles_per_cam: int, lanes: int
+) -> wp.vec4:
+    """(x_lo, x_hi, y_lo, y_hi): the pixel centres spanned by the ``lanes``-thread warp of ``tid`` (the
+    thread's own pixel where ``lanes`` is 1). A warp of spare threads (past the tile's pixels) gets an
+    empty rectangle: lo > hi on an axis."""
+    ct = tid // tile_threads
+    local = tid - ct * tile_threads
+    tile = ct % tiles_per_cam
+    ox = (tile % tiles_x) * tile_size
+    oy = (tile // tiles_x) * tile_size
+    first = local - local % lanes
+    last = wp.min(first + lanes, tile_size * tile_size) - 1
+    r0 = first // tile_size
+    r1 = last // tile_size
+    c0 = int(0)
+    c1 = tile_size - 1
+    if r0 == r1:
+        c0 = first - r0 * tile_size
+        c1 = last - r1 * tile_size
+    return wp.vec4(
+        float(ox + c0) + 0.5, float(ox + c1) + 0.5, float(oy + r0) + 0.5, float(oy + r1) + 0.5
+    )
+
+
+@wp.func
+def alpha_extent(conic: wp.vec3, opacity: float) -> wp.vec2:
+    """Half-widths (x, y) of a box around the 2D mean outside which alpha < ALPHA_MIN.
+
+    alpha >= ALPHA_MIN needs sigma <= t = ln(opacity / ALPHA_MIN), an ellipse; these are its bounding
+    box's half-widths, with a margin on t and on the box that covers fast-math rounding. (-1, -1) where
+    the Gaussian blends nowhere; infinite for a degenerate conic."""
+    if not (opacity > 0.0):
+        return wp.vec2(-1.0, -1.0)
+    t = wp.log(opacity / ALPHA_MIN) + 0.01
+    if t <= 0.0:
+        return wp.vec2(-1.0, -1.0)
+    det = conic[0] * conic[2] - conic[1] * conic[1]
+    if not (det > 0.0):
+        return wp.vec2(wp.inf, wp.inf)
+    return wp.vec2(wp.sqrt(2.0 * t * conic[2] / det) + 0.01, wp.sqrt(2.0 * t * conic[0] / det) + 0.01)
+
+
+@wp.func
+def gaussian_reaches(mean2d: wp.vec2, extent: wp.vec2, rect: wp.vec4) -> int:
+    """0 if a Gaussian with ``alpha_extent`` ``extent`` has alpha < ALPHA_MIN at every pixel centre of
+    ``rect``, else 1. Conservative: a kept Gaussian that blends nothing is skipped per pixel later."""
+    if extent[0] < 0.0:
+        return 0
+    if mean2d[0] + extent[0] < rect[0] or mean2d[0] - extent[0] > rect[1]:
+        return 0
+    if mean2d[1] + extent[1] < rect[2] or mean2d[1] - extent[1] > rect[3]:
+        return 0
+    return 1
+
+
+@wp.func
 def gaussian_alpha(conic: wp.vec3, mean2d: wp.vec2, opacity: float, px: float, py: float) -> wp.vec3:
     """(alpha, sigma, vis) at pixel centre (px, py); alpha = 0 where the Gaussian is skipped."""
     dx = mean2d[0] - px
@@ -97,6 +161,7 @@ def raster_kernels(channels: int):
     def rasterize_forward(
         means2d: wp.array(dtype=wp.vec2),
         conics: wp.array(dtype=wp.vec3),
+        extents: wp.array(dtype=wp.vec2),
         colors: wp.array(dtype=vec),
         opacities: wp.array(dtype=float),
         backgrounds: wp.array(dtype=vec),
@@ -124,6 +189,7 @@ def raster_kernels(channels: int):
         py = float(pix[3]) + 0.5
         W = lane_count()
         lane = tid % W
+        rect = warp_rect(tid, tile_size, tile_threads, tiles_x, tiles_per_cam, W)
         end = tile_end[ct]
         T = float(1.0)
         acc = vec()
@@ -141,14 +207,19 @@ def raster_kernels(channels: int):
             gc = wp.vec3()
             go = float(0.0)
             gcol = vec()
+            reaches = int(0)
             if j < end:
                 g = isect_ids[j]
                 gm = means2d[g]
                 gc = conics[g]
                 go = opacities[g % num_gaussians]
                 gcol = colors[g]
-            n = wp.min(W, end - b)
-            for s in range(n):
+                reaches = gaussian_reaches(gm, extents[g], rect)
+            # only the batch's Gaussians that reach the warp's pixels are broadcast and evaluated
+            pending = lane_ballot(reaches)
+            while pending != 0:
+                s = bit_lowest(pending)
+                pending = bit_clear(pending, s)
                 m = lane_shfl_vec2(gm, s)
                 con = lane_shfl_vec3(gc, s)
                 o = lane_shfl(go, s)
@@ -175,6 +246,7 @@ def raster_kernels(channels: int):
     def rasterize_backward(
         means2d: wp.array(dtype=wp.vec2),
         conics: wp.array(dtype=wp.vec3),
+        extents: wp.array(dtype=wp.vec2),
         colors: wp.array(dtype=vec),
         opacities: wp.array(dtype=float),
         backgrounds: wp.array(dtype=vec),
@@ -207,6 +279,7 @@ def raster_kernels(channels: int):
         py = float(pix[3]) + 0.5
         W = lane_count()
         lane = tid % W
+        rect = warp_rect(tid, tile_size, tile_threads, tiles_x, tiles_per_cam, W)
         last = int(-1)
         T_final = float(1.0)
         v_c = vec()
@@ -231,14 +304,18 @@ def raster_kernels(channels: int):
             gc = wp.vec3()
             go = float(0.0)
             gcol = vec()
+            reaches = int(0)
             if j >= start:
                 gid = isect_ids[j]
                 gm = means2d[gid]
                 gc = conics[gid]
                 go = opacities[gid % num_gaussians]
                 gcol = colors[gid]
-            n = wp.min(W, b - start + 1)
-            for s in range(n):
+                reaches = gaussian_reaches(gm, extents[gid], rect)
+            pending = lane_ballot(reaches)  # lane s holds Gaussian b - s: lowest bit first is back to front
+            while pending != 0:
+                s = bit_lowest(pending)
+                pending = bit_clear(pending, s)
                 m = lane_shfl_vec2(gm, s)
                 con = lane_shfl_vec3(gc, s)
                 o = lane_shfl(go, s)

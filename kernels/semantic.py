@@ -13,8 +13,11 @@ import functools
 import warp as wp
 
 from .lanes import (
+    bit_clear,
+    bit_lowest,
     lane_all,
     lane_any,
+    lane_ballot,
     lane_count,
     lane_shfl,
     lane_shfl_int,
@@ -22,7 +25,7 @@ from .lanes import (
     lane_shfl_vec3,
     lane_sum,
 )
-from .raster import BLEND_KERNEL_OPTIONS, T_MIN, gaussian_alpha, tile_pixel
+from .raster import BLEND_KERNEL_OPTIONS, T_MIN, gaussian_alpha, gaussian_reaches, tile_pixel, warp_rect
 
 
 @wp.func
@@ -33,17 +36,22 @@ def load_lane_gaussian(
     num_gaussians: int,
     means2d: wp.array(dtype=wp.vec2),
     conics: wp.array(dtype=wp.vec3),
+    extents: wp.array(dtype=wp.vec2),
     opacities: wp.array(dtype=float),
     confidences: wp.array(dtype=float),
     labels: wp.array(dtype=wp.int32),
+    rect: wp.vec4,
 ):
     """This lane's share of a batch: the j-th intersection's (Gaussian, mean2d, conic, opacity,
-    confidence, label); past the tile's end a record that blends nothing (label -1, opacity 0)."""
+    confidence, label, whether it reaches the warp's ``rect``); past the tile's end a record that blends
+    nothing and reaches no pixel."""
     if j < end:
         g = isect_ids[j]
         n = g % num_gaussians
-        return n, means2d[g], conics[g], opacities[n], confidences[n], labels[n]
-    return int(0), wp.vec2(), wp.vec3(), float(0.0), float(0.0), int(-1)
+        m = means2d[g]
+        reaches = gaussian_reaches(m, extents[g], rect)
+        return n, m, conics[g], opacities[n], confidences[n], labels[n], reaches
+    return int(0), wp.vec2(), wp.vec3(), float(0.0), float(0.0), int(-1), int(0)
 
 
 @wp.func
@@ -67,6 +75,7 @@ def semantic_kernels(buffer_size: int):
     def semantic_vote(
         means2d: wp.array(dtype=wp.vec2),
         conics: wp.array(dtype=wp.vec3),
+        extents: wp.array(dtype=wp.vec2),
         opacities: wp.array(dtype=float),
         labels: wp.array(dtype=wp.int32),
         confidences: wp.array(dtype=float),
@@ -94,6 +103,7 @@ def semantic_kernels(buffer_size: int):
         py = float(pix[3]) + 0.5
         W = lane_count()
         lane = tid % W
+        rect = warp_rect(tid, tile_size, tile_threads, tiles_x, tiles_per_cam, W)
         end = tile_end[ct]
         T = float(1.0)
         labs = veci(-1)
@@ -107,11 +117,24 @@ def semantic_kernels(buffer_size: int):
         while b < end:
             if lane_all(done) != 0:
                 break
-            gn, gm, gc, go, gconf, glab = load_lane_gaussian(
-                b + lane, end, isect_ids, num_gaussians, means2d, conics, opacities, confidences, labels
+            gn, gm, gc, go, gconf, glab, reaches = load_lane_gaussian(
+                b + lane,
+                end,
+                isect_ids,
+                num_gaussians,
+                means2d,
+                conics,
+                extents,
+                opacities,
+                confidences,
+                labels,
+                rect,
             )
-            cnt = wp.min(W, end - b)
-            for s in range(cnt):
+            # only the batch's Gaussians that reach the warp's pixels are broadcast and evaluated
+            pending = lane_ballot(reaches)
+            while pending != 0:
+                s = bit_lowest(pending)
+                pending = bit_clear(pending, s)
                 m, con, o, cf, lab = lane_shfl_gaussian(gm, gc, go, gconf, glab, s)
                 if done == 0:
                     ca = cf * gaussian_alpha(con, m, o, px, py)[0]
@@ -167,6 +190,7 @@ def semantic_kernels(buffer_size: int):
     def semantic_contribution(
         means2d: wp.array(dtype=wp.vec2),
         conics: wp.array(dtype=wp.vec3),
+        extents: wp.array(dtype=wp.vec2),
         opacities: wp.array(dtype=float),
         labels: wp.array(dtype=wp.int32),
         confidences: wp.array(dtype=float),
@@ -196,6 +220,7 @@ def semantic_kernels(buffer_size: int):
         py = float(pix[3]) + 0.5
         W = lane_count()
         lane = tid % W
+        rect = warp_rect(tid, tile_size, tile_threads, tiles_x, tiles_per_cam, W)
         end = tile_end[ct]
         labs = veci(-1)
         ws = vecf(0.0)
@@ -213,11 +238,24 @@ def semantic_kernels(buffer_size: int):
         while b < end:
             if lane_all(done) != 0:
                 break
-            gn, gm, gc, go, gconf, glab = load_lane_gaussian(
-                b + lane, end, isect_ids, num_gaussians, means2d, conics, opacities, confidences, labels
+            gn, gm, gc, go, gconf, glab, reaches = load_lane_gaussian(
+                b + lane,
+                end,
+                isect_ids,
+                num_gaussians,
+                means2d,
+                conics,
+                extents,
+                opacities,
+                confidences,
+                labels,
+                rect,
             )
-            cnt = wp.min(W, end - b)
-            for s in range(cnt):
+            # only the batch's Gaussians that reach the warp's pixels are broadcast and evaluated
+            pending = lane_ballot(reaches)
+            while pending != 0:
+                s = bit_lowest(pending)
+                pending = bit_clear(pending, s)
                 m, con, o, cf, lab = lane_shfl_gaussian(gm, gc, go, gconf, glab, s)
                 hit = int(0)
                 v_num = float(0.0)

@@ -182,6 +182,7 @@ class TileBins:
     tile_end: torch.Tensor  # [C * tiles] int32
     isect_ids: torch.Tensor  # [M] int32, flattened c * N + n, sorted by (camera, tile, depth)
     tiles_per_gaussian: torch.Tensor  # [C, N] int32
+    extents: torch.Tensor  # [C, N, 2] half-widths of the box outside which alpha < 1/255; -1 if culled
 
     @property
     def num_intersections(self) -> int:
@@ -200,6 +201,8 @@ class TileBins:
 
 def bin_gaussians(
     means2d: torch.Tensor,
+    conics: torch.Tensor,
+    opacities: torch.Tensor,
     radii: torch.Tensor,
     depths: torch.Tensor,
     width: int,
@@ -208,6 +211,9 @@ def bin_gaussians(
     checks: ValueChecks | None = None,
 ) -> TileBins:
     """Assign projected Gaussians [C, N] to tiles and sort every tile's list front to back.
+
+    A Gaussian goes to the tiles its screen radius covers, less those where its alpha stays below 1/255
+    at every pixel (``conics`` [C, N, 3], ``opacities`` [N] decide that), which would blend nothing of it.
 
     ``checks``: the caller's pending input checks, settled on the sync this function makes anyway."""
     wp = _wp()
@@ -219,19 +225,22 @@ def bin_gaussians(
     n_tiles = C * tiles_x * tiles_y
     tile_start, tile_end = torch.zeros(2, n_tiles, dtype=torch.int32, device=dev)  # empty tiles: [0, 0)
     counts = torch.empty(C, N, dtype=torch.int32, device=dev)  # count_tiles writes every entry
+    extents = torch.empty(C, N, 2, device=dev)  # likewise
     if C * N == 0:
         if checks is not None:
             checks.settle()
         empty = torch.zeros(0, dtype=torch.int32, device=dev)
-        return TileBins(tile_size, tiles_x, tiles_y, tile_start, tile_end, empty, counts)
+        return TileBins(tile_size, tiles_x, tiles_y, tile_start, tile_end, empty, counts, extents)
     m2d = _as_wp(means2d.detach(), wp.vec2)
     rad = _as_wp(radii)
+    grid = [N, tile_size, tiles_x, tiles_y]
+    ext = _as_wp(extents, wp.vec2)
     with warp_stream(dev) as wdev:
         wp.launch(
             binning.count_tiles,
             dim=C * N,
-            inputs=[m2d, rad, tile_size, tiles_x, tiles_y],
-            outputs=[_as_wp(counts)],
+            inputs=[m2d, rad, _as_wp(conics.detach(), wp.vec3), _as_wp(opacities.detach()), *grid],
+            outputs=[_as_wp(counts), ext],
             device=wdev,
         )
         offsets = torch.cumsum(counts.reshape(-1), 0, dtype=torch.int64)
@@ -246,7 +255,7 @@ def bin_gaussians(
             wp.launch(
                 binning.emit_intersections,
                 dim=C * N,
-                inputs=[m2d, rad, _as_wp(depth_bits), _as_wp(offsets), N, tile_size, tiles_x, tiles_y],
+                inputs=[m2d, rad, ext, _as_wp(depth_bits), _as_wp(offsets), *grid],
                 outputs=[wk, wv],
                 device=wdev,
             )
@@ -258,7 +267,7 @@ def bin_gaussians(
                 outputs=[_as_wp(tile_start), _as_wp(tile_end)],
                 device=wdev,
             )
-    return TileBins(tile_size, tiles_x, tiles_y, tile_start, tile_end, values[:total], counts)
+    return TileBins(tile_size, tiles_x, tiles_y, tile_start, tile_end, values[:total], counts, extents)
 
 
 def _chunks(D: int) -> list[tuple[int, int]]:
@@ -276,7 +285,11 @@ class _Rasterize(torch.autograd.Function):
         out_alphas = torch.empty(C, height, width, device=dev)
         last_ids = torch.empty(C, height, width, dtype=torch.int32, device=dev)
         # launch arguments shared by every chunk, kept for the backward launches
-        geometry = [_as_wp(means2d.detach(), wp.vec2), _as_wp(conics.detach(), wp.vec3)]
+        geometry = [
+            _as_wp(means2d.detach(), wp.vec2),
+            _as_wp(conics.detach(), wp.vec3),
+            _as_wp(bins.extents, wp.vec2),
+        ]
         opac = _as_wp(opacities.detach())
         tile_start, isect_ids = _as_wp(bins.tile_start), _as_wp(bins.isect_ids)
         alphas_arg, last_arg = _as_wp(out_alphas), _as_wp(last_ids)
@@ -521,7 +534,9 @@ def rasterization(
         means, quats, scales, viewmats, Ks, width, height, near_plane, far_plane, eps2d
     )
     with torch.no_grad():
-        bins = bin_gaussians(means2d, radii, depths, width, height, tile_size, checks)  # settles checks
+        bins = bin_gaussians(
+            means2d, conics, opacities, radii, depths, width, height, tile_size, checks
+        )  # settles checks
 
     if render_mode in ("D", "ED"):
         blend, bg = depths.unsqueeze(-1), None

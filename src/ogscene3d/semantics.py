@@ -97,7 +97,7 @@ def _vote(
         )
         # unlabelled Gaussians neither vote nor occlude: a zero radius keeps them out of every tile
         radii = torch.where(labels >= 0, radii, torch.zeros_like(radii))
-        bins = bin_gaussians(means2d, radii, depths, width, height, tile_size, checks)
+        bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, tile_size, checks)
     buf_l = torch.full((C, height, width, buffer_size), -1, dtype=torch.int32, device=dev)
     buf_w = torch.zeros(C, height, width, buffer_size, device=dev)
     out_l = torch.full((C, height, width), -1, dtype=torch.int32, device=dev)
@@ -109,6 +109,7 @@ def _vote(
     geometry = [
         _as_wp(means2d, wp.vec2),
         _as_wp(conics, wp.vec3),
+        _as_wp(bins.extents, wp.vec2),
         _as_wp(opacities.detach()),
         _as_wp(labels.to(torch.int32)),
         _as_wp(confidences.detach()),
