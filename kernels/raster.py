@@ -47,6 +47,21 @@ T_MIN = 1e-4
 
 
 @wp.func
+def tile_local_xy(local: int, tile_size: int) -> wp.vec2i:
+    """Pixel offset in its tile of a tile's ``local``-th thread. Where the tile side is a multiple of 8,
+    each 32 consecutive threads (one CUDA warp) cover an 8x4 block: a squarer warp footprint than two
+    16-pixel rows, so fewer of the tile's Gaussians reach a warp (see ``gaussian_reaches``). Otherwise
+    rows."""
+    if tile_size % 8 == 0:
+        w = local // 32
+        lane = local - w * 32
+        blocks_x = tile_size // 8
+        by = w // blocks_x
+        return wp.vec2i((w - by * blocks_x) * 8 + lane % 8, by * 4 + lane // 8)
+    return wp.vec2i(local % tile_size, local // tile_size)
+
+
+@wp.func
 def tile_pixel(
     tid: int, tile_size: int, tile_threads: int, tiles_x: int, tiles_per_cam: int, width: int, height: int
 ) -> wp.vec4i:
@@ -59,8 +74,9 @@ def tile_pixel(
     tile = ct - cam * tiles_per_cam
     ty = tile // tiles_x
     tx = tile - ty * tiles_x
-    x = tx * tile_size + local % tile_size
-    y = ty * tile_size + local // tile_size
+    xy = tile_local_xy(local, tile_size)
+    x = tx * tile_size + xy[0]
+    y = ty * tile_size + xy[1]
     if local >= tile_size * tile_size or x >= width or y >= height:
         return wp.vec4i(-1, ct, x, y)
     return wp.vec4i((cam * height + y) * width + x, ct, x, y)
@@ -80,15 +96,13 @@ def warp_rect(
     oy = (tile // tiles_x) * tile_size
     first = local - local % lanes
     last = wp.min(first + lanes, tile_size * tile_size) - 1
-    r0 = first // tile_size
-    r1 = last // tile_size
-    c0 = int(0)
-    c1 = tile_size - 1
-    if r0 == r1:
-        c0 = first - r0 * tile_size
-        c1 = last - r1 * tile_size
+    lo = tile_local_xy(first, tile_size)
+    hi = tile_local_xy(last, tile_size)
+    if tile_size % 8 != 0 and lo[1] != hi[1]:
+        lo[0] = 0  # rows: a warp over several rows spans the tile's width
+        hi[0] = tile_size - 1
     return wp.vec4(
-        float(ox + c0) + 0.5, float(ox + c1) + 0.5, float(oy + r0) + 0.5, float(oy + r1) + 0.5
+        float(ox + lo[0]) + 0.5, float(ox + hi[0]) + 0.5, float(oy + lo[1]) + 0.5, float(oy + hi[1]) + 0.5
     )
 
 
