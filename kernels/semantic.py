@@ -110,6 +110,9 @@ def semantic_kernels(buffer_size: int):
         ws = vecf(0.0)
         filled = int(0)
         dropped = int(0)
+        weakest = int(0)
+        weakest_w = float(0.0)
+        stale = int(1)
         done = int(0)
         if out < 0:
             done = 1  # pixels past the image edge still take part in the lane shuffles
@@ -152,6 +155,8 @@ def semantic_kernels(buffer_size: int):
                                 if labs[k] == lab:
                                     ws[k] = ws[k] + w
                                     matched = 1
+                                    if k == weakest:
+                                        stale = 1
                             if matched == 0:
                                 if filled < buffer_size:
                                     for k in range(buffer_size):
@@ -159,19 +164,25 @@ def semantic_kernels(buffer_size: int):
                                             labs[k] = lab
                                             ws[k] = w
                                     filled += 1
+                                    stale = 1
                                 else:
                                     dropped += 1
-                                    weakest = int(0)
-                                    weakest_w = ws[0]
-                                    for k in range(1, buffer_size):
-                                        if ws[k] < weakest_w:
-                                            weakest = k
-                                            weakest_w = ws[k]
+                                    # the weakest entry (first of the lowest weight) changes only when its
+                                    # own slot does: search again only then, not at every dropped vote
+                                    if stale != 0:
+                                        weakest = int(0)
+                                        weakest_w = ws[0]
+                                        for k in range(1, buffer_size):
+                                            if ws[k] < weakest_w:
+                                                weakest = k
+                                                weakest_w = ws[k]
+                                        stale = 0
                                     if w > weakest_w:
                                         for k in range(buffer_size):
                                             if k == weakest:
                                                 labs[k] = lab
                                                 ws[k] = w
+                                        stale = 1
             b += W
         if out >= 0:
             best = int(-1)

@@ -122,6 +122,83 @@ def test_more_labels_than_buffer(device):
     assert torch.equal(big.labels[0].cpu().long(), ref_lab)
 
 
+def _emulate_buffer(votes, size):
+    """The documented overflow policy on one pixel's (label, weight) votes in depth order: a vote adds to
+    its label's entry; a new label fills a free entry, or at a full buffer replaces the weakest entry (the
+    first of the lowest weight) if it outweighs it, else is dropped. -> ({label: weight}, dropped)."""
+    labs, ws, dropped = [], [], 0
+    for lab, w in votes:
+        if lab in labs:
+            ws[labs.index(lab)] += w
+        elif len(labs) < size:
+            labs.append(lab)
+            ws.append(w)
+        else:
+            dropped += 1
+            k = min(range(size), key=lambda i: (ws[i], i))
+            if w > ws[k]:
+                labs[k], ws[k] = lab, w
+    return dict(zip(labs, ws)), dropped
+
+
+@pytest.mark.parametrize("buffer_size", [1, 3, 4])
+def test_overflow_keeps_the_documented_entries(device, buffer_size):
+    """Many Gaussians from a small label alphabet stacked in depth, with random opacities and confidences:
+    every pixel's buffer holds exactly what the policy gives (matches into the weakest entry, evictions
+    and dropped votes all occur), and the dropped votes are counted."""
+    from reference_raster import project
+
+    g = torch.Generator().manual_seed(buffer_size)
+    n, size = 60, 6
+    means = torch.zeros(n, 3)
+    means[:, 2] = torch.linspace(2.0, 8.0, n)
+    means[:, :2] = (torch.rand(n, 2, generator=g) - 0.5) * 0.2
+    quats = torch.tensor([[1.0, 0, 0, 0]]).repeat(n, 1)
+    scales = torch.full((n, 3), 0.5)
+    opac = torch.rand(n, generator=g) * 0.3 + 0.02
+    conf = torch.rand(n, generator=g)
+    labels = torch.randint(0, 7, (n,), generator=g, dtype=torch.int32)
+    vm, K = cameras(size, size)
+    scene = [t.to(device) for t in (means, quats, scales, opac, labels, conf)]
+    out = render_semantics(
+        *scene, vm.to(device), K.to(device), size, size, buffer_size=buffer_size, return_buffer=True
+    )
+    f = torch.float64
+    m2d, con, depth, _ = project(
+        means.to(f), quats.to(f), scales.to(f), vm[0].to(f), K[0].to(f), size, size, 0.01, 1e10, 0.3
+    )
+    order = torch.argsort(depth).tolist()
+    total_dropped = 0
+    for y in range(size):
+        for x in range(size):
+            T, votes = 1.0, []
+            for i in order:
+                dx, dy = float(m2d[i, 0]) - (x + 0.5), float(m2d[i, 1]) - (y + 0.5)
+                sigma = (
+                    0.5 * (float(con[i, 0]) * dx * dx + float(con[i, 2]) * dy * dy)
+                    + float(con[i, 1]) * dx * dy
+                )
+                a = min(0.99, float(opac[i]) * math.exp(-sigma))
+                if sigma < 0 or a < 1 / 255:
+                    continue
+                ca = float(conf[i]) * a
+                if T * (1 - ca) <= 1e-4:
+                    break
+                votes.append((int(labels[i]), ca * T))
+                T *= 1 - ca
+            expect, dropped = _emulate_buffer(votes, buffer_size)
+            total_dropped += dropped
+            got = {
+                int(lab): float(w)
+                for lab, w in zip(out.buffer_labels[0, y, x].tolist(), out.buffer_weights[0, y, x].tolist())
+                if lab >= 0
+            }
+            assert got.keys() == expect.keys(), (x, y)
+            for lab, w in expect.items():
+                assert got[lab] == pytest.approx(w, abs=1e-5)
+    assert out.meta["overflow_votes"] == total_dropped > 0
+
+
 @pytest.mark.parametrize("value,message", [(1.5, "lie in"), (-0.1, "lie in"), (math.nan, "NaN")])
 def test_confidence_values_are_checked(device, value, message):
     means, quats, scales, opac, _ = random_scene(4, device=device)
