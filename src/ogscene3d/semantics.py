@@ -98,11 +98,12 @@ def _vote(
         # unlabelled Gaussians neither vote nor occlude: a zero radius keeps them out of every tile
         radii = torch.where(labels >= 0, radii, torch.zeros_like(radii))
         bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, tile_size, checks)
-    buf_l = torch.full((C, height, width, buffer_size), -1, dtype=torch.int32, device=dev)
-    buf_w = torch.zeros(C, height, width, buffer_size, device=dev)
-    out_l = torch.full((C, height, width), -1, dtype=torch.int32, device=dev)
-    out_w = torch.zeros(C, height, width, device=dev)
-    overflow = torch.zeros(C, height, width, dtype=torch.int32, device=dev)
+    # the voting kernel writes every pixel of every output
+    buf_l = torch.empty(C, height, width, buffer_size, dtype=torch.int32, device=dev)
+    buf_w = torch.empty(C, height, width, buffer_size, device=dev)
+    out_l = torch.empty(C, height, width, dtype=torch.int32, device=dev)
+    out_w = torch.empty(C, height, width, device=dev)
+    overflow = torch.empty(C, height, width, dtype=torch.int32, device=dev)
     vote, _ = semantic_kernels(buffer_size)
     veci = wp.types.vector(length=buffer_size, dtype=wp.int32)
     vecf = wp.types.vector(length=buffer_size, dtype=wp.float32)
