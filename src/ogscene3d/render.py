@@ -9,6 +9,7 @@ generated adjoint) and the blending (hand-written back-to-front kernel).
 from __future__ import annotations
 
 import functools
+import importlib
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,15 +34,43 @@ def _kernels():
     return projection, binning, raster
 
 
+# torch dtype -> the Warp scalar type a launch argument of that tensor holds
+_SCALARS = {torch.float32: "float32", torch.int32: "int32", torch.int64: "int64", torch.uint8: "uint8"}
+
+
+@functools.cache
+def _array_descriptor() -> Any:
+    """Warp's bare array descriptor type (``warp.types.array_t``; private in newer Warp), or None."""
+    wp = _wp()
+    found = getattr(wp.types, "array_t", None)
+    if found is None:
+        try:
+            found = importlib.import_module("warp._src.types").array_t
+        except (ImportError, AttributeError):
+            return None
+    return found
+
+
 def _as_wp(t: torch.Tensor, dtype: Any = None):
     """A flat (1D) Warp launch argument viewing a contiguous tensor; vector/matrix dtypes consume the
-    trailing dims. It is Warp's bare array descriptor (cheaper to make and to launch with than a
-    ``wp.array``), which holds no reference to the memory: the tensor rides along on it so that a
-    contiguous copy lives until the launch that uses it has been queued."""
+    trailing dims. It is Warp's bare array descriptor, built directly where Warp exposes its type (a few
+    microseconds less than ``wp.from_torch`` per argument, and a forward+backward passes about 60): it
+    holds no reference to the memory, so the tensor rides along on it and a contiguous copy lives until
+    the launch is queued."""
+    wp = _wp()
     t = t.contiguous()
-    shape = getattr(dtype, "_shape_", ())
-    t = t.reshape(-1, *shape) if shape else t.reshape(-1)
-    arg = _wp().from_torch(t, dtype=dtype, requires_grad=False, return_ctype=True)
+    scalar = _SCALARS.get(t.dtype)
+    expected = getattr(dtype, "_wp_scalar_type_", dtype)
+    if scalar is None or (expected is not None and wp.types.type_repr(expected) != scalar):
+        raise TypeError(f"cannot pass a {t.dtype} tensor as a Warp {dtype} array")
+    per_item = getattr(dtype, "_length_", 1)
+    descriptor = _array_descriptor()
+    if descriptor is None:
+        shape = getattr(dtype, "_shape_", ())
+        view = t.reshape(-1, *shape) if shape else t.reshape(-1)
+        arg = wp.from_torch(view, dtype=dtype, requires_grad=False, return_ctype=True)
+    else:
+        arg = descriptor(t.data_ptr(), 0, 1, (t.numel() // per_item,), (t.element_size() * per_item,))
     arg.tensor = t
     return arg
 
