@@ -51,24 +51,30 @@ def _array_descriptor() -> Any:
     return found
 
 
+@functools.cache
+def _scalars_per_item(torch_dtype: torch.dtype, dtype: Any) -> int:
+    """Scalars per element of a Warp ``dtype`` array (None: the tensor's own scalar type) viewing a tensor
+    of ``torch_dtype``; TypeError where the scalar types differ."""
+    scalar = _SCALARS.get(torch_dtype)
+    expected = getattr(dtype, "_wp_scalar_type_", dtype)
+    if scalar is None or (expected is not None and _wp().types.type_repr(expected) != scalar):
+        raise TypeError(f"cannot pass a {torch_dtype} tensor as a Warp {dtype} array")
+    return getattr(dtype, "_length_", 1)
+
+
 def _as_wp(t: torch.Tensor, dtype: Any = None):
     """A flat (1D) Warp launch argument viewing a contiguous tensor; vector/matrix dtypes consume the
     trailing dims. It is Warp's bare array descriptor, built directly where Warp exposes its type (a few
     microseconds less than ``wp.from_torch`` per argument, and a forward+backward passes about 60): it
     holds no reference to the memory, so the tensor rides along on it and a contiguous copy lives until
     the launch is queued."""
-    wp = _wp()
     t = t.contiguous()
-    scalar = _SCALARS.get(t.dtype)
-    expected = getattr(dtype, "_wp_scalar_type_", dtype)
-    if scalar is None or (expected is not None and wp.types.type_repr(expected) != scalar):
-        raise TypeError(f"cannot pass a {t.dtype} tensor as a Warp {dtype} array")
-    per_item = getattr(dtype, "_length_", 1)
+    per_item = _scalars_per_item(t.dtype, dtype)
     descriptor = _array_descriptor()
     if descriptor is None:
         shape = getattr(dtype, "_shape_", ())
         view = t.reshape(-1, *shape) if shape else t.reshape(-1)
-        arg = wp.from_torch(view, dtype=dtype, requires_grad=False, return_ctype=True)
+        arg = _wp().from_torch(view, dtype=dtype, requires_grad=False, return_ctype=True)
     else:
         arg = descriptor(t.data_ptr(), 0, 1, (t.numel() // per_item,), (t.element_size() * per_item,))
     arg.tensor = t
