@@ -3,8 +3,8 @@
     python benchmarks/rasterize.py --device cuda                       # 50k..2M at 1200x680
     python benchmarks/rasterize.py --device cpu --width 160 --height 120 --counts 5k,20k
 
-Prints forward and forward+backward milliseconds, peak GPU memory, and ours/gsplat ratios
-(gsplat only when importable).
+Prints forward and forward+backward milliseconds, peak GPU memory, the (Gaussian, tile) intersections
+of a forward, and ours/gsplat ratios (gsplat only when importable).
 """
 
 from __future__ import annotations
@@ -38,6 +38,14 @@ def _gsplat():
         return None
 
 
+def _intersections(meta: dict) -> int | None:
+    """(Gaussian, tile) pairs of one forward: ours counts them, gsplat's meta holds their keys."""
+    if "n_intersections" in meta:
+        return int(meta["n_intersections"])
+    ids = meta.get("isect_ids")
+    return int(ids.numel()) if ids is not None else None
+
+
 def bench(fn, scene, vm, K, width, height, device, iters):
     forward, forward_backward = render_fns(fn, scene, vm, K, width, height)
 
@@ -45,6 +53,7 @@ def bench(fn, scene, vm, K, width, height, device, iters):
         "fwd_ms": time_ms(forward, device, iters=iters),
         "fwd+bwd_ms": time_ms(forward_backward, device, iters=iters),
         "peak_MiB": peak_mb(forward_backward, device),
+        "isects": _intersections(forward()[2]),
     }
 
 
@@ -71,9 +80,10 @@ def main() -> None:
             row["fwd+bwd_ratio"] = ours["fwd+bwd_ms"] / theirs["fwd+bwd_ms"]
         rows.append(row)
         print(f"done N={n}", file=sys.stderr)
-    cols = ["N", "device", "ours_fwd_ms", "ours_fwd+bwd_ms", "ours_peak_MiB"]
+    cols = ["N", "device", "ours_fwd_ms", "ours_fwd+bwd_ms", "ours_peak_MiB", "ours_isects"]
     if gs is not None:
-        cols += ["gsplat_fwd_ms", "gsplat_fwd+bwd_ms", "gsplat_peak_MiB", "fwd_ratio", "fwd+bwd_ratio"]
+        cols += ["gsplat_fwd_ms", "gsplat_fwd+bwd_ms", "gsplat_peak_MiB", "gsplat_isects"]
+        cols += ["fwd_ratio", "fwd+bwd_ratio"]
     print(f"rasterization at {args.width}x{args.height}, RGB, one camera")
     print_table(rows, cols)
 
