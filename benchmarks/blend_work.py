@@ -1,0 +1,119 @@
+"""Blending work per pixel, counted (not timed): how many Gaussians a 32-lane warp evaluates per pixel.
+
+    python benchmarks/blend_work.py                      # 500k Gaussians, 1200x680, both scenes
+    python benchmarks/blend_work.py --counts 20k --width 160 --height 120
+
+Emulates the CUDA blending loop in torch on the real tile lists (ours, from ``bin_gaussians``): a warp
+walks its tile's depth-sorted list until all its pixels have ended (T <= 1e-4), and evaluates either
+every entry (no culling) or only those whose alpha >= 1/255 box reaches its pixels (8x4 blocks, as the
+kernels do). Colour (alpha) and semantic (confidence x alpha, labelled Gaussians only) rays are counted
+separately. Machine-independent, so a CPU run predicts how the blending kernels' work changes on a GPU.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import camera, parse_count, print_table, synthetic_gaussians, synthetic_surfaces  # noqa: E402
+
+from ogscene3d.render import _Project, bin_gaussians  # noqa: E402
+
+SCENES = {"cloud": synthetic_gaussians, "surfaces": synthetic_surfaces}
+TILE = 16
+
+
+def _warp_blocks() -> list[tuple[int, int]]:
+    """Pixel offsets (x, y) of the eight 8x4 warp blocks of a 16x16 tile."""
+    return [((w % 2) * 8, (w // 2) * 4) for w in range(TILE * TILE // 32)]
+
+
+def count(scene: str, n: int, width: int, height: int, semantic: bool, max_tiles: int) -> dict:
+    means, quats, scales, opac, _, labels, conf = SCENES[scene](n, torch.device("cpu"))
+    vm, K = camera(width, height, torch.device("cpu"))
+    with torch.no_grad():
+        m2d, conics, depths, radii = _Project.apply(
+            means, quats, scales, vm, K, width, height, 0.01, 1e10, 0.3
+        )
+        if semantic:
+            radii = torch.where(labels >= 0, radii, torch.zeros_like(radii))
+        bins = bin_gaussians(m2d, conics, opac, radii, depths, width, height, TILE)
+    m2d, conics, ext = m2d[0], conics[0], bins.extents[0]
+    ys, xs = torch.meshgrid(torch.arange(TILE) + 0.5, torch.arange(TILE) + 0.5, indexing="ij")
+    n_tiles = bins.tile_start.numel()
+    step = max(1, n_tiles // max_tiles)
+    totals = {"entries": 0, "no_cull": 0, "cull": 0, "pixels": 0}
+    for tile in range(0, n_tiles, step):
+        s, e = int(bins.tile_start[tile]), int(bins.tile_end[tile])
+        ids = bins.isect_ids[s:e].long()
+        ox, oy = (tile % bins.tiles_x) * TILE, (tile // bins.tiles_x) * TILE
+        valid = ((xs + ox) < width) & ((ys + oy) < height)
+        totals["pixels"] += int(valid.sum())
+        totals["entries"] += len(ids) * int(valid.sum())
+        if len(ids) == 0:
+            continue
+        dx = m2d[ids, 0][None, None] - (xs + ox)[..., None]
+        dy = m2d[ids, 1][None, None] - (ys + oy)[..., None]
+        c = conics[ids]
+        sigma = 0.5 * (c[:, 0] * dx * dx + c[:, 2] * dy * dy) + c[:, 1] * dx * dy
+        alpha = torch.clamp(opac[ids] * torch.exp(-sigma), max=0.99)
+        alpha = torch.where((sigma >= 0) & (alpha >= 1 / 255), alpha, torch.zeros_like(alpha))
+        if semantic:
+            alpha = alpha * conf[ids]
+        ended = torch.cumprod(1 - alpha, dim=-1) <= 1e-4
+        # entries a pixel walks: up to and including the one that ends it, else the whole list
+        walk = torch.where(
+            ended.any(-1),
+            ended.float().argmax(-1) + 1,
+            torch.full_like(ended[..., 0], len(ids), dtype=torch.long),
+        )
+        walk = torch.where(valid, walk, torch.zeros_like(walk))
+        for bx, by in _warp_blocks():
+            lanes = valid[by : by + 4, bx : bx + 8]
+            if not lanes.any():
+                continue
+            depth = int(walk[by : by + 4, bx : bx + 8].max())
+            x0, x1, y0, y1 = ox + bx + 0.5, ox + bx + 7.5, oy + by + 0.5, oy + by + 3.5
+            e_ = ext[ids[:depth]]
+            mx, my = m2d[ids[:depth], 0], m2d[ids[:depth], 1]
+            reach = (e_[:, 0] >= 0) & (mx + e_[:, 0] >= x0) & (mx - e_[:, 0] <= x1)
+            reach &= (my + e_[:, 1] >= y0) & (my - e_[:, 1] <= y1)
+            totals["no_cull"] += depth * int(lanes.sum())
+            totals["cull"] += int(reach.sum()) * int(lanes.sum())
+    px = max(totals["pixels"], 1)
+    return {
+        "scene": scene,
+        "N": n,
+        "rays": "semantic" if semantic else "colour",
+        "isects": bins.num_intersections,
+        "list_per_px": totals["entries"] / px,
+        "evaluated_no_cull": totals["no_cull"] / px,
+        "evaluated_cull": totals["cull"] / px,
+        "reduction": totals["no_cull"] / max(totals["cull"], 1),
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--counts", default="500k")
+    ap.add_argument("--width", type=int, default=1200)
+    ap.add_argument("--height", type=int, default=680)
+    ap.add_argument("--max-tiles", type=int, default=800, help="tiles sampled evenly (all if fewer)")
+    ap.add_argument("--scene", choices=sorted(SCENES), action="append", help="default: both")
+    args = ap.parse_args()
+    rows = [
+        count(scene, parse_count(c), args.width, args.height, semantic, args.max_tiles)
+        for scene in args.scene or sorted(SCENES)
+        for c in args.counts.split(",")
+        for semantic in (False, True)
+    ]
+    print(f"Gaussians evaluated per pixel by 32-lane warps, {args.width}x{args.height}, {TILE}x{TILE} tiles")
+    print_table(rows, list(rows[0].keys()))
+
+
+if __name__ == "__main__":
+    main()
