@@ -1,5 +1,9 @@
 """Tile binning: which 16x16 tiles each projected Gaussian touches, keyed for a per-tile depth sort.
 
+A Gaussian is binned to the tiles of its screen radius's square that its alpha >= 1/255 ellipse meets
+(``tile_rect`` bounds them, ``tile_reached`` tests each): elsewhere it would blend nothing, so the images
+are those of plain radius binning and the per-tile lists are shorter.
+
 Keys are 64-bit: ``(camera * tiles_per_camera + tile) << 32 | float_bits(depth)``. Depths of kept
 Gaussians are > near_plane > 0, and positive IEEE floats order like their bit patterns, so one radix
 sort gives tiles in order and, inside each tile, Gaussians front to back.
@@ -7,7 +11,7 @@ sort gives tiles in order and, inside each tile, Gaussians front to back.
 
 import warp as wp
 
-from .raster import alpha_extent
+from .raster import alpha_extent, ellipse_meets_box, sigma_limit
 
 
 @wp.func
@@ -35,6 +39,16 @@ def tile_rect(
     return wp.vec4i(x0, y0, x1, y1)
 
 
+@wp.func
+def tile_reached(center: wp.vec2, conic: wp.vec3, t: float, tx: int, ty: int, tile_size: int) -> int:
+    """1 if the ellipse sigma <= t (``sigma_limit``) meets tile (tx, ty)'s pixel-centre box, else 0: a
+    tile of the bounding box may miss a slanted ellipse."""
+    x_lo = float(tx * tile_size) + 0.5
+    y_lo = float(ty * tile_size) + 0.5
+    box = wp.vec4(x_lo, x_lo + float(tile_size - 1), y_lo, y_lo + float(tile_size - 1))
+    return ellipse_meets_box(center, conic, t, box)
+
+
 @wp.kernel(enable_backward=False)
 def count_tiles(
     means2d: wp.array(dtype=wp.vec2),
@@ -55,19 +69,29 @@ def count_tiles(
         counts[tid] = 0
         extents[tid] = wp.vec2(-1.0, -1.0)
         return
-    ext = alpha_extent(conics[tid], opacities[tid % num_gaussians])
+    conic = conics[tid]
+    t = sigma_limit(opacities[tid % num_gaussians])
+    ext = alpha_extent(conic, opacities[tid % num_gaussians])
     extents[tid] = ext
-    rect = tile_rect(means2d[tid], float(r), ext, tile_size, tiles_x, tiles_y)
-    counts[tid] = (rect[2] - rect[0]) * (rect[3] - rect[1])
+    center = means2d[tid]
+    rect = tile_rect(center, float(r), ext, tile_size, tiles_x, tiles_y)
+    n = int(0)
+    for ty in range(rect[1], rect[3]):
+        for tx in range(rect[0], rect[2]):
+            n += tile_reached(center, conic, t, tx, ty, tile_size)
+    counts[tid] = n
 
 
 @wp.kernel(enable_backward=False)
 def emit_intersections(
     means2d: wp.array(dtype=wp.vec2),
     radii: wp.array(dtype=wp.int32),
+    conics: wp.array(dtype=wp.vec3),
+    opacities: wp.array(dtype=float),
     extents: wp.array(dtype=wp.vec2),
     depth_bits: wp.array(dtype=wp.int32),
     offsets: wp.array(dtype=wp.int64),
+    counts: wp.array(dtype=wp.int32),
     num_gaussians: int,
     tile_size: int,
     tiles_x: int,
@@ -75,25 +99,27 @@ def emit_intersections(
     keys: wp.array(dtype=wp.int64),
     values: wp.array(dtype=wp.int32),
 ):
-    """``offsets`` is the inclusive prefix sum of the per-Gaussian tile counts."""
+    """``offsets`` is the inclusive prefix sum of the per-Gaussian tile ``counts``; the tiles are those
+    ``count_tiles`` counted."""
     tid = wp.tid()
     r = radii[tid]
     if r <= 0:
         return
-    rect = tile_rect(means2d[tid], float(r), extents[tid], tile_size, tiles_x, tiles_y)
+    center = means2d[tid]
+    conic = conics[tid]
+    t = sigma_limit(opacities[tid % num_gaussians])
+    rect = tile_rect(center, float(r), extents[tid], tile_size, tiles_x, tiles_y)
     cam = tid // num_gaussians
     base = wp.int64(cam * tiles_x * tiles_y)
-    w = rect[2] - rect[0]
-    count = w * (rect[3] - rect[1])
-    start = offsets[tid] - wp.int64(count)
+    k = offsets[tid] - wp.int64(counts[tid])
     low = wp.int64(depth_bits[tid]) & wp.int64(4294967295)
-    k = wp.int64(0)
     for ty in range(rect[1], rect[3]):
         for tx in range(rect[0], rect[2]):
-            tile = base + wp.int64(ty * tiles_x + tx)
-            keys[start + k] = (tile << wp.int64(32)) | low
-            values[start + k] = tid
-            k += wp.int64(1)
+            if tile_reached(center, conic, t, tx, ty, tile_size) != 0:
+                tile = base + wp.int64(ty * tiles_x + tx)
+                keys[k] = (tile << wp.int64(32)) | low
+                values[k] = tid
+                k += wp.int64(1)
 
 
 @wp.kernel(enable_backward=False)

@@ -4,10 +4,10 @@ The channel count is a compile-time constant (a Warp vector length), so accumula
 ``raster_kernels(D)`` builds and caches the pair of kernels for D channels. One thread per pixel,
 threads of a tile consecutive, so on CUDA the warps of a block walk one tile's Gaussian list together
 (reading it 32 Gaussians at a time, see lanes.py). Of each batch a warp broadcasts and evaluates only the
-Gaussians that reach one of its pixels (``gaussian_reaches``, on the box the binning computed with
-``alpha_extent``): a 16x16 tile's list holds every Gaussian that touches the tile, but one warp covers a
-16x2 strip of it. The same kernels run on the CPU device,
-where a warp is one pixel.
+Gaussians that reach one of its pixels (``warp_reaches``: the box the binning computed with
+``alpha_extent``, then the alpha >= 1/255 ellipse): a 16x16 tile's list holds every Gaussian that
+touches the tile, but one warp covers an 8x4 block of it. The same kernels run on the CPU device, where
+a warp is one pixel.
 """
 
 import functools
@@ -50,7 +50,7 @@ T_MIN = 1e-4
 def tile_local_xy(local: int, tile_size: int) -> wp.vec2i:
     """Pixel offset in its tile of a tile's ``local``-th thread. Where the tile side is a multiple of 8,
     each 32 consecutive threads (one CUDA warp) cover an 8x4 block: a squarer warp footprint than two
-    16-pixel rows, so fewer of the tile's Gaussians reach a warp (see ``gaussian_reaches``). Otherwise
+    16-pixel rows, so fewer of the tile's Gaussians reach a warp (see ``warp_reaches``). Otherwise
     rows."""
     if tile_size % 8 == 0:
         w = local // 32
@@ -107,15 +107,25 @@ def warp_rect(
 
 
 @wp.func
+def sigma_limit(opacity: float) -> float:
+    """t with alpha < ALPHA_MIN wherever sigma > t: ln(opacity / ALPHA_MIN) plus a margin that covers
+    fast-math rounding; -1 where the Gaussian blends nowhere."""
+    if not (opacity > 0.0):
+        return -1.0
+    t = wp.log(opacity / ALPHA_MIN) + 0.01
+    if t <= 0.0:
+        return -1.0
+    return t
+
+
+@wp.func
 def alpha_extent(conic: wp.vec3, opacity: float) -> wp.vec2:
     """Half-widths (x, y) of a box around the 2D mean outside which alpha < ALPHA_MIN.
 
-    alpha >= ALPHA_MIN needs sigma <= t = ln(opacity / ALPHA_MIN), an ellipse; these are its bounding
-    box's half-widths, with a margin on t and on the box that covers fast-math rounding. (-1, -1) where
-    the Gaussian blends nowhere; infinite for a degenerate conic."""
-    if not (opacity > 0.0):
-        return wp.vec2(-1.0, -1.0)
-    t = wp.log(opacity / ALPHA_MIN) + 0.01
+    alpha >= ALPHA_MIN needs sigma <= t (``sigma_limit``), an ellipse; these are its bounding box's
+    half-widths, with a margin that covers fast-math rounding. (-1, -1) where the Gaussian blends nowhere;
+    infinite for a degenerate conic."""
+    t = sigma_limit(opacity)
     if t <= 0.0:
         return wp.vec2(-1.0, -1.0)
     det = conic[0] * conic[2] - conic[1] * conic[1]
@@ -135,6 +145,46 @@ def gaussian_reaches(mean2d: wp.vec2, extent: wp.vec2, rect: wp.vec4) -> int:
     if mean2d[1] + extent[1] < rect[2] or mean2d[1] - extent[1] > rect[3]:
         return 0
     return 1
+
+
+@wp.func
+def ellipse_meets_box(mean2d: wp.vec2, conic: wp.vec3, t: float, box: wp.vec4) -> int:
+    """1 if sigma <= t somewhere in ``box`` (x_lo, x_hi, y_lo, y_hi), else 0; 1 for a conic that is not
+    positive definite. Exact where ``gaussian_reaches`` tests the ellipse's bounding box."""
+    if mean2d[0] >= box[0] and mean2d[0] <= box[1] and mean2d[1] >= box[2] and mean2d[1] <= box[3]:
+        return 1
+    a = conic[0]
+    b = conic[1]
+    c = conic[2]
+    if not (a > 0.0 and c > 0.0):
+        return 1
+    # the convex quadratic's minimum over the box lies on an edge: on each, minimise along it (clamped)
+    best = float(wp.inf)
+    for e in range(4):
+        dx = float(0.0)
+        dy = float(0.0)
+        if e < 2:
+            dx = mean2d[0] - wp.where(e == 0, box[0], box[1])
+            dy = wp.clamp(-b * dx / c, mean2d[1] - box[3], mean2d[1] - box[2])
+        else:
+            dy = mean2d[1] - wp.where(e == 2, box[2], box[3])
+            dx = wp.clamp(-b * dy / a, mean2d[0] - box[1], mean2d[0] - box[0])
+        best = wp.min(best, 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy)
+    return wp.where(best <= t, 1, 0)
+
+
+@wp.func
+def warp_reaches(
+    mean2d: wp.vec2, conic: wp.vec3, opacity: float, extent: wp.vec2, rect: wp.vec4, lanes: int
+) -> int:
+    """Whether a Gaussian can blend at one of the warp's pixels (``rect``): its bounding box first, then,
+    for a warp of several pixels, the ellipse itself (about an eighth fewer Gaussians evaluated). For a
+    one-pixel warp (the CPU) the per-pixel alpha test that follows is that same test."""
+    if gaussian_reaches(mean2d, extent, rect) == 0:
+        return 0
+    if lanes == 1:
+        return 1
+    return ellipse_meets_box(mean2d, conic, sigma_limit(opacity), rect)
 
 
 @wp.func
@@ -228,7 +278,7 @@ def raster_kernels(channels: int):
                 gc = conics[g]
                 go = opacities[g % num_gaussians]
                 gcol = colors[g]
-                reaches = gaussian_reaches(gm, extents[g], rect)
+                reaches = warp_reaches(gm, gc, go, extents[g], rect, W)
             # only the batch's Gaussians that reach the warp's pixels are broadcast and evaluated
             pending = lane_ballot(reaches)
             while pending != 0:
@@ -325,7 +375,7 @@ def raster_kernels(channels: int):
                 gc = conics[gid]
                 go = opacities[gid % num_gaussians]
                 gcol = colors[gid]
-                reaches = gaussian_reaches(gm, extents[gid], rect)
+                reaches = warp_reaches(gm, gc, go, extents[gid], rect, W)
             pending = lane_ballot(reaches)  # lane s holds Gaussian b - s: lowest bit first is back to front
             while pending != 0:
                 s = bit_lowest(pending)

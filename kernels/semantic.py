@@ -25,7 +25,7 @@ from .lanes import (
     lane_shfl_vec3,
     lane_sum,
 )
-from .raster import BLEND_KERNEL_OPTIONS, T_MIN, gaussian_alpha, gaussian_reaches, tile_pixel, warp_rect
+from .raster import BLEND_KERNEL_OPTIONS, T_MIN, gaussian_alpha, tile_pixel, warp_reaches, warp_rect
 
 
 @wp.func
@@ -49,8 +49,10 @@ def load_lane_gaussian(
         g = isect_ids[j]
         n = g % num_gaussians
         m = means2d[g]
-        reaches = gaussian_reaches(m, extents[g], rect)
-        return n, m, conics[g], opacities[n], confidences[n], labels[n], reaches
+        c = conics[g]
+        o = opacities[n]
+        reaches = warp_reaches(m, c, o, extents[g], rect, lane_count())
+        return n, m, c, o, confidences[n], labels[n], reaches
     return int(0), wp.vec2(), wp.vec3(), float(0.0), float(0.0), int(-1), int(0)
 
 

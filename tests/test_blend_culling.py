@@ -12,8 +12,16 @@ import math
 import numpy as np
 import pytest
 import torch
+from ogscene3d.kernels.binning import tile_reached
 from ogscene3d.kernels.lanes import bit_clear, bit_lowest, lane_ballot
-from ogscene3d.kernels.raster import alpha_extent, gaussian_alpha, gaussian_reaches, tile_pixel, warp_rect
+from ogscene3d.kernels.raster import (
+    alpha_extent,
+    gaussian_alpha,
+    gaussian_reaches,
+    tile_pixel,
+    warp_reaches,
+    warp_rect,
+)
 
 from ogscene3d.device import init_warp
 
@@ -62,11 +70,16 @@ def _reach(
     opacities: wp.array(dtype=float),
     rects: wp.array(dtype=wp.vec4),
     reaches: wp.array(dtype=wp.int32),
+    exact: wp.array(dtype=wp.int32),
+    one_pixel: wp.array(dtype=wp.int32),
     blends: wp.array(dtype=wp.int32),
 ):
     i = wp.tid()
     r = rects[i]
-    reaches[i] = gaussian_reaches(means2d[i], alpha_extent(conics[i], opacities[i]), r)
+    ext = alpha_extent(conics[i], opacities[i])
+    reaches[i] = gaussian_reaches(means2d[i], ext, r)
+    exact[i] = warp_reaches(means2d[i], conics[i], opacities[i], ext, r, 32)
+    one_pixel[i] = warp_reaches(means2d[i], conics[i], opacities[i], ext, r, 1)
     hit = int(0)
     y = r[2]
     while y <= r[3]:
@@ -77,6 +90,28 @@ def _reach(
             x += 1.0
         y += 1.0
     blends[i] = hit
+
+
+@wp.kernel(enable_backward=False)
+def _tiles(
+    means2d: wp.array(dtype=wp.vec2),
+    conics: wp.array(dtype=wp.vec3),
+    limits: wp.array(dtype=float),
+    tile_size: int,
+    reached: wp.array(dtype=wp.int32),
+    inside: wp.array(dtype=wp.int32),
+):
+    i = wp.tid()
+    reached[i] = tile_reached(means2d[i], conics[i], limits[i], 0, 0, tile_size)
+    hit = int(0)
+    for y in range(tile_size):
+        for x in range(tile_size):
+            dx = means2d[i][0] - (float(x) + 0.5)
+            dy = means2d[i][1] - (float(y) + 0.5)
+            c = conics[i]
+            if 0.5 * (c[0] * dx * dx + c[2] * dy * dy) + c[1] * dx * dy <= limits[i]:
+                hit = 1
+    inside[i] = hit
 
 
 @pytest.mark.parametrize("tile_size", [5, 8, 16, 32])
@@ -145,19 +180,26 @@ def test_lane_ballot(device: str) -> None:
             assert np.all(got[32 * w : 32 * w + 32] == expect)
 
 
-def test_gaussian_reaches_keeps_every_gaussian_that_blends(device: str) -> None:
-    """Random ellipses (thin, round, faint, near the ALPHA_MIN threshold) around 16x2 and 1x1 rectangles:
-    a Gaussian that blends at any pixel centre of its rectangle is always kept."""
-    g = torch.Generator().manual_seed(0)
-    n = 20000
+def _random_conics(n: int, g: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
+    """Conics of random screen ellipses (any angle, 0.4-20 px, down to 5% as thin, plus eps2d) and their
+    major sigmas."""
     ang = torch.rand(n, generator=g) * math.pi
-    s1 = torch.exp(torch.rand(n, generator=g) * 4 - 1)  # 0.4 .. 20 px
-    s2 = s1 * torch.exp(-torch.rand(n, generator=g) * 3)  # down to 5% of s1: thin ellipses
+    s1 = torch.exp(torch.rand(n, generator=g) * 4 - 1)
+    s2 = s1 * torch.exp(-torch.rand(n, generator=g) * 3)
     c, s = torch.cos(ang), torch.sin(ang)
     rot = torch.stack([torch.stack([c, -s], -1), torch.stack([s, c], -1)], -2)
     cov = rot @ torch.diag_embed(torch.stack([s1, s2], -1) ** 2) @ rot.transpose(1, 2) + 0.3 * torch.eye(2)
     inv = torch.linalg.inv(cov)
-    conics = torch.stack([inv[:, 0, 0], inv[:, 0, 1], inv[:, 1, 1]], -1)
+    return torch.stack([inv[:, 0, 0], inv[:, 0, 1], inv[:, 1, 1]], -1), s1
+
+
+def test_gaussian_reaches_keeps_every_gaussian_that_blends(device: str) -> None:
+    """Random ellipses (thin, round, faint, near the ALPHA_MIN threshold) around 16x2 and 1x1 rectangles:
+    a Gaussian that blends at any pixel centre of its rectangle is always kept, by the bounding-box test
+    and by the exact ellipse test of multi-pixel warps."""
+    g = torch.Generator().manual_seed(0)
+    n = 20000
+    conics, s1 = _random_conics(n, g)
     opac = torch.where(
         torch.rand(n, generator=g) < 0.2, torch.rand(n, generator=g) * 0.01, torch.rand(n, generator=g)
     )  # a fifth near or below 1/255
@@ -173,11 +215,15 @@ def test_gaussian_reaches_keeps_every_gaussian_that_blends(device: str) -> None:
     ]
     reaches = wp.empty(n, dtype=wp.int32, device=device)
     blends = wp.empty(n, dtype=wp.int32, device=device)
-    wp.launch(_reach, dim=n, inputs=arrs, outputs=[reaches, blends], device=device)
-    reaches, blends = reaches.numpy(), blends.numpy()
+    exact = wp.empty(n, dtype=wp.int32, device=device)
+    one_pixel = wp.empty(n, dtype=wp.int32, device=device)
+    wp.launch(_reach, dim=n, inputs=arrs, outputs=[reaches, exact, one_pixel, blends], device=device)
+    reaches, exact, one_pixel, blends = (a.numpy() for a in (reaches, exact, one_pixel, blends))
     assert blends.sum() > n // 5  # the scene is not all misses
-    assert np.all(reaches[blends == 1] == 1)
-    assert (reaches[blends == 0] == 0).mean() > 0.5  # and the test does cull most misses
+    assert np.all(reaches[blends == 1] == 1) and np.all(exact[blends == 1] == 1)
+    assert (reaches[blends == 0] == 0).mean() > 0.5  # the bounding box culls most misses
+    assert np.all(exact <= reaches) and (exact < reaches).sum() > n // 50  # the ellipse culls more
+    np.testing.assert_array_equal(one_pixel, reaches)  # one-pixel warps: the box only
 
 
 def test_binning_leaves_out_tiles_where_alpha_stays_below_threshold(device: str) -> None:
@@ -203,3 +249,37 @@ def test_binning_leaves_out_tiles_where_alpha_stays_below_threshold(device: str)
         assert int(meta["radii"][0, 0]) > 0  # the screen radius does not depend on opacity
         tiles.append(int(meta["tiles_per_gaussian"].sum()))
     assert tiles[0] > tiles[1] > tiles[2] == 0
+
+
+@pytest.mark.parametrize("tile_size", [8, 16])
+def test_tile_reached_keeps_every_tile_with_a_pixel_inside_the_ellipse(device: str, tile_size: int) -> None:
+    """Slanted, thin and round ellipses around a tile: a tile with a pixel centre where sigma <= t is
+    always kept, and a tile only the ellipse's bounding box meets is left out."""
+    g = torch.Generator().manual_seed(tile_size)
+    n = 20000
+    conics, _ = _random_conics(n, g)
+    limits = torch.rand(n, generator=g) * 5.5
+    means = (torch.rand(n, 2, generator=g) - 0.5) * 4 * tile_size + tile_size / 2
+    arrs = [
+        wp.array(t.contiguous().numpy(), dtype=d, device=device)
+        for t, d in ((means, wp.vec2), (conics, wp.vec3), (limits, float))
+    ]
+    reached = wp.empty(n, dtype=wp.int32, device=device)
+    inside = wp.empty(n, dtype=wp.int32, device=device)
+    wp.launch(_tiles, dim=n, inputs=[*arrs, tile_size], outputs=[reached, inside], device=device)
+    reached, inside = reached.numpy(), inside.numpy()
+    assert inside.sum() > n // 10
+    assert np.all(reached[inside == 1] == 1)
+    # the continuous box is a little larger than its pixel centres, so a few more are kept
+    assert (reached[inside == 0] == 1).mean() < 0.05
+    det = conics[:, 0] * conics[:, 2] - conics[:, 1] ** 2
+    ex = torch.sqrt(2 * limits * conics[:, 2] / det)
+    ey = torch.sqrt(2 * limits * conics[:, 0] / det)
+    lo, hi = 0.5, tile_size - 0.5
+    box_meets = (
+        (means[:, 0] + ex >= lo)
+        & (means[:, 0] - ex <= hi)
+        & (means[:, 1] + ey >= lo)
+        & (means[:, 1] - ey <= hi)
+    ).numpy()
+    assert (box_meets & (reached == 0)).sum() > n // 50  # bounding-box-only tiles are dropped

@@ -268,13 +268,14 @@ def bin_gaussians(
         return TileBins(tile_size, tiles_x, tiles_y, tile_start, tile_end, empty, counts, extents)
     m2d = _as_wp(means2d.detach(), wp.vec2)
     rad = _as_wp(radii)
+    footprint = [m2d, rad, _as_wp(conics.detach(), wp.vec3), _as_wp(opacities.detach())]
     grid = [N, tile_size, tiles_x, tiles_y]
     ext = _as_wp(extents, wp.vec2)
     with warp_stream(dev) as wdev:
         wp.launch(
             binning.count_tiles,
             dim=C * N,
-            inputs=[m2d, rad, _as_wp(conics.detach(), wp.vec3), _as_wp(opacities.detach()), *grid],
+            inputs=[*footprint, *grid],
             outputs=[_as_wp(counts), ext],
             device=wdev,
         )
@@ -290,7 +291,7 @@ def bin_gaussians(
             wp.launch(
                 binning.emit_intersections,
                 dim=C * N,
-                inputs=[m2d, rad, ext, _as_wp(depth_bits), _as_wp(offsets), *grid],
+                inputs=[*footprint, ext, _as_wp(depth_bits), _as_wp(offsets), _as_wp(counts), *grid],
                 outputs=[wk, wv],
                 device=wdev,
             )
