@@ -5,9 +5,10 @@
 
 Emulates the CUDA blending loop in torch on the real tile lists (ours, from ``bin_gaussians``): a warp
 walks its tile's depth-sorted list until all its pixels have ended (T <= 1e-4), and evaluates either
-every entry (no culling) or only those whose alpha >= 1/255 box reaches its pixels (8x4 blocks, as the
-kernels do). Colour (alpha) and semantic (confidence x alpha, labelled Gaussians only) rays are counted
-separately. Machine-independent, so a CPU run predicts how the blending kernels' work changes on a GPU.
+every entry (no culling) or only those whose alpha >= 1/255 box and ellipse reach its pixels (8x4
+blocks, as the kernels do). Colour (alpha) and semantic (confidence x alpha, labelled Gaussians only)
+rays are counted separately. Machine-independent, so a CPU run predicts how the blending kernels' work
+changes on a GPU.
 """
 
 from __future__ import annotations
@@ -30,6 +31,24 @@ TILE = 16
 def _warp_blocks() -> list[tuple[int, int]]:
     """Pixel offsets (x, y) of the eight 8x4 warp blocks of a 16x16 tile."""
     return [((w % 2) * 8, (w // 2) * 4) for w in range(TILE * TILE // 32)]
+
+
+def _min_sigma_in_box(mean: torch.Tensor, conic: torch.Tensor, box: tuple[float, ...]) -> torch.Tensor:
+    """Minimum of sigma over the box (x_lo, x_hi, y_lo, y_hi), as kernels/raster.py ellipse_meets_box."""
+    x_lo, x_hi, y_lo, y_hi = box
+    a, b, c = conic.unbind(-1)
+    mx, my = mean.unbind(-1)
+    inside = (mx >= x_lo) & (mx <= x_hi) & (my >= y_lo) & (my <= y_hi)
+    best = torch.full_like(a, float("inf"))
+    for edge in range(4):
+        if edge < 2:
+            dx = mx - (x_lo if edge == 0 else x_hi)
+            dy = torch.clamp(-b * dx / c, min=my - y_hi, max=my - y_lo)
+        else:
+            dy = my - (y_lo if edge == 2 else y_hi)
+            dx = torch.clamp(-b * dy / a, min=mx - x_hi, max=mx - x_lo)
+        best = torch.minimum(best, 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy)
+    return torch.where(inside, torch.zeros_like(best), best)
 
 
 def count(scene: str, n: int, width: int, height: int, semantic: bool, max_tiles: int) -> dict:
@@ -82,6 +101,10 @@ def count(scene: str, n: int, width: int, height: int, semantic: bool, max_tiles
             mx, my = m2d[ids[:depth], 0], m2d[ids[:depth], 1]
             reach = (e_[:, 0] >= 0) & (mx + e_[:, 0] >= x0) & (mx - e_[:, 0] <= x1)
             reach &= (my + e_[:, 1] >= y0) & (my - e_[:, 1] <= y1)
+            limit = torch.log(opac[ids[:depth]] * 255.0) + 0.01
+            reach &= (
+                _min_sigma_in_box(torch.stack([mx, my], -1), conics[ids[:depth]], (x0, x1, y0, y1)) <= limit
+            )
             totals["no_cull"] += depth * int(lanes.sum())
             totals["cull"] += int(reach.sum()) * int(lanes.sum())
     px = max(totals["pixels"], 1)
