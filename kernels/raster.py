@@ -164,13 +164,15 @@ def ellipse_meets_box(mean2d: wp.vec2, conic: wp.vec3, t: float, box: wp.vec4) -
         dx = float(0.0)
         dy = float(0.0)
         if e < 2:
-            dx = mean2d[0] - wp.where(e == 0, box[0], box[1])
+            dx = mean2d[0] - box[e]  # the x_lo (e = 0) or x_hi edge
             dy = wp.clamp(-b * dx / c, mean2d[1] - box[3], mean2d[1] - box[2])
         else:
-            dy = mean2d[1] - wp.where(e == 2, box[2], box[3])
+            dy = mean2d[1] - box[e]  # the y_lo (e = 2) or y_hi edge
             dx = wp.clamp(-b * dy / a, mean2d[0] - box[1], mean2d[0] - box[0])
         best = wp.min(best, 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy)
-    return wp.where(best <= t, 1, 0)
+    if best <= t:
+        return 1
+    return 0
 
 
 @wp.func
