@@ -43,8 +43,14 @@ def test_non_contiguous_tensor_is_copied() -> None:
 
 @pytest.mark.parametrize(
     "tensor,dtype",
-    [(torch.zeros(3, dtype=torch.float64), None), (torch.zeros(3, 2), wp.vec2i), (torch.zeros(3), wp.int32)],
+    [
+        (torch.zeros(3, dtype=torch.float64), None),
+        (torch.zeros(3, 2), wp.vec2i),
+        (torch.zeros(3), wp.int32),
+        (torch.zeros(4, 4), wp.vec3),
+        (torch.zeros(3, 9), wp.mat33),
+    ],
 )
 def test_mismatched_dtype_is_refused(tensor, dtype) -> None:
-    with pytest.raises(TypeError, match="cannot pass"):
+    with pytest.raises(TypeError, match="cannot pass|trailing dims"):
         render._as_wp(tensor, dtype)

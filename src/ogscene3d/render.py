@@ -52,14 +52,14 @@ def _array_descriptor() -> Any:
 
 
 @functools.cache
-def _scalars_per_item(torch_dtype: torch.dtype, dtype: Any) -> int:
-    """Scalars per element of a Warp ``dtype`` array (None: the tensor's own scalar type) viewing a tensor
-    of ``torch_dtype``; TypeError where the scalar types differ."""
+def _item_layout(torch_dtype: torch.dtype, dtype: Any) -> tuple[int, tuple[int, ...]]:
+    """(scalars per element, element shape) of a Warp ``dtype`` array (None: the tensor's own scalar type)
+    viewing a tensor of ``torch_dtype``; TypeError where the scalar types differ."""
     scalar = _SCALARS.get(torch_dtype)
     expected = getattr(dtype, "_wp_scalar_type_", dtype)
     if scalar is None or (expected is not None and _wp().types.type_repr(expected) != scalar):
         raise TypeError(f"cannot pass a {torch_dtype} tensor as a Warp {dtype} array")
-    return getattr(dtype, "_length_", 1)
+    return getattr(dtype, "_length_", 1), tuple(getattr(dtype, "_shape_", ()))
 
 
 def _as_wp(t: torch.Tensor, dtype: Any = None):
@@ -69,10 +69,11 @@ def _as_wp(t: torch.Tensor, dtype: Any = None):
     holds no reference to the memory, so the tensor rides along on it and a contiguous copy lives until
     the launch is queued."""
     t = t.contiguous()
-    per_item = _scalars_per_item(t.dtype, dtype)
+    per_item, shape = _item_layout(t.dtype, dtype)
+    if shape and tuple(t.shape[-len(shape) :]) != shape:
+        raise TypeError(f"a Warp {dtype} array needs trailing dims {shape}, got a tensor of {tuple(t.shape)}")
     descriptor = _array_descriptor()
     if descriptor is None:
-        shape = getattr(dtype, "_shape_", ())
         view = t.reshape(-1, *shape) if shape else t.reshape(-1)
         arg = _wp().from_torch(view, dtype=dtype, requires_grad=False, return_ctype=True)
     else:
