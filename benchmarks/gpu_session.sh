@@ -5,7 +5,8 @@
 #   DEVICE=cpu SMALL=1 bash benchmarks/gpu_session.sh /tmp/dry   # dry run of the same steps on a CPU
 #
 # Steps (each one's log goes to OUTDIR/<step>.log; a failing step does not stop the others):
-#   tests      the kernel, semantic and mapping tests (they run on cuda when torch sees a GPU)
+#   tests      the kernel, semantic and mapping tests (they run on cuda when torch sees a GPU); first the
+#              warp-culling pieces (ballot, warp rectangles), which only a GPU runs with 32 lanes
 #   rasterize  ours vs gsplat, forward and forward+backward, 50k..2M Gaussians at 1200x680 (issue #2)
 #   semantic   semantic render + contribution vs a colour forward pass, 500k at 1200x680 (issue #3)
 #   mapping    per-keyframe module times at 1200x680 with ~1M Gaussians (issue #5), also as JSON
@@ -47,7 +48,7 @@ except ImportError as e:
     print("gsplat not importable:", e)
 PY
 
-step tests python -m pytest -q -p no:cacheprovider \
+step tests python -m pytest -q -p no:cacheprovider tests/test_blend_culling.py tests/test_launch_args.py \
   tests/test_rasterization.py tests/test_rasterization_edges.py tests/test_semantics.py tests/test_knn.py \
   tests/test_gaussians.py tests/test_mapping_local.py tests/test_mapping_refine.py \
   tests/test_mapping_longterm.py tests/test_mapping_merge.py tests/test_mapping_optimize.py tests/test_mapping_mapper.py
