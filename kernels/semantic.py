@@ -123,17 +123,8 @@ def semantic_kernels(buffer_size: int):
             if lane_all(done) != 0:
                 break
             gn, gm, gc, go, gconf, glab, reaches = load_lane_gaussian(
-                b + lane,
-                end,
-                isect_ids,
-                num_gaussians,
-                means2d,
-                conics,
-                extents,
-                opacities,
-                confidences,
-                labels,
-                rect,
+                b + lane, end, isect_ids, num_gaussians, means2d, conics, extents, opacities, confidences,
+                labels, rect,
             )
             # only the batch's Gaussians that reach the warp's pixels are broadcast and evaluated
             pending = lane_ballot(reaches)
@@ -252,17 +243,8 @@ def semantic_kernels(buffer_size: int):
             if lane_all(done) != 0:
                 break
             gn, gm, gc, go, gconf, glab, reaches = load_lane_gaussian(
-                b + lane,
-                end,
-                isect_ids,
-                num_gaussians,
-                means2d,
-                conics,
-                extents,
-                opacities,
-                confidences,
-                labels,
-                rect,
+                b + lane, end, isect_ids, num_gaussians, means2d, conics, extents, opacities, confidences,
+                labels, rect,
             )
             # only the batch's Gaussians that reach the warp's pixels are broadcast and evaluated
             pending = lane_ballot(reaches)
