@@ -114,7 +114,7 @@ def _tiles(
     inside[i] = hit
 
 
-@pytest.mark.parametrize("tile_size", [5, 8, 16, 32])
+@pytest.mark.parametrize("tile_size", [1, 5, 8, 16, 24, 32])
 @pytest.mark.parametrize("lanes", [1, 32])
 def test_warp_rect_spans_the_warps_pixels(device: str, tile_size: int, lanes: int) -> None:
     width, height = 3 * tile_size - 2, 2 * tile_size + 1  # partial tiles on the right and bottom

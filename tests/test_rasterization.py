@@ -92,10 +92,11 @@ def test_gradients_match_reference(device, n, width, height, mode):
         assert _rel(g, rg) < 1e-2, (name, _rel(g, rg))
 
 
-@pytest.mark.parametrize("tile_size", [5, 8, 32])
+@pytest.mark.parametrize("tile_size", [5, 8, 24, 32])
 def test_other_tile_sizes_match_reference(device, tile_size):
-    # 5x5 = 25 and 8x8 = 64 pixels: on CUDA a tile's threads are padded to whole 32-lane warps, and a
-    # 32x32 tile spans four 256-thread blocks; images and gradients must not depend on that layout
+    # 5x5 = 25 pixels: on CUDA a tile's threads are padded to whole 32-lane warps (rows of pixels); sides
+    # that are multiples of 8 put each warp on an 8x4 block (24: three across); a 32x32 tile spans four
+    # 256-thread blocks. Images and gradients must not depend on that layout
     scene = random_scene(90, seed=tile_size, device=device)
     vm, K = cameras(45, 37, device=device)
     params = [t.clone().requires_grad_(True) for t in scene]
