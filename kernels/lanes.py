@@ -3,8 +3,10 @@
 On CUDA the blending kernels read Gaussians in batches of 32: each lane loads one Gaussian (parallel
 loads, one memory latency per batch) and ``lane_shfl`` broadcasts it to the other lanes, as gsplat does
 with shared memory. The backward sums each Gaussian's gradient across the lanes before one atomic add,
-instead of one atomic per pixel. On the CPU device a "warp" is one thread: ``lane_count`` is 1, the
-shuffles and sums are the identity, and the same kernel source runs unchanged.
+instead of one atomic per pixel. ``lane_ballot`` gives every lane the mask of lanes whose Gaussian
+reaches the warp's pixels; the kernels visit only its set bits (``bit_lowest``, ``bit_clear``). On the
+CPU device a "warp" is one thread: ``lane_count`` is 1, the shuffles and sums are the identity, the
+ballot is the thread's own bit, and the same kernel source runs unchanged.
 
 Every lane of a warp must reach each of these calls (the CUDA intrinsics use the full mask): call them
 only under warp-uniform control flow. The kernels launch a multiple of 32 threads per block.
