@@ -48,7 +48,7 @@ except ImportError as e:
     print("gsplat not importable:", e)
 PY
 
-step tests python -m pytest -q -p no:cacheprovider tests/test_blend_culling.py tests/test_launch_args.py \
+step tests python -m pytest -q -p no:cacheprovider tests/test_blend_culling.py tests/test_render_internals.py \
   tests/test_rasterization.py tests/test_rasterization_edges.py tests/test_semantics.py tests/test_knn.py \
   tests/test_gaussians.py tests/test_mapping_local.py tests/test_mapping_refine.py \
   tests/test_mapping_longterm.py tests/test_mapping_merge.py tests/test_mapping_optimize.py tests/test_mapping_mapper.py

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import importlib
+import inspect
 from dataclasses import dataclass
 from typing import Any
 
@@ -235,6 +236,22 @@ class TileBins:
         return int(self.tile_start.numel()) * self.tile_threads
 
 
+@functools.cache
+def _sort_takes_bit_range() -> bool:
+    return "end_bit" in inspect.signature(_wp().utils.radix_sort_pairs).parameters
+
+
+def _sort_keys(keys, values, count: int, n_tiles: int) -> None:
+    """Radix-sort ``count`` (tile << 32 | depth) keys with their values, over the key bits in use only:
+    32 depth bits and as many as the largest tile index needs (a 1200x680 image: 44 of 64), where Warp
+    takes a bit range."""
+    if _sort_takes_bit_range():
+        end_bit = 32 + max(1, (n_tiles - 1).bit_length())
+        _wp().utils.radix_sort_pairs(keys, values, count, 0, end_bit)
+    else:
+        _wp().utils.radix_sort_pairs(keys, values, count)
+
+
 def bin_gaussians(
     means2d: torch.Tensor,
     conics: torch.Tensor,
@@ -296,7 +313,7 @@ def bin_gaussians(
                 outputs=[wk, wv],
                 device=wdev,
             )
-            wp.utils.radix_sort_pairs(wk, wv, total)
+            _sort_keys(wk, wv, total, n_tiles)
             wp.launch(
                 binning.tile_ranges,
                 dim=total,

@@ -1,4 +1,4 @@
-"""Launch arguments: the bare Warp array descriptors render.py builds from torch tensors."""
+"""render.py internals: the bare Warp array descriptors of launch arguments, and the tile sort."""
 
 from __future__ import annotations
 
@@ -54,3 +54,27 @@ def test_non_contiguous_tensor_is_copied() -> None:
 def test_mismatched_dtype_is_refused(tensor, dtype) -> None:
     with pytest.raises(TypeError, match="cannot pass|trailing dims"):
         render._as_wp(tensor, dtype)
+
+
+@pytest.mark.parametrize("bit_range", [True, False])
+def test_binning_sorts_by_tile_then_depth(device, bit_range, monkeypatch) -> None:
+    """The radix sort runs over the key bits in use (tile index and depth) where Warp takes a bit range:
+    every tile's list is front to back, and both paths give the same lists."""
+    monkeypatch.setattr(render, "_sort_takes_bit_range", lambda: bit_range)
+    g = torch.Generator().manual_seed(3)
+    C, N, W, H = 2, 3000, 300, 170  # 19 x 11 tiles per camera: 418 tiles, 9 bits
+    means2d = (torch.rand(C, N, 2, generator=g) * torch.tensor([W, H])).to(device)
+    conics = torch.tensor([0.05, 0.0, 0.05]).repeat(C, N, 1).to(device)
+    opac = torch.full((N,), 0.9, device=device)
+    radii = torch.randint(1, 40, (C, N), generator=g, dtype=torch.int32).to(device)
+    depths = (torch.rand(C, N, generator=g) * 10 + 0.1).to(device)
+    bins = render.bin_gaussians(means2d, conics, opac, radii, depths, W, H, 16)
+    ids = bins.isect_ids.long().cpu()
+    tiles = torch.repeat_interleave(
+        torch.arange(bins.tile_start.numel()), (bins.tile_end - bins.tile_start).cpu()
+    )
+    assert len(tiles) == len(ids) == int(bins.tiles_per_gaussian.sum())
+    d = depths.reshape(-1).cpu()[ids]
+    same_tile = tiles[1:] == tiles[:-1]
+    assert torch.all(d[1:][same_tile] >= d[:-1][same_tile])
+    assert (ids // N == tiles // (bins.tiles_x * bins.tiles_y)).all()  # each camera's Gaussians in its tiles
