@@ -1,8 +1,9 @@
-"""The blending kernels skip, per warp, the Gaussians of a batch that reach none of the warp's pixels.
+"""Culling: the binning leaves out tiles a Gaussian's alpha >= 1/255 ellipse misses, and the blending
+kernels skip, per warp, the Gaussians of a batch that reach none of the warp's pixels.
 
 On the CPU a warp is one thread, so the rasterizer and semantic tests only exercise one-pixel warps;
-these tests pin the pieces of the 32-lane path (the warp's pixel rectangle, the ballot and bit helpers)
-on every device, and check that the reach test never drops a Gaussian that blends at some pixel.
+these tests pin the pieces of the 32-lane path (the warp's pixel rectangle, the ballot and bit helpers,
+the ellipse test) on every device, and check that no test drops a Gaussian that blends at some pixel.
 """
 
 from __future__ import annotations
