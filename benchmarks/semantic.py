@@ -69,7 +69,7 @@ def bench_one(
         "sem+contrib_1call_ms": t_both,
         "1call/color": t_both / t_color,
         "peak_MiB": peak_mb(contribution, device),
-        "overflow_px": semantic().meta["overflow_pixels"],
+        "overflow_px": int(semantic().meta["overflow_pixels"]),
     }
 
 

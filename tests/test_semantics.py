@@ -196,7 +196,8 @@ def test_overflow_keeps_the_documented_entries(device, buffer_size):
             assert got.keys() == expect.keys(), (x, y)
             for lab, w in expect.items():
                 assert got[lab] == pytest.approx(w, abs=1e-5)
-    assert out.meta["overflow_votes"] == total_dropped > 0
+    assert isinstance(out.meta["overflow_votes"], torch.Tensor)  # left on the device: no host sync
+    assert int(out.meta["overflow_votes"]) == total_dropped > 0
 
 
 @pytest.mark.parametrize("value,message", [(1.5, "lie in"), (-0.1, "lie in"), (math.nan, "NaN")])

@@ -31,7 +31,8 @@ class SemanticRender:
     """``labels`` [C, H, W] int32 (-1 where no labelled Gaussian votes); ``weights`` [C, H, W] the winning
     vote max_k R_p[k]. With ``return_buffer``: ``buffer_labels`` / ``buffer_weights`` [C, H, W, B], the
     per-pixel (label, weight) entries (label -1 = empty). ``meta`` holds ``overflow_pixels`` (pixels that saw
-    more distinct labels than the buffer holds) and ``overflow_votes`` (votes dropped or evicted)."""
+    more distinct labels than the buffer holds) and ``overflow_votes`` (votes dropped or evicted) as 0-dim
+    int64 tensors on the render's device (``int()`` reads them; the call itself does not wait for the GPU)."""
 
     labels: torch.Tensor
     weights: torch.Tensor
@@ -292,7 +293,8 @@ def rendering_contribution(
 
 def _semantic_render(bins: TileBins, buffer_size: int, outputs, return_buffer: bool) -> SemanticRender:
     buf_l, buf_w, out_l, out_w, overflow = outputs
-    overflow_pixels, overflow_votes = torch.stack([(overflow > 0).sum(), overflow.sum()]).tolist()
+    # counted on the device and left there: a host read here would make every call wait for its kernels
+    overflow_pixels, overflow_votes = torch.stack([(overflow > 0).sum(), overflow.sum()]).unbind()
     meta = {
         "buffer_size": buffer_size,
         "overflow_pixels": overflow_pixels,
