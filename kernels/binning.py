@@ -13,6 +13,9 @@ import warp as wp
 
 from .raster import alpha_extent, ellipse_meets_box, sigma_limit
 
+# a Gaussian's rectangle of at most this many tiles has each tested (a 64-bit mask carries the result)
+MASK_TILES = wp.constant(64)
+
 
 @wp.func
 def tile_rect(
@@ -61,8 +64,12 @@ def count_tiles(
     tiles_y: int,
     counts: wp.array(dtype=wp.int32),
     extents: wp.array(dtype=wp.vec2),
+    reached: wp.array(dtype=wp.uint64),
 ):
-    """Tiles per Gaussian, and its ``alpha_extent`` for the emission and the blending kernels."""
+    """Tiles per Gaussian; its ``alpha_extent``, for the emission and the blending kernels; and which tiles
+    of its ``tile_rect`` its ellipse meets (bit i: the i-th tile in row-major order), so that the emission
+    writes exactly the tiles counted here instead of deciding again. A rectangle of more than 64 tiles
+    keeps all of them."""
     tid = wp.tid()
     r = radii[tid]
     if r <= 0:
@@ -70,25 +77,35 @@ def count_tiles(
         extents[tid] = wp.vec2(-1.0, -1.0)
         return
     conic = conics[tid]
-    t = sigma_limit(opacities[tid % num_gaussians])
-    ext = alpha_extent(conic, opacities[tid % num_gaussians])
+    o = opacities[tid % num_gaussians]
+    ext = alpha_extent(conic, o)
     extents[tid] = ext
     center = means2d[tid]
     rect = tile_rect(center, float(r), ext, tile_size, tiles_x, tiles_y)
+    in_rect = (rect[2] - rect[0]) * (rect[3] - rect[1])
+    if in_rect > MASK_TILES:
+        counts[tid] = in_rect
+        return
+    t = sigma_limit(o)
+    mask = wp.uint64(0)
+    bit = wp.uint64(1)
     n = int(0)
     for ty in range(rect[1], rect[3]):
         for tx in range(rect[0], rect[2]):
-            n += tile_reached(center, conic, t, tx, ty, tile_size)
+            if tile_reached(center, conic, t, tx, ty, tile_size) != 0:
+                mask = mask | bit
+                n += 1
+            bit = bit << wp.uint64(1)
     counts[tid] = n
+    reached[tid] = mask
 
 
 @wp.kernel(enable_backward=False)
 def emit_intersections(
     means2d: wp.array(dtype=wp.vec2),
     radii: wp.array(dtype=wp.int32),
-    conics: wp.array(dtype=wp.vec3),
-    opacities: wp.array(dtype=float),
     extents: wp.array(dtype=wp.vec2),
+    reached: wp.array(dtype=wp.uint64),
     depth_bits: wp.array(dtype=wp.int32),
     offsets: wp.array(dtype=wp.int64),
     counts: wp.array(dtype=wp.int32),
@@ -100,26 +117,27 @@ def emit_intersections(
     values: wp.array(dtype=wp.int32),
 ):
     """``offsets`` is the inclusive prefix sum of the per-Gaussian tile ``counts``; the tiles are those
-    ``count_tiles`` counted."""
+    ``count_tiles`` counted and marked in ``reached``."""
     tid = wp.tid()
     r = radii[tid]
     if r <= 0:
         return
-    center = means2d[tid]
-    conic = conics[tid]
-    t = sigma_limit(opacities[tid % num_gaussians])
-    rect = tile_rect(center, float(r), extents[tid], tile_size, tiles_x, tiles_y)
+    rect = tile_rect(means2d[tid], float(r), extents[tid], tile_size, tiles_x, tiles_y)
+    every = (rect[2] - rect[0]) * (rect[3] - rect[1]) > MASK_TILES
+    mask = reached[tid]
     cam = tid // num_gaussians
     base = wp.int64(cam * tiles_x * tiles_y)
     k = offsets[tid] - wp.int64(counts[tid])
     low = wp.int64(depth_bits[tid]) & wp.int64(4294967295)
+    bit = wp.uint64(1)
     for ty in range(rect[1], rect[3]):
         for tx in range(rect[0], rect[2]):
-            if tile_reached(center, conic, t, tx, ty, tile_size) != 0:
+            if every or (mask & bit) != wp.uint64(0):
                 tile = base + wp.int64(ty * tiles_x + tx)
                 keys[k] = (tile << wp.int64(32)) | low
                 values[k] = tid
                 k += wp.int64(1)
+            bit = bit << wp.uint64(1)
 
 
 @wp.kernel(enable_backward=False)

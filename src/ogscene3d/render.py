@@ -36,7 +36,13 @@ def _kernels():
 
 
 # torch dtype -> the Warp scalar type a launch argument of that tensor holds
-_SCALARS = {torch.float32: "float32", torch.int32: "int32", torch.int64: "int64", torch.uint8: "uint8"}
+_SCALARS = {
+    torch.float32: "float32",
+    torch.int32: "int32",
+    torch.int64: "int64",
+    torch.uint64: "uint64",
+    torch.uint8: "uint8",
+}
 
 
 @functools.cache
@@ -289,12 +295,14 @@ def bin_gaussians(
     footprint = [m2d, rad, _as_wp(conics.detach(), wp.vec3), _as_wp(opacities.detach())]
     grid = [N, tile_size, tiles_x, tiles_y]
     ext = _as_wp(extents, wp.vec2)
+    # which tiles of its rectangle each Gaussian's ellipse meets, decided once for count and emission
+    reached = _as_wp(torch.empty(C * N, dtype=torch.uint64, device=dev))
     with warp_stream(dev) as wdev:
         wp.launch(
             binning.count_tiles,
             dim=C * N,
             inputs=[*footprint, *grid],
-            outputs=[_as_wp(counts), ext],
+            outputs=[_as_wp(counts), ext, reached],
             device=wdev,
         )
         offsets = torch.cumsum(counts.reshape(-1), 0, dtype=torch.int64)
@@ -309,7 +317,7 @@ def bin_gaussians(
             wp.launch(
                 binning.emit_intersections,
                 dim=C * N,
-                inputs=[*footprint, ext, _as_wp(depth_bits), _as_wp(offsets), _as_wp(counts), *grid],
+                inputs=[m2d, rad, ext, reached, _as_wp(depth_bits), _as_wp(offsets), _as_wp(counts), *grid],
                 outputs=[wk, wv],
                 device=wdev,
             )
