@@ -279,8 +279,9 @@ def raster_kernels(channels: int):
                 gm = means2d[g]
                 gc = conics[g]
                 go = opacities[g % num_gaussians]
-                gcol = colors[g]
                 reaches = warp_reaches(gm, gc, go, extents[g], rect, W)
+                if reaches != 0:
+                    gcol = colors[g]  # only a reaching Gaussian's colour is ever broadcast
             # only the batch's Gaussians that reach the warp's pixels are broadcast and evaluated
             pending = lane_ballot(reaches)
             while pending != 0:
@@ -376,8 +377,9 @@ def raster_kernels(channels: int):
                 gm = means2d[gid]
                 gc = conics[gid]
                 go = opacities[gid % num_gaussians]
-                gcol = colors[gid]
                 reaches = warp_reaches(gm, gc, go, extents[gid], rect, W)
+                if reaches != 0:
+                    gcol = colors[gid]
             pending = lane_ballot(reaches)  # lane s holds Gaussian b - s: lowest bit first is back to front
             while pending != 0:
                 s = bit_lowest(pending)
