@@ -51,8 +51,9 @@ def load_lane_gaussian(
         m = means2d[g]
         c = conics[g]
         o = opacities[n]
-        reaches = warp_reaches(m, c, o, extents[g], rect, lane_count())
-        return n, m, c, o, confidences[n], labels[n], reaches
+        if warp_reaches(m, c, o, extents[g], rect, lane_count()) != 0:
+            return n, m, c, o, confidences[n], labels[n], int(1)
+        return n, m, c, o, float(0.0), int(-1), int(0)  # never broadcast: its vote is not loaded
     return int(0), wp.vec2(), wp.vec3(), float(0.0), float(0.0), int(-1), int(0)
 
 
