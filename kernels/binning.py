@@ -77,8 +77,8 @@ def count_tiles(
         extents[tid] = wp.vec2(-1.0, -1.0)
         return
     conic = conics[tid]
-    o = opacities[tid % num_gaussians]
-    ext = alpha_extent(conic, o)
+    t = sigma_limit(opacities[tid % num_gaussians])
+    ext = alpha_extent(conic, t)
     extents[tid] = ext
     center = means2d[tid]
     rect = tile_rect(center, float(r), ext, tile_size, tiles_x, tiles_y)
@@ -86,7 +86,6 @@ def count_tiles(
     if in_rect > MASK_TILES:
         counts[tid] = in_rect
         return
-    t = sigma_limit(o)
     mask = wp.uint64(0)
     bit = wp.uint64(1)
     n = int(0)

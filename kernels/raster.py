@@ -119,13 +119,12 @@ def sigma_limit(opacity: float) -> float:
 
 
 @wp.func
-def alpha_extent(conic: wp.vec3, opacity: float) -> wp.vec2:
+def alpha_extent(conic: wp.vec3, t: float) -> wp.vec2:
     """Half-widths (x, y) of a box around the 2D mean outside which alpha < ALPHA_MIN.
 
-    alpha >= ALPHA_MIN needs sigma <= t (``sigma_limit``), an ellipse; these are its bounding box's
-    half-widths, with a margin that covers fast-math rounding. (-1, -1) where the Gaussian blends nowhere;
-    infinite for a degenerate conic."""
-    t = sigma_limit(opacity)
+    alpha >= ALPHA_MIN needs sigma <= t (``sigma_limit`` of the opacity), an ellipse; these are its
+    bounding box's half-widths, with a margin that covers fast-math rounding. (-1, -1) where the Gaussian
+    blends nowhere (t < 0); infinite for a degenerate conic."""
     if t <= 0.0:
         return wp.vec2(-1.0, -1.0)
     det = conic[0] * conic[2] - conic[1] * conic[1]

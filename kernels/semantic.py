@@ -68,6 +68,7 @@ def lane_shfl_gaussian(gm: wp.vec2, gc: wp.vec3, go: float, gconf: float, glab: 
         lane_shfl_int(glab, src),
     )
 
+
 @functools.cache
 def semantic_kernels(buffer_size: int):
     """(vote, contribution) kernels for a per-pixel buffer of ``buffer_size`` entries."""

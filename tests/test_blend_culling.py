@@ -19,6 +19,7 @@ from ogscene3d.kernels.raster import (
     alpha_extent,
     gaussian_alpha,
     gaussian_reaches,
+    sigma_limit,
     tile_pixel,
     warp_reaches,
     warp_rect,
@@ -77,7 +78,7 @@ def _reach(
 ):
     i = wp.tid()
     r = rects[i]
-    ext = alpha_extent(conics[i], opacities[i])
+    ext = alpha_extent(conics[i], sigma_limit(opacities[i]))
     reaches[i] = gaussian_reaches(means2d[i], ext, r)
     exact[i] = warp_reaches(means2d[i], conics[i], opacities[i], ext, r, 32)
     one_pixel[i] = warp_reaches(means2d[i], conics[i], opacities[i], ext, r, 1)

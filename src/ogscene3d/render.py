@@ -596,9 +596,8 @@ def rasterization(
         means, quats, scales, viewmats, Ks, width, height, near_plane, far_plane, eps2d
     )
     with torch.no_grad():
-        bins = bin_gaussians(
-            means2d, conics, opacities, radii, depths, width, height, tile_size, checks
-        )  # settles checks
+        # settles checks
+        bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, tile_size, checks)
 
     if render_mode in ("D", "ED"):
         blend, bg = depths.unsqueeze(-1), None
