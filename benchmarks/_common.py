@@ -1,12 +1,16 @@
-"""Shared helpers for the benchmark scripts: synthetic Gaussian scenes and a synchronising timer."""
+"""Shared helpers for the benchmark scripts: synthetic Gaussian scenes, a synchronising timer and a
+device-kernel timer."""
 
 from __future__ import annotations
 
 import math
+import statistics
 import time
 from collections.abc import Callable
 
 import torch
+from torch.autograd import DeviceType
+from torch.profiler import ProfilerActivity, profile
 
 
 def parse_count(text: str) -> int:
@@ -90,15 +94,47 @@ def render_fns(render, scene, vm, K, width, height):
     return forward, forward_backward
 
 
-def time_ms(fn: Callable[[], object], device: torch.device, warmup: int = 2, iters: int = 10) -> float:
+def time_ms(
+    fn: Callable[[], object], device: torch.device, warmup: int = 2, iters: int = 10, blocks: int = 5
+) -> float:
+    """Wall milliseconds per call: the median over ``blocks`` timed blocks of ``iters`` calls each, so one
+    block slowed by the host (another process, a clock change) does not move the figure."""
     for _ in range(warmup):
         fn()
-    sync(device)
-    t0 = time.perf_counter()
-    for _ in range(iters):
+    per_block = []
+    for _ in range(blocks):
+        sync(device)
+        t0 = time.perf_counter()
+        for _ in range(iters):
+            fn()
+        sync(device)
+        per_block.append((time.perf_counter() - t0) * 1000.0 / iters)
+    return statistics.median(per_block)
+
+
+def profiled_kernel_ms(prof) -> float:
+    """Total device-kernel time (kernels, memsets, copies) in a torch.profiler run, in ms. Named ranges
+    (``record_function``, autograd Functions) also appear on the device timeline, spanning the kernels
+    they launch: they are left out, or their kernels would count twice."""
+    total_us = 0.0
+    for evt in prof.key_averages():  # the same sum as the "Self CUDA time total" line of its table
+        if evt.device_type == DeviceType.CUDA and not getattr(evt, "is_user_annotation", False):
+            total_us += evt.self_device_time_total
+    return total_us / 1000.0
+
+
+def kernel_ms(fn: Callable[[], object], device: torch.device, calls: int = 10) -> float:
+    """Device-kernel milliseconds per call (host-independent; nan on the CPU)."""
+    if device.type != "cuda":
+        return float("nan")
+    for _ in range(2):
         fn()
     sync(device)
-    return (time.perf_counter() - t0) * 1000.0 / iters
+    with profile(activities=[ProfilerActivity.CPU, ProfilerActivity.CUDA]) as prof:
+        for _ in range(calls):
+            fn()
+        sync(device)
+    return profiled_kernel_ms(prof) / calls
 
 
 def peak_mb(fn: Callable[[], object], device: torch.device) -> float:

@@ -5,10 +5,11 @@
         --gaussians 5k --map-gaussians 20k
 
 Writes OUTDIR/raster.txt (ours, and gsplat when importable: forward and forward+backward),
-OUTDIR/semantic.txt (labels + P_conf in one call), OUTDIR/mapping.txt (the ``mapping.py modules`` round with
-each module inside a named range ``M:<function>``) and OUTDIR/summary.txt: per call, the device-kernel time
-(host-independent) next to the wall time, and the host time spent queueing a forward. Wall time well above
-kernel time means the call is host-bound (launch overhead, syncs).
+OUTDIR/semantic.txt (labels + P_conf in one call and a colour forward of the same scene, on both scenes),
+OUTDIR/mapping.txt (the ``mapping.py modules`` round with each module inside a named range
+``M:<function>``) and OUTDIR/summary.txt: per call, the device-kernel time (host-independent) next to the
+wall time, and the host time spent queueing a forward. Wall time well above kernel time means the call is
+host-bound (launch overhead, syncs).
 """
 
 from __future__ import annotations
@@ -24,7 +25,16 @@ from torch.profiler import ProfilerActivity, profile, record_function
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import mapping as mapping_bench  # noqa: E402
-from _common import camera, parse_count, render_fns, sync, synthetic_gaussians, time_ms  # noqa: E402
+from _common import (  # noqa: E402
+    camera,
+    parse_count,
+    profiled_kernel_ms,
+    render_fns,
+    sync,
+    synthetic_gaussians,
+    synthetic_surfaces,
+    time_ms,
+)
 
 from ogscene3d import rasterization, rendering_contribution  # noqa: E402
 from ogscene3d.device import resolve_device  # noqa: E402
@@ -41,14 +51,6 @@ MAPPING_FUNCTIONS = (
 
 def _activities(device: torch.device) -> list:
     return [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device.type == "cuda" else [])
-
-
-def _kernel_ms(prof) -> float:
-    """Total device-kernel time in a profile, in ms (0 on CPU)."""
-    total = 0.0
-    for evt in prof.key_averages():
-        total += getattr(evt, "self_device_time_total", getattr(evt, "self_cuda_time_total", 0.0))
-    return total / 1000.0
 
 
 def _write_tables(prof, path: Path, title: str, device: torch.device, rows: int = 30) -> None:
@@ -101,28 +103,42 @@ def profile_raster(args, device, out: Path, summary: list[str]) -> None:
             _write_tables(prof, out / "raster.txt", f"{name} {label} x{args.calls}", device)
             summary.append(
                 f"raster {name:6s} {label:8s} N={n}: wall {time_ms(fn, device, iters=args.calls):.3f} ms, "
-                f"kernels {_kernel_ms(prof) / args.calls:.3f} ms per call"
+                f"kernels {profiled_kernel_ms(prof) / args.calls:.3f} ms per call"
             )
         summary.append(f"raster {name:6s} fwd host-side {_host_ms(forward, device):.3f} ms per call")
 
 
-def profile_semantic(args, device, out: Path, summary: list[str]) -> None:
+def _profile_semantic_scene(scene: str, make, args, device, out: Path) -> str:
     n = parse_count(args.gaussians)
-    means, quats, scales, opac, _, labels, conf = synthetic_gaussians(n, device)
-    vm, K = camera(args.width, args.height, device)
+    W, H = args.width, args.height
+    vm, K = camera(W, H, device)
+    means, quats, scales, opac, colors, labels, conf = make(n, device)
 
     def one_call():
-        W, H = args.width, args.height
         return rendering_contribution(
             means, quats, scales, opac, labels, conf, vm[0], K[0], W, H, return_semantics=True
         )
 
-    prof = _profiled(one_call, args.calls, device)
-    _write_tables(prof, out / "semantic.txt", f"labels + P_conf x{args.calls}", device)
-    summary.append(
-        f"semantic 1call N={n}: wall {time_ms(one_call, device, iters=args.calls):.3f} ms, "
-        f"kernels {_kernel_ms(prof) / args.calls:.3f} ms per call"
+    def color():
+        with torch.no_grad():
+            return rasterization(means, quats, scales, opac, colors, vm, K, W, H)
+
+    kernels = {}
+    for label, fn in (("labels + P_conf", one_call), ("colour fwd", color)):
+        prof = _profiled(fn, args.calls, device)
+        _write_tables(prof, out / "semantic.txt", f"{scene} {label} x{args.calls}", device)
+        kernels[label] = profiled_kernel_ms(prof) / args.calls
+    both, col = kernels["labels + P_conf"], kernels["colour fwd"]
+    ratio = both / col if col else float("nan")  # no device kernels on the CPU
+    return (
+        f"semantic {scene:8s} 1call N={n}: wall {time_ms(one_call, device, iters=args.calls):.3f} ms, "
+        f"kernels {both:.3f} ms per call; colour fwd kernels {col:.3f} ms; ratio {ratio:.2f}"
     )
+
+
+def profile_semantic(args, device, out: Path, summary: list[str]) -> None:
+    for scene, make in (("cloud", synthetic_gaussians), ("surfaces", synthetic_surfaces)):
+        summary.append(_profile_semantic_scene(scene, make, args, device, out))
 
 
 def profile_mapping(args, device, out: Path, summary: list[str]) -> None:

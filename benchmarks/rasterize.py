@@ -16,6 +16,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import (  # noqa: E402
     camera,
+    kernel_ms,
     parse_count,
     peak_mb,
     print_table,
@@ -52,6 +53,8 @@ def bench(fn, scene, vm, K, width, height, device, iters):
     return {
         "fwd_ms": time_ms(forward, device, iters=iters),
         "fwd+bwd_ms": time_ms(forward_backward, device, iters=iters),
+        "fwd_kernel_ms": kernel_ms(forward, device),
+        "fwd+bwd_kernel_ms": kernel_ms(forward_backward, device),
         "peak_MiB": peak_mb(forward_backward, device),
         "isects": _intersections(forward()[2]),
     }
@@ -76,15 +79,17 @@ def main() -> None:
         if gs is not None:
             theirs = bench(gs, scene, vm, K, args.width, args.height, device, args.iters)
             row.update({f"gsplat_{k}": v for k, v in theirs.items()})
-            row["fwd_ratio"] = ours["fwd_ms"] / theirs["fwd_ms"]
-            row["fwd+bwd_ratio"] = ours["fwd+bwd_ms"] / theirs["fwd+bwd_ms"]
+            for k in ("fwd", "fwd+bwd", "fwd_kernel", "fwd+bwd_kernel"):
+                row[f"{k}_ratio"] = ours[f"{k}_ms"] / theirs[f"{k}_ms"]
         rows.append(row)
         print(f"done N={n}", file=sys.stderr)
-    cols = ["N", "device", "ours_fwd_ms", "ours_fwd+bwd_ms", "ours_peak_MiB", "ours_isects"]
+    figures = ["fwd_ms", "fwd+bwd_ms", "fwd_kernel_ms", "fwd+bwd_kernel_ms", "peak_MiB", "isects"]
+    cols = ["N", "device"] + [f"ours_{k}" for k in figures]
     if gs is not None:
-        cols += ["gsplat_fwd_ms", "gsplat_fwd+bwd_ms", "gsplat_peak_MiB", "gsplat_isects"]
-        cols += ["fwd_ratio", "fwd+bwd_ratio"]
+        cols += [f"gsplat_{k}" for k in figures]
+        cols += ["fwd_ratio", "fwd+bwd_ratio", "fwd_kernel_ratio", "fwd+bwd_kernel_ratio"]
     print(f"rasterization at {args.width}x{args.height}, RGB, one camera")
+    print("wall ms: median of 5 timed blocks; kernel ms: device-kernel time per call (torch.profiler)")
     print_table(rows, cols)
 
 

@@ -20,6 +20,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import (  # noqa: E402
     camera,
+    kernel_ms,
     parse_count,
     peak_mb,
     print_table,
@@ -34,9 +35,7 @@ from ogscene3d.device import resolve_device  # noqa: E402
 SCENES = {"cloud": synthetic_gaussians, "surfaces": synthetic_surfaces}
 
 
-def bench_one(
-    scene: str, n: int, W: int, H: int, n_labels: int, iters: int, device: torch.device
-) -> dict:
+def bench_one(scene: str, n: int, W: int, H: int, n_labels: int, iters: int, device: torch.device) -> dict:
     means, quats, scales, opac, colors, labels, conf = SCENES[scene](n, device, labels=n_labels)
     vm, K = camera(W, H, device)
 
@@ -59,6 +58,7 @@ def bench_one(
     t_sem = time_ms(semantic, device, iters=iters)
     t_contrib = time_ms(contribution, device, iters=iters)
     t_both = time_ms(both, device, iters=iters)
+    k_color, k_both = kernel_ms(color, device), kernel_ms(both, device)
     return {
         "scene": scene,
         "N": n,
@@ -68,6 +68,9 @@ def bench_one(
         "contribution_ms": t_contrib,
         "sem+contrib_1call_ms": t_both,
         "1call/color": t_both / t_color,
+        "color_fwd_kernel_ms": k_color,
+        "1call_kernel_ms": k_both,
+        "1call/color_kernels": k_both / k_color,
         "peak_MiB": peak_mb(contribution, device),
         "overflow_px": int(semantic().meta["overflow_pixels"]),
     }
@@ -92,6 +95,7 @@ def main() -> None:
     ]
     print(f"semantic kernels at {W}x{H}, {args.labels} distinct labels, one camera")
     print("contribution_ms includes the voting pass it needs; 1call = labels + P_conf from one call")
+    print("wall ms: median of 5 timed blocks; kernel ms: device-kernel time per call (torch.profiler)")
     print_table(rows, list(rows[0].keys()))
 
 
