@@ -123,18 +123,28 @@ def profiled_kernel_ms(prof) -> float:
     return total_us / 1000.0
 
 
+def profile_activities(device: torch.device) -> list:
+    return [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device.type == "cuda" else [])
+
+
+def profiled(fn: Callable[[], object], device: torch.device, calls: int):
+    """A torch.profiler run of ``calls`` calls of ``fn``, after three unprofiled ones (compilation, the
+    allocator's first requests)."""
+    for _ in range(3):
+        fn()
+    sync(device)
+    with profile(activities=profile_activities(device)) as prof:
+        for _ in range(calls):
+            fn()
+        sync(device)
+    return prof
+
+
 def kernel_ms(fn: Callable[[], object], device: torch.device, calls: int = 10) -> float:
     """Device-kernel milliseconds per call (host-independent; nan on the CPU)."""
     if device.type != "cuda":
         return float("nan")
-    for _ in range(2):
-        fn()
-    sync(device)
-    with profile(activities=[ProfilerActivity.CPU, ProfilerActivity.CUDA]) as prof:
-        for _ in range(calls):
-            fn()
-        sync(device)
-    return profiled_kernel_ms(prof) / calls
+    return profiled_kernel_ms(profiled(fn, device, calls)) / calls
 
 
 def peak_mb(fn: Callable[[], object], device: torch.device) -> float:
@@ -162,3 +172,7 @@ def _fmt(v: object) -> str:
     if isinstance(v, float):
         return "nan" if math.isnan(v) else f"{v:.2f}"
     return str(v)
+
+
+# the semantic benchmarks' scenes: a volume-filling cloud (worst case) and a mapped room of surfaces
+SEMANTIC_SCENES = {"cloud": synthetic_gaussians, "surfaces": synthetic_surfaces}

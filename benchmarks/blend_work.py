@@ -20,11 +20,10 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import camera, parse_count, print_table, synthetic_gaussians, synthetic_surfaces  # noqa: E402
+from _common import SEMANTIC_SCENES, camera, parse_count, print_table  # noqa: E402
 
 from ogscene3d.render import _Project, bin_gaussians  # noqa: E402
 
-SCENES = {"cloud": synthetic_gaussians, "surfaces": synthetic_surfaces}
 TILE = 16
 
 
@@ -52,7 +51,7 @@ def _min_sigma_in_box(mean: torch.Tensor, conic: torch.Tensor, box: tuple[float,
 
 
 def count(scene: str, n: int, width: int, height: int, semantic: bool, max_tiles: int) -> dict:
-    means, quats, scales, opac, _, labels, conf = SCENES[scene](n, torch.device("cpu"))
+    means, quats, scales, opac, _, labels, conf = SEMANTIC_SCENES[scene](n, torch.device("cpu"))
     vm, K = camera(width, height, torch.device("cpu"))
     with torch.no_grad():
         m2d, conics, depths, radii = _Project.apply(
@@ -126,11 +125,11 @@ def main() -> None:
     ap.add_argument("--width", type=int, default=1200)
     ap.add_argument("--height", type=int, default=680)
     ap.add_argument("--max-tiles", type=int, default=800, help="tiles sampled evenly (all if fewer)")
-    ap.add_argument("--scene", choices=sorted(SCENES), action="append", help="default: both")
+    ap.add_argument("--scene", choices=sorted(SEMANTIC_SCENES), action="append", help="default: both")
     args = ap.parse_args()
     rows = [
         count(scene, parse_count(c), args.width, args.height, semantic, args.max_tiles)
-        for scene in args.scene or sorted(SCENES)
+        for scene in args.scene or sorted(SEMANTIC_SCENES)
         for c in args.counts.split(",")
         for semantic in (False, True)
     ]

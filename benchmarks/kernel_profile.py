@@ -21,18 +21,20 @@ import time
 from pathlib import Path
 
 import torch
-from torch.profiler import ProfilerActivity, profile, record_function
+from torch.profiler import profile, record_function
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import mapping as mapping_bench  # noqa: E402
 from _common import (  # noqa: E402
+    SEMANTIC_SCENES,
     camera,
     parse_count,
+    profile_activities,
+    profiled,
     profiled_kernel_ms,
     render_fns,
     sync,
     synthetic_gaussians,
-    synthetic_surfaces,
     time_ms,
 )
 
@@ -49,10 +51,6 @@ MAPPING_FUNCTIONS = (
 )
 
 
-def _activities(device: torch.device) -> list:
-    return [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device.type == "cuda" else [])
-
-
 def _write_tables(prof, path: Path, title: str, device: torch.device, rows: int = 30) -> None:
     ka = prof.key_averages()
     with path.open("a") as fh:
@@ -60,17 +58,6 @@ def _write_tables(prof, path: Path, title: str, device: torch.device, rows: int 
         if device.type == "cuda":
             fh.write(ka.table(sort_by="self_cuda_time_total", row_limit=rows, max_name_column_width=70))
         fh.write(ka.table(sort_by="self_cpu_time_total", row_limit=rows, max_name_column_width=70))
-
-
-def _profiled(fn, calls: int, device: torch.device):
-    for _ in range(3):  # compile and warm the allocator first
-        fn()
-    sync(device)
-    with profile(activities=_activities(device)) as prof:
-        for _ in range(calls):
-            fn()
-        sync(device)
-    return prof
 
 
 def _host_ms(fn, device: torch.device, calls: int = 20) -> float:
@@ -99,7 +86,7 @@ def profile_raster(args, device, out: Path, summary: list[str]) -> None:
     for name, render in renderers:
         forward, forward_backward = render_fns(render, scene, vm, K, args.width, args.height)
         for label, fn in (("fwd", forward), ("fwd+bwd", forward_backward)):
-            prof = _profiled(fn, args.calls, device)
+            prof = profiled(fn, device, args.calls)
             _write_tables(prof, out / "raster.txt", f"{name} {label} x{args.calls}", device)
             summary.append(
                 f"raster {name:6s} {label:8s} N={n}: wall {time_ms(fn, device, iters=args.calls):.3f} ms, "
@@ -125,7 +112,7 @@ def _profile_semantic_scene(scene: str, make, args, device, out: Path) -> str:
 
     kernels = {}
     for label, fn in (("labels + P_conf", one_call), ("colour fwd", color)):
-        prof = _profiled(fn, args.calls, device)
+        prof = profiled(fn, device, args.calls)
         _write_tables(prof, out / "semantic.txt", f"{scene} {label} x{args.calls}", device)
         kernels[label] = profiled_kernel_ms(prof) / args.calls
     both, col = kernels["labels + P_conf"], kernels["colour fwd"]
@@ -137,7 +124,7 @@ def _profile_semantic_scene(scene: str, make, args, device, out: Path) -> str:
 
 
 def profile_semantic(args, device, out: Path, summary: list[str]) -> None:
-    for scene, make in (("cloud", synthetic_gaussians), ("surfaces", synthetic_surfaces)):
+    for scene, make in SEMANTIC_SCENES.items():
         summary.append(_profile_semantic_scene(scene, make, args, device, out))
 
 
@@ -162,7 +149,7 @@ def profile_mapping(args, device, out: Path, summary: list[str]) -> None:
     )
     mapping_bench.modules(margs)  # compile and warm up
     margs.repeat = 2
-    with profile(activities=_activities(device)) as prof:
+    with profile(activities=profile_activities(device)) as prof:
         res = mapping_bench.modules(margs)
     ka = prof.key_averages()
     with (out / "mapping.txt").open("w") as fh:

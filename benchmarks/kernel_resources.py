@@ -111,8 +111,11 @@ def kernel_resources(kernel, arch: int, workdir: Path) -> dict[str, int]:
     paths = wp.compile_aot_module(kernel.module, arch=arch, module_dir=str(out), use_ptx=False)
     for path in paths:
         if path.suffix == ".cubin":
-            found = {sym: v for sym, v in cubin_resources(path).items() if "registers" in v}
-            entry = [v for sym, v in found.items() if sym.endswith("_cuda_kernel_forward")]
+            entry = [
+                v
+                for sym, v in cubin_resources(path).items()
+                if sym.endswith("_cuda_kernel_forward") and "registers" in v
+            ]
             if len(entry) == 1:
                 return {"registers": entry[0]["registers"], "frame_bytes": entry[0].get("frame_bytes", 0)}
     raise RuntimeError(f"no cubin with one kernel entry for {kernel.key} (sm_{arch}) in {out}")

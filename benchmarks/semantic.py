@@ -19,24 +19,21 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import (  # noqa: E402
+    SEMANTIC_SCENES,
     camera,
     kernel_ms,
     parse_count,
     peak_mb,
     print_table,
-    synthetic_gaussians,
-    synthetic_surfaces,
     time_ms,
 )
 
 from ogscene3d import rasterization, render_semantics, rendering_contribution  # noqa: E402
 from ogscene3d.device import resolve_device  # noqa: E402
 
-SCENES = {"cloud": synthetic_gaussians, "surfaces": synthetic_surfaces}
-
 
 def bench_one(scene: str, n: int, W: int, H: int, n_labels: int, iters: int, device: torch.device) -> dict:
-    means, quats, scales, opac, colors, labels, conf = SCENES[scene](n, device, labels=n_labels)
+    means, quats, scales, opac, colors, labels, conf = SEMANTIC_SCENES[scene](n, device, labels=n_labels)
     vm, K = camera(W, H, device)
 
     def color():
@@ -84,13 +81,13 @@ def main() -> None:
     ap.add_argument("--height", type=int, default=680)
     ap.add_argument("--labels", type=int, default=2000)
     ap.add_argument("--iters", type=int, default=10)
-    ap.add_argument("--scene", choices=sorted(SCENES), action="append", help="default: both")
+    ap.add_argument("--scene", choices=sorted(SEMANTIC_SCENES), action="append", help="default: both")
     args = ap.parse_args()
     device = resolve_device(args.device)
     W, H = args.width, args.height
     rows = [
         bench_one(scene, parse_count(c), W, H, args.labels, args.iters, device)
-        for scene in args.scene or sorted(SCENES)
+        for scene in args.scene or sorted(SEMANTIC_SCENES)
         for c in args.counts.split(",")
     ]
     print(f"semantic kernels at {W}x{H}, {args.labels} distinct labels, one camera")

@@ -90,9 +90,9 @@ def _kernel_resources_module():
 
 @pytest.mark.skipif(90 not in ARCHS, reason="this Warp build cannot compile for sm_90")
 def test_blend_kernels_keep_their_registers_on_the_h100(tmp_path) -> None:
-    """The blending kernels are latency-bound: a spill to local memory, or the vote losing its third block
-    per SM, showed up as 10-30% slower kernels on the H100. Both are visible in the cubin, so check them
-    here, without a GPU."""
+    """The blending kernels are latency-bound: on the H100 the vote at two blocks per SM ran 28% slower than
+    at three, and spilling versions of it 20-90% slower. Both are visible in the cubin, so check them here,
+    without a GPU."""
     from ogscene3d.kernels.raster import BLEND_BLOCK_DIM
     from ogscene3d.kernels.semantic import VOTE_BLOCKS_PER_SM
 
