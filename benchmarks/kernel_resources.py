@@ -90,17 +90,13 @@ def blocks_per_sm(registers: int, block_dim: int, arch: int) -> int:
 def blend_kernels(channels: list[int], buffer_size: int) -> list[tuple[str, object]]:
     """(label, Warp kernel) of the raster kernels for each channel count and the semantic kernels."""
     from ogscene3d.kernels.raster import raster_kernels
-    from ogscene3d.kernels.semantic import semantic_kernels
+    from ogscene3d.kernels.semantic import semantic_kernel
 
     out = []
     for c in channels:
         fwd, bwd = raster_kernels(c)
         out += [(f"rasterize_forward ({c} ch)", fwd), (f"rasterize_backward ({c} ch)", bwd)]
-    vote, contribution = semantic_kernels(buffer_size)
-    return out + [
-        (f"semantic_vote (buffer {buffer_size})", vote),
-        (f"semantic_contribution ({buffer_size})", contribution),
-    ]
+    return out + [(f"semantic_render (buffer {buffer_size})", semantic_kernel(buffer_size))]
 
 
 def kernel_resources(kernel, arch: int, workdir: Path) -> dict[str, int]:

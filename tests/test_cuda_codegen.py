@@ -13,7 +13,7 @@ import pkgutil
 
 import pytest
 from ogscene3d.kernels.raster import raster_kernels
-from ogscene3d.kernels.semantic import semantic_kernels
+from ogscene3d.kernels.semantic import semantic_kernel
 
 from ogscene3d import kernels
 from ogscene3d.device import init_warp
@@ -64,9 +64,8 @@ def test_raster_kernels_compile_for_cuda(channels: int, arch: int, tmp_path) -> 
 @needs_nvrtc
 @pytest.mark.parametrize("arch", ARCHS)
 @pytest.mark.parametrize("buffer_size", [1, DEFAULT_BUFFER_SIZE, 64])  # bounds and default
-def test_semantic_kernels_compile_for_cuda(buffer_size: int, arch: int, tmp_path) -> None:
-    for kernel in semantic_kernels(buffer_size):
-        _compile(kernel.module, arch, tmp_path)
+def test_semantic_kernel_compiles_for_cuda(buffer_size: int, arch: int, tmp_path) -> None:
+    _compile(semantic_kernel(buffer_size).module, arch, tmp_path)
 
 
 def test_every_kernel_file_is_covered() -> None:
@@ -90,9 +89,9 @@ def _kernel_resources_module():
 
 @pytest.mark.skipif(90 not in ARCHS, reason="this Warp build cannot compile for sm_90")
 def test_blend_kernels_keep_their_registers_on_the_h100(tmp_path) -> None:
-    """The blending kernels are latency-bound: on the H100 the vote at two blocks per SM ran 28% slower than
-    at three, and spilling versions of it 20-90% slower. Both are visible in the cubin, so check them here,
-    without a GPU."""
+    """The blending kernels are latency-bound: on the H100 the semantic vote at two blocks per SM ran 28%
+    slower than at three, and spilling versions of it 20-90% slower. Both are visible in the cubin, so
+    check them here, without a GPU."""
     from ogscene3d.kernels.raster import BLEND_BLOCK_DIM
     from ogscene3d.kernels.semantic import VOTE_BLOCKS_PER_SM
 
@@ -101,7 +100,7 @@ def test_blend_kernels_keep_their_registers_on_the_h100(tmp_path) -> None:
         r = res.kernel_resources(kernel, 90, tmp_path)
         assert 0 < r["registers"] <= 255, label
         assert r["frame_bytes"] == 0, f"{label} spills {r['frame_bytes']} bytes on sm_90"
-        if label.startswith("semantic_vote"):
+        if label.startswith("semantic_render"):
             assert res.blocks_per_sm(r["registers"], BLEND_BLOCK_DIM, 90) >= VOTE_BLOCKS_PER_SM
 
 

@@ -120,14 +120,22 @@ def test_more_labels_than_buffer(device):
     big = render_semantics(*scene, labels.to(device), conf.to(device), vm, K, 16, 16, buffer_size=16)
     assert big.meta["overflow_pixels"] == 0
     assert torch.equal(big.labels[0].cpu().long(), ref_lab)
+    assert big.buffer_labels is None and big.buffer_weights is None  # not asked for: not written
 
 
 def _emulate_buffer(votes, size):
-    """The documented overflow policy on one pixel's (label, weight) votes in depth order: a vote adds to
-    its label's entry; a new label fills a free entry, or at a full buffer replaces the weakest entry (the
-    first of the lowest weight) if it outweighs it, else is dropped. -> ({label: weight}, dropped)."""
-    labs, ws, dropped = [], [], 0
+    """The documented overflow policy on one pixel's (label, weight) votes in depth order: consecutive votes
+    of one label are summed into a run; a run adds to its label's entry; a new label's run fills a free
+    entry, or at a full buffer replaces the weakest entry (the first of the lowest weight) if it outweighs
+    it, else is dropped. -> ({label: weight}, runs that met a full buffer)."""
+    runs = []
     for lab, w in votes:
+        if runs and runs[-1][0] == lab:
+            runs[-1][1] += w
+        else:
+            runs.append([lab, w])
+    labs, ws, dropped = [], [], 0
+    for lab, w in runs:
         if lab in labs:
             ws[labs.index(lab)] += w
         elif len(labs) < size:
@@ -144,8 +152,8 @@ def _emulate_buffer(votes, size):
 @pytest.mark.parametrize("buffer_size", [1, 3, 4])
 def test_overflow_keeps_the_documented_entries(device, buffer_size):
     """Many Gaussians from a small label alphabet stacked in depth, with random opacities and confidences:
-    every pixel's buffer holds exactly what the policy gives (matches into the weakest entry, evictions
-    and dropped votes all occur), and the dropped votes are counted."""
+    every pixel's buffer holds exactly what the policy gives (runs, matches into the weakest entry,
+    evictions and dropped runs all occur), and the runs that met a full buffer are counted."""
     from reference_raster import project
 
     g = torch.Generator().manual_seed(buffer_size)
@@ -168,7 +176,7 @@ def test_overflow_keeps_the_documented_entries(device, buffer_size):
         means.to(f), quats.to(f), scales.to(f), vm[0].to(f), K[0].to(f), size, size, 0.01, 1e10, 0.3
     )
     order = torch.argsort(depth).tolist()
-    total_dropped = 0
+    total_dropped = merged = 0
     for y in range(size):
         for x in range(size):
             T, votes = 1.0, []
@@ -186,6 +194,7 @@ def test_overflow_keeps_the_documented_entries(device, buffer_size):
                     break
                 votes.append((int(labels[i]), ca * T))
                 T *= 1 - ca
+            merged += sum(a[0] == b[0] for a, b in zip(votes, votes[1:]))
             expect, dropped = _emulate_buffer(votes, buffer_size)
             total_dropped += dropped
             got = {
@@ -198,6 +207,7 @@ def test_overflow_keeps_the_documented_entries(device, buffer_size):
                 assert got[lab] == pytest.approx(w, abs=1e-5)
     assert isinstance(out.meta["overflow_votes"], torch.Tensor)  # left on the device: no host sync
     assert int(out.meta["overflow_votes"]) == total_dropped > 0
+    assert merged > 0  # votes were summed into runs
 
 
 @pytest.mark.parametrize("value,message", [(1.5, "lie in"), (-0.1, "lie in"), (math.nan, "NaN")])

@@ -1,7 +1,9 @@
 """Semantic rendering API: confidence-weighted label voting and per-Gaussian rendering contribution.
 
 Both build on the rasterizer's projection and tile binning, restricted to labelled Gaussians
-(label >= 0): unlabelled Gaussians neither vote nor occlude (DESIGN.md "Kernel math").
+(label >= 0): unlabelled Gaussians neither vote nor occlude (DESIGN.md "Kernel math"); nor do those of
+confidence 0, so they are left out of the tiles too. One kernel launch gives the labels and, for
+``rendering_contribution``, P_conf.
 """
 
 from __future__ import annotations
@@ -31,8 +33,9 @@ class SemanticRender:
     """``labels`` [C, H, W] int32 (-1 where no labelled Gaussian votes); ``weights`` [C, H, W] the winning
     vote max_k R_p[k]. With ``return_buffer``: ``buffer_labels`` / ``buffer_weights`` [C, H, W, B], the
     per-pixel (label, weight) entries (label -1 = empty). ``meta`` holds ``overflow_pixels`` (pixels that saw
-    more distinct labels than the buffer holds) and ``overflow_votes`` (votes dropped or evicted) as 0-dim
-    int64 tensors on the render's device (``int()`` reads them; the call itself does not wait for the GPU)."""
+    more distinct labels than the buffer holds) and ``overflow_votes`` (runs of a label's consecutive votes
+    that met a full buffer: dropped, or in place of the weakest entry) as 0-dim int64 tensors on the
+    render's device (``int()`` reads them; the call itself does not wait for the GPU)."""
 
     labels: torch.Tensor
     weights: torch.Tensor
@@ -55,7 +58,7 @@ def _check_semantic_inputs(
     return width, height
 
 
-def _vote(
+def _render(
     means,
     quats,
     scales,
@@ -72,12 +75,16 @@ def _vote(
     tile_size,
     buffer_size,
     checks: ValueChecks,
+    write_buffer: bool,
+    contribute: bool = False,
+    pixel_mask: torch.Tensor | None = None,
 ):
-    """Project every Gaussian, bin the labelled ones and run the voting kernel (the binning settles
-    ``checks``)."""
+    """Project every Gaussian, bin the labelled ones and run the semantic kernel (the binning settles
+    ``checks``). -> (bins, (buffer labels, buffer weights, labels, weights, overflow counts), numerator,
+    denominator); the buffer and the sums are None where not asked for."""
     wp = _wp()
     from ogscene3d.kernels.raster import BLEND_BLOCK_DIM
-    from ogscene3d.kernels.semantic import semantic_kernels
+    from ogscene3d.kernels.semantic import semantic_kernel
 
     if not (isinstance(buffer_size, int) and 1 <= buffer_size <= 64):
         raise ValueError(f"buffer_size must be an int in [1, 64], got {buffer_size!r}")
@@ -96,19 +103,29 @@ def _vote(
             far_plane,
             eps2d,
         )
-        # unlabelled Gaussians neither vote nor occlude: a zero radius keeps them out of every tile
-        radii = torch.where(labels >= 0, radii, torch.zeros_like(radii))
+        # unlabelled Gaussians neither vote nor occlude, nor do those of confidence 0 (their conf * alpha is
+        # 0): a zero radius keeps them out of every tile
+        radii = torch.where((labels >= 0) & (confidences > 0), radii, torch.zeros_like(radii))
         bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, tile_size, checks)
-    # the voting kernel writes every pixel of every output
-    buf_l = torch.empty(C, height, width, buffer_size, dtype=torch.int32, device=dev)
-    buf_w = torch.empty(C, height, width, buffer_size, device=dev)
-    out_l = torch.empty(C, height, width, dtype=torch.int32, device=dev)
-    out_w = torch.empty(C, height, width, device=dev)
-    overflow = torch.empty(C, height, width, dtype=torch.int32, device=dev)
-    vote, _ = semantic_kernels(buffer_size)
+    # the kernel writes every pixel of every output it is given; the unused ones get one element
+    pixels = (C, height, width)
+    buffer_shape = (*(pixels if write_buffer else (1,)), buffer_size)
+    buf_l = torch.empty(buffer_shape, dtype=torch.int32, device=dev)
+    buf_w = torch.empty(buffer_shape, device=dev)
+    out_l = torch.empty(pixels, dtype=torch.int32, device=dev)
+    out_w = torch.empty(pixels, device=dev)
+    overflow = torch.empty(pixels, dtype=torch.int32, device=dev)
+    sums = max(n, 1) if contribute else 1
+    num = torch.zeros(sums, device=dev)
+    den = torch.zeros(sums, device=dev)
+    mask = (
+        pixel_mask.to(torch.uint8).contiguous()
+        if pixel_mask is not None
+        else torch.zeros(1, dtype=torch.uint8, device=dev)
+    )
     veci = wp.types.vector(length=buffer_size, dtype=wp.int32)
     vecf = wp.types.vector(length=buffer_size, dtype=wp.float32)
-    geometry = [
+    inputs = [
         _as_wp(means2d, wp.vec2),
         _as_wp(conics, wp.vec3),
         _as_wp(bins.extents, wp.vec2),
@@ -118,27 +135,39 @@ def _vote(
         _as_wp(bins.tile_start),
         _as_wp(bins.tile_end),
         _as_wp(bins.isect_ids),
+        max(n, 1),
+        width,
+        height,
+        bins.tile_size,
+        bins.tile_threads,
+        bins.tiles_x,
+        bins.tiles_x * bins.tiles_y,
+        int(write_buffer),
+        int(contribute),
+        _as_wp(mask),
+        int(pixel_mask is not None),
     ]
-    dims = [
-        max(n, 1), width, height, bins.tile_size, bins.tile_threads, bins.tiles_x, bins.tiles_x * bins.tiles_y
+    outputs = [
+        _as_wp(buf_l, veci),
+        _as_wp(buf_w, vecf),
+        _as_wp(out_l),
+        _as_wp(out_w),
+        _as_wp(overflow),
+        _as_wp(num),
+        _as_wp(den),
     ]
-    launch_dim = bins.blend_launch_dim
     with warp_stream(dev) as wdev:
         wp.launch(
-            vote,
-            dim=launch_dim,
-            inputs=[*geometry, *dims],
-            outputs=[
-                _as_wp(buf_l, veci),
-                _as_wp(buf_w, vecf),
-                _as_wp(out_l),
-                _as_wp(out_w),
-                _as_wp(overflow),
-            ],
+            semantic_kernel(buffer_size),
+            dim=bins.blend_launch_dim,
+            inputs=inputs,
+            outputs=outputs,
             device=wdev,
             block_dim=BLEND_BLOCK_DIM,
         )
-    return bins, geometry, dims, launch_dim, (buf_l, buf_w, out_l, out_w, overflow)
+    buffers = (buf_l, buf_w) if write_buffer else (None, None)
+    sums_out = (num, den) if contribute else (None, None)
+    return bins, (*buffers, out_l, out_w, overflow), *sums_out
 
 
 @_on_torch_stream
@@ -169,7 +198,7 @@ def render_semantics(
     width, height = _check_semantic_inputs(
         means, quats, scales, opacities, labels, confidences, viewmats, Ks, width, height, checks
     )
-    bins, _, _, _, outputs = _vote(
+    bins, outputs, _, _ = _render(
         means,
         quats,
         scales,
@@ -186,8 +215,9 @@ def render_semantics(
         tile_size,
         buffer_size,
         checks,
+        write_buffer=return_buffer,
     )
-    return _semantic_render(bins, buffer_size, outputs, return_buffer)
+    return _semantic_render(bins, buffer_size, outputs)
 
 
 @_on_torch_stream
@@ -235,11 +265,7 @@ def rendering_contribution(
     dev = means.device
     if pixel_mask is not None:
         check_tensor("pixel_mask", pixel_mask, (height, width), dev, dtypes=(torch.bool, torch.uint8))
-    wp = _wp()
-    from ogscene3d.kernels.raster import BLEND_BLOCK_DIM
-    from ogscene3d.kernels.semantic import semantic_kernels
-
-    bins, geometry, dims, launch_dim, (buf_l, buf_w, out_l, out_w, overflow) = _vote(
+    bins, outputs, num, den = _render(
         means,
         quats,
         scales,
@@ -256,42 +282,18 @@ def rendering_contribution(
         tile_size,
         buffer_size,
         checks,
+        write_buffer=return_semantics,
+        contribute=True,
+        pixel_mask=pixel_mask,
     )
-    n = means.shape[0]
-    num = torch.zeros(max(n, 1), device=dev)
-    den = torch.zeros(max(n, 1), device=dev)
-    mask = (
-        pixel_mask.to(torch.uint8).contiguous()
-        if pixel_mask is not None
-        else torch.zeros(1, dtype=torch.uint8, device=dev)
-    )
-    _, contribution = semantic_kernels(buffer_size)
-    veci = wp.types.vector(length=buffer_size, dtype=wp.int32)
-    vecf = wp.types.vector(length=buffer_size, dtype=wp.float32)
-    with warp_stream(dev) as wdev:
-        wp.launch(
-            contribution,
-            dim=launch_dim,
-            inputs=[
-                *geometry,
-                _as_wp(buf_l, veci),
-                _as_wp(buf_w, vecf),
-                _as_wp(mask),
-                int(pixel_mask is not None),
-                *dims,
-            ],
-            outputs=[_as_wp(num), _as_wp(den)],
-            device=wdev,
-            block_dim=BLEND_BLOCK_DIM,
-        )
     # unlabelled and unseen Gaussians have num = den = 0, hence P_conf 0
-    p_conf = (num / (den + eps))[:n].clamp_(0.0, 1.0)
+    p_conf = (num / (den + eps))[: means.shape[0]].clamp_(0.0, 1.0)
     if not return_semantics:
         return p_conf
-    return p_conf, _semantic_render(bins, buffer_size, (buf_l, buf_w, out_l, out_w, overflow), True)
+    return p_conf, _semantic_render(bins, buffer_size, outputs)
 
 
-def _semantic_render(bins: TileBins, buffer_size: int, outputs, return_buffer: bool) -> SemanticRender:
+def _semantic_render(bins: TileBins, buffer_size: int, outputs) -> SemanticRender:
     buf_l, buf_w, out_l, out_w, overflow = outputs
     # counted on the device and left there: a host read here would make every call wait for its kernels
     overflow_pixels, overflow_votes = torch.stack([(overflow > 0).sum(), overflow.sum()]).unbind()
@@ -304,8 +306,8 @@ def _semantic_render(bins: TileBins, buffer_size: int, outputs, return_buffer: b
     return SemanticRender(
         labels=out_l,
         weights=out_w,
-        buffer_labels=buf_l if return_buffer else None,
-        buffer_weights=buf_w if return_buffer else None,
+        buffer_labels=buf_l,
+        buffer_weights=buf_w,
         meta=meta,
     )
 
