@@ -6,9 +6,11 @@
 Emulates the CUDA blending loop in torch on the real tile lists (ours, from ``bin_gaussians``): a warp
 walks its tile's depth-sorted list until all its pixels have ended (T <= 1e-4), and evaluates either
 every entry (no culling) or only those whose alpha >= 1/255 box and ellipse reach its pixels (8x4
-blocks, as the kernels do). Colour (alpha) and semantic (confidence x alpha, labelled Gaussians only)
-rays are counted separately. Machine-independent, so a CPU run predicts how the blending kernels' work
-changes on a GPU.
+blocks, as the kernels do). Colour (alpha) and semantic (confidence x alpha; labelled Gaussians of
+confidence > 0 only) rays are counted separately; for semantic rays also the entries at which a warp
+runs the label-buffer code, when every vote updates the buffer and when a run of one label's consecutive
+votes updates it once (as kernels/semantic.py does; the contribution walk's R_p look-ups follow the same
+runs). Machine-independent, so a CPU run predicts how the blending kernels' work changes on a GPU.
 """
 
 from __future__ import annotations
@@ -58,13 +60,13 @@ def count(scene: str, n: int, width: int, height: int, semantic: bool, max_tiles
             means, quats, scales, vm, K, width, height, 0.01, 1e10, 0.3
         )
         if semantic:
-            radii = torch.where(labels >= 0, radii, torch.zeros_like(radii))
+            radii = torch.where((labels >= 0) & (conf > 0), radii, torch.zeros_like(radii))
         bins = bin_gaussians(m2d, conics, opac, radii, depths, width, height, TILE)
     m2d, conics, ext = m2d[0], conics[0], bins.extents[0]
     ys, xs = torch.meshgrid(torch.arange(TILE) + 0.5, torch.arange(TILE) + 0.5, indexing="ij")
     n_tiles = bins.tile_start.numel()
     step = max(1, n_tiles // max_tiles)
-    totals = {"entries": 0, "no_cull": 0, "cull": 0, "pixels": 0}
+    totals = {"entries": 0, "no_cull": 0, "cull": 0, "pixels": 0, "updates": 0, "run_updates": 0}
     for tile in range(0, n_tiles, step):
         s, e = int(bins.tile_start[tile]), int(bins.tile_end[tile])
         ids = bins.isect_ids[s:e].long()
@@ -90,6 +92,16 @@ def count(scene: str, n: int, width: int, height: int, semantic: bool, max_tiles
             torch.full_like(ended[..., 0], len(ids), dtype=torch.long),
         )
         walk = torch.where(valid, walk, torch.zeros_like(walk))
+        if semantic:
+            # a vote is a blended entry (before the one that ends the pixel); it starts a run where the
+            # pixel's previous vote had another label
+            j = torch.arange(len(ids))
+            last = walk - ended.any(-1).long()  # entries before the one that ends the pixel
+            voted = (alpha > 0) & (j < last[..., None]) & valid[..., None]
+            previous = torch.cummax(torch.where(voted, j, -1), dim=-1).values
+            previous = torch.cat([torch.full_like(previous[..., :1], -1), previous[..., :-1]], -1)
+            lab = labels[ids]
+            starts = voted & ((previous < 0) | (lab[previous.clamp(min=0)] != lab))
         for bx, by in _warp_blocks():
             lanes = valid[by : by + 4, bx : bx + 8]
             if not lanes.any():
@@ -106,6 +118,11 @@ def count(scene: str, n: int, width: int, height: int, semantic: bool, max_tiles
             )
             totals["no_cull"] += depth * int(lanes.sum())
             totals["cull"] += int(reach.sum()) * int(lanes.sum())
+            if semantic:
+                # the warp runs the buffer code for an entry where any of its lanes needs it
+                block = (slice(by, by + 4), slice(bx, bx + 8))
+                totals["updates"] += int(voted[block].flatten(0, 1).any(0).sum()) * int(lanes.sum())
+                totals["run_updates"] += int(starts[block].flatten(0, 1).any(0).sum()) * int(lanes.sum())
     px = max(totals["pixels"], 1)
     return {
         "scene": scene,
@@ -116,6 +133,9 @@ def count(scene: str, n: int, width: int, height: int, semantic: bool, max_tiles
         "evaluated_no_cull": totals["no_cull"] / px,
         "evaluated_cull": totals["cull"] / px,
         "reduction": totals["no_cull"] / max(totals["cull"], 1),
+        # per pixel, entries for which a warp updates the label buffer: at every vote, or once per run
+        "buffer_updates_per_vote": totals["updates"] / px if semantic else float("nan"),
+        "buffer_updates_per_run": totals["run_updates"] / px if semantic else float("nan"),
     }
 
 
