@@ -115,13 +115,13 @@ def _render(
     out_l = torch.empty(pixels, dtype=torch.int32, device=dev)
     out_w = torch.empty(pixels, device=dev)
     overflow = torch.empty(pixels, dtype=torch.int32, device=dev)
-    sums = max(n, 1) if contribute else 1
-    num = torch.zeros(sums, device=dev)
-    den = torch.zeros(sums, device=dev)
+    # the sums are accumulated, so zeroed; the placeholders the kernel never reads need no fill (a launch)
+    sums = torch.zeros(2, max(n, 1), device=dev) if contribute else torch.empty(2, 1, device=dev)
+    num, den = sums[0], sums[1]
     mask = (
         pixel_mask.to(torch.uint8).contiguous()
         if pixel_mask is not None
-        else torch.zeros(1, dtype=torch.uint8, device=dev)
+        else torch.empty(1, dtype=torch.uint8, device=dev)
     )
     veci = wp.types.vector(length=buffer_size, dtype=wp.int32)
     vecf = wp.types.vector(length=buffer_size, dtype=wp.float32)
