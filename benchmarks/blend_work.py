@@ -59,9 +59,8 @@ def count(scene: str, n: int, width: int, height: int, semantic: bool, max_tiles
         m2d, conics, depths, radii = _Project.apply(
             means, quats, scales, vm, K, width, height, 0.01, 1e10, 0.3
         )
-        if semantic:
-            radii = torch.where((labels >= 0) & (conf > 0), radii, torch.zeros_like(radii))
-        bins = bin_gaussians(m2d, conics, opac, radii, depths, width, height, TILE)
+        voters = (labels, conf) if semantic else None
+        bins = bin_gaussians(m2d, conics, opac, radii, depths, width, height, TILE, voters=voters)
     m2d, conics, ext = m2d[0], conics[0], bins.extents[0]
     ys, xs = torch.meshgrid(torch.arange(TILE) + 0.5, torch.arange(TILE) + 0.5, indexing="ij")
     n_tiles = bins.tile_start.numel()

@@ -58,6 +58,8 @@ def count_tiles(
     radii: wp.array(dtype=wp.int32),
     conics: wp.array(dtype=wp.vec3),
     opacities: wp.array(dtype=float),
+    labels: wp.array(dtype=wp.int32),
+    confidences: wp.array(dtype=float),
     num_gaussians: int,
     tile_size: int,
     tiles_x: int,
@@ -69,9 +71,14 @@ def count_tiles(
     """Tiles per Gaussian; its ``alpha_extent``, for the emission and the blending kernels; and which tiles
     of its ``tile_rect`` its ellipse meets (bit i: the i-th tile in row-major order), so that the emission
     writes exactly the tiles counted here instead of deciding again. A rectangle of more than 64 tiles
-    keeps all of them."""
+    keeps all of them. Where ``labels`` is given (not empty), only voters are binned: a Gaussian of label
+    < 0 or confidence <= 0 is culled like one outside the view."""
     tid = wp.tid()
     r = radii[tid]
+    if labels.shape[0] > 0:
+        n = tid % num_gaussians
+        if labels[n] < 0 or confidences[n] <= 0.0:
+            r = 0
     if r <= 0:
         counts[tid] = 0
         extents[tid] = wp.vec2(-1.0, -1.0)
@@ -118,15 +125,15 @@ def emit_intersections(
     """``offsets`` is the inclusive prefix sum of the per-Gaussian tile ``counts``; the tiles are those
     ``count_tiles`` counted and marked in ``reached``."""
     tid = wp.tid()
-    r = radii[tid]
-    if r <= 0:
+    n_tiles = counts[tid]
+    if n_tiles == 0:  # culled, or its ellipse meets no tile (``reached`` is unwritten for the culled)
         return
-    rect = tile_rect(means2d[tid], float(r), extents[tid], tile_size, tiles_x, tiles_y)
+    rect = tile_rect(means2d[tid], float(radii[tid]), extents[tid], tile_size, tiles_x, tiles_y)
     every = (rect[2] - rect[0]) * (rect[3] - rect[1]) > MASK_TILES
     mask = reached[tid]
     cam = tid // num_gaussians
     base = wp.int64(cam * tiles_x * tiles_y)
-    k = offsets[tid] - wp.int64(counts[tid])
+    k = offsets[tid] - wp.int64(n_tiles)
     low = wp.int64(depth_bits[tid]) & wp.int64(4294967295)
     bit = wp.uint64(1)
     for ty in range(rect[1], rect[3]):

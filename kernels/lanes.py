@@ -67,6 +67,24 @@ def lane_sum(x: float) -> float: ...
 
 @wp.func_native(
     """
+#if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 800
+    return __reduce_add_sync(0xffffffffu, x);
+#elif defined(__CUDA_ARCH__)
+    int v = x;
+    for (int o = 16; o > 0; o >>= 1) v += __shfl_xor_sync(0xffffffffu, v, o);
+    return v;
+#else
+    return x;
+#endif
+"""
+)
+def lane_sum_int(x: int) -> int:
+    """The sum of ``x`` over the warp's lanes, in every lane (one instruction from sm_80 on)."""
+    ...
+
+
+@wp.func_native(
+    """
 #if defined(__CUDA_ARCH__)
     int v = x;
     for (int o = 16; o > 0; o >>= 1) v = max(v, __shfl_xor_sync(0xffffffffu, v, o));

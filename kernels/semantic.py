@@ -29,6 +29,7 @@ from .lanes import (
     lane_shfl_vec2,
     lane_shfl_vec3,
     lane_sum,
+    lane_sum_int,
 )
 from .raster import (
     BLEND_BLOCK_DIM,
@@ -119,13 +120,14 @@ def semantic_kernel(buffer_size: int):
         buf_weights: wp.array(dtype=vecf),
         out_labels: wp.array(dtype=wp.int32),
         out_weights: wp.array(dtype=float),
-        overflows: wp.array(dtype=wp.int32),
+        overflow_counts: wp.array(dtype=wp.int64),
         numerator: wp.array(dtype=float),
         denominator: wp.array(dtype=float),
     ):
-        """Per pixel the label, its weight, the overflow count (and with ``write_buffer`` the buffer);
-        with ``contribute``, per Gaussian sum_p w_ip R_p[l_i] and sum_p w_ip (dL_sq/ds_i and dL_lin/ds_i)
-        over the pixels of ``pixel_mask`` (all unless ``use_mask``)."""
+        """Per pixel the label and its weight (and with ``write_buffer`` the buffer); added to
+        ``overflow_counts`` the pixels whose buffer overflowed and the runs that met a full buffer; with
+        ``contribute``, per Gaussian sum_p w_ip R_p[l_i] and sum_p w_ip (dL_sq/ds_i and dL_lin/ds_i) over
+        the pixels of ``pixel_mask`` (all unless ``use_mask``)."""
         tid = wp.tid()
         pix = tile_pixel(tid, tile_size, tile_threads, tiles_x, tiles_per_cam, width, height)
         out = pix[0]
@@ -232,7 +234,15 @@ def semantic_kernel(buffer_size: int):
                 buf_weights[out] = ws
             out_labels[out] = best
             out_weights[out] = best_w
-            overflows[out] = dropped
+        # the totals are all the caller reads of the overflows: one atomic per warp that had any
+        overflowed = int(0)
+        if dropped > 0:
+            overflowed = 1
+        over_pixels = lane_sum_int(overflowed)
+        over_runs = lane_sum_int(dropped)
+        if lane == 0 and over_runs > 0:
+            wp.atomic_add(overflow_counts, 0, wp.int64(over_pixels))
+            wp.atomic_add(overflow_counts, 1, wp.int64(over_runs))
         if contribute == 0:
             return
         # The second walk: the same weights w_ip again, now with the pixel's final R_p at hand.

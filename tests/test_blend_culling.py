@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import torch
 from ogscene3d.kernels.binning import tile_reached
-from ogscene3d.kernels.lanes import bit_clear, bit_lowest, lane_ballot
+from ogscene3d.kernels.lanes import bit_clear, bit_lowest, lane_ballot, lane_sum_int
 from ogscene3d.kernels.raster import (
     alpha_extent,
     gaussian_alpha,
@@ -63,6 +63,12 @@ def _bits(
 def _ballot(out: wp.array(dtype=wp.int32)):
     tid = wp.tid()
     out[tid] = lane_ballot(int(tid % 3 == 0))
+
+
+@wp.kernel(enable_backward=False)
+def _sum_int(values: wp.array(dtype=wp.int32), out: wp.array(dtype=wp.int32)):
+    tid = wp.tid()
+    out[tid] = lane_sum_int(values[tid])
 
 
 @wp.kernel(enable_backward=False)
@@ -180,6 +186,20 @@ def test_lane_ballot(device: str) -> None:
             bits = sum(1 << k for k in range(32) if (32 * w + k) % 3 == 0)
             expect = np.array([bits], dtype=np.uint32).view(np.int32)[0]
             assert np.all(got[32 * w : 32 * w + 32] == expect)
+
+
+def test_lane_sum_int(device: str) -> None:
+    values = np.random.default_rng(1).integers(-1000, 100000, 64).astype(np.int32)
+    out = wp.empty(64, dtype=wp.int32, device=device)
+    wp.launch(
+        _sum_int, dim=64, inputs=[wp.array(values, device=device)], outputs=[out], device=device, block_dim=64
+    )
+    got = out.numpy()
+    if device == "cpu":  # a warp is one thread: its own value
+        np.testing.assert_array_equal(got, values)
+    else:
+        for w in range(2):
+            assert np.all(got[32 * w : 32 * w + 32] == values[32 * w : 32 * w + 32].sum())
 
 
 def _random_conics(n: int, g: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:

@@ -78,3 +78,27 @@ def test_binning_sorts_by_tile_then_depth(device, bit_range, monkeypatch) -> Non
     same_tile = tiles[1:] == tiles[:-1]
     assert torch.all(d[1:][same_tile] >= d[:-1][same_tile])
     assert (ids // N == tiles // (bins.tiles_x * bins.tiles_y)).all()  # each camera's Gaussians in its tiles
+
+
+def test_binning_keeps_only_voters(device) -> None:
+    """With ``voters`` the binning leaves out Gaussians of label < 0 or confidence 0 in every camera: the
+    same tiles and lists as zeroing their radii, and no tiles of their own."""
+    g = torch.Generator().manual_seed(4)
+    C, N, W, H = 2, 2000, 200, 120
+    means2d = (torch.rand(C, N, 2, generator=g) * torch.tensor([W, H])).to(device)
+    conics = torch.tensor([0.05, 0.01, 0.08]).repeat(C, N, 1).to(device)
+    opac = (torch.rand(N, generator=g) * 0.9 + 0.05).to(device)
+    radii = torch.randint(1, 30, (C, N), generator=g, dtype=torch.int32).to(device)
+    depths = (torch.rand(C, N, generator=g) * 10 + 0.1).to(device)
+    labels = torch.randint(-1, 5, (N,), generator=g, dtype=torch.int32).to(device)
+    conf = torch.where(torch.rand(N, generator=g) < 0.2, 0.0, torch.rand(N, generator=g)).to(device)
+    votes = (labels >= 0) & (conf > 0)
+    assert 0 < int(votes.sum()) < N
+    bins = render.bin_gaussians(means2d, conics, opac, radii, depths, W, H, 16, voters=(labels, conf))
+    zeroed = torch.where(votes, radii, torch.zeros_like(radii))
+    expect = render.bin_gaussians(means2d, conics, opac, zeroed, depths, W, H, 16)
+    assert torch.equal(bins.isect_ids, expect.isect_ids)
+    assert torch.equal(bins.tile_start, expect.tile_start) and torch.equal(bins.tile_end, expect.tile_end)
+    assert torch.equal(bins.tiles_per_gaussian, expect.tiles_per_gaussian)
+    assert (bins.tiles_per_gaussian[:, ~votes] == 0).all() and (bins.extents[:, ~votes] < 0).all()
+    assert int(bins.tiles_per_gaussian[:, votes].sum()) > 0

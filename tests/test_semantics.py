@@ -153,7 +153,8 @@ def _emulate_buffer(votes, size):
 def test_overflow_keeps_the_documented_entries(device, buffer_size):
     """Many Gaussians from a small label alphabet stacked in depth, with random opacities and confidences:
     every pixel's buffer holds exactly what the policy gives (runs, matches into the weakest entry,
-    evictions and dropped runs all occur), and the runs that met a full buffer are counted."""
+    evictions and dropped runs all occur), and the runs that met a full buffer and their pixels are
+    counted."""
     from reference_raster import project
 
     g = torch.Generator().manual_seed(buffer_size)
@@ -176,7 +177,7 @@ def test_overflow_keeps_the_documented_entries(device, buffer_size):
         means.to(f), quats.to(f), scales.to(f), vm[0].to(f), K[0].to(f), size, size, 0.01, 1e10, 0.3
     )
     order = torch.argsort(depth).tolist()
-    total_dropped = merged = 0
+    total_dropped = merged = overflowed = 0
     for y in range(size):
         for x in range(size):
             T, votes = 1.0, []
@@ -197,6 +198,7 @@ def test_overflow_keeps_the_documented_entries(device, buffer_size):
             merged += sum(a[0] == b[0] for a, b in zip(votes, votes[1:]))
             expect, dropped = _emulate_buffer(votes, buffer_size)
             total_dropped += dropped
+            overflowed += dropped > 0
             got = {
                 int(lab): float(w)
                 for lab, w in zip(out.buffer_labels[0, y, x].tolist(), out.buffer_weights[0, y, x].tolist())
@@ -207,6 +209,7 @@ def test_overflow_keeps_the_documented_entries(device, buffer_size):
                 assert got[lab] == pytest.approx(w, abs=1e-5)
     assert isinstance(out.meta["overflow_votes"], torch.Tensor)  # left on the device: no host sync
     assert int(out.meta["overflow_votes"]) == total_dropped > 0
+    assert int(out.meta["overflow_pixels"]) == overflowed > 0
     assert merged > 0  # votes were summed into runs
 
 
@@ -232,6 +235,11 @@ def test_bad_semantic_inputs():
         render_semantics(
             means, quats, scales, opac, torch.zeros(4, dtype=torch.int32), torch.full((4,), 1.5), vm, K, 8, 8
         )
+    for wide in (2**31, -(2**31) - 1):  # would wrap around to another label as int32
+        with pytest.raises(ValueError, match="labels must fit in int32"):
+            render_semantics(
+                means, quats, scales, opac, torch.tensor([0, 1, wide, 2]), torch.ones(4), vm, K, 8, 8
+            )
     with pytest.raises(ValueError, match="pixel_mask"):
         rendering_contribution(
             means,

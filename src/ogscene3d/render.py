@@ -268,13 +268,16 @@ def bin_gaussians(
     height: int,
     tile_size: int = 16,
     checks: ValueChecks | None = None,
+    voters: tuple[torch.Tensor, torch.Tensor] | None = None,
 ) -> TileBins:
     """Assign projected Gaussians [C, N] to tiles and sort every tile's list front to back.
 
     A Gaussian goes to the tiles its screen radius covers, less those where its alpha stays below 1/255
     at every pixel (``conics`` [C, N, 3], ``opacities`` [N] decide that), which would blend nothing of it.
 
-    ``checks``: the caller's pending input checks, settled on the sync this function makes anyway."""
+    ``checks``: the caller's pending input checks, settled on the sync this function makes anyway.
+    ``voters``: (labels [N] int32, confidences [N]) to bin only the Gaussians that vote (label >= 0,
+    confidence > 0), as the semantic kernels need (the others neither vote nor occlude)."""
     wp = _wp()
     _, binning, _ = _kernels()
     C, N = radii.shape
@@ -292,7 +295,10 @@ def bin_gaussians(
         return TileBins(tile_size, tiles_x, tiles_y, tile_start, tile_end, empty, counts, extents)
     m2d = _as_wp(means2d.detach(), wp.vec2)
     rad = _as_wp(radii)
+    if voters is None:
+        voters = (torch.empty(0, dtype=torch.int32, device=dev), torch.empty(0, device=dev))
     footprint = [m2d, rad, _as_wp(conics.detach(), wp.vec3), _as_wp(opacities.detach())]
+    votes = [_as_wp(voters[0].to(torch.int32)), _as_wp(voters[1].detach())]
     grid = [N, tile_size, tiles_x, tiles_y]
     ext = _as_wp(extents, wp.vec2)
     # which tiles of its rectangle each Gaussian's ellipse meets, decided once for count and emission
@@ -301,7 +307,7 @@ def bin_gaussians(
         wp.launch(
             binning.count_tiles,
             dim=C * N,
-            inputs=[*footprint, *grid],
+            inputs=[*footprint, *votes, *grid],
             outputs=[_as_wp(counts), ext, reached],
             device=wdev,
         )

@@ -54,7 +54,9 @@ def _check_semantic_inputs(
     check_tensor("confidences", confidences, (N,), means.device, finite=False)
     _check_values(checks, means, quats, scales, opacities, viewmats, Ks, confidences=confidences)
     if N and labels.dtype == torch.int64:
-        checks.fail_if(labels.max() > torch.iinfo(torch.int32).max, "labels must fit in int32")
+        info = torch.iinfo(torch.int32)
+        # below int32's range a label would wrap around to another (even a non-negative) one
+        checks.fail_if((labels.max() > info.max) | (labels.min() < info.min), "labels must fit in int32")
     return width, height
 
 
@@ -80,7 +82,7 @@ def _render(
     pixel_mask: torch.Tensor | None = None,
 ):
     """Project every Gaussian, bin the labelled ones and run the semantic kernel (the binning settles
-    ``checks``). -> (bins, (buffer labels, buffer weights, labels, weights, overflow counts), numerator,
+    ``checks``). -> (bins, (buffer labels, buffer weights, labels, weights, overflow counters), numerator,
     denominator); the buffer and the sums are None where not asked for."""
     wp = _wp()
     from ogscene3d.kernels.raster import BLEND_BLOCK_DIM
@@ -90,6 +92,7 @@ def _render(
         raise ValueError(f"buffer_size must be an int in [1, 64], got {buffer_size!r}")
     dev = means.device
     C, n = viewmats.shape[0], means.shape[0]
+    labels = labels.to(torch.int32)
     with torch.no_grad():
         means2d, conics, depths, radii = _Project.apply(
             means.detach(),
@@ -104,9 +107,10 @@ def _render(
             eps2d,
         )
         # unlabelled Gaussians neither vote nor occlude, nor do those of confidence 0 (their conf * alpha is
-        # 0): a zero radius keeps them out of every tile
-        radii = torch.where((labels >= 0) & (confidences > 0), radii, torch.zeros_like(radii))
-        bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, tile_size, checks)
+        # 0): the binning leaves them out of every tile
+        bins = bin_gaussians(
+            means2d, conics, opacities, radii, depths, width, height, tile_size, checks, (labels, confidences)
+        )
     # the kernel writes every pixel of every output it is given; the unused ones get one element
     pixels = (C, height, width)
     buffer_shape = (*(pixels if write_buffer else (1,)), buffer_size)
@@ -114,9 +118,12 @@ def _render(
     buf_w = torch.empty(buffer_shape, device=dev)
     out_l = torch.empty(pixels, dtype=torch.int32, device=dev)
     out_w = torch.empty(pixels, device=dev)
-    overflow = torch.empty(pixels, dtype=torch.int32, device=dev)
-    # the sums are accumulated, so zeroed; the placeholders the kernel never reads need no fill (a launch)
-    sums = torch.zeros(2, max(n, 1), device=dev) if contribute else torch.empty(2, 1, device=dev)
+    # The overflow counters and the sums are accumulated, so zeroed: one allocation holds both, the sums
+    # as float32 bits (all-zero bits are 0.0), so that one fill launch serves; the placeholders the kernel
+    # never reads need none
+    zeroed = torch.zeros(2 + (max(n, 1) if contribute else 0), dtype=torch.int64, device=dev)
+    counters = zeroed[:2]
+    sums = zeroed[2:].view(torch.float32).view(2, -1) if contribute else torch.empty(2, 1, device=dev)
     num, den = sums[0], sums[1]
     mask = (
         pixel_mask.to(torch.uint8).contiguous()
@@ -130,7 +137,7 @@ def _render(
         _as_wp(conics, wp.vec3),
         _as_wp(bins.extents, wp.vec2),
         _as_wp(opacities.detach()),
-        _as_wp(labels.to(torch.int32)),
+        _as_wp(labels),
         _as_wp(confidences.detach()),
         _as_wp(bins.tile_start),
         _as_wp(bins.tile_end),
@@ -152,7 +159,7 @@ def _render(
         _as_wp(buf_w, vecf),
         _as_wp(out_l),
         _as_wp(out_w),
-        _as_wp(overflow),
+        _as_wp(counters),
         _as_wp(num),
         _as_wp(den),
     ]
@@ -167,7 +174,7 @@ def _render(
         )
     buffers = (buf_l, buf_w) if write_buffer else (None, None)
     sums_out = (num, den) if contribute else (None, None)
-    return bins, (*buffers, out_l, out_w, overflow), *sums_out
+    return bins, (*buffers, out_l, out_w, counters), *sums_out
 
 
 @_on_torch_stream
@@ -294,9 +301,9 @@ def rendering_contribution(
 
 
 def _semantic_render(bins: TileBins, buffer_size: int, outputs) -> SemanticRender:
-    buf_l, buf_w, out_l, out_w, overflow = outputs
-    # counted on the device and left there: a host read here would make every call wait for its kernels
-    overflow_pixels, overflow_votes = torch.stack([(overflow > 0).sum(), overflow.sum()]).unbind()
+    buf_l, buf_w, out_l, out_w, counters = outputs
+    # counted by the kernel and left on the device: a host read here would make every call wait for it
+    overflow_pixels, overflow_votes = counters.unbind()
     meta = {
         "buffer_size": buffer_size,
         "overflow_pixels": overflow_pixels,
