@@ -3,6 +3,9 @@
 #
 #   bash benchmarks/gpu_session.sh OUTDIR          # on the GPU machine: CUDA tests + the three benchmarks
 #   DEVICE=cpu SMALL=1 bash benchmarks/gpu_session.sh /tmp/dry   # dry run of the same steps on a CPU
+#   STEPS="tests semantic" bash benchmarks/gpu_session.sh OUTDIR  # only these steps (a short lease)
+#   BASELINE=.ab/base bash benchmarks/gpu_session.sh OUTDIR      # also semantic_ab against a revision laid
+#                                          # out beforehand by `benchmarks/semantic_ab.py prepare REV .ab/base`
 #
 # Steps (each one's log goes to OUTDIR/<step>.log; a failing step does not stop the others):
 #   tests      the kernel, semantic and mapping tests (they run on cuda when torch sees a GPU); first the
@@ -11,10 +14,12 @@
 #   semantic   semantic render + contribution vs a colour forward pass, 500k at 1200x680 (issue #3)
 #   mapping    per-keyframe module times at 1200x680 with ~1M Gaussians (issue #5), also as JSON
 #   profile    kernel-level tables of the three (OUTDIR/profile/): device-kernel vs wall time per call
+#   semantic_ab with BASELINE: the semantic call of this tree and of the baseline in turn, same machine
 # OUTDIR/summary.txt lists each step's exit status and wall time.
 set -uo pipefail
 out=${1:?usage: gpu_session.sh OUTDIR}
 device=${DEVICE:-cuda}
+steps=" ${STEPS:-tests rasterize semantic mapping profile semantic_ab} "
 mkdir -p "$out"
 cd "$(dirname "$0")/.."
 
@@ -29,6 +34,7 @@ fi
 : > "$out/summary.txt"
 step() {
   local name=$1; shift
+  [[ "$steps" == *" $name "* ]] || return 0
   local t0=$SECONDS
   "$@" > "$out/$name.log" 2>&1
   local rc=$?
@@ -60,3 +66,7 @@ step mapping python benchmarks/mapping.py modules --device "$device" --size "$si
   --gaussians "$gaussians" --json "$out/mapping_modules.json"
 step profile python benchmarks/kernel_profile.py --device "$device" --width "$w" --height "$h" \
   --gaussians "$sem_counts" --map-gaussians "$gaussians" --out "$out/profile"
+if [[ -n "${BASELINE:-}" ]]; then
+  step semantic_ab python benchmarks/semantic_ab.py run "$BASELINE" --device "$device" --width "$w" \
+    --height "$h" --counts "$sem_counts" --iters "$iters"
+fi

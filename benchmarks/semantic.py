@@ -12,6 +12,7 @@ mapped scene holds them.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -28,6 +29,7 @@ from _common import (  # noqa: E402
     time_ms,
 )
 
+import ogscene3d  # noqa: E402
 from ogscene3d import rasterization, render_semantics, rendering_contribution  # noqa: E402
 from ogscene3d.device import resolve_device  # noqa: E402
 
@@ -82,6 +84,7 @@ def main() -> None:
     ap.add_argument("--labels", type=int, default=2000)
     ap.add_argument("--iters", type=int, default=10)
     ap.add_argument("--scene", choices=sorted(SEMANTIC_SCENES), action="append", help="default: both")
+    ap.add_argument("--json", type=Path, help="also write the rows here")
     args = ap.parse_args()
     device = resolve_device(args.device)
     W, H = args.width, args.height
@@ -90,10 +93,12 @@ def main() -> None:
         for scene in args.scene or sorted(SEMANTIC_SCENES)
         for c in args.counts.split(",")
     ]
-    print(f"semantic kernels at {W}x{H}, {args.labels} distinct labels, one camera")
+    print(f"semantic kernels at {W}x{H}, {args.labels} distinct labels, one camera ({ogscene3d.__file__})")
     print("contribution_ms includes the voting pass it needs; 1call = labels + P_conf from one call")
     print("wall ms: median of 5 timed blocks; kernel ms: device-kernel time per call (torch.profiler)")
     print_table(rows, list(rows[0].keys()))
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1))
 
 
 if __name__ == "__main__":
