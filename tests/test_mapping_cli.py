@@ -65,3 +65,22 @@ def test_run_errors(tmp_path, capsys):
     assert "resume" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["run", "--out", str(tmp_path / "o3"), "--ablation", "bogus"])
+
+
+def test_bad_frames_are_skipped_when_asked_and_resume_goes_on_after_them(tmp_path, capsys):
+    scene = _replica_scene(tmp_path / "scene", frames=4)
+    (scene / "results" / "depth000001.png").write_bytes(b"not a png")
+    out = tmp_path / "run"
+    common = ["--data", str(scene), "--segments", str(scene / "segs"), "--out", str(out), "--device", "cpu",
+              "--no-progress", "--set", "mapping.opt_iters=1", "--set", "graph.enabled=false",
+              "--set", "mapping.knn_radius=0.1"]  # fmt: skip
+    assert main(["run", *common, "--max-frames", "3"]) == 2
+    assert "depth000001.png" in capsys.readouterr().err
+    skip = ["--set", "data.on_bad_frame=skip"]
+    assert main(["run", *common, *skip, "--max-frames", "3"]) == 0
+    assert "mapped 2 frames" in capsys.readouterr().out
+    # the checkpoint records the dataset position, not the count of mapped frames: frame 3 alone is left
+    assert main(["run", *common, *skip, "--resume"]) == 0
+    assert "mapped 1 frames" in capsys.readouterr().out
+    t = json.loads((out / "timings.json").read_text())
+    assert t["counts"]["frames"] == 3

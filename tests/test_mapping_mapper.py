@@ -179,6 +179,47 @@ def test_odometry_poses_replace_the_dataset_poses(tmp_path):
     assert len(m.map) > 0
 
 
+def test_resumed_odometry_goes_on_in_the_same_trajectory(tmp_path):
+    """A sequence without poses: odometry anchors at the identity, and a run resumed from the checkpoint
+    tracks the next frames in the same coordinates as the uninterrupted run (the tracker's keyframe is in
+    the checkpoint), not from a new anchor."""
+    pytest.importorskip("open3d")
+    from ogscene3d.datasets import make_synthetic_scene, open_dataset
+
+    scene = make_synthetic_scene(tmp_path / "scene", seed=0, frames=60, width=96, height=72, progress=False)
+    ds = open_dataset(scene, max_frames=6)
+
+    def posed_by_odometry(i: int) -> Frame:
+        frame = ds[i]
+        frame.pose = None
+        return frame
+
+    cfg = _config("tracking.poses=odometry", "mapping.opt_iters=1")
+    whole = Mapper(cfg, "cpu")
+    for i in range(4):
+        whole.process(posed_by_odometry(i))
+    whole.save(tmp_path / "run")
+    resumed = Mapper(cfg, "cpu")
+    resumed.load_checkpoint(tmp_path / "run" / "map.npz")
+    assert resumed.next_index == 4
+    for i in (4, 5):
+        a, b = posed_by_odometry(i), posed_by_odometry(i)
+        whole.process(a)
+        resumed.process(b)
+        assert b.pose is not None and not np.allclose(b.pose, np.eye(4), atol=1e-3)
+        np.testing.assert_allclose(b.pose, a.pose, atol=1e-4)
+
+
+def test_odometry_resumed_from_a_checkpoint_without_tracker_state_warns(tmp_path, caplog):
+    m = Mapper(_config(), "cpu")
+    for i in range(2):
+        m.process(_frame(i))
+    m.save(tmp_path)
+    with caplog.at_level("WARNING", logger="ogscene3d.mapping.mapper"):
+        Mapper(_config("tracking.poses=odometry"), "cpu").load_checkpoint(tmp_path / "map.npz")
+    assert any("no tracker state" in r.message for r in caplog.records)
+
+
 def test_inner_probes_are_off_segment_boundaries(device):
     m = Mapper(_config(), device)
     segments = np.zeros((4, 6), dtype=np.int32)

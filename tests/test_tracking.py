@@ -275,6 +275,55 @@ def test_restart_after_max_lost_frames() -> None:
     assert tracker.step(frames[6]) is not None
 
 
+def _npz_roundtrip(state: dict, path: Path) -> dict:
+    np.savez(path, **state)
+    with np.load(path, allow_pickle=False) as z:  # as a checkpoint is read
+        return {k: z[k] for k in z.files}
+
+
+def test_state_lets_another_tracker_go_on_in_the_same_trajectory(tmp_path: Path) -> None:
+    """A tracker restored from ``state()`` (through an npz file, as in a checkpoint) tracks the next frames
+    exactly as the one that saved it, in its coordinates: no pose given, so only the state can say where."""
+    poses = synthetic_poses(9)
+    frames = synthetic_frames(poses, with_pose=False)
+    first = Tracker()
+    for f in frames[:5]:
+        assert first.step(f) is not None
+    state = first.state()
+    assert state["trk_kf_rgb"].shape == (H, W, 3) and len(state["trk_recent_rmse"]) > 0
+    second = Tracker()
+    second.load_state(_npz_roundtrip(state, tmp_path / "state.npz"))
+    assert second.keyframe_index == first.keyframe_index
+    for f in frames[5:]:
+        a, b = first.step(f), second.step(f)
+        assert a is not None and b is not None
+        np.testing.assert_allclose(b, a, atol=1e-4)  # Open3D's threaded reductions are not bit-exact
+        assert second.last is not None and second.last.status == "tracked"
+    fresh = Tracker()
+    assert fresh.state() == {}
+    fresh.load_state({})  # nothing to restore: the next frame anchors
+    np.testing.assert_array_equal(fresh.step(frames[5]), np.eye(4))
+
+
+def test_state_after_a_restart_keeps_the_anchor_pose(tmp_path: Path) -> None:
+    frames = synthetic_frames(synthetic_poses(6))
+    frames[3], frames[4] = garbage_frame(3, 1), garbage_frame(4, 2)
+    tracker = Tracker(TrackingConfig(max_lost_frames=2))
+    out = [tracker.step(f) for f in frames[:5]]
+    restored = Tracker(TrackingConfig(max_lost_frames=2))
+    restored.load_state(_npz_roundtrip(tracker.state(), tmp_path / "state.npz"))
+    np.testing.assert_allclose(restored.step(frames[5]), out[2])  # re-anchored at the last good pose
+
+
+def test_incomplete_state_is_an_error(synthetic: list[Frame]) -> None:
+    tracker = Tracker()
+    tracker.step(synthetic[0])
+    state = tracker.state()
+    del state["trk_last_pose"]
+    with pytest.raises(OGSceneError, match="trk_last_pose"):
+        Tracker().load_state(state)
+
+
 class _FakeOdometry:
     def __init__(self, transform: np.ndarray, fitness: float = 0.9, rmse: float = 0.01) -> None:
         self.result = (transform, fitness, rmse)

@@ -281,14 +281,14 @@ def map_scene(
     dev = mapper.device
     if dev.type == "cuda":
         torch.cuda.reset_peak_memory_stats(dev)
-    indices: Any = range(len(ds))
+    frames: Any = iter(ds)  # bad frames raise, or are skipped with a warning (data.on_bad_frame)
     if progress:
         from tqdm import tqdm
 
-        indices = tqdm(indices, desc=spec.name, unit="frame")
+        frames = tqdm(frames, desc=spec.name, unit="frame", total=len(ds))
     t0 = time.perf_counter()
-    for i in indices:
-        mapper.process(ds[i])
+    for frame in frames:
+        mapper.process(frame)
     mapper.finalize()
     if dev.type == "cuda":
         torch.cuda.synchronize(dev)

@@ -78,7 +78,7 @@ from __future__ import annotations
 import logging
 import math
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -333,7 +333,8 @@ def ransac_rigid(
 class _Prepared:
     """A frame converted for Open3D: RGBD image on the tracking device + intrinsics at tracking resolution.
 
-    ``gray``/``depth_full``/``K_full`` keep the input resolution for ORB features, computed lazily.
+    ``gray``/``depth_full``/``K_full`` keep the input resolution for ORB features, computed lazily, and
+    with ``rgb`` for ``Tracker.state``.
     """
 
     index: int
@@ -346,6 +347,7 @@ class _Prepared:
     gray: np.ndarray  # uint8 [H, W] at input resolution
     depth_full: np.ndarray  # float32 [H, W] metres, 0 = invalid
     K_full: np.ndarray  # float64 [3, 3]
+    rgb: np.ndarray  # uint8 [H, W, 3] at input resolution
     features: tuple[np.ndarray, np.ndarray] | None = None  # (points [M, 3], ORB descriptors [M, 32])
 
 
@@ -386,6 +388,60 @@ class Tracker:
         self._recent_rmse: list[tuple[str, float]] = []  # (method, residual) of the last accepted steps
         self._kf_method = "hybrid" if self.config.method == "auto" else self.config.method
         self._anchor_override = None if anchor_pose is None else check_pose(anchor_pose, "anchor pose")
+
+    def state(self) -> dict[str, np.ndarray]:
+        """What a resumed run needs to go on in the same trajectory, as arrays for an npz checkpoint: the
+        keyframe's image, depth, intrinsics and pose, the last pose, the motion prior and the recent
+        residuals (or, right after a restart, the pose to re-anchor at; nothing before the first anchor).
+        ``load_state`` restores it."""
+        if self._kf is None:
+            if self._anchor_override is None:
+                return {}
+            return {"trk_anchor_pose": self._anchor_override.copy()}
+        assert self._kf_pose is not None and self._last_pose is not None
+        kf = self._kf
+        return {
+            "trk_kf_index": np.array(kf.index),
+            "trk_kf_rgb": kf.rgb,
+            "trk_kf_depth": kf.depth_full,
+            "trk_kf_K": kf.K_full,
+            "trk_kf_pose": self._kf_pose.copy(),
+            "trk_kf_age": np.array(self._kf_age),
+            "trk_last_pose": self._last_pose.copy(),
+            "trk_velocity": self._velocity.copy(),
+            "trk_since_good": np.array(self._since_good),
+            "trk_failures": np.array(self._failures),
+            "trk_recent_methods": np.array([m for m, _ in self._recent_rmse], dtype=str),
+            "trk_recent_rmse": np.array([r for _, r in self._recent_rmse], dtype=np.float64),
+        }
+
+    def load_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Continue from ``state()`` of a tracker with the same configuration (a resumed run): the next
+        frame is aligned to the saved keyframe, so the trajectory goes on in the saved one's coordinates."""
+        self.reset()
+        if "trk_kf_rgb" not in state:
+            if "trk_anchor_pose" in state:
+                self._anchor_override = check_pose(state["trk_anchor_pose"], "saved tracker anchor pose")
+            return
+        try:
+            frame = Frame(
+                int(state["trk_kf_index"]),
+                np.ascontiguousarray(state["trk_kf_rgb"], dtype=np.uint8),
+                np.ascontiguousarray(state["trk_kf_depth"], dtype=np.float32),
+                state["trk_kf_K"],
+            )
+            self._accept_keyframe(
+                self._prepare(frame), check_pose(state["trk_kf_pose"], "saved keyframe pose")
+            )
+            self._kf_age = int(state["trk_kf_age"])
+            self._last_pose = check_pose(state["trk_last_pose"], "saved last pose")
+            self._velocity = check_pose(state["trk_velocity"], "saved motion prior")
+            self._since_good = int(state["trk_since_good"])
+            self._failures = int(state["trk_failures"])
+            rmse = np.asarray(state["trk_recent_rmse"], dtype=np.float64)
+            self._recent_rmse = list(zip(np.asarray(state["trk_recent_methods"]).tolist(), rmse.tolist()))
+        except KeyError as e:
+            raise OGSceneError(f"saved tracker state is incomplete (missing {e})") from e
 
     @property
     def keyframe_pose(self) -> np.ndarray | None:
@@ -430,7 +486,17 @@ class Tracker:
         gray = cv2.cvtColor(np.ascontiguousarray(frame.rgb), cv2.COLOR_RGB2GRAY)
         K_full = np.asarray(frame.K, dtype=np.float64)
         return _Prepared(
-            frame.index, rgbd, intrinsics, K, depth, depth.shape, valid_fraction, gray, depth_full, K_full
+            frame.index,
+            rgbd,
+            intrinsics,
+            K,
+            depth,
+            depth.shape,
+            valid_fraction,
+            gray,
+            depth_full,
+            K_full,
+            np.asarray(frame.rgb),
         )
 
     def _features(self, prep: _Prepared) -> tuple[np.ndarray, np.ndarray]:

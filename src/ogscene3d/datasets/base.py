@@ -270,7 +270,12 @@ class RGBDDataset:
         return self._load(int(i))
 
     def __iter__(self) -> Iterator[Frame]:
-        for i in range(len(self.records)):
+        return self.frames()
+
+    def frames(self, start: int = 0) -> Iterator[Frame]:
+        """The frames from position ``start`` on (a resumed run), in order; a bad frame raises its
+        :class:`DataError`, or is skipped with a warning when ``on_bad_frame == "skip"``."""
+        for i in range(start, len(self.records)):
             try:
                 frame = self._load(i)
             except DataError as e:

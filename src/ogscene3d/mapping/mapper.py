@@ -41,7 +41,7 @@ import yaml
 from ..atomic import atomic_write_text
 from ..config import Config, config_to_dict
 from ..device import resolve_device
-from ..errors import ConfigError, DataError
+from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame
 from ..gaussians import GaussianMap
 from .init import make_probes
@@ -124,6 +124,9 @@ class Mapper:
         self.recent: deque[MemoryEntry] = deque(maxlen=max(1, cfg.opt_memory_frames))
         self.timings = Timings(self.device)
         self.frames_seen = 0
+        # the dataset position after the latest frame given to process (mapped, untracked or not a
+        # keyframe): where a resumed run goes on, also when frames were skipped
+        self.next_index = 0
         self.keyframe_count = 0
         self.rng = np.random.default_rng(config.seed)
         self._graph = None
@@ -179,17 +182,20 @@ class Mapper:
             raise ConfigError(
                 f"tracking.poses must be 'gt' or 'odometry', got {self.config.tracking.poses!r}"
             )
-        if self._tracker is None:
-            from ..tracking import Tracker
-
-            self._tracker = Tracker(self.config.tracking, device=None)  # Open3D's CUDA when it has it
         with self.timings.section("tracking"):
-            pose = self._tracker.step(frame)
+            pose = self._get_tracker().step(frame)
         if pose is None:
             self.timings.add("frames_untracked")
             return False
         frame.pose = pose
         return True
+
+    def _get_tracker(self):
+        if self._tracker is None:
+            from ..tracking import Tracker
+
+            self._tracker = Tracker(self.config.tracking, device=None)  # Open3D's CUDA when it has it
+        return self._tracker
 
     def _render_check(self, frame: Frame) -> tuple[torch.Tensor | None, torch.Tensor | None]:
         if len(self.map) == 0:
@@ -216,6 +222,7 @@ class Mapper:
 
     def process(self, frame: Frame) -> bool:
         """Map one frame. Returns True when it was a keyframe (non-keyframes are only counted)."""
+        self.next_index = frame.index + 1
         if not self._track(frame):
             return False
         if frame.pose is None:
@@ -535,10 +542,13 @@ class Mapper:
     def _state_extra(self) -> dict[str, np.ndarray]:
         extra = {
             "mapper_frames_seen": np.array(self.frames_seen),
+            "mapper_next_index": np.array(self.next_index),
             "mapper_keyframe_count": np.array(self.keyframe_count),
             "mapper_memory_cursor": np.array(self.memory._cursor),
         }
         extra.update(self.keyframes.state())
+        if self._tracker is not None:
+            extra.update(self._tracker.state())  # the odometry goes on in the same trajectory
         mem = self.memory.entries
         if mem and len({e.depth.shape for e in mem}) == 1:
             extra["mem_keyframe"] = np.array([e.keyframe for e in mem])
@@ -565,6 +575,10 @@ class Mapper:
         try:
             with np.load(p, allow_pickle=False) as z:
                 self.frames_seen = int(z["mapper_frames_seen"])
+                # checkpoints from before the position was saved: frames_seen was used
+                self.next_index = (
+                    int(z["mapper_next_index"]) if "mapper_next_index" in z.files else self.frames_seen
+                )
                 self.keyframe_count = int(z["mapper_keyframe_count"])
                 self.keyframes.load_state({k: z[k] for k in ("kf_since_last", "kf_last_pose")})
                 self.memory.entries = []
@@ -582,8 +596,22 @@ class Mapper:
                         )
                         self.memory.restore(entry, self.device)
                     self.memory._cursor = int(z["mapper_memory_cursor"]) % max(1, len(self.memory.entries))
+                tracker_state = {k: z[k] for k in z.files if k.startswith("trk_")}
         except KeyError as e:
             raise DataError(f"{p}: not a mapper checkpoint (missing {e})") from e
+        self._tracker = None
+        if self.config.tracking.poses == "odometry":
+            if tracker_state:
+                try:
+                    self._get_tracker().load_state(tracker_state)
+                except (ValueError, OGSceneError) as e:
+                    raise DataError(f"{p}: cannot restore the tracker: {e}") from e
+            elif self.frames_seen:
+                log.warning(
+                    "%s holds no tracker state (written with dataset poses, or by an older version): "
+                    "odometry restarts at the next frame's own pose, or the identity where it has none",
+                    p,
+                )
         self.timings.counts["keyframes"] = self.keyframe_count
         self.timings.counts["frames"] = self.frames_seen
 

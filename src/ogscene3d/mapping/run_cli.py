@@ -88,35 +88,39 @@ def run(args: argparse.Namespace) -> int:
 
     mapper = Mapper(cfg, cfg.device)
     mapper.set_checkpoint_dir(out)
-    skip = 0
+    start = 0
     if args.resume:
         ckpt = out / "map.npz"
         if not ckpt.is_file():
             raise DataError(f"{ckpt}: --resume needs a checkpoint from an earlier run in --out")
         mapper.load_checkpoint(ckpt)
-        skip = mapper.frames_seen
+        start = mapper.next_index
         log.info(
-            "resuming after %d frames (%d keyframes, %d Gaussians)",
-            skip,
+            "resuming at frame %d (%d frames mapped, %d keyframes, %d Gaussians)",
+            start,
+            mapper.frames_seen,
             mapper.keyframe_count,
             len(mapper.map),
         )
 
-    indices = range(skip, len(ds))
+    # bad frames raise, or are skipped with a warning under data.on_bad_frame: skip
+    frames = ds.frames(start)
     if not args.no_progress:
         from tqdm import tqdm
 
-        indices = tqdm(indices, desc="mapping", unit="frame")
+        frames = tqdm(frames, desc="mapping", unit="frame", total=max(0, len(ds) - start))
     t0 = time.perf_counter()
-    for i in indices:
-        mapper.process(ds[i])
-        if hasattr(indices, "set_postfix"):
-            indices.set_postfix(gaussians=len(mapper.map), kf=mapper.keyframe_count)
+    given = 0
+    for frame in frames:
+        mapper.process(frame)
+        given += 1
+        if hasattr(frames, "set_postfix"):
+            frames.set_postfix(gaussians=len(mapper.map), kf=mapper.keyframe_count)
     mapper.finalize()
     mapper.save(out)
     dt = time.perf_counter() - t0
     print(
-        f"mapped {len(ds) - skip} frames ({mapper.keyframe_count} keyframes) in {dt:.1f} s "
+        f"mapped {given} frames ({mapper.keyframe_count} keyframes) in {dt:.1f} s "
         f"on {mapper.device}: "
         f"{len(mapper.map)} Gaussians -> {out}"
     )
