@@ -270,6 +270,29 @@ def test_json_roundtrip_networkx_graphml_and_query(tmp_path):
     assert nx.read_graphml(gml).number_of_nodes() == 3
 
 
+def test_state_resumes_captions_and_schedule():
+    """A graph restored from ``state()`` (through JSON, as in a checkpoint) keeps the captions and the update
+    schedule: the next update is the one the original would make, and captions only what it would."""
+    cfg = GraphConfig()
+    first, second = SpyCaptioner(), SpyCaptioner()
+    g = SceneGraph(cfg, captioner=first, node_confidence=TableConfidence({1: 0.1}))
+    for kf in range(15):
+        g.update(kf, *blob_map([0, 1, 2]))
+    h = SceneGraph(cfg, captioner=second, node_confidence=TableConfidence({1: 0.1}))
+    h.load_state(json.loads(json.dumps(g.state())))
+    assert h.to_json() == g.to_json() and h.nodes[0].caption == "thing 0 v1"
+    assert (
+        [kf for kf in range(15, 24) if h.is_due(kf)] == [kf for kf in range(15, 24) if g.is_due(kf)] == [23]
+    )
+    h.update(23, *blob_map([0, 1, 2, 3]))
+    assert second.calls == [[1, 3]]  # the uncertain node and the new one; nodes 0 and 2 keep their captions
+    assert h.nodes[0].caption == "thing 0 v1" and h.nodes[3].first_seen == 23
+    with pytest.raises(DataError, match="schedule"):
+        h.load_state({"graph": g.to_json()})
+    with pytest.raises(DataError, match="not a scene graph state"):
+        h.load_state([])
+
+
 @pytest.mark.parametrize(
     "content,match",
     [

@@ -84,3 +84,19 @@ def test_bad_frames_are_skipped_when_asked_and_resume_goes_on_after_them(tmp_pat
     assert "mapped 1 frames" in capsys.readouterr().out
     t = json.loads((out / "timings.json").read_text())
     assert t["counts"]["frames"] == 3
+
+
+def test_unusable_device_is_a_clean_error(tmp_path, capsys):
+    import torch
+
+    from ogscene3d.device import resolve_device
+    from ogscene3d.errors import ConfigError
+
+    for bad in ("bogus", "mps", "cuda:99"):
+        with pytest.raises(ConfigError, match="device="):
+            resolve_device(bad)
+    assert main(["run", "--out", str(tmp_path / "o"), "--device", "bogus", "--no-progress"]) == 2
+    assert "device='bogus' is not supported" in capsys.readouterr().err
+    if not torch.cuda.is_available():
+        assert main(["run", "--out", str(tmp_path / "o"), "--device", "cuda", "--no-progress"]) == 2
+        assert "sees no CUDA GPU" in capsys.readouterr().err

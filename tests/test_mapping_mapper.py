@@ -157,6 +157,29 @@ def test_scene_graph_is_fed(tmp_path, device):
     assert {n["id"] for n in graph["nodes"]} == {0, 1}
 
 
+def test_resume_keeps_the_scene_graph(tmp_path):
+    cfg = load_config(
+        None,
+        ["mapping.opt_iters=1", "mapping.knn_radius=0.1", "graph.init_keyframes=2", "graph.update_every=2",
+         "graph.min_gaussians=5", "graph.background=false"],
+    )  # fmt: skip
+    m = Mapper(cfg, "cpu")
+    for i in range(3):
+        m.process(_frame(i, (1 + i, 5 + i)))
+    m.save_checkpoint(tmp_path / "map.npz")
+    saved = m.graph.to_json()
+    assert saved["nodes"] and m.graph.num_updates == 1
+    r = Mapper(cfg, "cpu")
+    r.load_checkpoint(tmp_path / "map.npz")
+    assert r.graph is not None and r.graph.to_json() == saved
+    assert r.graph.is_due(3) and not r.graph.is_due(2)  # the schedule goes on: updates at keyframes 1, 3, ...
+    r.process(_frame(3, (4, 8)))
+    assert r.graph.num_updates == 2
+    assert {n["id"]: n["first_seen"] for n in saved["nodes"]}.items() <= {
+        n.id: n.first_seen for n in r.graph.nodes.values()
+    }.items()
+
+
 def test_odometry_poses_replace_the_dataset_poses(tmp_path):
     pytest.importorskip("open3d")  # the RGB-D odometry; absent only on bare benchmark machines
     from ogscene3d.datasets import make_synthetic_scene, open_dataset

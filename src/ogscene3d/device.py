@@ -8,19 +8,26 @@ from collections.abc import Iterator
 
 import torch
 
+from .errors import ConfigError
+
 
 def resolve_device(device: str | torch.device | None = None) -> torch.device:
     """Accept "cpu", "cuda", "cuda:0", a torch.device or None (CUDA when available, else CPU)."""
     if device is None:
         return torch.device("cuda:0" if torch.cuda.is_available() else "cpu")
-    dev = torch.device(device)
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError):
+        dev = None
+    if dev is None or dev.type not in ("cpu", "cuda"):
+        raise ConfigError(f"device={device!r} is not supported: use 'cpu', 'cuda' or 'cuda:N'")
     if dev.type == "cuda":
         if not torch.cuda.is_available():
-            raise ValueError(f"device={device!r} was asked for but torch sees no CUDA GPU; use device='cpu'")
+            raise ConfigError(f"device={device!r} was asked for but torch sees no CUDA GPU; use device='cpu'")
         if dev.index is None:
             dev = torch.device("cuda", torch.cuda.current_device())
-    elif dev.type != "cpu":
-        raise ValueError(f"device={device!r} is not supported: use 'cpu', 'cuda' or 'cuda:N'")
+        elif dev.index >= torch.cuda.device_count():
+            raise ConfigError(f"device={device!r}: torch sees {torch.cuda.device_count()} CUDA GPU(s)")
     return dev
 
 

@@ -597,6 +597,37 @@ class SceneGraph:
             relations=GeometricRelations(cfg.relations, cfg.up_axis),
             node_confidence=MeanConfidence(),
         )
+        g._read_json(doc, source)
+        return g
+
+    def state(self) -> dict:
+        """The graph and its update schedule, for a mapping checkpoint (``load_state`` resumes from it).
+        Observations and ground-truth votes are not kept: after a resume they start from the next
+        keyframe."""
+        with self._lock:
+            return {
+                "graph": self.to_json(),
+                "last_update_count": self._last_update_count,
+                "last_update_keyframe": self.last_update_keyframe,
+                "num_updates": self.num_updates,
+            }
+
+    def load_state(self, state: Any, source: str = "checkpoint") -> None:
+        """Go on from ``state()``: its nodes (captions, confidences, first_seen), edges and schedule, with
+        this graph's own captioner, relations and confidence; DataError naming ``source``."""
+        if not isinstance(state, dict) or not isinstance(state.get("graph"), dict):
+            raise DataError(f"{source}: not a scene graph state")
+        try:
+            schedule = [int(state[k]) for k in ("last_update_count", "last_update_keyframe", "num_updates")]
+        except (KeyError, TypeError, ValueError) as e:
+            raise DataError(f"{source}: scene graph state has no valid schedule ({e})") from None
+        with self._lock:
+            self._read_json(state["graph"], source)
+            self._last_update_count, self.last_update_keyframe, self.num_updates = schedule
+            self._initialized = bool(self.num_updates)
+
+    def _read_json(self, doc: Any, source: str) -> None:
+        """Replace the nodes and edges by those of a graph.json document."""
         if not isinstance(doc, dict) or doc.get("version") != GRAPH_JSON_VERSION:
             raise DataError(f"{source}: not a version-{GRAPH_JSON_VERSION} scene graph document")
         if not isinstance(doc.get("nodes"), list) or not isinstance(doc.get("edges"), list):
@@ -614,6 +645,8 @@ class SceneGraph:
                 )
             return a
 
+        nodes: dict[int, SceneNode] = {}
+        edges: dict[tuple[int, int], SceneEdge] = {}
         for k, d in enumerate(doc["nodes"]):
             if not isinstance(d, dict) or not isinstance(d.get("id"), int):
                 raise DataError(f"{source}: node #{k} has no integer 'id'")
@@ -634,7 +667,7 @@ class SceneGraph:
                 caption_source=str(d.get("caption_source", "")),
                 confidence=float(d.get("confidence", 0.0)),
             )
-            g.nodes[node.id] = node
+            nodes[node.id] = node
         for k, e in enumerate(doc["edges"]):
             try:
                 s, t, rel = int(e["source"]), int(e["target"]), str(e["relation"])
@@ -643,11 +676,11 @@ class SceneGraph:
                 raise DataError(
                     f"{source}: edge #{k} needs integer 'source'/'target' and a 'relation'"
                 ) from None
-            if s not in g.nodes or t not in g.nodes:
+            if s not in nodes or t not in nodes:
                 raise DataError(f"{source}: edge #{k} refers to a node that is not in the graph ({s} -> {t})")
-            g.edges[(min(s, t), max(s, t))] = SceneEdge(s, t, rel, score, str(e.get("predictor", "")))
-        g._initialized = True
-        return g
+            edges[(min(s, t), max(s, t))] = SceneEdge(s, t, rel, score, str(e.get("predictor", "")))
+        self.nodes, self.edges = nodes, edges
+        self._initialized = True
 
     def to_networkx(self):
         """A ``networkx.DiGraph``: node attributes caption, tag, confidence, center_x/y/z, num_gaussians,

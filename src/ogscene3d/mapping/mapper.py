@@ -549,6 +549,9 @@ class Mapper:
         extra.update(self.keyframes.state())
         if self._tracker is not None:
             extra.update(self._tracker.state())  # the odometry goes on in the same trajectory
+        if self._graph is not None and not self._graph_failed:
+            # captions (possibly paid VLM calls), first_seen and the update schedule go on after a resume
+            extra["graph_state"] = np.array(json.dumps(self._graph.state()))
         mem = self.memory.entries
         if mem and len({e.depth.shape for e in mem}) == 1:
             extra["mem_keyframe"] = np.array([e.keyframe for e in mem])
@@ -597,8 +600,21 @@ class Mapper:
                         self.memory.restore(entry, self.device)
                     self.memory._cursor = int(z["mapper_memory_cursor"]) % max(1, len(self.memory.entries))
                 tracker_state = {k: z[k] for k in z.files if k.startswith("trk_")}
+                graph_state = str(z["graph_state"]) if "graph_state" in z.files else None
         except KeyError as e:
             raise DataError(f"{p}: not a mapper checkpoint (missing {e})") from e
+        self._graph, self._graph_failed = None, False
+        if graph_state is not None and self.config.graph.enabled:
+            from ..graph import SceneGraph
+
+            try:
+                graph = SceneGraph(self.config.graph)
+                graph.load_state(json.loads(graph_state), source=f"{p} (graph_state)")
+                self._graph = graph
+            except Exception as e:  # noqa: BLE001 - the graph is optional: the map resumes without it
+                log.warning(
+                    "scene graph not restored (%s: %s): the next update builds it anew", type(e).__name__, e
+                )
         self._tracker = None
         if self.config.tracking.poses == "odometry":
             if tracker_state:

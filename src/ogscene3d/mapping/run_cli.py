@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from ..config import add_override_argument, load_config
+from ..device import resolve_device
 from ..errors import DataError
 from ..tracking import add_poses_argument
 
@@ -57,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config, overrides)
     if args.poses:
         cfg.tracking.poses = args.poses
+    resolve_device(cfg.device)  # an unusable device fails before a synthetic scene is generated
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
