@@ -114,6 +114,28 @@ def test_classical_backend(scene, tmp_path):
     assert not (out / "frame-000001.color.png").exists()
 
 
+def test_bad_frames_are_skipped_when_asked(scene, tmp_path, caplog):
+    import shutil
+
+    data = tmp_path / "data"
+    shutil.copytree(scene["data"], data)
+    (data / "frame-000001.depth.png").write_bytes(b"not a png")
+    out = tmp_path / "out"
+    args = ["segment", "--data", str(data), "--out", str(out), "--backend", "classical", "--no-progress"]
+    assert main(args) == 2  # the default: a bad frame is an error
+    with caplog.at_level("INFO", logger="ogscene3d.segmentation.segment_cli"):
+        assert main([*args, "--set", "data.on_bad_frame=skip"]) == 0
+        assert sorted(p.name for p in out.glob("*.png")) == [
+            "frame-000000.color.png",
+            "frame-000002.color.png",
+        ]
+        caplog.clear()
+        assert main([*args, "--set", "data.on_bad_frame=skip"]) == 0  # only the bad frame is left to do
+    messages = [r.message for r in caplog.records]
+    assert any("no frame segmented: the 1 left to do were bad" in m for m in messages)
+    assert not any("nothing to do" in m for m in messages)
+
+
 def test_cli_errors(scene, tmp_path, capsys):
     base = ["segment", "--data", str(scene["data"]), "--out", str(tmp_path / "x"), "--no-progress"]
     assert main(base) == 2  # the default backend (precomputed) computes nothing

@@ -134,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
     if skipped:
         log.info("%d of %d frames already segmented in %s: skipping them", skipped, len(stems), out)
 
-    done, n_segments, t0 = 0, 0, time.perf_counter()
+    done, bad, n_segments, t0 = 0, 0, 0, time.perf_counter()
     bar = tqdm(todo, desc=f"segment ({sc.backend})", unit="frame", disable=args.no_progress)
     for i in bar:
         try:
@@ -142,6 +142,7 @@ def run(args: argparse.Namespace) -> int:
         except DataError as e:
             if cfg.data.on_bad_frame == "skip":
                 log.warning("skipping frame %d: %s", i, e)
+                bad += 1
                 continue
             raise
         stem = stems[i] or frame.name or f"{frame.index:06d}"
@@ -170,6 +171,8 @@ def run(args: argparse.Namespace) -> int:
             n_segments / done,
             dt / done,
         )
+    elif bad:
+        log.warning("no frame segmented: the %d left to do were bad and skipped", bad)
     else:
         log.info("nothing to do: all %d frames already have segments in %s", len(stems), out)
     return 0
