@@ -310,6 +310,20 @@ def test_bad_frame_files(tmp_path, caplog, damage, match):
     assert any("frame000001" in r.getMessage() for r in caplog.records)
 
 
+@pytest.mark.parametrize("depth_scale, warned", [(6553.5, False), (6.5535, True), (6553500.0, True)])
+def test_implausible_depth_warns_once(tmp_path, caplog, depth_scale, warned):
+    """A wrong depth scale (the wall at 2 km or 2 mm): one warning naming the setting, at the first frame."""
+    scene = make_replica(tmp_path)
+    ds = open_dataset(scene, config=DataConfig(depth_scale=depth_scale))
+    with caplog.at_level(logging.WARNING, logger="ogscene3d.datasets.base"):
+        frames = list(ds)
+    assert len(frames) == 3
+    messages = [r.getMessage() for r in caplog.records if "implausible" in r.getMessage()]
+    assert len(messages) == int(warned)
+    if warned:
+        assert "depth000000.png" in messages[0] and "data.depth_scale" in messages[0]
+
+
 @pytest.mark.parametrize(
     "row, match",
     [

@@ -25,6 +25,8 @@ from ..segmentation.precomputed import read_segments
 log = logging.getLogger(__name__)
 
 DEPTH_FORMATS = ("linear", "shift3")
+# metres: the median depth of a first frame outside this range means a wrong depth scale or format
+PLAUSIBLE_MEDIAN_DEPTH = (0.05, 50.0)
 
 _PNG_END = b"IEND\xaeB`\x82"
 _JPEG_END = b"\xff\xd9"
@@ -253,6 +255,7 @@ class RGBDDataset:
         if self.segments_dir is not None and not self.segments_dir.is_dir():
             raise DataError(f"{self.segments_dir}: segments folder does not exist")
         self.resize_rgb_to_depth = resize_rgb_to_depth
+        self._depth_checked = False
 
     # -- sequence protocol
 
@@ -302,6 +305,8 @@ class RGBDDataset:
         depth = decode_depth(raw, self.depth_format, self.depth_scale)
         if self.invalid_raw is not None:
             depth[raw == self.invalid_raw] = 0.0
+        if not self._depth_checked:
+            self._depth_checked = self._check_depth_range(depth, rec.depth_path)
         if self.min_depth > 0:
             depth[depth < self.min_depth] = 0.0
         if self.max_depth > 0:
@@ -342,6 +347,24 @@ class RGBDDataset:
             gt_instances=gt_instances,
             gt_classes=gt_classes,
         )
+
+    def _check_depth_range(self, depth: np.ndarray, path: Path) -> bool:
+        """Warn once when the first frame with depth has a median outside what an RGB-D camera sees (a wrong
+        depth scale or format maps a room to kilometres or millimetres). -> whether a frame was checked."""
+        valid = depth[depth > 0]
+        if valid.size == 0:
+            return False
+        median = float(np.median(valid))
+        if not PLAUSIBLE_MEDIAN_DEPTH[0] <= median <= PLAUSIBLE_MEDIAN_DEPTH[1]:
+            log.warning(
+                "%s: median depth %.3g m is implausible for an RGB-D camera; check data.depth_scale "
+                "(now %g raw units per metre) and data.depth_format (now %s)",
+                path,
+                median,
+                self.depth_scale,
+                self.depth_format,
+            )
+        return True
 
     def _load_gt(
         self, rec: FrameRecord, shape: tuple[int, int]
