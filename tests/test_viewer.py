@@ -714,3 +714,27 @@ def test_cli_screenshot_without_chromium_is_a_clear_error(monkeypatch, tmp_path,
     assert main([str(run), "--port", "0", "--screenshot", str(tmp_path / "x.png")]) == 2
     assert "needs chromium" in capsys.readouterr().err
     assert not (tmp_path / "x.png").exists()
+
+
+def test_aborted_browser_handshakes_are_not_logged_as_errors():
+    """A speculative browser connection closed before its request (EOF under the handshake error) is
+    dropped from the websockets server's log; any other handshake failure, or other message, is kept."""
+    import logging
+
+    from ogscene3d.viewer.app import _DropAbortedHandshakes
+
+    def record(msg: str, exc: BaseException | None) -> logging.LogRecord:
+        info = (type(exc), exc, None) if exc is not None else None
+        return logging.LogRecord("websockets.server", logging.ERROR, __file__, 1, msg, (), info)
+
+    def chained(cause: BaseException) -> BaseException:
+        outer = ValueError("did not receive a valid HTTP request")
+        outer.__cause__ = RuntimeError("connection closed while reading HTTP request line")
+        outer.__cause__.__cause__ = cause
+        return outer
+
+    keep = _DropAbortedHandshakes().filter
+    assert not keep(record("opening handshake failed", chained(EOFError("stream ends after 0 bytes"))))
+    assert keep(record("opening handshake failed", chained(ValueError("bad header"))))
+    assert keep(record("opening handshake failed", None))
+    assert keep(record("connection handler failed", chained(EOFError())))

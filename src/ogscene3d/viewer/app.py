@@ -34,6 +34,30 @@ from .snapshot import MapSnapshot
 log = logging.getLogger(__name__)
 
 _COLOR_LABELS = {"rgb": "RGB", "semantic": "Semantic label", "confidence": "Confidence"}
+
+
+class _DropAbortedHandshakes(logging.Filter):
+    """Browsers open speculative connections and close some before sending a request; the websockets
+    server logs each as an ERROR with three chained tracebacks ("opening handshake failed"). Those are
+    harmless and dropped; a handshake that failed on a request that did arrive is still logged."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.getMessage() != "opening handshake failed" or not record.exc_info:
+            return True
+        exc = record.exc_info[1]
+        while exc is not None:
+            if isinstance(exc, EOFError):
+                return False
+            exc = exc.__cause__
+        return True
+
+
+def _quiet_websockets(verbose: bool) -> None:
+    """The websockets server's connection chatter stays out of the console unless ``verbose``."""
+    logging.getLogger("websockets").setLevel(logging.DEBUG if verbose else logging.WARNING)
+    server_log = logging.getLogger("websockets.server")
+    if not any(isinstance(f, _DropAbortedHandshakes) for f in server_log.filters):
+        server_log.addFilter(_DropAbortedHandshakes())
 _RENDER_LABELS = {"auto": "Auto", "splats": "Splats", "points": "Points"}
 _NO_NODE = "(none)"
 _MAX_NODE_OPTIONS = 500
@@ -103,6 +127,7 @@ class LiveViewer:
         self.max_rate_hz = float(max_rate_hz)
         self.control = control
         self._up = _up_vector(up)  # checked before a server is started
+        _quiet_websockets(verbose)
         self.server = viser.ViserServer(host=host, port=port, label=title, verbose=verbose)
         if self._up is not None:
             self.server.scene.set_up_direction(tuple(self._up))
