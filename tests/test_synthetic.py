@@ -285,7 +285,8 @@ def test_synth_cli(tmp_path, capsys, monkeypatch):
     assert cli.main(["synth", "--out", str(out), "--frames", "3"]) == 2
     assert "not empty" in capsys.readouterr().err
     assert cli.main(["synth", "--out", str(tmp_path / "y"), "--frames", "0"]) == 2
-    assert cli.main(["synth", "--out", str(tmp_path / "z"), "synthetic.frames=2", "synthetic.width=32"]) == 0
+    overrides = ["--set", "synthetic.frames=2", "--set", "synthetic.width=32"]
+    assert cli.main(["synth", "--out", str(tmp_path / "z"), *overrides]) == 0
     assert json.loads((tmp_path / "z" / "scene.json").read_text())["width"] == 32
     with pytest.raises(SystemExit):
         cli.main(["synth", "--out", str(tmp_path / "w"), "--size", "big"])

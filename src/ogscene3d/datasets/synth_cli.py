@@ -6,7 +6,7 @@ import argparse
 import logging
 import time
 
-from ..config import load_config
+from ..config import add_override_argument, load_config
 from ..errors import ConfigError, OGSceneError
 
 log = logging.getLogger(__name__)
@@ -39,7 +39,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--pose-noise", type=float, default=None, help="pose translation noise std in metres")
     p.add_argument("--device", default="cpu", help="Warp device for ray casting (cpu, cuda, cuda:0)")
     p.add_argument("--force", action="store_true", help="overwrite a non-empty output folder")
-    p.add_argument("overrides", nargs="*", help="config overrides key=value, e.g. synthetic.frames=30")
+    add_override_argument(p, "synthetic.frames=30")
     p.set_defaults(func=run)
 
 
