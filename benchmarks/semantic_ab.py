@@ -3,8 +3,8 @@
     python benchmarks/semantic_ab.py prepare f5c2db7 .ab/base       # where git is: lay out that revision
     python benchmarks/semantic_ab.py run .ab/base --device cuda      # on the GPU: alternate the two trees
 
-``prepare`` writes the package ``ogscene3d`` (with its kernels) of a git revision under DIR; DIR travels to a
-borrowed GPU machine as an untracked folder (or name it in the device tool's carry). ``run`` times
+``prepare`` writes the package ``ogscene3d`` (with its kernels) of a git revision under DIR (``.ab/`` is
+git-ignored: name it in the device tool's carry to take it to a borrowed GPU machine). ``run`` times
 ``semantic.py`` in fresh processes, this tree and the baseline (``PYTHONPATH=DIR``) in turn for
 ``--rounds`` rounds, and prints per scene the device-kernel and wall times of both, their ratio, and each
 one's ratio to a colour forward of the same scene. f5c2db7 is the last revision with two semantic kernels
