@@ -34,6 +34,9 @@ from .snapshot import MapSnapshot
 log = logging.getLogger(__name__)
 
 _COLOR_LABELS = {"rgb": "RGB", "semantic": "Semantic label", "confidence": "Confidence"}
+_RENDER_LABELS = {"auto": "Auto", "splats": "Splats", "points": "Points"}
+_NO_NODE = "(none)"
+_MAX_NODE_OPTIONS = 500
 
 
 class _DropAbortedHandshakes(logging.Filter):
@@ -58,9 +61,6 @@ def _quiet_websockets(verbose: bool) -> None:
     server_log = logging.getLogger("websockets.server")
     if not any(isinstance(f, _DropAbortedHandshakes) for f in server_log.filters):
         server_log.addFilter(_DropAbortedHandshakes())
-_RENDER_LABELS = {"auto": "Auto", "splats": "Splats", "points": "Points"}
-_NO_NODE = "(none)"
-_MAX_NODE_OPTIONS = 500
 
 
 class MappingControl(Protocol):
