@@ -1,7 +1,8 @@
 """Confidence-weighted semantic voting (paper Eq. 3) and per-Gaussian rendering contribution (Eqs. 12-15).
 
-Only labelled Gaussians of confidence > 0 are binned (the caller zeroes the others' screen radius), so
-unlabelled ones neither vote nor occlude. Front to back, a Gaussian's effective opacity is conf * alpha:
+Only labelled Gaussians of confidence > 0 are binned (``bin_gaussians(..., voters=...)`` leaves the others
+out), so unlabelled ones neither vote nor occlude. Front to back, a Gaussian's effective opacity is
+conf * alpha:
     w_ip = conf_i * alpha_ip * prod_{j<i} (1 - conf_j * alpha_jp),   R_p[k] = sum_{i: l_i = k} w_ip.
 Labels are unbounded ints, so each pixel keeps a bounded (label, weight) buffer in registers instead of
 a K-vector: exact while a pixel sees at most ``buffer_size`` distinct labels. Consecutive votes of one
