@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 import torch
 
-from ogscene3d.errors import DataError
+from ogscene3d.errors import ConfigError, DataError
 from ogscene3d.gaussians import SH_C0, GaussianMap
 
 
@@ -55,7 +55,21 @@ def test_append_rejects_bad_input():
         gm.append(torch.tensor([[0.0, float("nan"), 0.0]]), torch.zeros(1, 3), torch.zeros(1, 3))
     with pytest.raises(ValueError, match="colors"):
         gm.append(torch.zeros(2, 3), torch.zeros(3, 3), torch.zeros(2, 3))
+    for wide in (2**31, -(2**31) - 1):  # as int32 it would become another label (or -1, unlabelled)
+        with pytest.raises(ValueError, match="labels must fit in int32"):
+            gm.append(torch.zeros(2, 3), torch.zeros(2, 3), torch.zeros(2, 3), labels=torch.tensor([7, wide]))
+    zeros = torch.zeros(2, 3)
+    with pytest.raises(ValueError, match=r"confidences must lie in \[0, 1\]"):
+        gm.append(zeros, zeros, zeros, confidences=torch.tensor([0.5, 1.5]))
     assert len(gm) == 0
+
+
+def test_device_is_checked():
+    with pytest.raises(ConfigError, match="not supported"):
+        GaussianMap("bogus")
+    if not torch.cuda.is_available():
+        with pytest.raises(ConfigError, match="no CUDA GPU"):
+            GaussianMap("cuda")
 
 
 def test_prune_transparent_and_oversized(device):

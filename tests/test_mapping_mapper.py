@@ -128,6 +128,61 @@ def test_bad_input(device):
         m.load_checkpoint(Path("/nonexistent/map.npz"))
 
 
+def test_negative_segment_ids_are_no_segment(device):
+    """-1 for background (a common segmenter convention) means no segment, as 0 does: the same map."""
+    ref = Mapper(_config(), device)
+    ref.process(_frame(0))
+    f = _frame(0)
+    f.segments = f.segments.copy()
+    f.segments[:, :3] = 0
+    g = _frame(0)
+    g.segments = f.segments.copy()
+    g.segments[:, :3] = -1
+    maps = []
+    for frame in (f, g):
+        m = Mapper(_config(), device)
+        m.process(frame)
+        maps.append(m.map)
+    assert torch.equal(maps[0].labels, maps[1].labels) and torch.equal(maps[0].means, maps[1].means)
+    assert sorted(torch.unique(maps[1].labels).tolist()) == [-1, 0, 1]
+
+
+class _Segmenter:
+    def __init__(self, ids):
+        self.ids = ids
+
+    def __call__(self, rgb, depth=None):
+        from ogscene3d.segmentation.base import Segmentation
+
+        return Segmentation(self.ids, {1: 0.95})
+
+
+@pytest.mark.parametrize(
+    "ids, match",
+    [
+        (np.ones((H // 2, W // 2), np.int32), r"_Segmenter gave segment ids of shape \(12, 16\)"),
+        (np.ones((W, H), np.int32), r"shape \(32, 24\), the image is \(24, 32\)"),
+        (np.ones((H, W), np.float32), "dtype float32"),
+    ],
+)
+def test_a_segmenters_bad_output_is_named(ids, match):
+    m = Mapper(_config(), "cpu", segmenter=_Segmenter(ids))
+    with pytest.raises(DataError, match=match):
+        m.process(_frame(0, with_segments=False))
+
+
+def test_depth_in_millimetres_warns(caplog):
+    f = _frame(0)
+    f.depth = f.depth * 1000.0
+    m = Mapper(_config(), "cpu")
+    with caplog.at_level("WARNING", logger="ogscene3d.mapping.mapper"):
+        m.process(f)
+        m.process(_frame(1))
+    warned = [r.message for r in caplog.records if "implausible" in r.message]
+    assert len(warned) == 1 and "frame 0 (f0): median depth 2e+03 m" in warned[0]
+    assert "metres" in warned[0]
+
+
 def test_full_ablation_runs_longterm_and_refinement(device):
     cfg = _config("mapping.ablation=full", "mapping.refine_every=2", "mapping.longterm_every=2")
     m = Mapper(cfg, device)

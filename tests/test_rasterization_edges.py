@@ -2,6 +2,7 @@
 
 import math
 
+import numpy as np
 import pytest
 import torch
 from reference_raster import rasterize as ref_rasterize
@@ -143,12 +144,26 @@ def _args(device, **over):
         ("width", 0, "width"),
         ("height", -3, "height"),
         ("width", 2.5, "width"),
+        ("width", True, "width"),
+        ("tile_size", 64, r"tile_size must be an int in \[1, 32\]"),
+        ("tile_size", 8.0, "tile_size"),
     ],
 )
 def test_bad_shapes_and_sizes(field, value, match):
     args = _args("cpu", **{field: value})
     with pytest.raises(ValueError, match=match):
         rasterization(**args)
+
+
+def test_sizes_of_any_integer_type():
+    """numpy and 0-dim torch integers pass where Python ints do (sizes often come from arrays)."""
+    want, _, _ = rasterization(**_args("cpu"))
+    for cast in (np.int64, np.int32, torch.tensor):
+        args = _args("cpu")
+        args.update(width=cast(args["width"]), height=cast(args["height"]), tile_size=cast(8))
+        got, _, meta = rasterization(**args)
+        assert torch.allclose(got, want, atol=1e-6)
+        assert type(meta["width"]) is int and type(meta["tile_size"]) is int
 
 
 @pytest.mark.parametrize("field", ["means", "quats", "scales", "opacities", "colors", "viewmats", "Ks"])

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import numbers
+
+import numpy as np
 import torch
 
 
@@ -67,8 +70,20 @@ def check_tensor(
     return t
 
 
+def check_int(name: str, v: object, lo: int, hi: int | None = None) -> int:
+    """``v`` as an int in [lo, hi]: any integer type (Python's, numpy's, a 0-dim integer tensor), not bool."""
+    if isinstance(v, torch.Tensor) and v.dim() == 0 and not v.is_floating_point() and v.dtype != torch.bool:
+        v = int(v)
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Integral):
+        ok = False
+    else:
+        v = int(v)
+        ok = v >= lo and (hi is None or v <= hi)
+    if not ok:
+        what = f"an int >= {lo}" if hi is None else f"an int in [{lo}, {hi}]"
+        raise ValueError(f"{name} must be {what}, got {v!r}")
+    return v  # type: ignore[return-value]
+
+
 def check_image_size(width: object, height: object) -> tuple[int, int]:
-    for name, v in (("width", width), ("height", height)):
-        if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
-            raise ValueError(f"{name} must be a positive int, got {v!r}")
-    return int(width), int(height)  # type: ignore[arg-type]
+    return check_int("width", width, 1), check_int("height", height, 1)

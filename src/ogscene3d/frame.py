@@ -8,6 +8,19 @@ import numpy as np
 
 from .camera import Camera
 
+# metres: a median depth outside this range means a wrong depth scale or unit (a room in km or mm)
+PLAUSIBLE_MEDIAN_DEPTH = (0.05, 50.0)
+
+
+def implausible_median_depth(depth: np.ndarray) -> float | None:
+    """The median of the valid (> 0) depths when it lies outside what an RGB-D camera sees, else None
+    (also when no pixel has depth)."""
+    valid = depth[depth > 0]
+    if valid.size == 0:
+        return None
+    median = float(np.median(valid))
+    return None if PLAUSIBLE_MEDIAN_DEPTH[0] <= median <= PLAUSIBLE_MEDIAN_DEPTH[1] else median
+
 
 def check_pose(pose: np.ndarray, what: str = "pose", tol: float = 1e-3) -> np.ndarray:
     """Return ``pose`` as float64 4x4 or raise ValueError if it is not a finite rigid transform."""
@@ -28,8 +41,9 @@ def check_pose(pose: np.ndarray, what: str = "pose", tol: float = 1e-3) -> np.nd
 class Frame:
     """An RGB-D frame. ``pose`` is camera-to-world 4x4 (OpenCV axes) or None when it must be tracked.
 
-    ``segments`` is an int32 id map (0 = no segment) with ``segment_scores`` {id: SAM predicted IoU};
-    ``gt_instances`` / ``gt_classes`` are ground-truth maps when the dataset has them (synthetic scenes).
+    ``segments`` is an int id map (0 or negative = no segment) with ``segment_scores`` {id: SAM predicted
+    IoU}; ``gt_instances`` / ``gt_classes`` are ground-truth maps when the dataset has them (synthetic
+    scenes).
     """
 
     index: int

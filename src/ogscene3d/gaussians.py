@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 from .atomic import atomic_path
+from .device import resolve_device
 from .errors import DataError
 
 SH_C0 = 0.28209479177387814
@@ -59,7 +60,7 @@ class GaussianMap:
     """Struct-of-arrays semantic Gaussians on ``device`` with amortised-capacity growth."""
 
     def __init__(self, device: str | torch.device = "cpu", capacity: int = 1024) -> None:
-        self.device = torch.device(device)
+        self.device = resolve_device(device)
         self._n = 0
         self.next_label = 0
         cap = max(int(capacity), 1)
@@ -181,11 +182,17 @@ class GaussianMap:
                 x = x.expand(m, *shape)
             elif name == "log_scales" and x.ndim == 1 and x.shape[0] == m:
                 x = x[:, None].expand(m, 3)  # isotropic
+            if name == "labels" and x.numel() and not x.dtype.is_floating_point:
+                lo, hi = torch.iinfo(torch.int32).min, torch.iinfo(torch.int32).max
+                if int(x.min()) < lo or int(x.max()) > hi:
+                    raise ValueError("append: labels must fit in int32 (-1 = unlabelled)")
             x = x.to(dt)
             if tuple(x.shape) != (m, *shape):
                 raise ValueError(f"append: {name} must have shape {(m, *shape)}, got {tuple(x.shape)}")
             if dt.is_floating_point and not bool(torch.isfinite(x).all()):
                 raise ValueError(f"append: {name} contains NaN or inf")
+            if name == "confidences" and x.numel() and not bool(((x >= 0) & (x <= 1)).all()):
+                raise ValueError("append: confidences must lie in [0, 1]")
             return x
 
         identity = torch.tensor([1.0, 0.0, 0.0, 0.0], device=self.device)

@@ -16,7 +16,7 @@ from typing import Any
 
 import torch
 
-from ._validate import ValueChecks, check_image_size, check_tensor
+from ._validate import ValueChecks, check_image_size, check_int, check_tensor
 from .device import init_warp, warp_stream
 
 RENDER_MODES = ("RGB", "D", "ED", "RGB+D", "RGB+ED")
@@ -577,8 +577,7 @@ def rasterization(
     width, height = _check_shapes(means, quats, scales, opacities, viewmats, Ks, width, height)
     if render_mode not in RENDER_MODES:
         raise ValueError(f"render_mode must be one of {RENDER_MODES}, got {render_mode!r}")
-    if not (isinstance(tile_size, int) and 1 <= tile_size <= 32):
-        raise ValueError(f"tile_size must be an int in [1, 32], got {tile_size!r}")
+    tile_size = check_int("tile_size", tile_size, 1, 32)
     if not (near_plane > 0 and far_plane > near_plane):
         raise ValueError(
             f"need 0 < near_plane < far_plane, got near_plane={near_plane}, far_plane={far_plane}"

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from ._validate import ValueChecks, check_tensor
+from ._validate import ValueChecks, check_int, check_tensor
 from .device import warp_stream
 from .render import (
     TileBins,
@@ -88,8 +88,8 @@ def _render(
     from ogscene3d.kernels.raster import BLEND_BLOCK_DIM
     from ogscene3d.kernels.semantic import semantic_kernel
 
-    if not (isinstance(buffer_size, int) and 1 <= buffer_size <= 64):
-        raise ValueError(f"buffer_size must be an int in [1, 64], got {buffer_size!r}")
+    buffer_size = check_int("buffer_size", buffer_size, 1, 64)
+    tile_size = check_int("tile_size", tile_size, 1, 32)
     dev = means.device
     C, n = viewmats.shape[0], means.shape[0]
     labels = labels.to(torch.int32)

@@ -19,14 +19,12 @@ import numpy as np
 from ..camera import Camera
 from ..config import DataConfig
 from ..errors import DataError
-from ..frame import Frame, check_pose
+from ..frame import Frame, check_pose, implausible_median_depth
 from ..segmentation.precomputed import read_segments
 
 log = logging.getLogger(__name__)
 
 DEPTH_FORMATS = ("linear", "shift3")
-# metres: the median depth of a first frame outside this range means a wrong depth scale or format
-PLAUSIBLE_MEDIAN_DEPTH = (0.05, 50.0)
 
 _PNG_END = b"IEND\xaeB`\x82"
 _JPEG_END = b"\xff\xd9"
@@ -351,11 +349,10 @@ class RGBDDataset:
     def _check_depth_range(self, depth: np.ndarray, path: Path) -> bool:
         """Warn once when the first frame with depth has a median outside what an RGB-D camera sees (a wrong
         depth scale or format maps a room to kilometres or millimetres). -> whether a frame was checked."""
-        valid = depth[depth > 0]
-        if valid.size == 0:
+        if not np.any(depth > 0):
             return False
-        median = float(np.median(valid))
-        if not PLAUSIBLE_MEDIAN_DEPTH[0] <= median <= PLAUSIBLE_MEDIAN_DEPTH[1]:
+        median = implausible_median_depth(depth)
+        if median is not None:
             log.warning(
                 "%s: median depth %.3g m is implausible for an RGB-D camera; check data.depth_scale "
                 "(now %g raw units per metre) and data.depth_format (now %s)",

@@ -16,7 +16,9 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
+import torch
 
+from ..device import resolve_device
 from ..errors import DataError
 from .graph_metrics import match_nodes_by_overlap, relation_recall
 from .label_mapping import TextEmbedder, majority_overlap_mapping, text_label_mapping
@@ -134,7 +136,7 @@ def evaluate_run(
     num_views: int = 0,
     view_frames: Sequence[int] | None = None,
     out_dir: str | Path | None = None,
-    device: str = "cpu",
+    device: str | torch.device = "cpu",
     gt_points: Literal["observed", "all"] = "observed",
 ) -> EvalResult:
     """Evaluate ``run_dir`` against ``gt_path`` (see the module docstring).
@@ -161,6 +163,7 @@ def evaluate_run(
     """
     if gt_points not in ("observed", "all"):
         raise ValueError(f"gt_points must be 'observed' or 'all', got {gt_points!r}")
+    device = resolve_device(device)
     for p in protocols:
         if p not in PROTOCOLS:
             raise ValueError(f"unknown protocol {p!r}; expected one of {PROTOCOLS}")
@@ -275,7 +278,7 @@ def _views_block(
     num_views: int,
     view_frames: Sequence[int] | None,
     out_dir: str | Path | None,
-    device: str,
+    device: torch.device,
     ignore: Iterable[str] | None,
     notes: list[str],
 ) -> tuple[dict[str, Any] | None, SegmentationMetrics | None]:

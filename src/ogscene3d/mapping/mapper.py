@@ -42,7 +42,7 @@ from ..atomic import atomic_write_text
 from ..config import Config, config_to_dict
 from ..device import resolve_device
 from ..errors import ConfigError, DataError, OGSceneError
-from ..frame import Frame
+from ..frame import Frame, implausible_median_depth
 from ..gaussians import GaussianMap
 from .init import make_probes
 from .keyframes import KeyframeSelector
@@ -55,6 +55,25 @@ from .refine import global_refinement
 log = logging.getLogger(__name__)
 
 ABLATIONS = ("naive", "local", "local+global", "full")
+
+
+def _segment_ids(ids, frame: Frame, source: str) -> np.ndarray:
+    """The id map of ``frame``'s segments from ``source``, checked; negative ids (a common "background"
+    value) count as no segment, as 0 does."""
+    ids = np.asarray(ids)
+    if ids.shape != frame.rgb.shape[:2]:
+        raise DataError(
+            f"frame {frame.index} ({frame.name or 'unnamed'}): {source} gave segment ids of shape "
+            f"{ids.shape}, the image is {frame.rgb.shape[:2]}"
+        )
+    if not (np.issubdtype(ids.dtype, np.integer) or ids.dtype == np.bool_):
+        raise DataError(
+            f"frame {frame.index} ({frame.name or 'unnamed'}): {source} gave segment ids of dtype "
+            f"{ids.dtype}; an integer id map is needed (0 = no segment)"
+        )
+    if ids.size and ids.min() < 0:
+        ids = np.maximum(ids, 0)
+    return ids
 
 
 class Timings:
@@ -132,6 +151,7 @@ class Mapper:
         self._graph = None
         self._graph_failed = False
         self._warned_no_segments = False
+        self._checked_depth_range = False
         self._checkpoint_dir: Path | None = None
 
     # ------------------------------------------------------------------ switches
@@ -159,7 +179,7 @@ class Mapper:
     # ------------------------------------------------------------------ per frame
     def _segments(self, frame: Frame) -> tuple[np.ndarray | None, dict[int, float]]:
         if frame.segments is not None:
-            return np.asarray(frame.segments), dict(frame.segment_scores)
+            return _segment_ids(frame.segments, frame, "frame.segments"), dict(frame.segment_scores)
         if self.segmenter is None:
             self.segmenter = _default_segmenter(self.config, frame.K)
         if self.segmenter is not None:
@@ -168,7 +188,7 @@ class Mapper:
                     seg = self.segmenter.segment_frame(frame)
                 else:
                     seg = self.segmenter(frame.rgb, frame.depth)
-            return np.asarray(seg.ids), dict(seg.scores)
+            return _segment_ids(seg.ids, frame, type(self.segmenter).__name__), dict(seg.scores)
         if not self._warned_no_segments:
             log.warning("frames carry no segments and no segmenter was given: mapping geometry only")
             self._warned_no_segments = True
@@ -232,6 +252,17 @@ class Mapper:
             )
         if not np.all(np.isfinite(frame.depth)):
             raise DataError(f"frame {frame.index} ({frame.name or 'unnamed'}): depth contains NaN or inf")
+        if not self._checked_depth_range and np.any(frame.depth > 0):
+            self._checked_depth_range = True
+            median = implausible_median_depth(frame.depth)
+            if median is not None:
+                log.warning(
+                    "frame %d (%s): median depth %.3g m is implausible for an RGB-D camera; Frame.depth "
+                    "must be in metres (0 = invalid), or the map will be empty or wrong",
+                    frame.index,
+                    frame.name or "unnamed",
+                    median,
+                )
         self.frames_seen += 1
         self.timings.add("frames")
         if not self.keyframes(frame.pose):

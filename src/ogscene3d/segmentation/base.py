@@ -12,7 +12,8 @@ import numpy as np
 class Segmentation:
     """One frame's open-set segmentation.
 
-    ``ids``: int32 [H, W], 0 = no segment, ids are per-frame only (never consistent across frames).
+    ``ids``: int32 [H, W], 0 (or negative) = no segment, ids are per-frame only (never consistent across
+    frames).
     ``scores``: {id: predicted IoU in [0, 1]} (SAM's, or the front-end's own estimate).
     ``names``: {id: class name} for segments that came with a detector label.
     """
