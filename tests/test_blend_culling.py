@@ -269,7 +269,7 @@ def test_binning_leaves_out_tiles_where_alpha_stays_below_threshold(device: str)
         ref, ref_alpha = ref_rasterize(*scene, vm, K, 96, 80, tile_size=8)
         assert (img.cpu().double() - ref).abs().max() < 1e-4
         assert int(meta["radii"][0, 0]) > 0  # the screen radius does not depend on opacity
-        tiles.append(int(meta["tiles_per_gaussian"].sum()))
+        tiles.append(int(meta["tiles_per_gauss"].sum()))
     assert tiles[0] > tiles[1] > tiles[2] == 0
 
 

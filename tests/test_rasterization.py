@@ -92,6 +92,34 @@ def test_gradients_match_reference(device, n, width, height, mode):
         assert _rel(g, rg) < 1e-2, (name, _rel(g, rg))
 
 
+@pytest.mark.parametrize("mode", ["RGB", "RGB+ED"])
+def test_viewmat_gradients_match_reference(device, mode):
+    """Camera-pose gradients (as gsplat gives them), per camera of a two-camera batch."""
+    means, quats, scales, opac, colors = random_scene(80, seed=7, device=device)
+    vm, K = cameras(48, 36, count=2, device=device)
+    vm = vm.clone().requires_grad_(True)
+    out, alpha, _ = rasterization(means, quats, scales, opac, colors, vm, K, 48, 36, render_mode=mode)
+    torch.manual_seed(1)
+    w_out, w_alpha = torch.randn_like(out), torch.randn_like(alpha)
+    valid = torch.isfinite(out)
+    (g,) = torch.autograd.grad((out * w_out)[valid].sum() + (alpha * w_alpha).sum(), [vm])
+
+    ref_vm = vm.detach().cpu().double().requires_grad_(True)
+    ref_out, ref_alpha = ref_rasterize(
+        means, quats, scales, opac, colors, ref_vm, K.cpu(), 48, 36, render_mode=mode
+    )
+    ref_loss = (ref_out * w_out.cpu().double())[valid.cpu()].sum() + (
+        ref_alpha * w_alpha.cpu().double()
+    ).sum()
+    (rg,) = torch.autograd.grad(ref_loss, [ref_vm])
+    g = g.cpu()
+    assert g.shape == (2, 4, 4) and torch.isfinite(g).all()
+    assert all(float(rg[c].abs().sum()) > 0 for c in range(2))  # both cameras' poses matter
+    for c in range(2):
+        assert _cos(g[c], rg[c]) > 0.99, (c, _cos(g[c], rg[c]))
+        assert _rel(g[c], rg[c]) < 1e-2, (c, _rel(g[c], rg[c]))
+
+
 @pytest.mark.parametrize("tile_size", [5, 8, 24, 32])
 def test_other_tile_sizes_match_reference(device, tile_size):
     # 5x5 = 25 pixels: on CUDA a tile's threads are padded to whole 32-lane warps (rows of pixels); sides

@@ -85,7 +85,7 @@ def test_pixel_covered_by_thousands_of_gaussians(device):
     params = [t.clone().requires_grad_(True) for t in scene]
     img, alpha, meta = rasterization(*params, vm, K, 16, 16)
     ref, ref_alpha = ref_rasterize(*scene, vm, K, 16, 16)
-    assert int(meta["tiles_per_gaussian"].sum()) >= n
+    assert int(meta["tiles_per_gauss"].sum()) >= n
     assert (img.cpu().double() - ref).abs().mean() < 1e-3
     assert 0.5 < float(alpha.detach().max()) < 1.0
     img.sum().backward()
@@ -153,6 +153,32 @@ def test_bad_shapes_and_sizes(field, value, match):
     args = _args("cpu", **{field: value})
     with pytest.raises(ValueError, match=match):
         rasterization(**args)
+
+
+def test_meta_has_gsplats_keys(device):
+    """The keys gsplat's densification strategies check for, with gsplat's meaning (not packed)."""
+    means, quats, scales, opac, colors = random_scene(60, seed=5, device=device)
+    vm, K = cameras(40, 30, count=2, device=device)
+    means = means.clone().requires_grad_(True)
+    img, _, meta = rasterization(means, quats, scales, opac, colors, vm, K, 40, 30, tile_size=8)
+    for key in ["width", "height", "n_cameras", "radii", "gaussian_ids", "means2d"]:
+        assert key in meta, key
+    assert meta["gaussian_ids"] is None and meta["camera_ids"] is None
+    C, N = 2, 60
+    assert meta["means2d"].shape == (C, N, 2) and meta["radii"].shape == (C, N)
+    assert meta["opacities"].shape == (C, N) and torch.equal(meta["opacities"][1], opac)
+    ids = meta["flatten_ids"].long()
+    assert ids.numel() == meta["n_intersections"] == int(meta["tiles_per_gauss"].sum()) > 0
+    # tile t of camera c lists Gaussians of camera c that the projection kept, each as c * N + n
+    tiles_per_cam = meta["tile_width"] * meta["tile_height"]
+    for t in range(C * tiles_per_cam):
+        span = ids[int(meta["tile_start"][t]) : int(meta["tile_end"][t])]
+        assert bool((span // N == t // tiles_per_cam).all())
+        assert bool((meta["radii"].reshape(-1)[span] > 0).all())
+    # the screen-space gradient a strategy reads after backward
+    meta["means2d"].retain_grad()
+    img.sum().backward()
+    assert meta["means2d"].grad.shape == (C, N, 2) and meta["means2d"].grad.abs().sum() > 0
 
 
 def test_sizes_of_any_integer_type():

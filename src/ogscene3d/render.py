@@ -148,6 +148,9 @@ class _Project(torch.autograd.Function):
         v_means = torch.zeros_like(means)
         v_quats = torch.zeros_like(quats)
         v_scales = torch.zeros_like(scales)
+        # camera-pose gradients (pose refinement), only when asked: every (camera, Gaussian) thread adds
+        # into its camera's one matrix
+        v_viewmats = torch.zeros_like(viewmats) if ctx.needs_input_grad[3] else None
         grads_out = [
             torch.zeros_like(means2d) if v_means2d is None else v_means2d.contiguous(),
             torch.zeros_like(conics) if v_conics is None else v_conics.contiguous(),
@@ -170,7 +173,7 @@ class _Project(torch.autograd.Function):
                         _as_wp(v_means, wp.vec3),
                         _as_wp(v_quats, wp.vec4),
                         _as_wp(v_scales, wp.vec3),
-                        None,
+                        None if v_viewmats is None else _as_wp(v_viewmats, wp.mat44),
                         None,
                         0,
                         0,
@@ -188,7 +191,7 @@ class _Project(torch.autograd.Function):
                     adjoint=True,
                     device=wdev,
                 )
-        return v_means, v_quats, v_scales, None, None, None, None, None, None, None
+        return v_means, v_quats, v_scales, v_viewmats, None, None, None, None, None, None
 
 
 def _project_inputs(args, N, width, height, near_plane, far_plane, eps2d):
@@ -570,9 +573,13 @@ def rasterization(
         "RGB+D", "RGB+ED" (depth appended as the last channel).
     Returns:
         colors [C, H, W, D] (+1 channel with depth in the "+D"/"+ED" modes, D = 1 in "D"/"ED"),
-        alphas [C, H, W, 1], meta (projection and binning results: radii, means2d, depths, conics,
-        tiles_per_gaussian, tile ranges, isect_ids, n_cameras, width, height, tile_size).
-    Differentiable w.r.t. means, quats, scales, opacities and colors (not viewmats or Ks).
+        alphas [C, H, W, 1], meta (projection and binning results under gsplat's names: radii, means2d
+        (retain_grad() it for densification), depths, conics, opacities, tiles_per_gauss, flatten_ids (the
+        sorted intersections' c * N + n), n_cameras, width, height, tile_size, tile_width, tile_height;
+        and ours: tile_start / tile_end [C * tiles] (each tile's range of flatten_ids), n_intersections,
+        last_ids).
+    Differentiable w.r.t. means, quats, scales, opacities, colors and viewmats (camera poses, as in gsplat;
+    not Ks).
     """
     width, height = _check_shapes(means, quats, scales, opacities, viewmats, Ks, width, height)
     if render_mode not in RENDER_MODES:
@@ -617,15 +624,21 @@ def rasterization(
     if render_mode in ("ED", "RGB+ED"):
         expected = render[..., -1:] / alphas.clamp_min(1e-10)
         render = torch.cat([render[..., :-1], expected], dim=-1)
+    # gsplat's keys where the meaning is the same (its densification strategies read these): not packed,
+    # so no camera_ids / gaussian_ids. Tiles are ranges [tile_start, tile_end) where gsplat has isect_offsets
+    # and its int64 sort keys isect_ids
     meta = {
+        "camera_ids": None,
+        "gaussian_ids": None,
         "radii": radii,
         "means2d": means2d,
         "depths": depths,
         "conics": conics,
-        "tiles_per_gaussian": bins.tiles_per_gaussian,
+        "opacities": opacities.detach().expand(C, N),
+        "tiles_per_gauss": bins.tiles_per_gaussian,
+        "flatten_ids": bins.isect_ids,
         "tile_start": bins.tile_start,
         "tile_end": bins.tile_end,
-        "isect_ids": bins.isect_ids,
         "n_intersections": bins.num_intersections,
         "last_ids": last_ids,
         "n_cameras": C,
