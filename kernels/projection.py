@@ -103,7 +103,8 @@ def project_gaussians(
     b = cov2d[0, 1]
     d = cov2d[1, 1] + eps2d
     det = a * d - b * b
-    if det <= 0.0:
+    # not finite: a Gaussian so large (kilometres at arm's length) that float32 overflows; it is dropped
+    if det <= 0.0 or not wp.isfinite(det):
         cull(tid, means2d, conics, depths, radii)
         return
     inv_det = 1.0 / det
@@ -111,7 +112,8 @@ def project_gaussians(
 
     mid = 0.5 * (a + d)
     lam = mid + wp.sqrt(wp.max(0.01, mid * mid - det))
-    r = wp.ceil(3.0 * wp.sqrt(lam))
+    # bounded so that the int32 radius cannot wrap around; far beyond any image either way
+    r = wp.min(wp.ceil(3.0 * wp.sqrt(lam)), 1.0e8)
     if (
         mean2d[0] + r <= 0.0
         or mean2d[0] - r >= float(width)

@@ -50,10 +50,12 @@ def test_huge_and_tiny_scales_match_reference(device):
     scales = scales.clone()
     scales[:5] = 3.0  # covers the whole image
     scales[5:10] = 1e-6  # sub-pixel: only eps2d keeps it visible
+    scales[10:12] = 1e8  # a 3-sigma screen radius beyond int32 range (about 2.6e9 px)
     vm, K = cameras(40, 32, device=device)
-    img, alpha, _ = rasterization(means, quats, scales, opac, colors, vm, K, 40, 32)
+    img, alpha, meta = rasterization(means, quats, scales, opac, colors, vm, K, 40, 32)
     ref, ref_alpha = ref_rasterize(means, quats, scales, opac, colors, vm, K, 40, 32)
     assert torch.isfinite(img).all()
+    assert bool((meta["radii"] >= 0).all())  # no radius wrapped around to a negative int32
     assert (img.cpu().double() - ref).abs().mean() < 1e-3
     assert (alpha.cpu().double() - ref_alpha).abs().mean() < 1e-3
 
