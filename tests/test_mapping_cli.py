@@ -50,7 +50,7 @@ def test_run_and_resume(tmp_path, capsys):
     assert t["counts"]["frames"] == 3 and t["counts"]["keyframes"] == 3
     graph = json.loads((out / "graph.json").read_text())
     assert {n["label"] for n in graph["nodes"]} == {0, 1}
-    assert "mapped 1 frames" in capsys.readouterr().out
+    assert "read 1 frames: 1 mapped (3 keyframes in all)" in capsys.readouterr().out
 
 
 def test_run_errors(tmp_path, capsys):
@@ -78,10 +78,10 @@ def test_bad_frames_are_skipped_when_asked_and_resume_goes_on_after_them(tmp_pat
     assert "depth000001.png" in capsys.readouterr().err
     skip = ["--set", "data.on_bad_frame=skip"]
     assert main(["run", *common, *skip, "--max-frames", "3"]) == 0
-    assert "mapped 2 frames" in capsys.readouterr().out
+    assert "read 2 frames: 2 mapped" in capsys.readouterr().out
     # the checkpoint records the dataset position, not the count of mapped frames: frame 3 alone is left
     assert main(["run", *common, *skip, "--resume"]) == 0
-    assert "mapped 1 frames" in capsys.readouterr().out
+    assert "read 1 frames: 1 mapped" in capsys.readouterr().out
     t = json.loads((out / "timings.json").read_text())
     assert t["counts"]["frames"] == 3
 
@@ -100,3 +100,91 @@ def test_unusable_device_is_a_clean_error(tmp_path, capsys):
     if not torch.cuda.is_available():
         assert main(["run", "--out", str(tmp_path / "o"), "--device", "cuda", "--no-progress"]) == 2
         assert "sees no CUDA GPU" in capsys.readouterr().err
+
+
+def _common(scene, out):
+    return ["--out", str(out), "--device", "cpu", "--no-progress", "--data", str(scene),
+            "--segments", str(scene / "segs"), "--set", "mapping.opt_iters=1", "--set", "graph.enabled=false",
+            "--set", "mapping.knn_radius=0.1"]  # fmt: skip
+
+
+def test_resume_goes_on_with_the_runs_own_data_and_settings(tmp_path, capsys):
+    scene = _replica_scene(tmp_path / "scene", frames=3)
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out), "--max-frames", "2", "--set", "mapping.opt_iters=2"]) == 0
+    import yaml
+
+    saved = yaml.safe_load((out / "config.yaml").read_text())
+    assert saved["data"]["path"] == str(scene.resolve()) and saved["mapping"]["opt_iters"] == 2
+    capsys.readouterr()
+    # no --data, no --config, no --set: the run's own config.yaml says what and how (never a synthetic scene)
+    assert main(["run", "--out", str(out), "--resume", "--no-progress"]) == 0
+    assert "read 1 frames: 1 mapped (3 keyframes in all)" in capsys.readouterr().out
+    assert not (out / "scene").exists()
+    t = json.loads((out / "timings.json").read_text())
+    # module times go on across the resume: one 'add' per keyframe of the whole run
+    assert t["counts"]["frames"] == 3 and t["calls"]["add"] == t["counts"]["keyframes"] == 3
+    assert t["ms_per_keyframe"]["add"] == pytest.approx(1000 * t["seconds"]["add"] / 3, rel=1e-3)
+    # a finished run has nothing left to do, and its files stay as they are
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    assert main(["run", "--out", str(out), "--resume", "--no-progress"]) == 0
+    assert "nothing to do" in capsys.readouterr().out
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
+
+
+def test_resume_refuses_another_sequence(tmp_path, capsys):
+    scene = _replica_scene(tmp_path / "scene", frames=2)
+    other = _replica_scene(tmp_path / "other", frames=3)
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out)]) == 0
+    capsys.readouterr()
+    assert main(["run", *_common(other, out), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert f"was mapped from {scene.resolve()} (2 frames" in err and "new --out" in err
+    # the same frames moved elsewhere are fine
+    moved = tmp_path / "moved"
+    scene.rename(moved)
+    assert main(["run", *_common(moved, out), "--resume"]) == 0
+
+
+def test_a_bad_frame_keeps_the_map_built_so_far(tmp_path, capsys):
+    scene = _replica_scene(tmp_path / "scene", frames=4)
+    depth = scene / "results" / "depth000002.png"
+    good = depth.read_bytes()
+    depth.write_bytes(b"not a png")
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out)]) == 2
+    assert "depth000002.png" in capsys.readouterr().err
+    assert (out / "map.npz").is_file()  # frames 0 and 1, saved on the way out
+    depth.write_bytes(good)
+    assert main(["run", *_common(scene, out), "--resume"]) == 0
+    assert "read 2 frames: 2 mapped (4 keyframes in all)" in capsys.readouterr().out
+
+
+def test_odometry_run_writes_its_trajectory_and_fails_when_nothing_tracks(tmp_path, capsys):
+    pytest.importorskip("open3d")
+    from ogscene3d.datasets import make_synthetic_scene
+    from ogscene3d.eval.trajectory import read_trajectory
+
+    scene = make_synthetic_scene(tmp_path / "scene", seed=0, frames=60, width=96, height=72, progress=False)
+    out = tmp_path / "run"
+    args = ["run", "--data", str(scene), "--out", str(out), "--device", "cpu", "--no-progress",
+            "--poses", "odometry", "--max-frames", "3",
+            "--set", "mapping.opt_iters=1", "--set", "graph.enabled=false"]  # fmt: skip
+    assert main(args) == 0
+    traj = read_trajectory(out / "traj.txt")
+    assert traj.shape == (3, 4, 4)
+    from ogscene3d.datasets import open_dataset
+
+    gt = [f.pose for f in open_dataset(scene, max_frames=3)]
+    assert np.linalg.norm(traj[2][:3, 3] - gt[2][:3, 3]) < 0.05  # anchored at frame 0's pose, then tracked
+
+    flat = _replica_scene(tmp_path / "flat", frames=3)
+    for p in (flat / "results").glob("depth*.png"):  # no depth: odometry cannot anchor any frame
+        cv2.imwrite(str(p), np.zeros((H, W), np.uint16))
+    capsys.readouterr()
+    assert main(["run", *_common(flat, tmp_path / "run2"), "--poses", "odometry"]) == 2
+    assert (
+        "none of the 3 frames read could be mapped, 3 of them untracked by odometry"
+        in capsys.readouterr().err
+    )

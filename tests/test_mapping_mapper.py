@@ -122,7 +122,7 @@ def test_bad_input(device):
     m = Mapper(_config(), device)
     f = _frame(0)
     f.pose = None
-    with pytest.raises(DataError, match="pose"):
+    with pytest.raises(DataError, match="no camera pose.*--poses odometry"):
         m.process(f)
     with pytest.raises(DataError, match="map.npz"):
         m.load_checkpoint(Path("/nonexistent/map.npz"))

@@ -102,6 +102,14 @@ class Timings:
     def add(self, name: str, value: float = 1) -> None:
         self.counts[name] = self.counts.get(name, 0) + value
 
+    def state(self) -> dict:
+        return {"seconds": self.seconds, "calls": self.calls, "counts": self.counts}
+
+    def load_state(self, state: dict) -> None:
+        self.seconds = {str(k): float(v) for k, v in state.get("seconds", {}).items()}
+        self.calls = {str(k): int(v) for k, v in state.get("calls", {}).items()}
+        self.counts = {str(k): v for k, v in state.get("counts", {}).items()}
+
     def as_dict(self) -> dict:
         kf = max(1, int(self.counts.get("keyframes", 0)))
         return {
@@ -153,6 +161,13 @@ class Mapper:
         self._warned_no_segments = False
         self._checked_depth_range = False
         self._checkpoint_dir: Path | None = None
+        # under odometry, the tracked pose of every frame given to process (None: untracked), for traj.txt
+        self.trajectory: list[np.ndarray | None] = []
+        # whether finalize ran after the latest keyframe (a resumed finished run has nothing left to do)
+        self.finalized = False
+        # what the frames come from (set by the caller, e.g. {"path", "frames", "first"}), kept in
+        # checkpoints so that a resume can tell another sequence from the same one
+        self.source: dict = {}
 
     # ------------------------------------------------------------------ switches
     @property
@@ -242,16 +257,21 @@ class Mapper:
 
     def process(self, frame: Frame) -> bool:
         """Map one frame. Returns True when it was a keyframe (non-keyframes are only counted)."""
-        self.next_index = frame.index + 1
-        if not self._track(frame):
-            return False
-        if frame.pose is None:
-            raise DataError(
-                f"frame {frame.index} ({frame.name or 'unnamed'}): no camera pose; "
-                "use a dataset with poses or enable tracking"
-            )
+        # checked before the frame counts as read, so that a resume after this error retries it
         if not np.all(np.isfinite(frame.depth)):
             raise DataError(f"frame {frame.index} ({frame.name or 'unnamed'}): depth contains NaN or inf")
+        odometry = self.config.tracking.poses == "odometry"
+        if frame.pose is None and not odometry:
+            raise DataError(
+                f"frame {frame.index} ({frame.name or 'unnamed'}): no camera pose; use a dataset with "
+                "poses or track them (--poses odometry, config tracking.poses: odometry)"
+            )
+        self.next_index = frame.index + 1
+        tracked = self._track(frame)
+        if odometry:
+            self.trajectory.append(np.array(frame.pose, dtype=np.float64) if tracked else None)
+        if not tracked:
+            return False
         if not self._checked_depth_range and np.any(frame.depth > 0):
             self._checked_depth_range = True
             median = implausible_median_depth(frame.depth)
@@ -267,11 +287,12 @@ class Mapper:
         self.timings.add("frames")
         if not self.keyframes(frame.pose):
             return False
+        segments, scores = self._segments(frame)
         cfg = self.cfg
         kf = self.keyframe_count
         self.keyframe_count += 1
+        self.finalized = False
         self.timings.add("keyframes")
-        segments, scores = self._segments(frame)
 
         with self.timings.section("render_check"):
             alpha, depth = self._render_check(frame)
@@ -569,6 +590,7 @@ class Mapper:
                 log.warning("final scene-graph update failed: %s: %s", type(e).__name__, e)
                 self._graph_failed = True
         self.timings.counts["gaussians"] = len(self.map)
+        self.finalized = True
 
     def _state_extra(self) -> dict[str, np.ndarray]:
         extra = {
@@ -576,7 +598,14 @@ class Mapper:
             "mapper_next_index": np.array(self.next_index),
             "mapper_keyframe_count": np.array(self.keyframe_count),
             "mapper_memory_cursor": np.array(self.memory._cursor),
+            "mapper_finalized": np.array(self.finalized),
+            "mapper_source": np.array(json.dumps(self.source)),
+            # the module times of a run go on across resumes (ms per keyframe divides by all keyframes)
+            "mapper_timings": np.array(json.dumps(self.timings.state())),
         }
+        if self.trajectory:
+            nan = np.full((4, 4), np.nan)
+            extra["mapper_trajectory"] = np.stack([nan if p is None else p for p in self.trajectory])
         extra.update(self.keyframes.state())
         if self._tracker is not None:
             extra.update(self._tracker.state())  # the odometry goes on in the same trajectory
@@ -614,6 +643,13 @@ class Mapper:
                     int(z["mapper_next_index"]) if "mapper_next_index" in z.files else self.frames_seen
                 )
                 self.keyframe_count = int(z["mapper_keyframe_count"])
+                # older checkpoints lack these: not finalized, no source, times from zero
+                self.finalized = bool(z["mapper_finalized"]) if "mapper_finalized" in z.files else False
+                self.source = json.loads(str(z["mapper_source"])) if "mapper_source" in z.files else {}
+                if "mapper_timings" in z.files:
+                    self.timings.load_state(json.loads(str(z["mapper_timings"])))
+                traj = z["mapper_trajectory"] if "mapper_trajectory" in z.files else np.zeros((0, 4, 4))
+                self.trajectory = [None if np.isnan(p).any() else p for p in traj]
                 self.keyframes.load_state({k: z[k] for k in ("kf_since_last", "kf_last_pose")})
                 self.memory.entries = []
                 if "mem_keyframe" in z.files:
@@ -663,7 +699,8 @@ class Mapper:
         self.timings.counts["frames"] = self.frames_seen
 
     def save(self, out_dir: str | Path) -> Path:
-        """Write the run directory: gaussians.ply, map.npz, graph.json, timings.json, config.yaml."""
+        """Write the run directory: gaussians.ply, map.npz, graph.json, timings.json, config.yaml, and under
+        odometry traj.txt (the tracked poses, one row-major c2w 4x4 per frame read)."""
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         self.map.export_ply(out / "gaussians.ply")
@@ -673,6 +710,16 @@ class Mapper:
         timings["device"] = str(self.device)
         timings["ablation"] = self.cfg.ablation
         atomic_write_text(out / "timings.json", json.dumps(timings, indent=2))
+        tracked = [p for p in self.trajectory if p is not None]
+        if tracked:
+            from ..tracking import trajectory_text
+
+            # as `ogscene3d track` writes it: one pose per frame read, an untracked one repeats the last
+            held, filled = tracked[0], []
+            for p in self.trajectory:
+                held = p if p is not None else held
+                filled.append(held)
+            atomic_write_text(out / "traj.txt", trajectory_text(filled))
         self._save_graph(out / "graph.json")
         return out
 

@@ -7,7 +7,10 @@ import logging
 import time
 from pathlib import Path
 
-from ..config import add_override_argument, load_config
+import yaml
+
+from ..atomic import atomic_write_text
+from ..config import add_override_argument, config_to_dict, load_config
 from ..device import resolve_device
 from ..errors import DataError
 from ..tracking import add_poses_argument
@@ -55,14 +58,21 @@ def run(args: argparse.Namespace) -> int:
         overrides.append(f"mapping.ablation={args.ablation}")
     if args.device:
         overrides.append(f"device={args.device}")
-    cfg = load_config(args.config, overrides)
+    out = Path(args.out)
+    saved = out / "config.yaml"
+    base = args.config
+    if args.resume and base is None and saved.is_file():
+        base = saved  # a resumed run goes on with the settings (and the data) it started with
+        log.info("resuming with the run's own %s", saved)
+    cfg = load_config(base, overrides)
     if args.poses:
         cfg.tracking.poses = args.poses
     resolve_device(cfg.device)  # an unusable device fails before a synthetic scene is generated
-    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
-    data = args.data or cfg.data.path
+    data = args.data or cfg.data.path or (_recorded_data_path(saved) if args.resume else None)
+    if data is None and args.resume:
+        raise DataError(f"{out}: --resume needs the run's dataset: pass --data (the run records none)")
     if data is None:
         s = cfg.synthetic
         log.info(
@@ -84,9 +94,15 @@ def run(args: argparse.Namespace) -> int:
             s.pose_noise,
             progress=not args.no_progress,
         )
-    ds = open_dataset(data, segments_dir=args.segments, max_frames=args.max_frames, config=cfg.data)
+    # the run's config.yaml records what was mapped: eval finds the ground truth and --resume the frames
+    cfg.data.path = str(Path(data).resolve())
+    if args.segments:
+        cfg.data.segments_dir = str(Path(args.segments).resolve())
+    # --max-frames bounds this invocation only (a resume without it goes on to the end)
+    ds = open_dataset(max_frames=args.max_frames, config=cfg.data)
     if len(ds) == 0:
         raise DataError(f"{data}: the dataset has no frames")
+    source = {"path": cfg.data.path, "frames": len(ds), "first": ds.records[0].name}
 
     mapper = Mapper(cfg, cfg.device)
     mapper.set_checkpoint_dir(out)
@@ -96,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
         if not ckpt.is_file():
             raise DataError(f"{ckpt}: --resume needs a checkpoint from an earlier run in --out")
         mapper.load_checkpoint(ckpt)
+        _check_same_source(ckpt, mapper.source, source)
         start = mapper.next_index
         log.info(
             "resuming at frame %d (%d frames mapped, %d keyframes, %d Gaussians)",
@@ -104,6 +121,8 @@ def run(args: argparse.Namespace) -> int:
             mapper.keyframe_count,
             len(mapper.map),
         )
+    mapper.source = source
+    atomic_write_text(saved, yaml.safe_dump(config_to_dict(cfg), sort_keys=False))
 
     # bad frames raise, or are skipped with a warning under data.on_bad_frame: skip
     frames = ds.frames(start)
@@ -112,19 +131,68 @@ def run(args: argparse.Namespace) -> int:
 
         frames = tqdm(frames, desc="mapping", unit="frame", total=max(0, len(ds) - start))
     t0 = time.perf_counter()
-    given = 0
-    for frame in frames:
-        mapper.process(frame)
-        given += 1
-        if hasattr(frames, "set_postfix"):
-            frames.set_postfix(gaussians=len(mapper.map), kf=mapper.keyframe_count)
+    given, seen0 = 0, mapper.frames_seen
+    try:
+        for frame in frames:
+            mapper.process(frame)
+            given += 1
+            if hasattr(frames, "set_postfix"):
+                frames.set_postfix(gaussians=len(mapper.map), kf=mapper.keyframe_count)
+    except DataError:
+        if mapper.keyframe_count:
+            # a bad frame late in a long sequence must not cost the map built so far
+            mapper.save_checkpoint(out / "map.npz")
+            log.error(
+                "the map so far is in %s: fix the frame (or --set data.on_bad_frame=skip), then --resume",
+                out / "map.npz",
+            )
+        raise
+    if given == 0 and mapper.finalized:
+        print(f"nothing to do: {out} has mapped every frame of {data} (--resume read no new frame)")
+        return 0
+    if mapper.keyframe_count == 0:
+        untracked = int(mapper.timings.counts.get("frames_untracked", 0))
+        why = f", {untracked} of them untracked by odometry (see the warnings above)" if untracked else ""
+        raise DataError(f"{data}: none of the {given} frames read could be mapped{why}")
     mapper.finalize()
     mapper.save(out)
     dt = time.perf_counter() - t0
+    mapped = mapper.frames_seen - seen0
+    skipped = f", {given - mapped} untracked" if given > mapped else ""
     print(
-        f"mapped {given} frames ({mapper.keyframe_count} keyframes) in {dt:.1f} s "
-        f"on {mapper.device}: "
-        f"{len(mapper.map)} Gaussians -> {out}"
+        f"read {given} frames: {mapped} mapped ({mapper.keyframe_count} keyframes in all){skipped}, "
+        f"in {dt:.1f} s on {mapper.device}: {len(mapper.map)} Gaussians -> {out}"
     )
     print(mapper.timings.table())
     return 0
+
+
+def _recorded_data_path(saved: Path) -> str | None:
+    """data.path from a run's config.yaml (None when absent or unreadable)."""
+    try:
+        loaded = yaml.safe_load(saved.read_text())
+    except (OSError, yaml.YAMLError):
+        return None
+    data = loaded.get("data") if isinstance(loaded, dict) else None
+    path = data.get("path") if isinstance(data, dict) else None
+    return path if isinstance(path, str) else None
+
+
+def _check_same_source(ckpt: Path, recorded: dict, current: dict) -> None:
+    """Refuse to resume a map with frames of another sequence; a moved dataset (same frames) is fine."""
+    if not recorded or recorded.get("path") == current["path"]:
+        return
+    same = recorded.get("frames") == current["frames"] and recorded.get("first") == current["first"]
+    if same:
+        log.warning(
+            "%s was mapped from %s; resuming with the same frames from %s",
+            ckpt,
+            recorded["path"],
+            current["path"],
+        )
+        return
+    raise DataError(
+        f"{ckpt} was mapped from {recorded['path']} ({recorded.get('frames')} frames, first "
+        f"{recorded.get('first')!r}), not from {current['path']} ({current['frames']} frames, first "
+        f"{current['first']!r}): resume with the same --data, or map the other sequence into a new --out"
+    )
