@@ -615,7 +615,12 @@ class Tracker:
 
         if self._kf is None:
             if prep.valid_fraction < cfg.min_fitness:
-                return self._skip(frame, f"only {prep.valid_fraction:.1%} valid depth pixels, cannot anchor")
+                return self._skip(
+                    frame,
+                    f"only {prep.valid_fraction:.1%} valid depth pixels (< tracking.min_fitness "
+                    f"{cfg.min_fitness}; tracking.depth_min/depth_max and data.min_depth bound them), "
+                    "cannot anchor",
+                )
             if self._anchor_override is not None:
                 pose = self._anchor_override
             elif frame.pose is not None:
@@ -638,7 +643,11 @@ class Tracker:
                 f"{kf.shape[::-1]}; a Tracker follows one camera (call reset() for a new one)"
             )
         if prep.valid_fraction < cfg.min_fitness:
-            return self._skip(frame, f"only {prep.valid_fraction:.1%} valid depth pixels")
+            return self._skip(
+                frame,
+                f"only {prep.valid_fraction:.1%} valid depth pixels "
+                f"(< tracking.min_fitness {cfg.min_fitness})",
+            )
 
         assert self._last_pose is not None and self._kf_pose is not None
         kf_inv = np.linalg.inv(self._kf_pose)
