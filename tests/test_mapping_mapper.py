@@ -212,6 +212,21 @@ def test_scene_graph_is_fed(tmp_path, device):
     assert {n["id"] for n in graph["nodes"]} == {0, 1}
 
 
+@pytest.mark.parametrize("up, warns", [("[0,-1,0]", False), ("[0,0,1]", True)])
+def test_an_up_axis_far_from_the_cameras_up_warns(up, warns, caplog):
+    """_frame's cameras are upright OpenCV cameras (world up -y): a z-up setting is named, with the fix."""
+    cfg = _config(
+        "graph.enabled=true", "graph.init_keyframes=1", "graph.min_gaussians=5", f"graph.up_axis={up}"
+    )
+    m = Mapper(cfg, "cpu")
+    with caplog.at_level("WARNING", logger="ogscene3d.mapping.mapper"):
+        m.process(_frame(0))
+    warned = [r.message for r in caplog.records if "graph.up_axis" in r.message]
+    assert bool(warned) == warns
+    if warns:
+        assert "90 deg" in warned[0] and "-y-up, set --set graph.up_axis=[0,-1,0]" in warned[0]
+
+
 def test_resume_keeps_the_scene_graph(tmp_path):
     cfg = load_config(
         None,

@@ -168,6 +168,8 @@ class Mapper:
         # what the frames come from (set by the caller, e.g. {"path", "frames", "first"}), kept in
         # checkpoints so that a resume can tell another sequence from the same one
         self.source: dict = {}
+        # sum of the mapped cameras' up vectors in the world (-y of an OpenCV camera): checks graph.up_axis
+        self._camera_up_sum = np.zeros(3)
 
     # ------------------------------------------------------------------ switches
     @property
@@ -192,6 +194,32 @@ class Mapper:
         self._checkpoint_dir = Path(out_dir) if out_dir is not None else None
 
     # ------------------------------------------------------------------ per frame
+    def _check_up_axis(self) -> None:
+        """Warn when graph.up_axis is far from where the cameras' up points on average: relations (on,
+        under) and floor / wall / ceiling tags would then use a wrong vertical (worlds differ: Replica's and
+        ScanNet's are z-up, an OpenCV camera's first frame is -y up)."""
+        norm = float(np.linalg.norm(self._camera_up_sum))
+        up = np.asarray(self.config.graph.up_axis, dtype=np.float64)
+        if norm < 1e-9 or up.shape != (3,) or not np.linalg.norm(up) > 0:
+            return
+        cam_up = self._camera_up_sum / norm
+        angle = math.degrees(math.acos(float(np.clip(cam_up @ up / np.linalg.norm(up), -1.0, 1.0))))
+        if angle > 60.0:
+            axis = int(np.argmax(np.abs(cam_up)))
+            guess = [0.0, 0.0, 0.0]
+            guess[axis] = 1.0 if cam_up[axis] > 0 else -1.0
+            log.warning(
+                "graph.up_axis %s is %.0f deg from the cameras' mean up direction %s over %d frames: the "
+                "scene graph's on/under relations and floor/wall/ceiling tags would use a wrong vertical; if "
+                "this world is %s-up, set --set graph.up_axis=%s",
+                up.tolist(),
+                angle,
+                np.round(cam_up, 2).tolist(),
+                self.frames_seen,
+                "xyz"[axis] if guess[axis] > 0 else "-" + "xyz"[axis],
+                "[" + ",".join(f"{v:g}" for v in guess) + "]",
+            )
+
     def _segments(self, frame: Frame) -> tuple[np.ndarray | None, dict[int, float]]:
         if frame.segments is not None:
             return _segment_ids(frame.segments, frame, "frame.segments"), dict(frame.segment_scores)
@@ -272,6 +300,7 @@ class Mapper:
             self.trajectory.append(np.array(frame.pose, dtype=np.float64) if tracked else None)
         if not tracked:
             return False
+        self._camera_up_sum -= np.asarray(frame.pose, dtype=np.float64)[:3, 1]
         if not self._checked_depth_range and np.any(frame.depth > 0):
             self._checked_depth_range = True
             median = implausible_median_depth(frame.depth)
@@ -513,6 +542,7 @@ class Mapper:
             if self._graph is None:
                 from ..graph import SceneGraph
 
+                self._check_up_axis()
                 self._graph = SceneGraph(self.config.graph)
             if segments is not None and seg_to_label is not None:
                 ids, labs = seg_to_label
