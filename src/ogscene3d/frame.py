@@ -8,8 +8,9 @@ import numpy as np
 
 from .camera import Camera
 
-# metres: a median depth outside this range means a wrong depth scale or unit (a room in km or mm)
-PLAUSIBLE_MEDIAN_DEPTH = (0.05, 50.0)
+# metres: RGB-D cameras see up to about 10 m, so a median outside this range means a wrong depth scale,
+# unit or format (a room in km or mm, or a bit-shifted encoding read as linear)
+PLAUSIBLE_MEDIAN_DEPTH = (0.05, 20.0)
 
 
 def implausible_median_depth(depth: np.ndarray) -> float | None:
