@@ -4,9 +4,40 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import tempfile
+import threading
 from collections.abc import Iterator
 from pathlib import Path
+
+_UMASK_LOCK = threading.Lock()
+_PROC_STATUS = Path("/proc/self/status")  # Linux >= 4.7 reports the umask here
+
+
+def current_umask() -> int:
+    """The process umask, read without leaving a window in which other threads create open files.
+
+    Linux reports it in ``/proc/self/status``; elsewhere it can only be read by setting it, so it is
+    set to the most restrictive mask for that instant (a file another thread creates meanwhile comes
+    out private, never world-writable) and restored at once, under a lock against concurrent readers.
+    """
+    with contextlib.suppress(OSError, ValueError):
+        for line in _PROC_STATUS.read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    with _UMASK_LOCK:
+        mask = os.umask(0o077)
+        os.umask(mask)
+    return mask
+
+
+def _final_mode(path: Path) -> int:
+    """The permission bits a plain ``open(path, "w")`` would leave: those of the file it replaces, or
+    0o666 less the umask for a new file (``mkstemp`` creates 0o600, which hides outputs from other users)."""
+    try:
+        return stat.S_IMODE(os.stat(path).st_mode)
+    except OSError:
+        return 0o666 & ~current_umask()
 
 
 @contextlib.contextmanager
@@ -18,6 +49,9 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     os.close(fd)
     try:
         yield Path(tmp)
+        # Some filesystems (e.g. SMB mounts) refuse chmod: the output is still written, if less readable.
+        with contextlib.suppress(OSError):
+            os.chmod(tmp, _final_mode(path))
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
