@@ -224,10 +224,12 @@ def test_sevenscenes_invalid_depth_and_sequences(tmp_path):
     assert f.depth[0, 0] == 0.0 and np.allclose(f.depth[1:], 1.2)
     assert f.name == "frame-000000.color"
     np.testing.assert_allclose(f.K[0, 0], 585.0)
+    # a missing pose file is found when the dataset is opened, not when its frame is reached
     (root / "seq-02" / "frame-000001.pose.txt").unlink()
-    ds = open_dataset(root)
-    with pytest.raises(DataError, match=r"seq-02/frame-000001\.pose\.txt: pose file is missing"):
-        ds[3]
+    with pytest.raises(
+        DataError, match=r"1 of the 4 selected .*sevenscenes layout.*seq-02/frame-000001\.pose\.txt"
+    ):
+        open_dataset(root)
     assert len(list(open_dataset(root, config=DataConfig(on_bad_frame="skip")))) == 3
 
 
@@ -243,9 +245,9 @@ def test_segments_dir_is_read_and_checked(tmp_path):
     write_segments(seg, "frame000002", np.zeros((12, 16), np.int32))
     with pytest.raises(DataError, match=r"frame000002\.png.*16x12"):
         open_dataset(scene, segments_dir=seg)[2]
-    (seg / "frame000001.png").unlink()
-    with pytest.raises(DataError, match=r"frame000001\.png.*missing"):
-        open_dataset(scene, segments_dir=seg)[1]
+    (seg / "frame000002.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")
+    with pytest.raises(DataError, match=r"frame000002\.png: cannot decode segments PNG"):
+        open_dataset(scene, segments_dir=seg)[2]
     with pytest.raises(DataError, match="segments folder does not exist"):
         open_dataset(scene, segments_dir=tmp_path / "nope")
 
@@ -273,7 +275,6 @@ def _img(name, img):
     "damage, match",
     [
         (_rm("frame000001.jpg"), None),  # fewer frames: not an error
-        (_rm("depth000001.png"), r"depth000001\.png: depth file is missing"),
         (_write("depth000001.png", b"not a png"), r"depth000001\.png: cannot decode"),
         (_write("frame000001.jpg", b""), r"frame000001\.jpg: rgb file is empty"),
         (_cut("depth000001.png", slice(0, 60)), r"depth000001\.png: depth PNG is truncated"),

@@ -136,6 +136,27 @@ def test_bad_frames_are_skipped_when_asked(scene, tmp_path, caplog):
     assert not any("nothing to do" in m for m in messages)
 
 
+def test_partial_segments_dir_in_the_config(scene, tmp_path):
+    """data.segments_dir (e.g. from a config) naming the folder being filled: frames not segmented yet are
+    read without segments (not an error) and segmented; finished ones are left alone."""
+    out = tmp_path / "segs"
+    args = [
+        "segment",
+        "--data",
+        str(scene["data"]),
+        "--out",
+        str(out),
+        "--backend",
+        "classical",
+        "--no-progress",
+    ]
+    assert main([*args, "--max-frames", "1"]) == 0
+    done = (out / "frame-000000.color.png").stat().st_mtime_ns
+    assert main([*args, "--set", f"data.segments_dir={out}"]) == 0
+    assert sorted(p.name for p in out.glob("*.png")) == [f"frame-{i:06d}.color.png" for i in range(3)]
+    assert (out / "frame-000000.color.png").stat().st_mtime_ns == done
+
+
 def test_cli_errors(scene, tmp_path, capsys):
     base = ["segment", "--data", str(scene["data"]), "--out", str(tmp_path / "x"), "--no-progress"]
     assert main(base) == 2  # the default backend (precomputed) computes nothing

@@ -3,7 +3,8 @@
 A reader lists its frames once (file paths, poses, timestamps: cheap) as :class:`FrameRecord` s and
 reads pixels only when a frame is asked for. Everything that can go wrong with a file raises
 :class:`~ogscene3d.errors.DataError` naming the file and the problem; iteration turns that into a
-logged warning and a skipped frame when ``on_bad_frame == "skip"``.
+logged warning and a skipped frame when ``on_bad_frame == "skip"``. Missing files are found when the
+dataset is opened (one stat per file, nothing read), all at once.
 """
 
 from __future__ import annotations
@@ -20,11 +21,13 @@ from ..camera import Camera
 from ..config import DataConfig
 from ..errors import DataError
 from ..frame import Frame, check_pose, implausible_median_depth
-from ..segmentation.precomputed import read_segments
+from ..segmentation.precomputed import has_segments, read_segments
 
 log = logging.getLogger(__name__)
 
 DEPTH_FORMATS = ("linear", "shift3")
+
+MISSING_LISTED = 5  # missing files named in the error; the rest are counted
 
 _PNG_END = b"IEND\xaeB`\x82"
 _JPEG_END = b"\xff\xd9"
@@ -225,7 +228,7 @@ class RGBDDataset:
                 f"{self.root}: frame range start={config.start} stride={config.stride} selects none of "
                 f"{len(records)} frames"
             )
-        self.records = selected
+        self.records = self._drop_incomplete(selected)
         if config.intrinsics is not None:
             if len(config.intrinsics) != 4:
                 raise DataError(f"data.intrinsics must be [fx, fy, cx, cy], got {config.intrinsics}")
@@ -254,6 +257,37 @@ class RGBDDataset:
             raise DataError(f"{self.segments_dir}: segments folder does not exist")
         self.resize_rgb_to_depth = resize_rgb_to_depth
         self._depth_checked = False
+        self._warned_no_segments = False
+
+    def _drop_incomplete(self, selected: list[FrameRecord]) -> list[FrameRecord]:
+        """``selected`` less the frames whose rgb, depth or pose file is missing, found now rather than
+        when mapping reaches them (maybe hours in). Missing files are a :class:`DataError` listing them
+        all, or, when ``on_bad_frame == "skip"``, one warning and those frames left out."""
+        missing = {id(rec): paths for rec in selected if (paths := _missing_files(rec))}
+        if not missing:
+            return selected
+        files = [p for paths in missing.values() for p in paths]
+        named = ", ".join(self._relative(p) for p in files[:MISSING_LISTED])
+        if len(files) > MISSING_LISTED:
+            named += f" and {len(files) - MISSING_LISTED} more"
+        msg = (
+            f"{self.root}: {len(missing)} of the {len(selected)} selected frames lack files ({self.kind} "
+            f"layout); {len(files)} missing: {named}"
+        )
+        kept = [rec for rec in selected if id(rec) not in missing]
+        if self.config.on_bad_frame == "skip" and kept:
+            log.warning("%s; leaving those frames out (data.on_bad_frame: skip)", msg)
+            return kept
+        if self.config.on_bad_frame == "skip":
+            raise DataError(f"{msg}; no selected frame is left")
+        raise DataError(f"{msg}; set data.on_bad_frame: skip to leave those frames out")
+
+    def _relative(self, path: Path) -> str:
+        """``path`` below the dataset folder (named at the start of messages), else in full."""
+        try:
+            return str(path.relative_to(self.root))
+        except ValueError:
+            return str(path)
 
     # -- sequence protocol
 
@@ -330,7 +364,7 @@ class RGBDDataset:
                 raise DataError(str(e)) from e
         segments, scores = None, {}
         if self.segments_dir is not None:
-            segments, scores = read_segments(self.segments_dir, rec.rgb_path.stem, depth.shape)
+            segments, scores = self._read_segments(rec, depth.shape)
         gt_instances, gt_classes = self._load_gt(rec, depth.shape)
         return Frame(
             index=i,
@@ -345,6 +379,27 @@ class RGBDDataset:
             gt_instances=gt_instances,
             gt_classes=gt_classes,
         )
+
+    def _read_segments(
+        self, rec: FrameRecord, shape: tuple[int, int]
+    ) -> tuple[np.ndarray | None, dict[int, float]]:
+        """The frame's precomputed segments, or (None, {}) when it has no segments file: the mapper's
+        segmentation.backend then segments it live (frames may be segmented in part, e.g. while
+        ``ogscene3d segment`` is still running). A corrupt or wrong-size file is an error."""
+        assert self.segments_dir is not None
+        stem = rec.rgb_path.stem
+        if not has_segments(self.segments_dir, stem):
+            if not self._warned_no_segments:
+                log.warning(
+                    "%s: no segments file for frame %s (%s.png); frames without one are segmented live by "
+                    "segmentation.backend (warned once)",
+                    self.segments_dir,
+                    rec.name,
+                    stem,
+                )
+                self._warned_no_segments = True
+            return None, {}
+        return read_segments(self.segments_dir, stem, shape)
 
     def _check_depth_range(self, depth: np.ndarray, path: Path) -> bool:
         """Warn once when the first frame with depth has a median outside what an RGB-D camera sees (a wrong
@@ -368,6 +423,14 @@ class RGBDDataset:
     ) -> tuple[np.ndarray | None, np.ndarray | None]:
         """Ground-truth (instance map, class map) for layouts that have them; None otherwise."""
         return None, None
+
+
+def _missing_files(rec: FrameRecord) -> list[Path]:
+    """The files ``rec`` needs that do not exist (a stat each; nothing is read)."""
+    paths = [rec.rgb_path, rec.depth_path]
+    if rec.pose_path is not None:
+        paths.append(rec.pose_path)
+    return [p for p in paths if not p.is_file()]
 
 
 def read_label_png(

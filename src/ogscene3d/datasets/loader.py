@@ -40,17 +40,25 @@ def detect_kind(path: str | Path) -> tuple[str, Path]:
     for kind, reader in READERS.items():
         if reader.detect(root):
             return kind, root
-    children = [d for d in sorted(root.iterdir()) if d.is_dir()]
-    found = [(k, d) for d in children for k, r in READERS.items() if r.detect(d)]
-    scenes = {d for _, d in found}
-    if len(scenes) == 1:
-        return found[0]
-    if len(scenes) > 1:
-        names = ", ".join(sorted(d.name for d in scenes))
-        raise DataError(f"{root}: holds several scenes ({names}); open one of them")
+    found = _single_scene(root, list(READERS))
+    if found is not None:
+        return found
     if not any(root.iterdir()):
         raise DataError(f"{root}: folder is empty")
     raise DataError(f"{root}: no known dataset layout; expected one of {_LAYOUTS}")
+
+
+def _single_scene(root: Path, kinds: list[str]) -> tuple[str, Path] | None:
+    """(kind, sub-folder) when exactly one sub-folder of ``root`` is a scene of one of ``kinds`` (the
+    first that fits, in detection order), e.g. a NICE-SLAM ``Replica/`` folder holding ``room0/``; None
+    when none is. Several scenes are an error: which one to open is the user's choice."""
+    children = [d for d in sorted(root.iterdir()) if d.is_dir()]
+    found = [(k, d) for d in children for k in kinds if READERS[k].detect(d)]
+    scenes = {d for _, d in found}
+    if len(scenes) > 1:
+        names = ", ".join(sorted(d.name for d in scenes))
+        raise DataError(f"{root}: holds several scenes ({names}); open one of them")
+    return found[0] if found else None
 
 
 def open_dataset(
@@ -91,6 +99,10 @@ def open_dataset(
         if not root.is_dir():
             raise DataError(f"{root}: dataset path does not exist or is not a folder")
         if not READERS[kind].detect(root):
-            raise DataError(f"{root}: does not look like a {kind} dataset; expected one of {_LAYOUTS}")
+            # as with kind auto, a folder holding a single scene is entered (data.kind set in a config)
+            found = _single_scene(root, [kind])
+            if found is None:
+                raise DataError(f"{root}: does not look like a {kind} dataset; expected one of {_LAYOUTS}")
+            root = found[1]
     seg = Path(segments_dir) if segments_dir is not None else None
     return READERS[kind](root, cfg, seg)

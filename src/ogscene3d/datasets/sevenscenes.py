@@ -2,22 +2,27 @@
 
 7-Scenes: ``frame-%06d.color.png|jpg``, ``frame-%06d.depth.png`` (uint16 millimetres, 65535 =
 invalid), ``frame-%06d.pose.txt`` (4x4 camera-to-world, OpenCV axes), optional
-``camera-intrinsics.txt`` (3x3; default fx = fy = 585, cx = 320, cy = 240). The files may sit in
-the folder itself or in ``seq-XX/`` sub-folders (all sequences are concatenated in name order).
+``camera-intrinsics.txt`` (3x3; without it the Kinect default fx = fy = 585, cx = 320, cy = 240, with a
+warning). The files may sit in the folder itself or in ``seq-XX/`` sub-folders (all sequences are
+concatenated in name order); the intrinsics file in the folder or in the first sequence.
 
-Label-fusion / APC (``camera-intrinsics.color.txt`` or ``frame-*.segm.png`` present): the same
-names, depth in the bit-shifted format metres = (value >> 3) / 1e4 with < 0.3 m invalid, and
-``frame-%06d.segm.png`` uint8 class labels (class id = value / 6) returned as ``Frame.gt_classes``.
+Label-fusion / APC (``camera-intrinsics.color.txt``, preferred over ``camera-intrinsics.txt``, or
+``frame-*.segm.png`` present): the same names, depth in the bit-shifted format metres = (value >> 3) /
+1e4 with < 0.3 m invalid, and ``frame-%06d.segm.png`` uint8 class labels (class id = value / 6) returned
+as ``Frame.gt_classes``.
 """
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
 
 from ..config import DataConfig
 from .base import FrameRecord, K_from_values, RGBDDataset, read_label_png, read_matrix
+
+log = logging.getLogger(__name__)
 
 SEVENSCENES_DEFAULT_K = (585.0, 585.0, 320.0, 240.0)
 
@@ -30,6 +35,16 @@ def _sequence_dirs(root: Path) -> list[Path]:
     if _color_files(root):
         return [root]
     return sorted(d for d in root.glob("seq*") if d.is_dir() and _color_files(d))
+
+
+def find_intrinsics(root: Path, names: tuple[str, ...]) -> Path | None:
+    """The first of ``names`` (in order of preference) in ``root`` or its first sequence folder."""
+    folders = (root, *_sequence_dirs(root)[:1])
+    for name in names:
+        for d in folders:
+            if (d / name).is_file():
+                return d / name
+    return None
 
 
 class SevenScenesDataset(RGBDDataset):
@@ -60,13 +75,25 @@ class SevenScenesDataset(RGBDDataset):
                     )
                 )
         K = None
-        for name in self.intrinsics_files:
-            for d in (root, *(_sequence_dirs(root)[:1])):
-                if (d / name).is_file() and K is None:
-                    K = read_matrix(d / name, (3, 3), "intrinsics")
-        if K is None:
-            K = K_from_values(*SEVENSCENES_DEFAULT_K)
+        if config.intrinsics is None:  # data.intrinsics wins over the files (the base class applies it)
+            K = self._intrinsics(root)
         super().__init__(root, records, K, config, segments_dir)
+
+    @classmethod
+    def _intrinsics(cls, root: Path) -> np.ndarray:
+        """K from the first of ``intrinsics_files`` in the scene folder or its first sequence; else the
+        7-Scenes Kinect default, with a warning (right only for a Kinect v1 at 640x480)."""
+        path = find_intrinsics(root, cls.intrinsics_files)
+        if path is not None:
+            return read_matrix(path, (3, 3), "intrinsics")
+        log.warning(
+            "%s: no %s; using the 7-Scenes Kinect default intrinsics fx, fy, cx, cy = %s, right only for "
+            "that camera: give data.intrinsics = [fx, fy, cx, cy] for any other",
+            root,
+            " or ".join(cls.intrinsics_files),
+            SEVENSCENES_DEFAULT_K,
+        )
+        return K_from_values(*SEVENSCENES_DEFAULT_K)
 
 
 class LabelFusionDataset(SevenScenesDataset):
@@ -81,8 +108,9 @@ class LabelFusionDataset(SevenScenesDataset):
     @staticmethod
     def detect(root: Path) -> bool:
         dirs = _sequence_dirs(root)
+        # the colour intrinsics file is looked for where the reader looks for it, not in the scene folder only
         return bool(dirs) and (
-            (root / "camera-intrinsics.color.txt").is_file()
+            find_intrinsics(root, ("camera-intrinsics.color.txt",)) is not None
             or any(any(d.glob("frame-*.segm.png")) for d in dirs)
         )
 

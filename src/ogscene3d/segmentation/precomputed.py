@@ -2,6 +2,10 @@
 
 ``DIR/<rgb stem>.png``: uint16 segment ids, 0 = no segment, same size as the RGB image;
 ``DIR/<rgb stem>.json``: optional ``{"scores": {"<id>": float}}`` (SAM predicted IoU).
+
+A frame without a PNG has no precomputed segments: datasets give it ``segments=None`` and the
+mapper's ``segmentation.backend`` segments it live. :func:`read_segments` itself reads one file that
+must be there.
 """
 
 from __future__ import annotations
@@ -19,6 +23,11 @@ from ..errors import DataError
 def segments_paths(directory: str | Path, stem: str) -> tuple[Path, Path]:
     d = Path(directory)
     return d / f"{stem}.png", d / f"{stem}.json"
+
+
+def has_segments(directory: str | Path, stem: str) -> bool:
+    """Whether the frame ``stem`` has a segments PNG in ``directory`` (a stat; nothing is read)."""
+    return segments_paths(directory, stem)[0].is_file()
 
 
 def write_segments(
@@ -46,7 +55,11 @@ def write_segments(
 def read_segments(
     directory: str | Path, stem: str, shape: tuple[int, int] | None = None
 ) -> tuple[np.ndarray, dict[int, float]]:
-    """Read one frame's segments: (int32 id map, {id: score}). Missing scores default to 1.0."""
+    """Read one frame's segments: (int32 id map, {id: score}). Missing scores default to 1.0.
+
+    A missing, corrupt or wrong-size (``shape``) PNG raises :class:`DataError`; callers for which
+    segments are optional check :func:`has_segments` first.
+    """
     png, js = segments_paths(directory, stem)
     if not png.is_file():
         raise DataError(f"{png}: segments file is missing")
