@@ -281,3 +281,20 @@ def test_ray_worker_crash_is_recorded(local_ray) -> None:
     assert out[0]["name"] == "dies" and out[0]["status"] == "failed"
     assert "WorkerCrashedError" in out[0]["error"]
     assert out[1] == {"name": "fine", "status": "ok", "value": 7, "device": "cpu"}
+
+
+def test_a_bad_frame_keeps_the_scenes_map_so_far(tmp_path: Path, tiny_scene: Path) -> None:
+    import shutil
+
+    scene = tmp_path / "scene"
+    shutil.copytree(tiny_scene, scene)
+    (scene / "results" / "depth000004.png").write_bytes(b"not a png")  # keyframes 0 and 2 come before it
+    scenes = tmp_path / "scenes.txt"
+    scenes.write_text(f"{scene}\n")
+    argv = ["run-batch", str(scenes), "--out", str(tmp_path / "out"), "--config", CONFIG]
+    for ov in TINY:
+        argv += ["--set", ov]
+    assert main(argv) == 2  # every scene failed
+    rec = json.loads((tmp_path / "out" / "run_batch.json").read_text())["scenes"][0]
+    assert rec["status"] == "failed" and "depth000004.png" in rec["error"]
+    assert (tmp_path / "out" / rec["name"] / "map.npz").is_file()

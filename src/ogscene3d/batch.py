@@ -278,6 +278,7 @@ def map_scene(
 
     mapper = Mapper(cfg, cfg.device)
     mapper.set_checkpoint_dir(run_dir)
+    mapper.source = {"path": cfg.data.path, "frames": len(ds), "first": ds.records[0].name}
     dev = mapper.device
     if dev.type == "cuda":
         torch.cuda.reset_peak_memory_stats(dev)
@@ -287,8 +288,15 @@ def map_scene(
 
         frames = tqdm(frames, desc=spec.name, unit="frame", total=len(ds))
     t0 = time.perf_counter()
-    for frame in frames:
-        mapper.process(frame)
+    try:
+        for frame in frames:
+            mapper.process(frame)
+    except DataError:
+        if mapper.keyframe_count:  # the scene's map so far survives a bad frame (`ogscene3d run --resume`)
+            mapper.save_checkpoint(run_dir / "map.npz")
+        raise
+    if mapper.keyframe_count == 0:
+        raise DataError(f"{data}: none of its frames could be mapped (see the warnings above)")
     mapper.finalize()
     if dev.type == "cuda":
         torch.cuda.synchronize(dev)
