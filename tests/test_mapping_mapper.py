@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from ogscene3d.config import load_config
-from ogscene3d.errors import ConfigError, DataError
+from ogscene3d.errors import ConfigError, DataError, OGSceneError
 from ogscene3d.frame import Frame
 from ogscene3d.mapping.keyframes import KeyframeSelector
 from ogscene3d.mapping.mapper import Mapper
@@ -181,6 +181,20 @@ def test_depth_in_millimetres_warns(caplog):
     warned = [r.message for r in caplog.records if "implausible" in r.message]
     assert len(warned) == 1 and "frame 0 (f0): median depth 2e+03 m" in warned[0]
     assert "metres" in warned[0]
+
+
+@pytest.mark.parametrize(
+    "override, match",
+    [
+        ("graph.captioner.kind=opnai", "graph.captioner.kind"),
+        ("graph.relations.kind=llm", "no model name configured"),
+    ],
+)
+def test_a_mistake_in_the_graph_settings_stops_the_mapper_before_any_frame(override, match):
+    with pytest.raises((ConfigError, OGSceneError), match=match):
+        Mapper(load_config(None, [override]), "cpu")
+    # with the graph off its settings do not matter
+    Mapper(load_config(None, [override, "graph.enabled=false"]), "cpu")
 
 
 def test_full_ablation_runs_longterm_and_refinement(device):

@@ -156,7 +156,10 @@ class Mapper:
         self.next_index = 0
         self.keyframe_count = 0
         self.rng = np.random.default_rng(config.seed)
-        self._graph = None
+        # built now, so that a mistake in the graph's settings (captioner, relations, confidence model)
+        # stops the run before its first frame instead of disabling the graph hours into it
+        self._graph = self._new_graph() if config.graph.enabled else None
+        self._up_checked = False
         self._graph_failed = False
         self._warned_no_segments = False
         self._checked_depth_range = False
@@ -186,14 +189,20 @@ class Mapper:
 
     @property
     def graph(self):
-        """The scene graph (``ogscene3d.graph.SceneGraph``) once the first keyframe built it, else None."""
-        return self._graph
+        """The scene graph (``ogscene3d.graph.SceneGraph``) when ``config.graph.enabled``, else None (also
+        after an error disabled it for the run)."""
+        return None if self._graph_failed else self._graph
 
     def set_checkpoint_dir(self, out_dir: str | Path | None) -> None:
         """Where ``checkpoint_every`` writes ``map.npz`` during mapping."""
         self._checkpoint_dir = Path(out_dir) if out_dir is not None else None
 
     # ------------------------------------------------------------------ per frame
+    def _new_graph(self):
+        from ..graph import SceneGraph
+
+        return SceneGraph(self.config.graph)
+
     def _check_up_axis(self) -> None:
         """Warn when graph.up_axis is far from where the cameras' up points on average: relations (on,
         under) and floor / wall / ceiling tags would then use a wrong vertical (worlds differ: Replica's and
@@ -538,12 +547,12 @@ class Mapper:
 
         The keyframe's label map is its segmentation with each segment replaced by the scene label it was
         given (exact SAM boundaries); without segments, the map's rendered labels."""
+        if not self._up_checked:
+            self._up_checked = True
+            self._check_up_axis()
         try:
             if self._graph is None:
-                from ..graph import SceneGraph
-
-                self._check_up_axis()
-                self._graph = SceneGraph(self.config.graph)
+                self._graph = self._new_graph()
             if segments is not None and seg_to_label is not None:
                 ids, labs = seg_to_label
                 lut = np.full(int(max(ids.max(initial=0), segments.max(initial=0))) + 1, -1, dtype=np.int32)
@@ -702,10 +711,8 @@ class Mapper:
             raise DataError(f"{p}: not a mapper checkpoint (missing {e})") from e
         self._graph, self._graph_failed = None, False
         if graph_state is not None and self.config.graph.enabled:
-            from ..graph import SceneGraph
-
             try:
-                graph = SceneGraph(self.config.graph)
+                graph = self._new_graph()
                 graph.load_state(json.loads(graph_state), source=f"{p} (graph_state)")
                 self._graph = graph
             except Exception as e:  # noqa: BLE001 - the graph is optional: the map resumes without it
