@@ -9,6 +9,7 @@ import base64
 import json
 import logging
 import threading
+import time
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import cv2
@@ -28,6 +29,7 @@ from ogscene3d.graph import (
     SceneGraph,
     SceneNode,
 )
+from ogscene3d.graph.openai_client import EndpointUnreachable
 
 UP = (0.0, -1.0, 0.0)
 SECRET = "sk-test-DO-NOT-LEAK-123456"
@@ -347,3 +349,199 @@ def test_query_with_openai_embeddings(server_factory):
     n_req = len(srv.requests)
     g.query_scored("lamp")  # node embeddings are cached: one request for the query only
     assert len(srv.requests) == n_req + 1
+
+
+# ------------------------------------------------------------------ API key, deadlines, circuit breaker
+
+
+def test_unset_api_key_is_warned_once_and_named_in_auth_errors(server_factory, monkeypatch, caplog):
+    monkeypatch.delenv("OGS_TEST_UNSET_KEY", raising=False)
+    srv = server_factory(lambda body, n: (401, '{"error": "invalid api key"}', 0))
+    client = _client(srv, api_key_env="OGS_TEST_UNSET_KEY")
+    with caplog.at_level(logging.WARNING, logger="ogscene3d.graph.openai_client"):
+        for _ in range(2):
+            with pytest.raises(ModelError, match=r"HTTP 401.*\(API key from \$OGS_TEST_UNSET_KEY: not set\)"):
+                client.chat([{"role": "user", "content": "x"}])
+    warnings = [r.message for r in caplog.records if "OGS_TEST_UNSET_KEY" in r.message]
+    assert len(warnings) == 1 and "not set" in warnings[0]
+    assert "Authorization" not in srv.headers[0]  # local servers need none: still sent without
+    # a key that is set: no warning, the error names the variable but never the key
+    monkeypatch.setenv("OGS_TEST_KEY", SECRET)
+    caplog.clear()
+    with pytest.raises(ModelError, match=r"\(API key from \$OGS_TEST_KEY\)") as exc:
+        _client(srv).chat([{"role": "user", "content": "x"}])
+    assert SECRET not in str(exc.value) and "not set" not in caplog.text
+    # api_key_env "" says "no key": nothing to warn about
+    srv2 = server_factory(lambda body, n: (200, "fine", 0))
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        assert _client(srv2, api_key_env="").chat([{"role": "user", "content": "x"}]) == "fine"
+    assert caplog.text == ""
+
+
+class DripServer:
+    """Answers every POST slowly: the headers (``drip_headers``) or the body one byte every ``step`` s."""
+
+    def __init__(self, step: float = 0.05, drip_headers: bool = False):
+        body = json.dumps({"choices": [{"message": {"content": '{"caption": "slow drip caption"}'}}]})
+
+        class Handler(BaseHTTPRequestHandler):
+            def log_message(self, *args):
+                pass
+
+            def do_POST(self):
+                self.rfile.read(int(self.headers["Content-Length"]))
+                head = (
+                    "HTTP/1.1 200 OK\r\nContent-Type: application/json\r\n"
+                    f"Content-Length: {len(body)}\r\n\r\n"
+                )
+                slow, fast = (head + body, "") if drip_headers else (body, head)
+                try:
+                    self.wfile.write(fast.encode())
+                    for ch in slow:
+                        self.wfile.write(ch.encode())
+                        self.wfile.flush()
+                        time.sleep(step)
+                except (BrokenPipeError, ConnectionResetError):
+                    pass  # the client gave up, as it should
+
+        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.httpd.daemon_threads = True
+        threading.Thread(target=self.httpd.serve_forever, args=(0.05,), daemon=True).start()
+        self.base_url = f"http://127.0.0.1:{self.httpd.server_address[1]}/v1"
+
+    def close(self):
+        self.httpd.shutdown()
+        self.httpd.server_close()
+
+
+@pytest.mark.parametrize("drip_headers", [False, True])
+def test_timeout_bounds_the_whole_request_not_each_read(drip_headers):
+    """A server trickling a byte every 50 ms never trips a per-read timeout; the request must still end
+    after timeout_s (the reply takes several seconds to arrive in full)."""
+    srv = DripServer(step=0.05, drip_headers=drip_headers)
+    try:
+        client = ChatClient(srv.base_url, "m", api_key_env="", timeout_s=0.5, max_retries=1, backoff_s=0.0)
+        t0 = time.monotonic()
+        with pytest.raises(EndpointUnreachable, match="timed out after 0.5 s"):
+            client.chat([{"role": "user", "content": "x"}])
+        elapsed = time.monotonic() - t0
+    finally:
+        srv.close()
+    assert client.calls == 2 and elapsed < 2.0  # (max_retries + 1) * timeout_s, plus slack
+
+
+def _observed_graph(n_nodes: int, captioner) -> tuple[SceneGraph, tuple]:
+    """A scene graph with ``n_nodes`` observed nodes (red boxes) and the arrays of one update."""
+    g = SceneGraph(GraphConfig(min_obs_pixels=4), captioner=captioner, node_confidence=MeanConfidence())
+    H, W = 48, 16 * n_nodes
+    rgb = np.full((H, W, 3), 200, np.uint8)
+    lm = np.full((H, W), -1, np.int32)
+    for k in range(n_nodes):
+        lm[8:40, 16 * k + 2 : 16 * k + 14] = k
+    g.observe(0, Frame(0, rgb, np.ones((H, W), np.float32), np.eye(3)), lm)
+    rng = np.random.default_rng(0)
+    means = np.concatenate([rng.uniform(0, 0.3, (50, 3)) + [0.5 * k, 0, 0] for k in range(n_nodes)])
+    labels = np.repeat(np.arange(n_nodes, dtype=np.int32), 50)
+    return g, (means, labels, np.full(len(means), 0.9, np.float32))
+
+
+def test_circuit_breaker_skips_the_rest_of_an_update_when_the_endpoint_is_down(caplog):
+    import socket
+
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()  # nothing listens there: every request fails to connect
+    client = ChatClient(f"http://127.0.0.1:{port}/v1", "m", api_key_env="", max_retries=1, backoff_s=0.0)
+    g, arrays = _observed_graph(6, OpenAICaptioner(client, concurrency=1))
+    with caplog.at_level(logging.WARNING):
+        g.update(11, *arrays)
+    assert client.calls == 3 * 2  # three nodes' requests (with one retry each), then the rest skipped
+    skips = [r.message for r in caplog.records if "skipped the other" in r.message]
+    assert len(skips) == 1 and "3 caption request(s)" in skips[0]
+    assert all(n.caption_source == "heuristic" for n in g.nodes.values())
+
+
+def test_http_errors_do_not_trip_the_circuit_breaker(server_factory):
+    srv = server_factory(_caption_responder(fail_captions=True))
+    g, arrays = _observed_graph(5, OpenAICaptioner(_client(srv, max_retries=0), concurrency=1))
+    g.update(11, *arrays)
+    assert len(srv.requests) == 5  # the server answers (HTTP 500): every node is asked
+
+
+def test_failed_captions_are_retried_at_the_next_update(server_factory):
+    srv = server_factory(_caption_responder(fail_captions=True))
+    g, arrays = _observed_graph(2, OpenAICaptioner(_client(srv, max_retries=0), concurrency=1))
+    g.update(11, *arrays)
+    assert [n.caption_source for n in g.nodes.values()] == ["heuristic", "heuristic"]
+    srv.respond = _caption_responder()
+    g.update(23, *arrays)
+    assert [n.caption_source for n in g.nodes.values()] == ["vlm", "vlm"]
+    assert g.nodes[0].tag == "red box"
+
+
+# ------------------------------------------------------------------ prose caption replies
+
+
+def test_prose_caption_replies_are_kept_marked_and_warned_once(server_factory, caplog):
+    from ogscene3d.graph.captioner import read_caption_reply
+
+    assert read_caption_reply('{"caption": "a mug"}') == ("a mug", True)
+    assert read_caption_reply("I'm sorry, I can't help.") == ("I'm sorry, I can't help.", False)
+    assert read_caption_reply('{"error": "bad image"}') == (None, True)
+
+    def respond(body, n):
+        content = body["messages"][-1]["content"]
+        if isinstance(content, list):
+            return 200, "A red box on the floor.", 0
+        return 200, json.dumps({"tags": {}}), 0
+
+    srv = server_factory(respond)
+    g, arrays = _observed_graph(3, OpenAICaptioner(_client(srv), concurrency=2))
+    with caplog.at_level(logging.WARNING):
+        g.update(11, *arrays)
+    assert [n.caption_source for n in g.nodes.values()] == ["vlm-text"] * 3
+    assert g.nodes[0].caption == "A red box on the floor." and g.nodes[0].tag == "red box on the"
+    prose = [r.message for r in caplog.records if "not the JSON" in r.message]
+    assert len(prose) == 1 and "vlm-text" in prose[0]
+    assert g.stats()["vlm_captioned"] == 3
+
+
+# ------------------------------------------------------------------ relation replies
+
+
+def test_edge_reply_direction_comes_from_subject_or_object():
+    from ogscene3d.graph.relations import parse_edge_reply
+
+    pairs = _scene()[:2]  # (cup 2, table 1), (wall 3, picture 4)
+
+    def parse(entries):
+        return {
+            k: (r.source, r.relation, r.target)
+            for k, r in parse_edge_reply(_edge_reply(entries), pairs).items()
+        }
+
+    # only the object given, and it is the pair's first node: the other one is the subject
+    assert parse([{"pair": 0, "relation": "on", "object": 2}]) == {0: (1, "on", 2)}
+    assert parse([{"pair": 0, "relation": "on", "object": "1"}]) == {0: (2, "on", 1)}
+    assert parse([{"pair": 1, "relation": "supports", "subject": 3}]) == {1: (4, "on", 3)}
+    assert parse([{"pair": 1, "relation": "on"}]) == {1: (3, "on", 4)}  # no ids: pair order
+
+
+@pytest.mark.parametrize(
+    "entry",
+    [
+        {"pair": 0, "subject": 99, "relation": "on", "object": 98},  # ids of no node of the pair
+        {"pair": 0, "subject": 2, "relation": "on", "object": 3},  # object from another pair
+        {"pair": 0, "subject": 2, "relation": "on", "object": 2},  # a node related to itself
+        {"pair": 0, "subject": "cup", "relation": "on", "object": 1},  # not an id
+    ],
+)
+def test_edge_entries_naming_other_nodes_fall_back_to_geometry(entry, caplog):
+    from ogscene3d.graph.relations import parse_edge_reply
+
+    pairs = _scene()[:1]
+    with caplog.at_level(logging.WARNING):
+        assert parse_edge_reply(_edge_reply([entry]), pairs) == {}
+    assert "not the pair's nodes" in caplog.text

@@ -146,6 +146,9 @@ def test_proximity_ratios_rejects_bad_theta():
         ("mounted on", ("attached to", False)),
         ("supports", ("on", True)),
         ("contains", ("in", True)),
+        ("to the left of", ("next to", False)),  # looked up before articles are dropped
+        ("is to the right of the", ("next to", False)),
+        ("on the top of", ("on", False)),
         ("eats", None),
         ("", None),
     ],

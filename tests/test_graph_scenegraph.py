@@ -409,3 +409,84 @@ def test_heuristic_captions_follow_growing_geometry():
     assert g.nodes[0].tag != "wall" and g.nodes[1].tag == "floor"
     g.update(23, *wall(2.5))
     assert g.nodes[0].tag == "wall" and g.nodes[0].last_updated == 11
+
+
+class FlakyCaptioner(SpyCaptioner):
+    """Like SpyCaptioner but leaves the nodes in ``down[call]`` out (their request failed) on that call."""
+
+    def __init__(self, down: dict[int, set[int]]):
+        super().__init__()
+        self.down = down
+
+    def describe(self, requests):
+        out = super().describe(requests)
+        for i in self.down.get(len(self.calls), set()):
+            out.pop(i, None)
+        return out
+
+
+def test_fallback_captions_are_asked_for_again_at_the_next_update_and_finalize(caplog):
+    """A node whose VLM caption failed gets the heuristic caption, and is queued again at every update
+    (and at finalize) until the captioner answers, although its confidence is above tau_update."""
+    cap = FlakyCaptioner(down={1: {1, 2}, 2: {2}})
+    g = SceneGraph(
+        GraphConfig(), captioner=cap, relations=SpyRelations(), node_confidence=TableConfidence({})
+    )
+    g.update(11, *blob_map([0, 1, 2]))
+    assert [g.nodes[i].caption_source for i in (0, 1, 2)] == ["vlm", "heuristic", "heuristic"]
+    assert "heuristic" in g.nodes[1].caption
+    g.update(23, *blob_map([0, 1, 2]))
+    assert cap.calls[1] == [1, 2]  # the confident VLM-captioned node 0 is not asked again
+    assert g.nodes[1].caption == "thing 1 v2" and g.nodes[1].caption_source == "vlm"
+    assert g.nodes[2].caption_source == "heuristic" and g.nodes[2].last_updated == 23
+    with caplog.at_level("INFO", logger="ogscene3d.graph.scenegraph"):
+        g.finalize(30, *blob_map([0, 1, 2]))
+    assert cap.calls[2] == [2]
+    assert all(n.caption_source == "vlm" for n in g.nodes.values())
+    assert "3 of 3 nodes captioned by the VLM" in caplog.text
+
+
+def test_heuristic_captioner_does_not_requeue_its_own_captions():
+    class SpyHeuristic(HeuristicCaptioner):
+        def __init__(self):
+            super().__init__()
+            self.calls = []
+
+        def describe(self, requests):
+            self.calls.append([r.node.id for r in requests])
+            return super().describe(requests)
+
+    cap = SpyHeuristic()
+    g = SceneGraph(GraphConfig(), captioner=cap, node_confidence=TableConfidence({}))
+    g.update(11, *blob_map([0, 1]))
+    g.update(23, *blob_map([0, 1]))
+    g.finalize(30, *blob_map([0, 1]))
+    assert cap.calls == [[0, 1]]
+
+
+def test_stats_count_vlm_captions_and_finalize_warns_when_none(caplog):
+    cap = FlakyCaptioner(down={1: {0, 1}, 2: {0, 1}})
+    g = SceneGraph(GraphConfig(), captioner=cap, node_confidence=TableConfidence({}))
+    g.update(11, *blob_map([0, 1]))
+    with caplog.at_level("INFO", logger="ogscene3d.graph.scenegraph"):
+        g.finalize(12, *blob_map([0, 1]))
+    assert "0 of 2 nodes captioned by the VLM" in caplog.text
+    assert any(r.levelname == "WARNING" and "captioned by the VLM" in r.message for r in caplog.records)
+    doc = g.to_json()
+    assert doc["stats"]["vlm_captioned"] == 0 and doc["stats"]["caption_sources"] == {"heuristic": 2}
+    g.nodes[0].caption_source = "vlm-text"  # prose replies count as VLM captions
+    assert g.stats()["vlm_captioned"] == 1 and g.stats()["nodes"] == 2
+
+
+def test_graph_help_override_examples_are_valid_keys(capsys):
+    """The --set example of `ogscene3d graph --help` names real config keys."""
+    import re
+
+    from ogscene3d.cli import build_parser
+
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["graph", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    examples = re.findall(r"--set ([a-z_]+\.[\w.]+=[^\s)]+)", text)  # not the usage's KEY=VALUE
+    assert examples
+    load_config(None, [e.replace("MODEL", "text-embedding-3-small") for e in examples])

@@ -16,7 +16,7 @@ from .captioner import (
 )
 from .confidence import ClipConfidence, ClipTokenizer, MeanConfidence, NodeConfidence, build_confidence
 from .geometry import directed_ratios, proximate_points, proximity_ratios
-from .openai_client import ChatClient
+from .openai_client import ChatClient, EndpointUnreachable
 from .relations import (
     RELATIONS,
     GeometricRelations,
@@ -41,6 +41,7 @@ __all__ = [
     "ClipTokenizer",
     "Crop",
     "Description",
+    "EndpointUnreachable",
     "GeometricRelations",
     "GroundTruthCaptioner",
     "HeuristicCaptioner",

@@ -2,19 +2,23 @@
 
 * :class:`OpenAICaptioner`: a VLM through the OpenAI-compatible chat-completions API. One request per node
   with its observation set O_i (context crop, then up to three masked views, as base64 JPEG data URLs)
-  and the caption prompt; then ONE request that turns all new captions into short tags.
+  and the caption prompt; then ONE request that turns all new captions into short tags. A prose reply
+  (no JSON) is kept, marked ``"vlm-text"``; after a few requests in a row that cannot reach the endpoint,
+  the rest of the update's requests are skipped.
 * :class:`HeuristicCaptioner`: offline; says only what geometry and colour support (floor / wall / ceiling
   from the node's plane normal, extent and height along the configured up vector; otherwise size, colour
   and flatness) and marks its captions as heuristic.
 * :class:`GroundTruthCaptioner`: names from ground truth (synthetic scenes, evaluation only).
 
 A captioner returns ``{node id: Description}`` for the nodes it could describe; a node it leaves out keeps
-its previous caption (the scene graph fills nodes that never had one with the heuristic captioner).
+its previous caption (the scene graph fills nodes that never had one with the heuristic captioner, and asks
+the captioner again at its next update while a node's caption is a heuristic one).
 """
 
 from __future__ import annotations
 
 import logging
+import threading
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Protocol, runtime_checkable
@@ -22,7 +26,7 @@ from typing import Protocol, runtime_checkable
 from ..config import CaptionerConfig
 from ..errors import ConfigError
 from .geometry import color_name, format_length
-from .openai_client import ChatClient, extract_json, image_data_url
+from .openai_client import ChatClient, EndpointUnreachable, extract_json, image_data_url
 from .types import CaptionRequest, Description
 
 log = logging.getLogger(__name__)
@@ -55,23 +59,30 @@ TAG_PROMPT = (
 )
 
 
-def parse_caption_reply(text: str, max_chars: int = 1000) -> str | None:
-    """The caption in a VLM reply (``{"caption": ...}`` or plain prose); None when malformed or empty."""
+def read_caption_reply(text: str, max_chars: int = 1000) -> tuple[str | None, bool]:
+    """``(caption, is_json)`` of a VLM reply: ``{"caption": ...}`` gives ``(caption, True)``, plain prose
+    ``(prose, False)`` (local VLMs often ignore the requested format, so prose is kept); the caption is
+    None when the reply is malformed, empty or longer than ``max_chars``."""
     caption: object = None
+    is_json = True
     try:
         data = extract_json(text)
-        if isinstance(data, dict):
-            caption = data.get("caption")
-        else:
-            return None
+        if not isinstance(data, dict):
+            return None, True
+        caption = data.get("caption")
     except ValueError:
-        caption = text  # a plain-prose reply is accepted as the caption
+        caption, is_json = text, False
     if not isinstance(caption, str):
-        return None
+        return None, is_json
     caption = " ".join(caption.split())
     if not caption or len(caption) > max_chars:
-        return None
-    return caption
+        return None, is_json
+    return caption, is_json
+
+
+def parse_caption_reply(text: str, max_chars: int = 1000) -> str | None:
+    """The caption in a VLM reply (``{"caption": ...}`` or plain prose); None when malformed or empty."""
+    return read_caption_reply(text, max_chars)[0]
 
 
 def parse_tag_reply(text: str, ids: Sequence[int]) -> dict[int, str]:
@@ -108,11 +119,39 @@ def tag_from_caption(caption: str) -> str:
     return " ".join(head.split()[:4]) or "object"
 
 
+class _CircuitBreaker:
+    """Counts consecutive requests of one ``describe`` call that could not reach the endpoint (connection
+    failed or timed out); once ``limit`` of them came in a row, the remaining requests are skipped: with
+    the server down, each would otherwise wait out its own timeouts and retries."""
+
+    def __init__(self, limit: int) -> None:
+        self.limit = limit
+        self.failures = 0
+        self.skipped = 0
+        self.tripped = False
+        self._lock = threading.Lock()
+
+    def allow(self) -> bool:
+        with self._lock:
+            if self.tripped:
+                self.skipped += 1
+            return not self.tripped
+
+    def record(self, unreachable: bool) -> None:
+        with self._lock:
+            self.failures = self.failures + 1 if unreachable else 0
+            self.tripped = self.tripped or self.failures >= self.limit
+
+
 class OpenAICaptioner:
     """VLM captions through an OpenAI-compatible chat-completions endpoint, tags in one batched call.
 
     Nodes without any stored observation are left out (no images, nothing for the VLM to see).
     Per-node requests run on up to ``concurrency`` threads; failures are logged and the node left out.
+    After ``max_consecutive_failures`` requests in a row that could not reach the endpoint, the rest of
+    the call's requests are skipped (one warning); the scene graph asks again at its next update.
+    Captions from replies that are prose instead of the requested JSON get source ``"vlm-text"`` (warned
+    once per captioner: a refusal would be kept as a caption too).
     """
 
     def __init__(
@@ -121,11 +160,15 @@ class OpenAICaptioner:
         max_tokens: int = 300,
         concurrency: int = 4,
         tag_client: ChatClient | None = None,
+        max_consecutive_failures: int = 3,
     ):
         self.client = client
         self.tag_client = tag_client or client
         self.max_tokens = max_tokens
         self.concurrency = max(1, int(concurrency))
+        self.max_consecutive_failures = max(1, int(max_consecutive_failures))
+        self._warned_prose = False
+        self._lock = threading.Lock()
 
     @classmethod
     def from_config(cls, config: CaptionerConfig) -> OpenAICaptioner:
@@ -146,18 +189,42 @@ class OpenAICaptioner:
             content.append({"type": "image_url", "image_url": {"url": image_data_url(img)}})
         return [{"role": "system", "content": CAPTION_SYSTEM_PROMPT}, {"role": "user", "content": content}]
 
-    def _caption_one(self, req: CaptionRequest) -> str | None:
+    def _caption_one(self, req: CaptionRequest, breaker: _CircuitBreaker) -> tuple[str, bool] | None:
+        """``(caption, is_json)`` for one node, or None (failed, malformed, or skipped by ``breaker``)."""
+        if not breaker.allow():
+            return None
         try:
             reply = self.client.chat(self.caption_messages(req), max_tokens=self.max_tokens)
         except Exception as e:
+            breaker.record(isinstance(e, EndpointUnreachable))
             log.warning(
-                "captioner: node %d: request failed (%s); keeping its previous caption", req.node.id, e
+                "captioner: node %d: request failed (%s); it keeps its previous (or a heuristic) caption "
+                "until a later update",
+                req.node.id,
+                e,
             )
             return None
-        caption = parse_caption_reply(reply)
+        breaker.record(False)
+        caption, is_json = read_caption_reply(reply)
         if caption is None:
             log.warning("captioner: node %d: malformed caption reply ignored", req.node.id)
-        return caption
+            return None
+        if not is_json:
+            self._warn_prose(req.node.id, reply)
+        return caption, is_json
+
+    def _warn_prose(self, node_id: int, reply: str) -> None:
+        with self._lock:
+            first, self._warned_prose = not self._warned_prose, True
+        if first:
+            log.warning(
+                "captioner: %s answers in prose, not the JSON the caption prompt asks for (node %d: %r); "
+                'such replies are kept as captions with caption_source "vlm-text": check that they '
+                "describe the objects (a refusal is kept too)",
+                self.client.base_url,
+                node_id,
+                reply[:120],
+            )
 
     def describe(self, requests: Sequence[CaptionRequest]) -> dict[int, Description]:
         todo = [r for r in requests if r.observations.images()]
@@ -165,16 +232,30 @@ class OpenAICaptioner:
             log.info("captioner: %d node(s) have no observations yet", len(requests) - len(todo))
         if not todo:
             return {}
+        breaker = _CircuitBreaker(self.max_consecutive_failures)
         if self.concurrency > 1 and len(todo) > 1:
             with ThreadPoolExecutor(max_workers=min(self.concurrency, len(todo))) as pool:
-                captions = list(pool.map(self._caption_one, todo))
+                captions = list(pool.map(lambda r: self._caption_one(r, breaker), todo))
         else:
-            captions = [self._caption_one(r) for r in todo]
+            captions = [self._caption_one(r, breaker) for r in todo]
+        if breaker.skipped:
+            log.warning(
+                "captioner: %d requests in a row could not reach %s (connection failed or timed out); "
+                "skipped the other %d caption request(s) of this update: those nodes keep their previous "
+                "(or a heuristic) caption and are asked for again at the next update",
+                breaker.limit,
+                self.client.base_url,
+                breaker.skipped,
+            )
         got = {r.node.id: c for r, c in zip(todo, captions) if c is not None}
         if not got:
             return {}
-        tags = self.tags(got)
-        return {i: Description(c, tags.get(i) or tag_from_caption(c), "vlm") for i, c in got.items()}
+        # the tag request would only wait out the same dead endpoint: derive the tags from the captions
+        tags = {} if breaker.tripped else self.tags({i: c for i, (c, _) in got.items()})
+        return {
+            i: Description(c, tags.get(i) or tag_from_caption(c), "vlm" if is_json else "vlm-text")
+            for i, (c, is_json) in got.items()
+        }
 
     def tags(self, captions: Mapping[int, str]) -> dict[int, str]:
         """Tags for all ``{id: caption}`` in ONE request; missing ones are absent from the result."""

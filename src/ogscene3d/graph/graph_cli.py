@@ -22,7 +22,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--top-k", type=int, default=5, help="results per query (default 5)")
     p.add_argument("--graphml", help="write the graph as GraphML to this path (needs networkx)")
     p.add_argument("--config", help="YAML config (for graph.query_embedding and its endpoint)")
-    add_override_argument(p, "graph.query_embedding.model=...")
+    add_override_argument(p, "graph.query_embedding=openai --set graph.embedding_model=MODEL")
     p.add_argument("--edges", action="store_true", help="list every edge")
     p.set_defaults(func=run)
 

@@ -153,11 +153,17 @@ def normalize_relation(text: str) -> tuple[str, bool] | None:
     t = text.strip().lower().replace("_", " ").replace("-", " ")
     t = re.sub(r"[^a-z ]+", " ", t)
     t = re.sub(r"\s+", " ", t).strip()
-    t = re.sub(r"^(is|are|be|being|sits|it is|object is)\s+", "", t) if t not in _SYNONYMS else t
-    t = re.sub(r"\s+(the|a|an)$", "", t)
-    t = re.sub(r"\s+(the|a|an)\s+", " ", t)
-    if t in _SYNONYMS:
-        return _SYNONYMS[t]
+    # Simplify step by step and look the phrase up after each step: some phrases contain the words a
+    # later step drops ("to the left of" would become "to left of").
+    for simplify in (
+        lambda s: s,
+        lambda s: re.sub(r"^(is|are|be|being|sits|it is|object is)\s+", "", s),
+        lambda s: re.sub(r"\s+(the|a|an)$", "", s),
+        lambda s: re.sub(r"\s+(the|a|an)\s+", " ", s),
+    ):
+        t = simplify(t)
+        if t in _SYNONYMS:
+            return _SYNONYMS[t]
     return None
 
 
@@ -389,8 +395,40 @@ def edge_prompt(pairs: Sequence[tuple[SceneNode, SceneNode]], up: np.ndarray) ->
     return "\n".join(lines)
 
 
+_BAD_ID = object()  # an id field that is present but not an integer
+
+
+def _entry_id(item: dict, key: str) -> object:
+    """An entry's ``subject``/``object`` id: int, None when absent, ``_BAD_ID`` when not an integer."""
+    v = item.get(key)
+    if v is None:
+        return None
+    if isinstance(v, str) and v.strip().lstrip("-").isdigit():
+        return int(v)
+    if isinstance(v, int) and not isinstance(v, bool):
+        return v
+    if isinstance(v, float) and v.is_integer():  # 3.0 from a model that writes every number as float
+        return int(v)
+    return _BAD_ID
+
+
+def _direction(item: dict, a: int, b: int) -> tuple[int, int] | None:
+    """(source, target) of an entry for the pair (a, b) from its ``subject``/``object`` ids (pair order
+    when both are absent); None when an id is not one of the pair's or both name the same node."""
+    subj, obj = _entry_id(item, "subject"), _entry_id(item, "object")
+    given = [v for v in (subj, obj) if v is not None]
+    if any(v not in (a, b) for v in given) or (len(given) == 2 and subj == obj):
+        return None
+    if subj is not None:
+        return subj, (b if subj == a else a)
+    if obj is not None:
+        return (b if obj == a else a), obj
+    return a, b
+
+
 def parse_edge_reply(text: str, pairs: Sequence[tuple[SceneNode, SceneNode]]) -> dict[int, Relation]:
-    """Parse an edge-prompt reply into ``{pair index: Relation}``; malformed entries are logged, skipped."""
+    """Parse an edge-prompt reply into ``{pair index: Relation}``; malformed entries are logged, skipped
+    (those pairs fall back to geometry). An entry must name the pair's own nodes as subject/object."""
     try:
         data = extract_json(text)
     except ValueError as e:
@@ -419,12 +457,18 @@ def parse_edge_reply(text: str, pairs: Sequence[tuple[SceneNode, SceneNode]]) ->
             continue
         rel, swapped = norm
         a, b = pairs[k]
-        subj = item.get("subject")
-        if isinstance(subj, str) and subj.strip().lstrip("-").isdigit():
-            subj = int(subj)
-        src, dst = (a.id, b.id)
-        if subj == b.id and subj != a.id:
-            src, dst = b.id, a.id
+        direction = _direction(item, a.id, b.id)
+        if direction is None:
+            log.warning(
+                "relations LLM: entry for pair %d names subject %r / object %r, not the pair's nodes %d, %d",
+                k,
+                item.get("subject"),
+                item.get("object"),
+                a.id,
+                b.id,
+            )
+            continue
+        src, dst = direction
         if swapped:
             src, dst = dst, src
         out[k] = Relation(src, dst, rel, "llm")

@@ -13,7 +13,9 @@ Interface for the mapper (it needs nothing else from this package)::
 ``update`` follows the paper's schedule: the graph is initialised once ``init_keyframes`` keyframes have
 been seen (every node captioned, scored and connected); after that, every ``update_every`` keyframes,
 only the nodes with C_i < ``tau_update`` and the new nodes are re-captioned and re-scored, and only
-their edges are re-evaluated (Eqs. 20-21 against all nodes). Node geometry (centre, bounds, thinned
+their edges are re-evaluated (Eqs. 20-21 against all nodes). With a captioner other than the heuristic
+one, nodes that still carry a heuristic caption (its request failed, was skipped, or it had nothing to go
+on) are asked for again at every update and at ``finalize``. Node geometry (centre, bounds, thinned
 point set) is refreshed for all nodes at every update; nodes whose label vanished from the map (merged by
 global refinement) are removed with their edges.
 
@@ -46,11 +48,19 @@ from ..atomic import atomic_path, atomic_write_text
 from ..config import GraphConfig
 from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame
-from .captioner import Captioner, HeuristicCaptioner, build_captioner
+from .captioner import Captioner, GroundTruthCaptioner, HeuristicCaptioner, build_captioner
 from .confidence import MeanConfidence, NodeConfidence, build_confidence
 from .geometry import directed_ratios, proximate_points, unit_up
 from .relations import GeometricRelations, RelationPredictor, build_relations
-from .types import CaptionRequest, ObservationSet, SceneContext, SceneEdge, SceneNode, node_geometry
+from .types import (
+    VLM_CAPTION_SOURCES,
+    CaptionRequest,
+    ObservationSet,
+    SceneContext,
+    SceneEdge,
+    SceneNode,
+    node_geometry,
+)
 
 log = logging.getLogger(__name__)
 
@@ -332,7 +342,24 @@ class SceneGraph:
         self._last_update_count = keyframe_index + 1
         ok = self._safe_update(keyframe_index, *arrays)
         self.close()
+        self._log_caption_summary()
         return ok
+
+    def _log_caption_summary(self) -> None:
+        """How many nodes the VLM captioned in the end (the rest have fallback captions)."""
+        if isinstance(self.captioner, HeuristicCaptioner | GroundTruthCaptioner) or not self.nodes:
+            return
+        st = self.stats()
+        n, k = st["nodes"], st["vlm_captioned"]
+        prose = st["caption_sources"].get("vlm-text", 0)
+        log.log(
+            logging.WARNING if k == 0 else logging.INFO,
+            "scene graph: %d of %d nodes captioned by the VLM%s; %d keep a heuristic caption",
+            k,
+            n,
+            f" ({prose} from replies that were not JSON)" if prose else "",
+            st["caption_sources"].get("heuristic", 0),
+        )
 
     def close(self) -> None:
         """Stop the background worker (waits for a running update)."""
@@ -412,13 +439,15 @@ class SceneGraph:
                     for k, v in g.items():
                         setattr(node, k, v)
                     node._shape = None
+            retry: set[int] = set()
             if not self._initialized:
                 todo = sorted(self.nodes)
             else:
                 low = [
                     i for i, n in self.nodes.items() if n.confidence < self.config.tau_update and i not in new
                 ]
-                todo = sorted(set(new) | set(low))
+                retry = self._awaiting_caption() - set(new) - set(low)
+                todo = sorted(set(new) | set(low) | retry)
             ctx = self._scene_context()
             requests = [
                 CaptionRequest(
@@ -439,7 +468,12 @@ class SceneGraph:
         except Exception as e:
             log.warning("scene graph: captioner failed (%s); nodes keep their previous captions", e)
             descs = {}
-        need = [r for r in requests if r.node.id not in descs and not r.node.caption]
+        # Nodes left without an answer get (or refresh) the heuristic caption; a real caption is kept.
+        need = [
+            r
+            for r in requests
+            if r.node.id not in descs and (not r.node.caption or r.node.caption_source == "heuristic")
+        ]
         if need:
             descs.update(self._fallback_captioner.describe(need))
         with self._lock:
@@ -482,11 +516,12 @@ class SceneGraph:
         self.num_updates += 1
         self.last_update_keyframe = kf
         log.info(
-            "scene graph update at keyframe %d: %d nodes (%d new, %d re-captioned), %d edges, %.2f s",
+            "scene graph update at keyframe %d: %d nodes (%d new, %d re-captioned%s), %d edges, %.2f s",
             kf,
             len(self.nodes),
             len(new),
             len(requests) - len(new),
+            f", {len(retry)} of them after a fallback caption" if retry else "",
             len(self.edges),
             time.perf_counter() - t_start,
         )
@@ -495,6 +530,13 @@ class SceneGraph:
                 self.save(self.out_path)
             except Exception as e:
                 log.warning("scene graph: could not write %s (%s)", self.out_path, e)
+
+    def _awaiting_caption(self) -> set[int]:
+        """Nodes whose heuristic caption stands in for the configured captioner's: its request failed or
+        was skipped, or it had nothing to go on yet. Call with the lock held."""
+        if isinstance(self.captioner, HeuristicCaptioner):
+            return set()  # heuristic captions are final (and refreshed at every update anyway)
+        return {i for i, n in self.nodes.items() if n.caption_source == "heuristic"}
 
     def _scene_context(self) -> SceneContext:
         if not self.nodes:
@@ -558,12 +600,28 @@ class SceneGraph:
     # ------------------------------------------------------------------------------------------ output
 
     def to_json(self) -> dict:
-        """The graph.json document (DESIGN.md "Files"): version, nodes sorted by id, edges."""
+        """The graph.json document (DESIGN.md "Files"): version, nodes sorted by id, edges, and
+        :meth:`stats` (derived from the nodes; readers may ignore it)."""
         with self._lock:
             return {
                 "version": GRAPH_JSON_VERSION,
                 "nodes": [self.nodes[i].to_dict() for i in sorted(self.nodes)],
                 "edges": [self.edges[k].to_dict() for k in sorted(self.edges)],
+                "stats": self.stats(),
+            }
+
+    def stats(self) -> dict:
+        """Counts: ``nodes``, ``edges``, ``vlm_captioned`` (nodes whose caption came from a VLM, prose
+        replies included) and ``caption_sources`` (nodes per ``caption_source``; "" = no caption)."""
+        with self._lock:
+            sources: dict[str, int] = {}
+            for n in self.nodes.values():
+                sources[n.caption_source] = sources.get(n.caption_source, 0) + 1
+            return {
+                "nodes": len(self.nodes),
+                "edges": len(self.edges),
+                "vlm_captioned": sum(v for k, v in sources.items() if k in VLM_CAPTION_SOURCES),
+                "caption_sources": dict(sorted(sources.items())),
             }
 
     def to_dict(self) -> dict:

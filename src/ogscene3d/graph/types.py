@@ -12,6 +12,9 @@ import numpy as np
 
 from .geometry import Shape, oriented_box, shape_of
 
+#: ``caption_source`` values of captions written by a VLM.
+VLM_CAPTION_SOURCES: frozenset[str] = frozenset({"vlm", "vlm-text"})
+
 
 @dataclass
 class Crop:
@@ -114,10 +117,12 @@ class SceneNode:
 
     ``center`` is the mean of the Gaussian means; ``bbox_min``/``bbox_max`` their axis-aligned bounds;
     ``obb_center``/``obb_axes`` (rows = unit axes)/``obb_extent`` (full side lengths) the PCA-oriented box.
-    ``caption_source`` says where the caption came from: "vlm", "heuristic", "groundtruth" or "" (none
-    yet). ``confidence`` is C_i (paper Eq. 19, or the documented fallback). ``first_seen`` is the keyframe
-    index of the graph update that created the node, ``last_updated`` the one that last re-captioned and
-    re-scored it (selective update; heuristic captions additionally follow the geometry at every update).
+    ``caption_source`` says where the caption came from: "vlm", "vlm-text" (a VLM reply in prose instead
+    of the requested JSON), "heuristic" (also the fallback after a failed VLM request: such nodes are
+    asked for again at later updates), "groundtruth" or "" (none yet). ``confidence`` is C_i (paper
+    Eq. 19, or the documented fallback). ``first_seen`` is the keyframe index of the graph update that
+    created the node, ``last_updated`` the one that last re-captioned and re-scored it (selective update;
+    heuristic captions additionally follow the geometry at every update).
     ``points`` (not serialised) is the thinned set of the node's Gaussian means used for edges,
     ``color`` the median Gaussian colour in [0, 1], ``mean_confidence`` the mean Gaussian confidence.
     """
@@ -232,7 +237,8 @@ class CaptionRequest:
 
 @dataclass
 class Description:
-    """A captioner's answer for one node. ``source``: "vlm", "heuristic" or "groundtruth"."""
+    """A captioner's answer for one node. ``source``: "vlm", "vlm-text" (prose reply, not the requested
+    JSON), "heuristic" or "groundtruth"."""
 
     caption: str
     tag: str
