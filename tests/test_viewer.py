@@ -344,6 +344,63 @@ def test_load_run_errors_name_the_file(tmp_path):
         read_graph_json(bad)
 
 
+def test_load_run_tolerates_bad_optional_files(tmp_path, caplog):
+    """map.npz and timings.json only add the camera path and the timings panel: when they are truncated
+    or of the wrong shape, browsing goes on with a warning naming the file."""
+    import logging
+
+    run = _write_run(tmp_path / "run", make_scene(10))
+    poses = np.tile(np.eye(4), (3, 1, 1))
+    poses[:, 0, 3] = [2.0, 0.0, 1.0]
+    np.savez(run / "map.npz", mem_pose=poses, mem_keyframe=np.array([4, 0, 2]))
+    snap, _ = load_run(run)
+    np.testing.assert_allclose(snap.trajectory[:, 0, 3], [0.0, 1.0, 2.0])  # keyframe order
+    data = (run / "map.npz").read_bytes()
+    for name, content in [
+        ("map.npz", data[: len(data) // 2]),  # a run cut short mid-write
+        ("timings.json", "[1, 2]"),
+    ]:
+        (run / name).write_bytes(content) if isinstance(content, bytes) else (run / name).write_text(content)
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="ogscene3d.viewer.runs"):
+            snap, _ = load_run(run)
+        assert name in caplog.text
+    assert len(snap.trajectory) == 0 and snap.counts == {"gaussians": 30}
+    (run / "timings.json").write_text('{"counts": [1], "ms_per_keyframe": {"optimize": 3.0}}')
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="ogscene3d.viewer.runs"):
+        snap, _ = load_run(run)
+    assert "'counts'" in caplog.text and snap.timings == {"optimize": 3.0}
+
+
+@pytest.mark.parametrize(
+    "node,match",
+    [
+        ({"id": 1, "center": ["a", "b", "c"]}, "node 1 has a bad center"),
+        ({"id": 1, "center": [None, 0, 0]}, "node 1 has a bad center"),
+        ({"id": 1, "center": [float("nan"), 0, 0]}, "node 1 has a non-finite center"),
+        ({"id": 1, "center": [float("inf"), 0, 0]}, "non-finite center"),
+        ({"id": [1], "center": [0, 0, 0]}, "node 0 field 'id' must be an integer"),
+        ({"id": "1", "center": [0, 0, 0]}, "field 'id'"),
+    ],
+)
+def test_read_graph_json_rejects_bad_node_fields(tmp_path, node, match):
+    bad = tmp_path / "graph.json"
+    bad.write_text(json.dumps({"nodes": [node], "edges": []}))
+    with pytest.raises(DataError, match=match) as exc:
+        read_graph_json(bad)
+    assert str(bad) in str(exc.value)
+
+
+def test_read_graph_json_rejects_unhashable_edge_ends(tmp_path):
+    bad = tmp_path / "graph.json"
+    bad.write_text(
+        json.dumps({"nodes": [{"id": 1, "center": [0, 0, 0]}], "edges": [{"source": [1], "target": 1}]})
+    )
+    with pytest.raises(DataError, match="edge 0"):
+        read_graph_json(bad)
+
+
 # ------------------------------------------------------------------------------ scene layers
 
 
@@ -693,6 +750,58 @@ def test_cli_browse_prints_the_bound_url_and_serves(tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+@pytest.mark.parametrize("port", ["70000", "-5", "http"])
+def test_cli_rejects_ports_outside_the_tcp_range(port, capsys):
+    from ogscene3d.viewer.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["run", "--port", port])
+    assert exc.value.code == 2 and "--port" in capsys.readouterr().err
+
+
+def test_check_bindable_follows_viser_port_search():
+    import socket
+
+    from ogscene3d.viewer.app import check_bindable
+
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen(1)
+    port = busy.getsockname()[1]
+    try:
+        assert check_bindable("127.0.0.1", port) > port  # viser moves on to the next free port
+    finally:
+        busy.close()
+    assert check_bindable("127.0.0.1", 0) == 0
+    with pytest.raises(ConfigError, match="0 to 65535"):
+        check_bindable("127.0.0.1", 70000)
+    with pytest.raises(ConfigError, match="192.0.2.1"):
+        check_bindable("192.0.2.1", 8080)  # TEST-NET address: not this machine's
+
+
+def test_cli_unbindable_host_is_a_clean_error_not_a_hang(tmp_path):
+    """viser binds on its own thread; when that fails the main thread used to wait forever."""
+    run = _write_run(tmp_path / "run", make_scene(10))
+    proc = subprocess.run(
+        [sys.executable, "-m", "ogscene3d.viewer.cli", str(run), "--host", "192.0.2.1", "--port", "0"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 2
+    assert "ogscene3d-live: error: cannot serve the viewer on 192.0.2.1" in proc.stderr
+
+
+def test_node_details_name_the_caption_source():
+    from ogscene3d.viewer.app import caption_line
+
+    assert caption_line({"caption": "a mug", "caption_source": "vlm-text"}) == (
+        "caption (VLM, prose reply instead of JSON): a mug"
+    )
+    assert caption_line({"caption": "a mug", "caption_source": "vlm"}) == "caption (VLM): a mug"
+    assert caption_line({"caption": "a mug"}) == "caption: a mug"
 
 
 def test_cli_rejects_bad_settings():

@@ -11,7 +11,9 @@ newest snapshot waits), so an unwatched viewer costs the mapping nothing but the
 
 from __future__ import annotations
 
+import errno
 import logging
+import socket
 import threading
 import time
 from collections.abc import Callable
@@ -20,6 +22,7 @@ from typing import Protocol
 
 import numpy as np
 
+from ..errors import ConfigError
 from .scene import (
     COLOR_MODES,
     RENDER_MODES,
@@ -36,6 +39,13 @@ log = logging.getLogger(__name__)
 _COLOR_LABELS = {"rgb": "RGB", "semantic": "Semantic label", "confidence": "Confidence"}
 _RENDER_LABELS = {"auto": "Auto", "splats": "Splats", "points": "Points"}
 _NO_NODE = "(none)"
+# graph.json caption_source values as the node details panel names them
+_CAPTION_SOURCES = {
+    "vlm": "VLM",
+    "vlm-text": "VLM, prose reply instead of JSON",
+    "heuristic": "geometric heuristic",
+    "groundtruth": "ground truth",
+}
 _MAX_NODE_OPTIONS = 500
 
 
@@ -98,11 +108,72 @@ def _up_vector(up: str | np.ndarray | tuple | None) -> np.ndarray | None:
     return v / np.linalg.norm(v)
 
 
+# viser tries the requested port and then the next ones, this many in all, before giving up
+_VISER_PORT_TRIES = 1000
+
+
+def _binds(host: str, port: int) -> OSError | None:
+    """Whether a listening TCP socket can be bound on ``host``:``port`` as asyncio's ``create_server``
+    (viser's) binds it: every address ``host`` resolves to, skipping families the machine lacks
+    (EADDRNOTAVAIL) as long as one address binds. None when it can, else the error."""
+    infos = socket.getaddrinfo(host or None, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    bound, skipped = 0, None
+    for family, kind, proto, _, addr in infos:
+        with socket.socket(family, kind, proto) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as asyncio does on POSIX
+            try:
+                s.bind(addr)
+                bound += 1
+            except OSError as e:
+                if e.errno != errno.EADDRNOTAVAIL:
+                    return e
+                skipped = e
+    return None if bound else skipped
+
+
+def check_bindable(host: str, port: int) -> int:
+    """The port viser will serve on for ``host``/``port`` (the first free one from ``port`` on; port 0
+    lets the OS choose), or ConfigError when there is none: an invalid port, a host name that does not
+    resolve, or an address that is not this machine's.
+
+    viser binds on its own thread and, when that fails, leaves the caller waiting forever (deaf to
+    Ctrl-C and SIGTERM), so what it cannot bind is found out here first."""
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
+        raise ConfigError(f"viewer port must be an integer from 0 to 65535, got {port!r}")
+    last: OSError | None = None
+    candidates = range(port, min(port + _VISER_PORT_TRIES, 65536)) if port else [0]
+    for p in candidates:
+        try:
+            last = _binds(host, p)
+        except socket.gaierror as e:
+            raise ConfigError(f"viewer host {host!r} does not resolve to an address ({e})") from None
+        if last is None:
+            return p
+        if last.errno not in (errno.EADDRINUSE, errno.EACCES):
+            break  # the host itself cannot be bound: another port will not help
+    where = f"{host}:{port}" if port else f"{host} (any port)"
+    if last is not None and last.errno in (errno.EADDRINUSE, errno.EACCES):
+        raise ConfigError(f"cannot serve the viewer on {where} or the next ports: {last.strerror}")
+    raise ConfigError(
+        f"cannot serve the viewer on {where}: {last.strerror if last else 'no address'} "
+        "(is the host an address of this machine? 127.0.0.1 or 0.0.0.0 always are)"
+    )
+
+
+def caption_line(node: dict) -> str:
+    """The node panel's caption line, saying where the caption came from (``caption_source``) when the
+    graph records it: a prose VLM reply or a heuristic fallback reads differently from a VLM caption."""
+    source = node.get("caption_source")
+    label = _CAPTION_SOURCES.get(source, str(source)) if source else ""
+    return f"caption ({label}): {node['caption']}" if label else f"caption: {node['caption']}"
+
+
 class LiveViewer:
     """A viser server showing the map, the camera and the scene graph, with a control GUI.
 
     ``host``/``port``: where to bind (viser moves to the next free port when ``port`` is busy; port 0
-    picks any free port); :attr:`url` has the port actually bound. ``up``: the world up direction
+    picks any free port); :attr:`url` has the port actually bound. ConfigError when ``host``/``port``
+    cannot be served (see :func:`check_bindable`). ``up``: the world up direction
     ("+z", "-y", ... or a vector). ``max_rate_hz`` bounds the push rate. ``control``: the mapping
     session behind the pause and save buttons (None when browsing a saved run).
     """
@@ -127,6 +198,7 @@ class LiveViewer:
         self.max_rate_hz = float(max_rate_hz)
         self.control = control
         self._up = _up_vector(up)  # checked before a server is started
+        check_bindable(host, port)
         _quiet_websockets(verbose)
         self.server = viser.ViserServer(host=host, port=port, label=title, verbose=verbose)
         if self._up is not None:
@@ -512,7 +584,7 @@ class LiveViewer:
             f"confidence: {float(node.get('confidence', 0.0)):.3f}",
         ]
         if node.get("caption"):
-            lines.append(f"caption: {node['caption']}")
+            lines.append(caption_line(node))
         if "num_gaussians" in node:
             lines.append(f"Gaussians: {node['num_gaussians']}")
         if "bbox_min" in node and "bbox_max" in node:

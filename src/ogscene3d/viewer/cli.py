@@ -43,6 +43,16 @@ def _positive_float(text: str) -> float:
     return v
 
 
+def _port(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"expected a port number, got {text!r}") from e
+    if not 0 <= v <= 65535:
+        raise argparse.ArgumentTypeError(f"port must be from 0 to 65535 (0: any free port), got {v}")
+    return v
+
+
 def _size(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in text.lower().split("x"))
@@ -79,7 +89,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--host", default="127.0.0.1", help="address to bind (0.0.0.0 exposes the viewer to the network)"
     )
     p.add_argument(
-        "--port", type=int, default=8080, help="port to try first (the next free one is used if busy)"
+        "--port",
+        type=_port,
+        default=8080,
+        help="port to try first (the next free one is used if busy; 0: any free port)",
     )
     p.add_argument("--rate", type=_positive_float, default=4.0, help="maximum viewer updates per second")
     p.add_argument("--max-splats", type=_positive_int, default=200_000, help="most Gaussians drawn as splats")
@@ -186,7 +199,7 @@ def take_screenshot(
 
 def run(args: argparse.Namespace) -> int:
     """Entry point shared by ``ogscene3d-live`` and ``ogscene3d live``; returns the exit code."""
-    from .app import LiveViewer
+    from .app import LiveViewer, check_bindable
 
     if args.run_dir is not None and (args.data or args.synthetic):
         raise ConfigError(
@@ -194,6 +207,8 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.run_dir is None and not args.data and not args.synthetic:
         raise ConfigError("nothing to show: give RUN_DIR, --data DATASET or --synthetic")
+    # before reading a run or building a mapper: a host/port the server cannot bind is an error now
+    check_bindable(args.host, args.port)
 
     stop = threading.Event()
     prev = signal.getsignal(signal.SIGTERM)

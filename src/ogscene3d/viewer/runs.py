@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import json
 import logging
+import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -74,8 +76,27 @@ def read_gaussians_ply(path: str | Path) -> dict[str, np.ndarray]:
     }
 
 
+def _check_node(p: Path, i: int, node: object) -> None:
+    """DataError naming the file, the node and the field unless ``node`` has an integer id and a finite
+    3-vector center (the viewer places every node at its center)."""
+    if not isinstance(node, dict) or "id" not in node or "center" not in node:
+        raise DataError(f"{p}: node {i} lacks 'id' or 'center'")
+    nid = node["id"]
+    if not isinstance(nid, int) or isinstance(nid, bool):
+        raise DataError(f"{p}: node {i} field 'id' must be an integer, got {nid!r:.60}")
+    center = node["center"]
+    numbers = isinstance(center, list) and all(
+        isinstance(v, int | float) and not isinstance(v, bool) for v in center
+    )
+    if not numbers or len(center) != 3:
+        raise DataError(f"{p}: node {nid} has a bad center {center!r:.80} (field 'center': 3 numbers)")
+    if not np.isfinite(np.asarray(center, dtype=np.float64)).all():
+        raise DataError(f"{p}: node {nid} has a non-finite center {center!r:.80} (field 'center')")
+
+
 def read_graph_json(path: str | Path) -> dict:
-    """Read graph.json and check its structure (nodes need id and center; edges source/target)."""
+    """Read graph.json and check its structure (nodes need an integer id and a finite 3-vector center;
+    edges a source and target among the node ids). DataError naming the file and the field."""
     p = Path(path)
     try:
         doc = json.loads(p.read_text())
@@ -85,19 +106,83 @@ def read_graph_json(path: str | Path) -> dict:
         raise DataError(f"{p}: expected an object with a 'nodes' list")
     nodes = doc.get("nodes", [])
     for i, node in enumerate(nodes):
-        if not isinstance(node, dict) or "id" not in node or "center" not in node:
-            raise DataError(f"{p}: node {i} lacks 'id' or 'center'")
-        c = np.asarray(node["center"], dtype=np.float64) if isinstance(node["center"], list) else None
-        if c is None or c.shape != (3,):
-            raise DataError(f"{p}: node {node.get('id')} has a bad center {node['center']!r}")
+        _check_node(p, i, node)
     ids = {n["id"] for n in nodes}
     edges = doc.get("edges", [])
     if not isinstance(edges, list):
         raise DataError(f"{p}: 'edges' must be a list")
     for i, e in enumerate(edges):
-        if not isinstance(e, dict) or e.get("source") not in ids or e.get("target") not in ids:
-            raise DataError(f"{p}: edge {i} does not join two known nodes")
+        if not isinstance(e, dict) or not _known(e.get("source"), ids) or not _known(e.get("target"), ids):
+            raise DataError(f"{p}: edge {i} does not join two known nodes (fields 'source', 'target')")
     return {"version": doc.get("version", 1), "nodes": nodes, "edges": edges}
+
+
+def _known(node_id: object, ids: set[int]) -> bool:
+    # an unhashable id (a list) cannot be looked up in the set: it is simply not a known node
+    return isinstance(node_id, int) and not isinstance(node_id, bool) and node_id in ids
+
+
+def _read_timings(path: Path) -> dict:
+    """timings.json as a dict; {} with a warning when it is unreadable or not an object (it only feeds
+    the timings panel, so a bad file must not stop browsing)."""
+    if not path.is_file():
+        return {}
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        log.warning("%s: unreadable (%s); no timings shown", path, e)
+        return {}
+    if not isinstance(doc, dict):
+        log.warning("%s: expected a JSON object, got %s; no timings shown", path, type(doc).__name__)
+        return {}
+    return doc
+
+
+def _run_counts(timings: dict, path: Path) -> dict[str, float]:
+    """frames / keyframes / labels from timings.json's ``counts`` (numbers only; others warned about)."""
+    counts = timings.get("counts", {})
+    if not isinstance(counts, dict):
+        log.warning("%s: field 'counts' is not an object; no counts shown", path)
+        return {}
+    out: dict[str, float] = {}
+    for key in ("frames", "keyframes", "labels"):
+        v = counts.get(key)
+        if isinstance(v, int | float) and not isinstance(v, bool):
+            out[key] = v
+        elif v is not None:
+            log.warning("%s: field 'counts.%s' is not a number (%r); not shown", path, key, v)
+    return out
+
+
+def _read_trajectory(path: Path) -> np.ndarray:
+    """The memory keyframes' camera-to-world poses [T,4,4] from map.npz, in keyframe order; [0,4,4] with
+    a warning when the file is unreadable (it is optional: it only draws the camera path)."""
+    empty = np.zeros((0, 4, 4))
+    if not path.is_file():
+        return empty
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if "mem_pose" not in z.files or "mem_keyframe" not in z.files:
+                return empty
+            poses = np.asarray(z["mem_pose"], dtype=np.float64)
+            keyframes = np.asarray(z["mem_keyframe"])
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as e:
+        # a run cut short mid-write leaves a truncated zip (BadZipFile) or member (zlib.error, EOFError)
+        log.warning("%s: unreadable (%s: %s); no keyframe poses shown", path, type(e).__name__, e)
+        return empty
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4) or keyframes.shape != (len(poses),):
+        log.warning(
+            "%s: fields 'mem_pose' %s / 'mem_keyframe' %s are not [T,4,4] / [T]; no keyframe poses shown",
+            path,
+            poses.shape,
+            keyframes.shape,
+        )
+        return empty
+    ok = np.isfinite(poses).all(axis=(1, 2))
+    if not ok.all():
+        log.warning("%s: %d keyframe pose(s) with non-finite entries left out", path, int((~ok).sum()))
+    order = np.argsort(keyframes[ok], kind="stable")
+    return poses[ok][order]
 
 
 def _read_up(path: Path) -> np.ndarray | None:
@@ -126,27 +211,10 @@ def load_run(run_dir: str | Path) -> tuple[MapSnapshot, RunInfo]:
         raise DataError(f"{root}: not a run directory (no gaussians.ply)")
     arrays = read_gaussians_ply(ply)
     graph = read_graph_json(root / "graph.json") if (root / "graph.json").is_file() else None
-    timings: dict = {}
-    tpath = root / "timings.json"
-    if tpath.is_file():
-        try:
-            timings = json.loads(tpath.read_text())
-        except (OSError, json.JSONDecodeError) as e:
-            log.warning("%s: unreadable (%s); no timings shown", tpath, e)
-    trajectory = np.zeros((0, 4, 4))
-    npz = root / "map.npz"
-    if npz.is_file():
-        try:
-            with np.load(npz, allow_pickle=False) as z:
-                if "mem_pose" in z.files and "mem_keyframe" in z.files:
-                    order = np.argsort(z["mem_keyframe"])
-                    trajectory = np.asarray(z["mem_pose"], dtype=np.float64)[order]
-        except (OSError, ValueError, EOFError) as e:
-            log.warning("%s: unreadable (%s); no keyframe poses shown", npz, e)
+    timings = _read_timings(root / "timings.json")
+    trajectory = _read_trajectory(root / "map.npz")
     counts: dict[str, float] = {"gaussians": len(arrays["means"])}
-    for key in ("frames", "keyframes", "labels"):
-        if key in timings.get("counts", {}):
-            counts[key] = timings["counts"][key]
+    counts.update(_run_counts(timings, root / "timings.json"))
     snap = MapSnapshot(
         **arrays,
         trajectory=trajectory,
