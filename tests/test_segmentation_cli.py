@@ -96,18 +96,13 @@ def test_sam_detector_backend_keeps_names(scene, tmp_path):
     assert not (out / "frame-000001.color.png").exists()
 
 
+def _classical(data, out) -> list[str]:
+    return ["segment", "--data", str(data), "--out", str(out), "--backend", "classical", "--no-progress"]
+
+
 def test_classical_backend(scene, tmp_path):
     out = tmp_path / "classical"
-    args = [
-        "segment",
-        "--data",
-        str(scene["data"]),
-        "--out",
-        str(out),
-        "--backend",
-        "classical",
-        "--no-progress",
-    ]
+    args = _classical(scene["data"], out)
     assert main([*args, "--stride", "2"]) == 0
     ids, scores = read_segments(out, "frame-000002.color", (H, W))
     assert ids.min() >= 1 and all(0.88 <= s <= 1.0 for s in scores.values())
@@ -121,7 +116,7 @@ def test_bad_frames_are_skipped_when_asked(scene, tmp_path, caplog):
     shutil.copytree(scene["data"], data)
     (data / "frame-000001.depth.png").write_bytes(b"not a png")
     out = tmp_path / "out"
-    args = ["segment", "--data", str(data), "--out", str(out), "--backend", "classical", "--no-progress"]
+    args = _classical(data, out)
     assert main(args) == 2  # the default: a bad frame is an error
     with caplog.at_level("INFO", logger="ogscene3d.segmentation.segment_cli"):
         assert main([*args, "--set", "data.on_bad_frame=skip"]) == 0
@@ -140,16 +135,7 @@ def test_partial_segments_dir_in_the_config(scene, tmp_path):
     """data.segments_dir (e.g. from a config) naming the folder being filled: frames not segmented yet are
     read without segments (not an error) and segmented; finished ones are left alone."""
     out = tmp_path / "segs"
-    args = [
-        "segment",
-        "--data",
-        str(scene["data"]),
-        "--out",
-        str(out),
-        "--backend",
-        "classical",
-        "--no-progress",
-    ]
+    args = _classical(scene["data"], out)
     assert main([*args, "--max-frames", "1"]) == 0
     done = (out / "frame-000000.color.png").stat().st_mtime_ns
     assert main([*args, "--set", f"data.segments_dir={out}"]) == 0
