@@ -155,6 +155,21 @@ def test_longterm_skips_boundary_pixels(device, skip_edges):
         assert bool((gm.labels.cpu()[lost] == 1).all())
 
 
+def test_longterm_same_class_off_is_the_papers_rule(device):
+    """Without ``same_class`` a pixel reaches its nearest Gaussians whatever their label (the paper's
+    rule): near the label boundary more Gaussians are judged, and more lose confidence."""
+    from ogscene3d.mapping.longterm import longterm_view_update
+
+    stats = {}
+    for same_class in (True, False):
+        gm, _ = _wall_map(device)
+        stats[same_class] = longterm_view_update(
+            gm, _wall_entry(18), k=4, radius=0.08, pixel_step=1, skip_edges=False, same_class=same_class
+        )
+    assert stats[False].updated > stats[True].updated
+    assert stats[False].decreased > stats[True].decreased > 0
+
+
 def test_longterm_view_update_eq16(device):
     """A wall with label 0 left of x = 0 and label 1 right of it; the stored segmentation puts the band
     0 <= x < 0.33 into the left segment, so label-1 Gaussians there become inconsistent and lose confidence

@@ -123,7 +123,7 @@ class MappingConfig:
     # than 5 cm off the surfaces, and the distance-based association then split objects into new labels
     lr_means: float = 0.0001
     lr_scales: float = 0.001
-    lr_quats: float = 0.001
+    lr_quats: float = 0.001  # the paper gives none (only scales, opacity, colour); 3DGS's value
     lr_opacities: float = 0.05
     lr_colors: float = 0.0001
     lambda_c: float = 1.0
@@ -142,6 +142,10 @@ class MappingConfig:
     longterm_pixel_step: int = 2  # pixel grid step of the long-term pixel-to-Gaussian association
     longterm_knn_k: int = 5  # Gaussians associated with each back-projected memory pixel (within knn_radius)
     longterm_skip_edges: bool = True  # long-term: leave out pixels on segment / rendered-label boundaries
+    # Beyond the paper (which takes a pixel's nearest Gaussians, whatever their label): a memory pixel is
+    # associated only with Gaussians of the label rendered there, the ones that can have produced it (near a
+    # boundary the nearest include the neighbouring object's). Synthetic seeds 0-2: mIoU 70.25 vs 69.75.
+    longterm_same_class: bool = True
     fill_unlabeled: bool = True  # unlabeled Gaussians under a labeled segment take its label
     refine_unlabeled: bool = False  # individual refinement also labels unlabeled Gaussians (confidence 0)
     # Beyond the paper (mapping/merge.py): an ambiguous segment that contains two labels' whole visible

@@ -1,10 +1,11 @@
 """Local 3D optimization (paper Sec. III-B.2): spatial-semantic association of a keyframe's segments.
 
 For every new (probe) Gaussian of segment m we find its k nearest *labeled* scene Gaussians within
-``knn_radius`` (Warp hash grid), or within a per-probe radius where that is larger: the paper gives no
-radius for this KNN, and a fixed one smaller than the probe grid spacing (far or grazing surfaces at low
-resolution) leaves most probes of an already-mapped surface unmatched, so p(m) falls below tau_p, the
-surface gets a second label and every later view of it is ambiguous (case i) between the two.
+``knn_radius`` (Warp hash grid), or, with ``knn_radius_spacing`` > 0 (off by default), within a per-probe
+radius where that is larger: the paper gives no radius for this KNN, and a fixed one smaller than the probe
+grid spacing (far or grazing surfaces at low resolution) leaves most probes of an already-mapped surface
+unmatched, so p(m) falls below tau_p, the surface gets a second label and every later view of it is
+ambiguous (case i) between the two.
 Over all matches of the segment, c1(m), c2(m) are the counts of the most
 and second most frequent scene labels and l*_m the most frequent one (Eq. 4):
 

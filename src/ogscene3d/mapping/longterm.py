@@ -241,9 +241,12 @@ def longterm_view_update(
     radius: float = 0.05,
     pixel_step: int = 2,
     skip_edges: bool = True,
+    same_class: bool = True,
 ) -> LongTermStats:
     """One memory view's Eq. 16 update of ``gm.confidences`` (in place). ``gm`` is a GaussianMap.
-    ``skip_edges``: leave out pixels on a boundary of the stored segments or of the rendered labels."""
+    ``skip_edges``: leave out pixels on a boundary of the stored segments or of the rendered labels.
+    ``same_class``: a pixel reaches only Gaussians of its rendered label (see ``associate_pixels``); False
+    is the paper's rule, its nearest Gaussians whatever their label."""
     from ..render import rendering_contribution
 
     stats = LongTermStats(views=1)
@@ -283,7 +286,14 @@ def longterm_view_update(
         c2w = torch.as_tensor(entry.pose, dtype=torch.float32, device=dev)
         pts = torch.stack([x, y, z], 1) @ c2w[:3, :3].T + c2w[:3, 3]
         hit, p2d3d, consistent = associate_pixels(
-            gm.means, gm.labels, pts, p_pix[vv, uu], remapped[vv, uu], k, radius, rendered[vv, uu]
+            gm.means,
+            gm.labels,
+            pts,
+            p_pix[vv, uu],
+            remapped[vv, uu],
+            k,
+            radius,
+            rendered[vv, uu] if same_class else None,
         )
         keep = gm.labels[hit] >= 0
         hit, p2d3d, consistent = hit[keep], p2d3d[keep], consistent[keep]

@@ -530,6 +530,7 @@ class Mapper:
                 radius=cfg.knn_radius,
                 pixel_step=cfg.longterm_pixel_step,
                 skip_edges=cfg.longterm_skip_edges,
+                same_class=cfg.longterm_same_class,
             )
             for k, v in st.as_dict().items():
                 if k != "mean_iou":

@@ -1,7 +1,9 @@
 """Geometry/appearance optimization of the Gaussians after each keyframe (paper Sec. III-B.4).
 
 L = lambda_c * ((1 - lambda) * |C - C_obs|_1 + lambda * (1 - SSIM(C, C_obs))) + lambda_d * |D - D_obs|_1,
-with the depth term over valid observed depth only, averaged over the current keyframe and a few memory
+with the depth term over valid observed depth only (D is the expected depth, sum d_i w_i / sum w_i, where
+the paper writes the accumulated sum d_i w_i: partly covered pixels are judged by their depth, not pushed to
+full opacity by it), averaged over the current keyframe and a few memory
 frames rendered together (one batched ``rasterization`` call). Adam with per-group learning rates (the
 paper's: scales 0.001, opacity 0.05, colour 0.0001; means and rotations from the config). Only the
 Gaussians that project into at least one of the views are optimised (the others get no gradient anyway);

@@ -12,8 +12,10 @@ of its Gaussians, the nearest Gaussian *outside the cluster* with conf > tau_hig
 ``cluster_radius``: the paper's search is unbounded, a finite radius keeps it a hash-grid query).
 Only labels change; its Gaussians are then excluded from individual refinement.
 
-Individual level: every remaining Gaussian with conf < tau_low (including unlabeled ones, whose confidence
-is 0) takes the label of the nearest Gaussian with conf > tau_high within r_search and conf := 0.5.
+Individual level: every remaining labelled Gaussian with conf < tau_low (unlabeled ones too, whose
+confidence is 0, with ``include_unlabeled`` / ``mapping.refine_unlabeled``, off by default: the paper's
+unlabelled Gaussians do not exist at confidence 0) takes the label of the nearest Gaussian with
+conf > tau_high within r_search and conf := 0.5.
 """
 
 from __future__ import annotations
