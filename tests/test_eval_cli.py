@@ -110,6 +110,8 @@ def test_eval_cli_both_protocols(scene, monkeypatch, capsys, tmp_path):
     assert _main(argv + ["--traj", str(tmp_path / "est.txt"), str(tmp_path / "gt.txt")], monkeypatch) == 0
     out = capsys.readouterr().out
     assert "protocol: hovsg" in out and "protocol: conceptgraphs" in out and "relation recall" in out
+    assert "label mapping: text," in out and "oracle" not in out  # tags name the labels, not the GT
+    assert "15 Gaussians (0.0% unlabelled" in out
     report = json.loads((run / "metrics.json").read_text())
     assert report["label_mapping"]["method"] == "text"
     assert report["label_mapping"]["num_mapped_labels"] == 3
@@ -226,7 +228,8 @@ def test_eval_cli_on_a_generated_synthetic_scene(tmp_path, monkeypatch, capsys):
     assert 0.7 < report["semantic_3d"]["hovsg"]["miou"] < 1.0
     assert report["scene_graph"]["recall"] == pytest.approx(1.0)
     v = report["semantic_2d"]
-    assert v["frames"] == [0] and v["protocol"].startswith("novel-view-2d")
+    assert v["frames"] == [0] and v["protocol"].startswith("rendered-view-2d")
+    assert "not held-out novel views" in v["protocol"]
     # Splats of a perfect labelling reproduce the GT class image up to the 2D dilation of small
     # splats (eps2d) at this tiny resolution, which fattens thin objects by about a pixel.
     assert v["overall_acc"] > 0.65
@@ -267,8 +270,84 @@ def test_unobserved_gt_points_are_void_unless_asked_for(scene, monkeypatch, caps
     with pytest.raises(ValueError, match="gt_points"):
         evaluate_run(run, scene_dir, gt_points="some")
     argv = ["eval", str(run), "--gt", str(scene_dir), "--mapping", "overlap", "--no-plots"]
+    capsys.readouterr()
     assert _main(argv, monkeypatch) == 0
-    assert "scored on the 10 labelled GT points some frame saw (67% of all" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "scored on the 10 labelled GT points some frame saw (67% of all" in out
+    assert "label mapping: overlap (oracle: names scene labels from the GT)" in out
     assert _main(argv + ["--gt-points", "all"], monkeypatch) == 0
     assert "some frame saw" not in capsys.readouterr().out
     assert json.loads((run / "metrics.json").read_text())["gt_points"]["points"] == "all"
+    # ConceptGraphs averages the classes of the scored (observed) GT points: the unseen table is out.
+    cg = evaluate_run(run, scene_dir, protocols=["conceptgraphs"], ignore=[], mapping="overlap")
+    assert cg.semantic["conceptgraphs"].evaluated.tolist() == [True, False, True]
+
+
+def _set_gaussians(run, **fields):
+    g = PlyData.read(str(run / "gaussians.ply"))["vertex"].data.copy()
+    for name, values in fields.items():
+        g[name] = values
+    _write_ply(run / "gaussians.ply", g)
+
+
+def test_unnamed_scene_labels_vote_no_class_under_hovsg(scene):
+    """A labelled Gaussian whose tag names no GT class is a prediction of *no class*: under HOV-SG
+    it votes so, instead of letting the chair and wall Gaussians around fill the table's space."""
+    run, scene_dir = scene
+    graph = json.loads((run / "graph.json").read_text())
+    graph["nodes"][1]["tag"] = "lamp"  # label 8 (the table's Gaussians at x = 11..14) names no class
+    (run / "graph.json").write_text(json.dumps(graph))
+    res = evaluate_run(run, scene_dir, protocols=["hovsg", "conceptgraphs"], ignore=[])
+    assert res.label_to_class == {7: 0, 9: 2}
+    h = res.semantic["hovsg"]
+    # Every table GT point's 5 nearest Gaussians are mostly label 8: no class, a miss; chair and wall
+    # take no false positive from them.
+    np.testing.assert_allclose(h.iou, [1.0, 0.0, 1.0])
+    assert h.to_dict()["unassigned_predictions"] == 5
+    c = res.semantic["conceptgraphs"]
+    np.testing.assert_allclose(c.iou, [5 / 6, 0.0, 1.0])  # table: 4 unnamed misses, 1 taken as chair
+
+
+def test_unlabelled_gaussians_are_misses_under_conceptgraphs_only(scene, tmp_path):
+    """Unlabelled Gaussians (label -1) are kept for ConceptGraphs, which counts on predicted points,
+    as predictions of no class; HOV-SG's vote leaves them out; min_opacity still filters."""
+    run, scene_dir = scene
+    labels = np.array([7] * 6 + [8] * 4 + [9] * 5)
+    labels[1:5] = -1  # four of the chair's five Gaussians carry no label
+    opacity = np.full(15, 2.0)
+    opacity[4] = -5.0  # a floater, below min_opacity
+    _set_gaussians(run, label=labels, opacity=opacity)
+    res = evaluate_run(run, scene_dir, protocols=["hovsg", "conceptgraphs"], ignore=[], min_opacity=0.5)
+    rep = res.report
+    assert rep["num_gaussians_evaluated"] == 14 and rep["num_gaussians_labelled"] == 11
+    assert rep["unlabelled_fraction"] == pytest.approx(3 / 14)
+    # chair: TP 1 (x=0), FN 3 (unlabelled), FP 1 (the chair label at table x=10).
+    c = res.semantic["conceptgraphs"]
+    np.testing.assert_allclose(c.iou, [1 / 5, 4 / 5, 1.0])
+    assert c.to_dict()["unassigned_predictions"] == 3
+    # HOV-SG: exactly as if the unlabelled Gaussians were not in the map.
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    g = PlyData.read(str(run / "gaussians.ply"))["vertex"].data
+    _write_ply(bare / "gaussians.ply", g[(labels >= 0)])
+    (bare / "graph.json").write_text((run / "graph.json").read_text())
+    ref = evaluate_run(bare, scene_dir, protocols=["hovsg"], ignore=[])
+    np.testing.assert_array_equal(res.semantic["hovsg"].confusion, ref.semantic["hovsg"].confusion)
+    _set_gaussians(run, label=np.full(15, -1))
+    with pytest.raises(DataError, match="no labelled Gaussians"):
+        evaluate_run(run, scene_dir, protocols=["conceptgraphs"])
+
+
+def test_unknown_ignore_names_are_warned_and_reported(scene, monkeypatch, capsys, caplog):
+    run, scene_dir = scene
+    with caplog.at_level("WARNING", logger="ogscene3d.eval.metrics"):
+        res = evaluate_run(run, scene_dir, protocols=["hovsg", "conceptgraphs"], ignore=["wall", "ceilng"])
+    assert "'ceilng'" in caplog.text and "chair, table, wall" in caplog.text
+    assert caplog.text.count("ceilng") == 1  # once, not once per protocol
+    for block in res.report["semantic_3d"].values():
+        assert block["ignore_unknown"] == ["ceilng"] and block["ignored_classes"] == ["wall"]
+    # The protocols' own defaults are recorded but not warned about: a scene may lack a ceiling.
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="ogscene3d.eval.metrics"):
+        res = evaluate_run(run, scene_dir, protocols=["hovsg"])
+    assert not caplog.text and res.report["semantic_3d"]["hovsg"]["ignore_unknown"] == ["floor", "ceiling"]

@@ -5,7 +5,12 @@ import math
 import numpy as np
 import pytest
 
-from ogscene3d.eval.metrics import confusion_matrix, format_metrics_table, segmentation_metrics
+from ogscene3d.eval.metrics import (
+    confusion_matrix,
+    format_metrics_table,
+    segmentation_metrics,
+    warn_unknown_ignore,
+)
 
 NAMES = ["a", "b", "c"]
 
@@ -77,6 +82,42 @@ def test_ignore_by_index_and_unknown_names_tolerated():
     gt = np.array([0, 1, 2])
     m = segmentation_metrics(confusion_matrix(gt, gt, 3), NAMES, ignore=[1, "ceiling"])
     assert m.num_evaluated == 2
+
+
+def test_unknown_ignore_names_are_reported_and_warned(caplog):
+    gt = np.array([0, 1, 2])
+    m = segmentation_metrics(confusion_matrix(gt, gt, 3), NAMES, ignore=["b", "ceilng"])
+    assert m.ignored == ["b"] and m.to_dict()["ignore_unknown"] == ["ceilng"]
+    assert segmentation_metrics(confusion_matrix(gt, gt, 3), NAMES).to_dict()["ignore_unknown"] == []
+    with caplog.at_level("WARNING", logger="ogscene3d.eval.metrics"):
+        assert warn_unknown_ignore(["b", "ceilng"], NAMES) == ["ceilng"]
+    assert "'ceilng'" in caplog.text and "a, b, c" in caplog.text
+    many = [f"class{i}" for i in range(20)]
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="ogscene3d.eval.metrics"):
+        warn_unknown_ignore(["x"], many)
+    assert "class7, ..." in caplog.text and "class8" not in caplog.text and "20 in all" in caplog.text
+    caplog.clear()
+    assert warn_unknown_ignore(["a", 2], NAMES) == [] and not caplog.text
+
+
+def test_gt_present_evaluates_classes_without_counted_points():
+    # Rows count predicted points (ConceptGraphs): class c is in the GT cloud but no point reached it.
+    cm = confusion_matrix(np.array([0, 0, 1]), np.array([0, 0, 1]), 3)
+    present = np.array([True, True, True])
+    m = segmentation_metrics(cm, NAMES, gt_present=present)
+    assert m.num_evaluated == 3 and m.iou[2] == 0.0 and m.acc[2] == 0.0
+    assert m.miou == pytest.approx(2 / 3) and m.macc == pytest.approx(2 / 3)
+    assert m.fmiou == 1.0 and m.overall_acc == 1.0  # weighted by counted points: c weighs nothing
+    # Ignored classes stay out; a class absent from the GT stays out even with counted points.
+    ign = segmentation_metrics(cm, NAMES, ignore=["c"], gt_present=present)
+    assert ign.num_evaluated == 2 and ign.miou == 1.0
+    absent = segmentation_metrics(cm, NAMES, gt_present=np.array([True, False, True]))
+    assert absent.evaluated.tolist() == [True, False, True] and math.isnan(absent.iou[1])
+    with pytest.raises(ValueError, match="gt_present"):
+        segmentation_metrics(cm, NAMES, gt_present=np.array([1, 1, 1]))
+    with pytest.raises(ValueError, match="no evaluated class"):
+        segmentation_metrics(cm, NAMES, gt_present=np.array([False, False, True]))
 
 
 def test_square_matrix_accepted():

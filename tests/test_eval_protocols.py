@@ -1,4 +1,4 @@
-"""HOV-SG / ConceptGraphs protocols and 2D novel-view metrics on toy data with hand-checked results."""
+"""HOV-SG / ConceptGraphs protocols and 2D rendered-view metrics on toy data with hand-checked results."""
 
 import numpy as np
 import pytest
@@ -12,6 +12,7 @@ from ogscene3d.eval.protocols import (
     majority_vote,
     nearest_neighbors,
     novel_view_metrics,
+    rendered_view_metrics,
 )
 
 
@@ -81,6 +82,83 @@ def test_unlabelled_predictions_do_not_vote_in_hovsg_but_miss_in_conceptgraphs()
     assert none.miou == 0.0
 
 
+def test_hovsg_unnamed_labels_vote_no_class_and_unlabelled_do_not_vote():
+    # x = 0..4 chair, 5..8 a scene label the mapping could not name (class -1), 9 table.
+    pred_cls = np.array([0] * 5 + [-1] * 4 + [1])
+    labelled = np.ones(10, dtype=bool)
+    m = hovsg_protocol(PRED_PTS, pred_cls, GT_PTS, GT_CLS, NAMES, ignore=(), k=1, pred_labelled=labelled)
+    # Each GT point takes its own prediction: GT 5..8 get "no class" (misses), not the chair/table
+    # classes of farther neighbours.
+    np.testing.assert_allclose(m.iou, [1.0, 1 / 5])
+    assert m.miou == pytest.approx(0.6) and m.to_dict()["unassigned_predictions"] == 4
+    # The same points left unlabelled (no scene label) do not vote: their neighbours fill the gap.
+    gap = hovsg_protocol(
+        PRED_PTS, pred_cls, GT_PTS, GT_CLS, NAMES, ignore=(), k=1, pred_labelled=pred_cls >= 0
+    )
+    assert gap.to_dict()["unassigned_predictions"] == 0
+    np.testing.assert_array_equal(
+        gap.confusion, hovsg_protocol(PRED_PTS, pred_cls, GT_PTS, GT_CLS, NAMES, (), k=1).confusion
+    )
+    # The unlabelled mask goes through evaluate_semantic_3d to HOV-SG.
+    d = evaluate_semantic_3d(
+        PRED_PTS, pred_cls, GT_PTS, GT_CLS, NAMES, protocol="hovsg", ignore=(), k=1, pred_labelled=labelled
+    )
+    np.testing.assert_array_equal(d.confusion, m.confusion)
+    with pytest.raises(ValueError, match="pred_labelled"):
+        hovsg_protocol(PRED_PTS, PRED_CLS, GT_PTS, GT_CLS, NAMES, pred_labelled=np.zeros(10, dtype=bool))
+
+
+def test_hovsg_no_class_wins_only_a_strict_majority():
+    gt_pts = _line([0.0])
+    pred_pts = _line([0.1, -0.2, 0.3, -0.4])
+    names = ["chair", "table"]
+    labelled = np.ones(4, dtype=bool)
+    # Two "no class" votes against two chair votes: a real class wins the tie.
+    tie = hovsg_protocol(
+        pred_pts, np.array([-1, 0, -1, 0]), gt_pts, [0], names, (), k=4, pred_labelled=labelled
+    )
+    assert tie.iou[0] == 1.0
+    lost = hovsg_protocol(
+        pred_pts, np.array([-1, -1, -1, 0]), gt_pts, [0], names, (), k=4, pred_labelled=labelled
+    )
+    assert lost.iou[0] == 0.0 and lost.confusion[0, -1] == 1
+
+
+def test_conceptgraphs_averages_gt_classes_the_map_never_reached():
+    # ConceptGraphs' eval_replica_semseg.py keeps the classes present in the GT cloud (minus
+    # excluded ones): a lamp the map has no point near scores IoU 0 and recall 0.
+    names = ["other", "chair", "table", "lamp"]
+    gt_pts = _line([0, 0.1, 10, 10.1, 20, 20.1])
+    gt_cls = np.array([1, 1, 2, 2, 3, 3])
+    pred_pts = _line([0, 0.05, 10, 10.05])
+    pred_cls = np.array([1, 1, 2, 2])
+    c = conceptgraphs_protocol(pred_pts, pred_cls, gt_pts, gt_cls, names)  # default ignore: other
+    assert [n for n, e in zip(names, c.evaluated) if e] == ["chair", "table", "lamp"]
+    assert c.iou[3] == 0.0 and c.acc[3] == 0.0 and c.support[3] == 0
+    # The reference figures of ConceptGraphs' compute_metrics on this scene.
+    assert c.miou == pytest.approx(2 / 3) and c.macc == pytest.approx(2 / 3) and c.fmiou == pytest.approx(1.0)
+    # "other" has GT points here but stays ignored.
+    c2 = conceptgraphs_protocol(pred_pts, pred_cls, gt_pts, np.array([0, 1, 2, 2, 3, 3]), names)
+    assert not c2.evaluated[0] and c2.num_evaluated == 3
+    # Classes absent from the GT cloud stay out even when predicted.
+    c3 = conceptgraphs_protocol(pred_pts, np.array([1, 3, 2, 2]), gt_pts[:4], gt_cls[:4], names)
+    assert not c3.evaluated[3] and c3.predicted[3] == 1 and c3.num_evaluated == 2
+
+
+def test_hovsg_evaluates_every_gt_class_not_ignored():
+    # Counted on GT points, HOV-SG already averages every GT class with points, predicted or not.
+    names = ["other", "chair", "table", "lamp"]
+    gt_pts = _line([0, 0.1, 10, 10.1, 20, 20.1])
+    gt_cls = np.array([1, 1, 2, 2, 3, 3])
+    h = hovsg_protocol(
+        _line([0, 0.05, 10, 10.05]), np.array([1, 1, 2, 2]), gt_pts, gt_cls, names, ["other"], k=1
+    )
+    assert [n for n, e in zip(names, h.evaluated) if e] == ["chair", "table", "lamp"]
+    # The lamp's GT points take the table's vote: lamp IoU 0, table IoU 2/4.
+    np.testing.assert_allclose(h.iou[1:], [1.0, 0.5, 0.0])
+    assert h.miou == pytest.approx(0.5)
+
+
 def test_majority_vote_ties_and_validity():
     votes = np.array([[2, 2, 1, 1, 5], [3, 3, 3, 0, 0], [4, 9, 9, 9, 9], [1, 1, 1, 1, 1]])
     valid = np.ones_like(votes, dtype=bool)
@@ -125,18 +203,21 @@ def test_label_lookup_dict_and_array():
     np.testing.assert_array_equal(label_lookup({}, labels), -np.ones((2, 2)))
 
 
-def test_novel_view_metrics_two_views():
+def test_rendered_view_metrics_two_views():
     r1 = np.array([[10, 10], [11, -1]])
     g1 = np.array([[0, 0], [1, 1]])
     r2 = torch.tensor([[12, 11], [10, 10]], dtype=torch.int32)  # 12 has no class
     g2 = np.array([[1, 1], [0, -1]])
-    m = novel_view_metrics([r1, r2], [g1, g2], {10: 0, 11: 1}, ["chair", "table"])
+    m = rendered_view_metrics([r1, r2], [g1, g2], {10: 0, 11: 1}, ["chair", "table"])
     # chair: 3 TP; table: 2 TP, 2 misses (-1 and unmapped 12); the void pixel is skipped.
     np.testing.assert_allclose(m.iou, [1.0, 0.5])
     assert m.miou == pytest.approx(0.75) and m.macc == pytest.approx(0.75)
-    assert m.support.sum() == 7 and "novel-view" in m.protocol
+    assert m.support.sum() == 7
+    # The views are frames of the mapped sequence: the protocol must not claim novel views.
+    assert m.protocol.startswith("rendered-view-2d") and "not held-out novel views" in m.protocol
+    assert novel_view_metrics is rendered_view_metrics  # the former name still imports
     with pytest.raises(ValueError, match="view 0"):
-        novel_view_metrics([r1], [np.zeros((3, 2), int)], {10: 0}, ["chair", "table"])
+        rendered_view_metrics([r1], [np.zeros((3, 2), int)], {10: 0}, ["chair", "table"])
 
 
 def _brute_force_confusions(pred_pts, pred_cls, gt_pts, gt_cls, c, k):

@@ -1,7 +1,7 @@
 """ogscene3d.eval: the paper's metrics under the community protocols, label naming, pictures.
 
 * :mod:`.metrics` — confusion matrix, mIoU / F-mIoU / mAcc / per-class IoU (conventions documented there).
-* :mod:`.protocols` — HOV-SG and ConceptGraphs 3D protocols, 2D novel-view metrics (paper Table I).
+* :mod:`.protocols` — HOV-SG and ConceptGraphs 3D protocols, 2D metrics of rendered dataset frames.
 * :mod:`.label_mapping` — scene labels -> GT classes by majority overlap or by text.
 * :mod:`.graph_metrics` — relation recall with nodes matched by 3D overlap.
 * :mod:`.trajectory` — ATE RMSE after Umeyama alignment.
@@ -32,6 +32,7 @@ from .protocols import (
     majority_vote,
     nearest_neighbors,
     novel_view_metrics,
+    rendered_view_metrics,
 )
 from .readers import GroundTruth, RunData, find_ground_truth, load_ground_truth, read_graph_json, read_run
 from .run_eval import EvalResult, build_label_mapping, evaluate_run
@@ -81,6 +82,7 @@ __all__ = [
     "read_run",
     "read_trajectory",
     "relation_recall",
+    "rendered_view_metrics",
     "segmentation_metrics",
     "side_by_side",
     "text_label_mapping",

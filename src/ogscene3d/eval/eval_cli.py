@@ -48,7 +48,7 @@ def add_parser(subparsers: Any) -> None:
         "--ignore",
         default=None,
         help="comma-separated class names left out of the means (default: wall,floor,ceiling for hovsg, "
-        "'other' for conceptgraphs; '' = none)",
+        "'other' for conceptgraphs; '' = none); names matching no class are warned about",
     )
     p.add_argument(
         "--mapping",
@@ -134,6 +134,25 @@ def run(args: argparse.Namespace) -> int:
         raise OGSceneError(str(e)) from e
 
 
+def _mapping_line(report: dict[str, Any]) -> str:
+    """The label mapping, flagged when it looked at the ground truth to name the scene labels."""
+    m = report["label_mapping"]
+    # Overlap naming reads the GT classes, so its scores measure segmentation, not naming.
+    oracle = " (oracle: names scene labels from the GT)" if m["method"] == "overlap" else ""
+    return (
+        f"label mapping: {m['method']}{oracle}, "
+        f"{m['num_mapped_labels']}/{m['num_scene_labels']} scene labels named"
+    )
+
+
+def _gaussians_line(report: dict[str, Any]) -> str:
+    unlabelled = report.get("unlabelled_fraction", 0.0)
+    return (
+        f"{report['num_gaussians_evaluated']} Gaussians ({100 * unlabelled:.1f}% unlabelled: no vote under "
+        f"hovsg, misses under conceptgraphs), {report['num_gt_points']} GT points"
+    )
+
+
 def _run(args: argparse.Namespace) -> int:
     protocols = list(PROTOCOLS) if args.protocol == "both" else [args.protocol]
     ignore = None if args.ignore is None else [s.strip() for s in args.ignore.split(",") if s.strip()]
@@ -171,13 +190,9 @@ def _run(args: argparse.Namespace) -> int:
         report["trajectory"] = ate(traj[0], traj[1], args.align).to_dict()
 
     out = args.out or args.run_dir
-    m = report["label_mapping"]
     print(f"run: {args.run_dir}   ground truth: {report['ground_truth']}")
-    print(
-        f"label mapping: {m['method']} "
-        f"({m['num_mapped_labels']}/{m['num_scene_labels']} scene labels named); "
-        f"{report['num_gaussians_evaluated']} Gaussians, {report['num_gt_points']} GT points"
-    )
+    print(_mapping_line(report))
+    print(_gaussians_line(report))
     gp = report["gt_points"]
     if gp["points"] == "observed":
         print(

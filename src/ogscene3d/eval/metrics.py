@@ -11,7 +11,11 @@ Conventions (the ones HOV-SG and ConceptGraphs use, stated once here):
   list. Classes absent from the ground truth are left out of every mean (their IoU is reported
   as NaN/None), even when the method predicted them: their false positives still lower the IoU of
   the classes whose points they took (as false negatives of those classes), which is the standard
-  ScanNet/HOV-SG handling.
+  ScanNet/HOV-SG handling. A protocol that counts on *predicted* points (ConceptGraphs) passes
+  ``gt_present`` instead: the classes present in the ground-truth cloud are evaluated, so a class
+  the map never reached still enters the means, with IoU 0 and recall 0.
+* Ignore names that match no class are listed (``ignore_unknown``), never an error: a scene may
+  simply lack e.g. a ceiling.
 * Ignored classes (e.g. wall/floor/ceiling) are left out of the means. What happens to the points
   whose ground truth is an ignored class is protocol dependent (``ignored_gt_points``):
   ``"drop"`` removes them entirely (ConceptGraphs, ScanNet benchmark); ``"false_positive"`` keeps
@@ -29,12 +33,15 @@ Formulas over the evaluated set E, with TP_c, FP_c, FN_c from the matrix and sup
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
+
+log = logging.getLogger(__name__)
 
 IgnoredGtPoints = Literal["drop", "false_positive"]
 
@@ -99,6 +106,7 @@ class SegmentationMetrics:
     predicted: np.ndarray  # [C] int64, prediction count per class (column sums)
     evaluated: np.ndarray  # [C] bool
     ignored: list[str] = field(default_factory=list)
+    ignore_unknown: list[str] = field(default_factory=list)  # ignore names that matched no class
     miou: float = float("nan")
     fmiou: float = float("nan")
     macc: float = float("nan")
@@ -132,6 +140,7 @@ class SegmentationMetrics:
             "overall_acc": _nan_to_none(self.overall_acc),
             "num_evaluated_classes": self.num_evaluated,
             "ignored_classes": list(self.ignored),
+            "ignore_unknown": list(self.ignore_unknown),
             "unassigned_predictions": int(self.confusion[:, -1].sum()),
             "per_class": self.per_class(),
         }
@@ -166,12 +175,33 @@ def resolve_ignore(
     return sorted(set(idx)), unknown
 
 
+def warn_unknown_ignore(
+    ignore: Iterable[str | int] | None, class_names: Sequence[str], shown: int = 8
+) -> list[str]:
+    """Log a warning naming the ``ignore`` names that match no class (and the first class names).
+
+    Meant for ignore lists a user typed (a typo would otherwise leave a class in the means without a
+    word); returns the unknown names.
+    """
+    _, unknown = resolve_ignore(ignore, class_names)
+    if unknown:
+        more = f", ... ({len(class_names)} in all)" if len(class_names) > shown else ""
+        log.warning(
+            "ignore names matching no class (so nothing is ignored for them): %s; classes: %s%s",
+            ", ".join(repr(u) for u in unknown),
+            ", ".join(class_names[:shown]),
+            more,
+        )
+    return unknown
+
+
 def segmentation_metrics(
     confusion: np.ndarray,
     class_names: Sequence[str] | None = None,
     ignore: Iterable[str | int] | None = None,
     ignored_gt_points: IgnoredGtPoints = "drop",
     protocol: str = "confusion",
+    gt_present: Any | None = None,
 ) -> SegmentationMetrics:
     """mIoU, F-mIoU, mAcc and per-class IoU/accuracy from a confusion matrix (see the module docstring).
 
@@ -182,9 +212,13 @@ def segmentation_metrics(
         ignore: class names or indices left out of the means.
         ignored_gt_points: "drop" or "false_positive", what the points of ignored GT classes do.
         protocol: recorded in the result so every output states how it was computed.
+        gt_present: [C] bool, the classes present in the ground truth, for protocols whose matrix rows
+            do not count GT points (ConceptGraphs counts predicted points): these classes, less the
+            ignored ones, are evaluated even with no counted point (IoU 0, recall 0). None = the
+            classes with support > 0.
 
     Raises:
-        ValueError: bad shapes/values, or no evaluated class has any ground-truth point.
+        ValueError: bad shapes/values, or no evaluated class has any counted point.
     """
     cm = np.asarray(confusion)
     if cm.ndim != 2 or cm.shape[0] == 0:
@@ -202,7 +236,7 @@ def segmentation_metrics(
         raise ValueError(f"class_names has {len(names)} entries but the confusion matrix has {c} classes")
     if ignored_gt_points not in ("drop", "false_positive"):
         raise ValueError(f"ignored_gt_points must be 'drop' or 'false_positive', got {ignored_gt_points!r}")
-    ignore_idx, _ = resolve_ignore(ignore, names)
+    ignore_idx, ignore_unknown = resolve_ignore(ignore, names)
 
     cm = cm.copy()
     if ignored_gt_points == "drop" and ignore_idx:
@@ -214,15 +248,18 @@ def segmentation_metrics(
     fn = support - tp
     ignored_mask = np.zeros(c, dtype=bool)
     ignored_mask[ignore_idx] = True
-    evaluated = (support > 0) & ~ignored_mask
-    if not evaluated.any():
+    evaluated = _present_mask(gt_present, c) if gt_present is not None else support > 0
+    evaluated &= ~ignored_mask
+    if not support[evaluated].any():
         raise ValueError(
             f"no evaluated class has ground-truth points ({protocol}); "
             f"ignored: {[names[i] for i in ignore_idx]}"
         )
     with np.errstate(invalid="ignore", divide="ignore"):
-        iou = np.where(evaluated, tp / (tp + fp + fn), np.nan)
-        acc = np.where(evaluated, tp / support, np.nan)
+        # An evaluated class with no counted point at all (only possible with gt_present) scores 0,
+        # as in ConceptGraphs' max(1, denominator).
+        iou = np.where(evaluated, tp / np.maximum(tp + fp + fn, 1), np.nan)
+        acc = np.where(evaluated, tp / np.maximum(support, 1), np.nan)
     t = support[evaluated].astype(np.float64)
     return SegmentationMetrics(
         protocol=protocol,
@@ -234,11 +271,19 @@ def segmentation_metrics(
         predicted=predicted,
         evaluated=evaluated,
         ignored=[names[i] for i in ignore_idx],
+        ignore_unknown=ignore_unknown,
         miou=float(np.mean(iou[evaluated])),
         fmiou=float(np.sum(t * iou[evaluated]) / t.sum()),
         macc=float(np.mean(acc[evaluated])),
         overall_acc=float(tp[evaluated].sum() / t.sum()),
     )
+
+
+def _present_mask(gt_present: Any, num_classes: int) -> np.ndarray:
+    mask = np.asarray(gt_present)
+    if mask.dtype != bool or mask.shape != (num_classes,):
+        raise ValueError(f"gt_present must be a [{num_classes}] bool array, got {mask.dtype} {mask.shape}")
+    return mask.copy()
 
 
 def format_metrics_table(metrics: SegmentationMetrics, per_class: bool = True) -> str:

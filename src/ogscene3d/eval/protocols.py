@@ -5,21 +5,28 @@ numbers are not interchangeable and every result names the protocol that produce
 
 * ``"hovsg"`` (HOV-SG, ``application/eval/evaluate_sem_seg.py``): every ground-truth point takes the
   majority class of its k = 5 nearest *labelled* predicted points (ties go to the smallest class
-  index, like ``np.bincount(...).argmax()``); predicted points with no class do not vote. Metrics
-  are counted on ground-truth points. Background classes (default wall/floor/ceiling) are left out
-  of the means, but their points stay in the count, so predicting ``table`` on a wall point is a
-  false positive of ``table`` (``ignored_gt_points="false_positive"``), as in HOV-SG's metric code.
+  index, like ``np.bincount(...).argmax()``). Unlabelled predicted points (no scene label) do not
+  vote. A labelled point whose scene label the label mapping could not name votes *no class*: HOV-SG
+  has no free abstention (every mask gets some class), so an unnamed label must not let its
+  neighbours' classes fill its space. A GT point whose vote *no class* wins is predicted -1, a miss
+  of its class (on a tie a real class wins over *no class*). Metrics are counted on ground-truth
+  points. Background classes (default wall/floor/ceiling) are left out of the means, but their
+  points stay in the count, so predicting ``table`` on a wall point is a false positive of
+  ``table`` (``ignored_gt_points="false_positive"``), as in HOV-SG's metric code.
 * ``"conceptgraphs"`` (ConceptGraphs, ``scripts/eval_replica_semseg.py``): every predicted point takes
   the class of its nearest ground-truth point as its reference; metrics are counted on predicted
   points. Predicted points whose reference is an ignored class are dropped. Predicted points with
-  no class count as misses of their reference class.
+  no class (unlabelled, or unnamed by the label mapping) count as misses of their reference class.
+  The classes averaged are those present in the ground-truth cloud (less the ignored ones), as in
+  ConceptGraphs' ``keep_index``: a class no predicted point reached scores IoU 0 and recall 0.
 
 Nearest neighbours come from a KD-tree (``scipy.spatial.cKDTree``), queried in chunks, so memory is
 O(N + M), never O(N * M).
 
-The 2D novel-view protocol (paper Table I, following OpenGS-SLAM) accumulates one confusion matrix
-over all held-out views: pixels with ground truth < 0 are void, rendered pixels with no label
-(-1) or a label the mapping does not name are misses.
+The 2D rendered-view protocol (paper Table I, following OpenGS-SLAM) accumulates one confusion
+matrix over the rendered views: pixels with ground truth < 0 are void, rendered pixels with no label
+(-1) or a label the mapping does not name are misses. The views are frames of the mapped sequence
+(not held-out novel views), and the protocol string says so.
 """
 
 from __future__ import annotations
@@ -122,6 +129,43 @@ def majority_vote(votes: np.ndarray, valid: np.ndarray | None = None) -> np.ndar
     return out
 
 
+def _labelled_mask(pred_labelled: Any, pred_classes: np.ndarray) -> np.ndarray:
+    """Which predicted points carry a scene label; a point with a class but no label is a caller bug."""
+    if pred_labelled is None:
+        return pred_classes >= 0
+    mask = np.asarray(pred_labelled)
+    if mask.dtype != bool or mask.shape != pred_classes.shape:
+        raise ValueError(
+            f"pred_labelled: expected a [{pred_classes.shape[0]}] bool array, got {mask.dtype} {mask.shape}"
+        )
+    if np.any(pred_classes[~mask] >= 0):
+        raise ValueError("pred_labelled marks points unlabelled that pred_classes gives a class")
+    return mask
+
+
+def hovsg_vote(
+    pred_points: np.ndarray,
+    pred_classes: np.ndarray,
+    labelled: np.ndarray,
+    gt_points: np.ndarray,
+    num_classes: int,
+    k: int = 5,
+    workers: int = 1,
+) -> np.ndarray:
+    """Class of every GT point by the vote of its k nearest labelled predicted points, -1 = no class.
+
+    Labelled points without a class vote the sentinel ``num_classes``; it sorts after every real
+    class, so it only wins a strict majority (ties go to the smallest class index).
+    """
+    if not labelled.any():
+        return np.full(gt_points.shape[0], -1, dtype=np.int64)
+    _, idx = nearest_neighbors(pred_points[labelled], gt_points, k=k, workers=workers)
+    voter_classes = pred_classes[labelled]
+    voter_classes = np.where(voter_classes >= 0, voter_classes, num_classes)
+    voted = majority_vote(voter_classes[np.maximum(idx, 0)], idx >= 0)
+    return np.where(voted == num_classes, -1, voted)
+
+
 def hovsg_protocol(
     pred_points: Any,
     pred_classes: Any,
@@ -132,30 +176,29 @@ def hovsg_protocol(
     k: int = 5,
     ignored_gt_points: IgnoredGtPoints = "false_positive",
     workers: int = 1,
+    pred_labelled: Any | None = None,
 ) -> SegmentationMetrics:
     """HOV-SG 3D semantic segmentation protocol (see the module docstring).
 
     Args:
         pred_points: [N, 3] predicted points (Gaussian centres), metres, same frame as the GT.
-        pred_classes: [N] GT-class index per predicted point, -1 = no class (does not vote).
+        pred_classes: [N] GT-class index per predicted point, -1 = no class.
         gt_points: [M, 3] ground-truth points.
         gt_classes: [M] class index per GT point, -1 = void.
         class_names: the C ground-truth class names.
         ignore: background class names/indices left out of the means.
         k: neighbours in the majority vote (HOV-SG uses 5).
         ignored_gt_points: HOV-SG keeps them as false positives; "drop" gives the ScanNet convention.
+        pred_labelled: [N] bool, which predicted points carry a scene label. Unlabelled points do not
+            vote; labelled points with class -1 (a label the mapping could not name) vote *no class*.
+            None = ``pred_classes >= 0`` (every point without a class is taken as unlabelled).
     """
     pp = _points(pred_points, "pred_points")
     pc = _labels(pred_classes, pp.shape[0], "pred_classes")
     gp = _points(gt_points, "gt_points")
     gc = _labels(gt_classes, gp.shape[0], "gt_classes")
-    labelled = pc >= 0
-    if labelled.any():
-        _, idx = nearest_neighbors(pp[labelled], gp, k=k, workers=workers)
-        votes = pc[labelled][np.maximum(idx, 0)]
-        voted = majority_vote(votes, idx >= 0)
-    else:
-        voted = np.full(gp.shape[0], -1, dtype=np.int64)
+    labelled = _labelled_mask(pred_labelled, pc)
+    voted = hovsg_vote(pp, pc, labelled, gp, len(class_names), k=k, workers=workers)
     cm = confusion_matrix(gc, voted, len(class_names))
     desc = f"hovsg (k={k} nearest predicted points vote for each GT point; counted on GT points)"
     return segmentation_metrics(cm, class_names, ignore, ignored_gt_points, protocol=desc)
@@ -172,7 +215,9 @@ def conceptgraphs_protocol(
 ) -> SegmentationMetrics:
     """ConceptGraphs 3D semantic segmentation protocol (see the module docstring).
 
-    Arguments as :func:`hovsg_protocol`; predicted points whose nearest GT point is void are skipped.
+    Arguments as :func:`hovsg_protocol`. Every predicted point counts, unlabelled ones too (class -1:
+    a miss of its reference class); predicted points whose nearest GT point is void are skipped. The
+    classes averaged are those with a (non-void) point in ``gt_classes``, less the ignored ones.
     """
     pp = _points(pred_points, "pred_points")
     pc = _labels(pred_classes, pp.shape[0], "pred_classes")
@@ -182,11 +227,16 @@ def conceptgraphs_protocol(
         raise ValueError("pred_points is empty: the ConceptGraphs protocol counts on predicted points")
     _, idx = nearest_neighbors(gp, pp, k=1, workers=workers)
     ref = gc[idx[:, 0]]
-    cm = confusion_matrix(ref, pc, len(class_names))
+    c = len(class_names)
+    cm = confusion_matrix(ref, pc, c)
+    # The rows count predicted points, so a GT class the map never reached has no row support; it is
+    # averaged anyway (IoU 0), like ConceptGraphs' keep_index of the classes in the GT cloud.
+    gt_present = np.bincount(gc[(gc >= 0) & (gc < c)], minlength=c)[:c] > 0
     desc = (
-        "conceptgraphs (each predicted point takes its nearest GT point's class; counted on predicted points)"
+        "conceptgraphs (each predicted point takes its nearest GT point's class; counted on predicted "
+        "points; the classes present in the GT are averaged)"
     )
-    return segmentation_metrics(cm, class_names, ignore, "drop", protocol=desc)
+    return segmentation_metrics(cm, class_names, ignore, "drop", protocol=desc, gt_present=gt_present)
 
 
 def evaluate_semantic_3d(
@@ -199,16 +249,20 @@ def evaluate_semantic_3d(
     ignore: Iterable[str | int] | None = None,
     k: int = 5,
     workers: int = 1,
+    pred_labelled: Any | None = None,
 ) -> SegmentationMetrics:
     """Dispatch to :func:`hovsg_protocol` or :func:`conceptgraphs_protocol`.
 
     ``ignore=None`` uses the protocol's default (HOV-SG: wall/floor/ceiling, ConceptGraphs: other).
+    ``pred_labelled`` (which predicted points carry a scene label) only matters to HOV-SG's vote;
+    ConceptGraphs counts every predicted point.
     """
     if protocol == "hovsg":
         ign = HOVSG_DEFAULT_IGNORE if ignore is None else ignore
         return hovsg_protocol(
-            pred_points, pred_classes, gt_points, gt_classes, class_names, ign, k=k, workers=workers
-        )
+            pred_points, pred_classes, gt_points, gt_classes, class_names, ign, k=k, workers=workers,
+            pred_labelled=pred_labelled,
+        )  # fmt: skip
     if protocol == "conceptgraphs":
         ign = CONCEPTGRAPHS_DEFAULT_IGNORE if ignore is None else ignore
         return conceptgraphs_protocol(
@@ -244,14 +298,18 @@ def label_lookup(mapping: Mapping[int, int] | np.ndarray, labels: Any) -> np.nda
     return np.where(hit, vals[pos], -1)
 
 
-def novel_view_metrics(
+#: What the 2D block is: renders at poses of the sequence's own frames, so it is not a novel-view score.
+RENDERED_VIEW_PROTOCOL = "rendered-view-2d (dataset frames of the mapped sequence, not held-out novel views)"
+
+
+def rendered_view_metrics(
     rendered_labels: Sequence[Any],
     gt_class_maps: Sequence[Any],
     label_to_class: Mapping[int, int] | np.ndarray,
     class_names: Sequence[str],
     ignore: Iterable[str | int] | None = None,
 ) -> SegmentationMetrics:
-    """2D novel-view semantic segmentation (paper Table I): mIoU / mAcc over held-out views.
+    """2D semantic segmentation of rendered views (paper Table I): mIoU / mAcc over dataset frames.
 
     Args:
         rendered_labels: per view an [H, W] int map of scene labels (``render_semantics(...).labels``),
@@ -280,5 +338,9 @@ def novel_view_metrics(
         class_names,
         ignore,
         "drop",
-        protocol=f"novel-view-2d ({len(rendered_labels)} views, confusion accumulated over pixels)",
+        protocol=f"{RENDERED_VIEW_PROTOCOL}: {len(rendered_labels)} views, confusion accumulated over pixels",
     )
+
+
+#: Former name of :func:`rendered_view_metrics`, kept so existing imports keep working.
+novel_view_metrics = rendered_view_metrics

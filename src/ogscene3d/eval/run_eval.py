@@ -22,7 +22,7 @@ from ..device import resolve_device
 from ..errors import DataError
 from .graph_metrics import match_nodes_by_overlap, relation_recall
 from .label_mapping import TextEmbedder, majority_overlap_mapping, text_label_mapping
-from .metrics import SegmentationMetrics
+from .metrics import SegmentationMetrics, warn_unknown_ignore
 from .protocols import PROTOCOLS, evaluate_semantic_3d, label_lookup, nearest_neighbors
 from .readers import GroundTruth, RunData, load_ground_truth, read_run
 
@@ -39,6 +39,17 @@ class EvalResult:
     semantic: dict[str, SegmentationMetrics]  # protocol name -> metrics
     label_to_class: dict[int, int]
     views: SegmentationMetrics | None = None  # 2D metrics of the rendered views, when asked for
+
+
+def _subset(run: RunData, keep: np.ndarray) -> RunData:
+    """The Gaussians of ``run`` where ``keep`` is True (the graph stays as it is)."""
+    return RunData(
+        run.means[keep],
+        run.labels[keep],
+        run.confidences[keep],
+        None if run.opacities is None else run.opacities[keep],
+        run.graph,
+    )
 
 
 def _associate(run: RunData, gt: GroundTruth, radius: float | None) -> np.ndarray:
@@ -147,7 +158,8 @@ def evaluate_run(
         mapping: "auto", "text" or "overlap" (see :func:`build_label_mapping`).
         classes: class-name table for a bare labelled PLY ground truth.
         k: neighbours of the HOV-SG vote.
-        min_opacity: Gaussians below this opacity are left out (floaters); 0 keeps all.
+        min_opacity: Gaussians below this opacity are left out (floaters); 0 keeps all. Unlabelled
+            Gaussians stay: misses under conceptgraphs, no vote under hovsg (``unlabelled_fraction``).
         assoc_radius: metres; a Gaussian farther than this from every GT point takes no part in the
             overlap label mapping and node matching (None = no limit). The protocols themselves use
             no radius, as in the original code.
@@ -169,29 +181,31 @@ def evaluate_run(
             raise ValueError(f"unknown protocol {p!r}; expected one of {PROTOCOLS}")
     run = read_run(run_dir)
     gt = load_ground_truth(gt_path, classes)
-    keep = run.labels >= 0
+    # Every protocol is given the Gaussians above min_opacity, unlabelled ones included: ConceptGraphs
+    # counts on predicted points, so an unlabelled Gaussian is a miss there, while HOV-SG's vote
+    # leaves it out (pred_labelled). Label naming and node matching look at labelled Gaussians only.
+    scored = run
     if min_opacity > 0 and run.opacities is not None:
-        keep &= run.opacities >= min_opacity
-    if not keep.any():
+        scored = _subset(run, run.opacities >= min_opacity)
+    labelled = scored.labels >= 0
+    if not labelled.any():
         raise DataError(f"{run_dir}: no labelled Gaussians to evaluate (min_opacity={min_opacity})")
-    run = RunData(
-        run.means[keep],
-        run.labels[keep],
-        run.confidences[keep],
-        None if run.opacities is None else run.opacities[keep],
-        run.graph,
-    )
+    run = _subset(scored, labelled)
     assoc = _associate(run, gt, assoc_radius)
     label_to_class, mapping_info = build_label_mapping(run, gt, mapping, assoc, embedder)
-    pred_classes = label_lookup(label_to_class, run.labels)
-    named = float((pred_classes >= 0).mean())
+    named = float((label_lookup(label_to_class, run.labels) >= 0).mean())
     mapping_info["fraction_of_gaussians_named"] = named
     notes: list[str] = []
     if named < 0.5:
         notes.append(
             f"only {100 * named:.0f}% of the labelled Gaussians have a GT class under the "
-            f"'{mapping_info['method']}' label mapping; the others count as unassigned"
+            f"'{mapping_info['method']}' label mapping; the others are predictions of no class "
+            "(they vote 'no class' under hovsg and are misses under conceptgraphs)"
         )
+    unlabelled_fraction = 1.0 - float(labelled.mean())
+    # A typo in a user's ignore list would otherwise leave that class in the means without a word.
+    if ignore is not None:
+        warn_unknown_ignore(ignore, gt.class_names)
 
     gt_classes = gt.classes
     gt_block: dict[str, Any] = {"points": "all", "num_scored": int((gt.classes >= 0).sum())}
@@ -206,16 +220,18 @@ def evaluate_run(
         notes.append("the ground truth does not say which points were observed: every GT point is scored")
 
     semantic: dict[str, SegmentationMetrics] = {}
+    scored_classes = label_lookup(label_to_class, scored.labels)
     for p in protocols:
         semantic[p] = evaluate_semantic_3d(
-            run.means,
-            pred_classes,
+            scored.means,
+            scored_classes,
             gt.points,
             gt_classes,
             gt.class_names,
             protocol=p,  # type: ignore[arg-type]
             ignore=ignore,
             k=k,
+            pred_labelled=labelled,
         )
 
     graph_block: dict[str, Any] | None = None
@@ -258,7 +274,9 @@ def evaluate_run(
         "version": 1,
         "run_dir": str(run_dir),
         "ground_truth": gt.source,
-        "num_gaussians_evaluated": int(run.means.shape[0]),
+        "num_gaussians_evaluated": int(scored.means.shape[0]),
+        "num_gaussians_labelled": int(labelled.sum()),
+        "unlabelled_fraction": unlabelled_fraction,
         "num_gt_points": int(gt.points.shape[0]),
         "gt_points": gt_block,
         "label_mapping": mapping_info,

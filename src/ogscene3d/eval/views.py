@@ -3,10 +3,10 @@
 For scenes whose frames carry ground-truth class maps (synthetic scenes), the map in
 ``gaussians.ply`` is rendered with :func:`ogscene3d.render_semantics` at a few poses of the
 scene's trajectory; rendered scene labels are named with the run's label mapping and compared with
-the ground-truth class maps (:func:`~ogscene3d.eval.protocols.novel_view_metrics`, paper Table I).
-The poses are those the dataset reports (``traj.txt``, what the mapper was given), so the views
-are *novel* only when the run did not map those frames (e.g. it used a stride); the report lists
-the frames used.
+the ground-truth class maps (:func:`~ogscene3d.eval.protocols.rendered_view_metrics`, paper Table I).
+The poses are those the dataset reports (``traj.txt``, what the mapper was given): these are frames
+of the mapped sequence, not held-out novel views (at most, frames a strided run skipped), and the
+protocol string says so; the report lists the frames used.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import numpy as np
 from ..errors import DataError
 from .metrics import SegmentationMetrics
 from .plots import side_by_side, write_png
-from .protocols import label_lookup, novel_view_metrics
+from .protocols import label_lookup, rendered_view_metrics
 from .readers import GroundTruth
 
 log = logging.getLogger(__name__)
@@ -107,8 +107,8 @@ def evaluate_views(
                                titles=("RGB", "rendered labels", "ground truth", "confidence"))  # fmt: skip
             name = frame.name or f"{i:06d}"
             pictures.append(write_png(Path(out_dir) / f"view_{name}.png", pic))
-    metrics = novel_view_metrics(rendered, gts, label_to_class, gt.class_names, ignore=ignore)
-    metrics = _with_protocol(metrics, f"{metrics.protocol}; dataset frames {idx}")
+    metrics = rendered_view_metrics(rendered, gts, label_to_class, gt.class_names, ignore=ignore)
+    metrics = _with_protocol(metrics, f"{metrics.protocol}; frames {idx}")
     return ViewsResult(metrics=metrics, frames=idx, pictures=pictures)
 
 
