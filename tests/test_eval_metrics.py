@@ -84,6 +84,22 @@ def test_ignore_by_index_and_unknown_names_tolerated():
     assert m.num_evaluated == 2
 
 
+def test_hovsg_ignore_presets():
+    """HOV-SG's own lists: substring rule on Replica (wall-plug, and indoor-plant through 'door'), names on
+    ScanNet."""
+    from ogscene3d.eval.metrics import resolve_ignore
+
+    replica = ["wall", "wall-cabinet", "wall-plug", "indoor-plant", "door", "window", "floor", "ceiling",
+               "chair", "table", "blinds"]  # fmt: skip
+    idx, unknown = resolve_ignore(["preset:hovsg-replica"], replica)
+    assert [replica[i] for i in idx] == replica[:8] and unknown == []
+    scannet = ["wall", "floor", "cabinet", "door", "window", "curtain", "background", "wall-plug"]
+    idx, _ = resolve_ignore(["preset:HOVSG-ScanNet", "curtain"], scannet)
+    assert [scannet[i] for i in idx] == ["wall", "floor", "door", "window", "curtain", "background"]
+    with pytest.raises(ValueError, match="unknown preset 'hovsg'; presets: hovsg-replica, hovsg-scannet"):
+        resolve_ignore(["preset:hovsg"], scannet)
+
+
 def test_unknown_ignore_names_are_reported_and_warned(caplog):
     gt = np.array([0, 1, 2])
     m = segmentation_metrics(confusion_matrix(gt, gt, 3), NAMES, ignore=["b", "ceilng"])

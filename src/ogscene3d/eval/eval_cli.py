@@ -48,7 +48,9 @@ def add_parser(subparsers: Any) -> None:
         "--ignore",
         default=None,
         help="comma-separated class names left out of the means (default: wall,floor,ceiling for hovsg, "
-        "'other' for conceptgraphs; '' = none); names matching no class are warned about",
+        "'other' for conceptgraphs; '' = none); names matching no class are warned about. "
+        "preset:hovsg-replica / preset:hovsg-scannet: the lists HOV-SG's own evaluation ignores, to compare "
+        "with its tables",
     )
     p.add_argument(
         "--mapping",

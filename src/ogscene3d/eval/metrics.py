@@ -146,10 +146,30 @@ class SegmentationMetrics:
         }
 
 
+#: The ignore lists of HOV-SG's own evaluation (its evaluate_sem_seg.py), by data set, for comparing with
+#: its tables: on Replica every class whose name *contains* one of the words (so also wall-cabinet,
+#: wall-plug and, through "door", indoor-plant), on ScanNet the classes of these names.
+IGNORE_PRESETS: dict[str, tuple[str, tuple[str, ...]]] = {
+    "hovsg-replica": ("contains", ("wall", "floor", "ceiling", "door", "window", "background")),
+    "hovsg-scannet": ("exact", ("wall", "floor", "door", "window", "background")),
+}
+
+
+def _preset_classes(name: str, class_names: Sequence[str]) -> list[int]:
+    if name not in IGNORE_PRESETS:
+        raise ValueError(f"ignore: unknown preset {name!r}; presets: {', '.join(IGNORE_PRESETS)}")
+    rule, words = IGNORE_PRESETS[name]
+    names = [n.strip().lower() for n in class_names]
+    if rule == "contains":
+        return [i for i, n in enumerate(names) if any(w in n for w in words)]
+    return [i for i, n in enumerate(names) if n in words]
+
+
 def resolve_ignore(
     ignore: Iterable[str | int] | None, class_names: Sequence[str]
 ) -> tuple[list[int], list[str]]:
-    """Turn an ignore list of class names (case-insensitive, exact) and/or indices into indices.
+    """Turn an ignore list of class names (case-insensitive, exact), indices and presets
+    (``preset:NAME``, see ``IGNORE_PRESETS``) into indices.
 
     Returns (indices, names that are not in ``class_names``); unknown names are not an error since
     a scene may simply lack e.g. a ceiling.
@@ -168,7 +188,9 @@ def resolve_ignore(
         key = str(item).strip().lower()
         if not key:
             continue
-        if key in lookup:
+        if key.startswith("preset:"):
+            idx.extend(_preset_classes(key.removeprefix("preset:"), class_names))
+        elif key in lookup:
             idx.append(lookup[key])
         else:
             unknown.append(str(item))

@@ -41,7 +41,8 @@ from .metrics import IgnoredGtPoints, SegmentationMetrics, confusion_matrix, seg
 Protocol3D = Literal["hovsg", "conceptgraphs"]
 PROTOCOLS: tuple[str, ...] = ("hovsg", "conceptgraphs")
 
-#: HOV-SG's background classes (its Replica evaluation also drops door/window; pass them explicitly).
+#: HOV-SG's background classes. Its own evaluation ignores more, by data set: ``--ignore
+#: preset:hovsg-replica`` / ``preset:hovsg-scannet`` (metrics.IGNORE_PRESETS) for comparing with its tables.
 HOVSG_DEFAULT_IGNORE: tuple[str, ...] = ("wall", "floor", "ceiling")
 #: ConceptGraphs' default run ignores only its catch-all "other" class.
 CONCEPTGRAPHS_DEFAULT_IGNORE: tuple[str, ...] = ("other",)
