@@ -15,13 +15,15 @@
 #   mapping    per-keyframe module times at 1200x680 with ~1M Gaussians (issue #5), also as JSON
 #   profile    kernel-level tables of the three (OUTDIR/profile/): device-kernel vs wall time per call
 #   semantic_ab with BASELINE: the semantic call of this tree and of the baseline in turn, same machine
-# OUTDIR/summary.txt lists each step's exit status and wall time.
+# OUTDIR/summary.txt lists each step's exit status and wall time; the script exits 1 when any step failed.
 set -uo pipefail
 out=${1:?usage: gpu_session.sh OUTDIR}
 device=${DEVICE:-cuda}
 steps=" ${STEPS:-tests rasterize semantic mapping profile semantic_ab} "
-mkdir -p "$out"
+# absolute before the cd below, so that a relative OUTDIR means the caller's directory
+out=$(mkdir -p "$out" && cd "$out" && pwd) || exit 2
 cd "$(dirname "$0")/.."
+failed=0
 
 if [[ "${SMALL:-0}" == 1 ]]; then
   size=160x120; w=160; h=120; counts=5k; sem_counts=5k; gaussians=20000; iters=2
@@ -38,6 +40,7 @@ step() {
   local t0=$SECONDS
   "$@" > "$out/$name.log" 2>&1
   local rc=$?
+  (( rc == 0 )) || failed=1
   printf '%-10s rc=%-3s %5ss  %s\n' "$name" "$rc" "$((SECONDS - t0))" "$*" | tee -a "$out/summary.txt"
 }
 
@@ -70,3 +73,4 @@ if [[ -n "${BASELINE:-}" ]]; then
   step semantic_ab python benchmarks/semantic_ab.py run "$BASELINE" --device "$device" --width "$w" \
     --height "$h" --counts "$sem_counts" --iters "$iters"
 fi
+exit "$failed"
