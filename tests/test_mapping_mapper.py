@@ -222,6 +222,8 @@ def test_scene_graph_is_fed(tmp_path, device):
     m.finalize()
     m.save(tmp_path)
     assert m.timings.counts.get("graph_errors", 0) == 0
+    # the final graph update is timed with the per-keyframe ones, the final pruning on its own
+    assert m.timings.calls["graph"] == 3 + 1 and m.timings.calls["prune"] == 1
     graph = json.loads((tmp_path / "graph.json").read_text())
     assert {n["id"] for n in graph["nodes"]} == {0, 1}
 

@@ -621,14 +621,20 @@ class Mapper:
                 self._longterm()
         if self.use_refine:
             self._refine()
-        self.map.prune(cfg.prune_opacity, cfg.prune_scale)
+        with self.timings.section("prune"):
+            self.map.prune(cfg.prune_opacity, cfg.prune_scale)
         if self._graph is not None and not self._graph_failed:
-            try:
-                gm = self.map
-                self._graph.finalize(self.keyframe_count - 1, gm.means, gm.labels, gm.confidences, gm.colors)
-            except Exception as e:  # noqa: BLE001
-                log.warning("final scene-graph update failed: %s: %s", type(e).__name__, e)
-                self._graph_failed = True
+            # timed with the per-keyframe updates: in a run of fewer than graph.init_keyframes keyframes this
+            # is the only update there is
+            with self.timings.section("graph"):
+                try:
+                    gm = self.map
+                    self._graph.finalize(
+                        self.keyframe_count - 1, gm.means, gm.labels, gm.confidences, gm.colors
+                    )
+                except Exception as e:  # noqa: BLE001
+                    log.warning("final scene-graph update failed: %s: %s", type(e).__name__, e)
+                    self._graph_failed = True
         self.timings.counts["gaussians"] = len(self.map)
         self.finalized = True
 
