@@ -10,7 +10,7 @@ a keyframe's Gaussians is O(new) and never reallocates on every call. All public
 of the first ``len(map)`` rows. ``next_label`` is the next unused scene label (labels are never reused).
 
 Files: ``save_npz``/``load_npz`` hold everything needed to resume mapping; ``export_ply`` writes the
-3DGS vertex layout at SH degree 0 plus ``label`` and ``confidence`` (DESIGN.md "Files").
+3DGS vertex layout at SH degree 0 plus ``label`` and ``confidence`` (README "File formats").
 """
 
 from __future__ import annotations

@@ -651,7 +651,7 @@ def rasterization(
     return render, alphas, meta
 
 
-# The semantic half of the functional API lives in its own module; DESIGN.md names render.py as the home
+# The semantic half of the functional API lives in its own module; the design names render.py as the home
 # of all three functions, so they are importable from here too (imported last: semantics uses this module).
 from .semantics import SemanticRender, render_semantics, rendering_contribution  # noqa: E402
 

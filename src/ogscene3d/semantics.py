@@ -1,8 +1,8 @@
 """Semantic rendering API: confidence-weighted label voting and per-Gaussian rendering contribution.
 
 Both build on the rasterizer's projection and tile binning, restricted to labelled Gaussians
-(label >= 0): unlabelled Gaussians neither vote nor occlude (DESIGN.md "Kernel math"); nor do those of
-confidence 0, so they are left out of the tiles too. One kernel launch gives the labels and, for
+(label >= 0): unlabelled Gaussians neither vote nor occlude (the math: kernels/semantic.py); nor do those
+of confidence 0, so they are left out of the tiles too. One kernel launch gives the labels and, for
 ``rendering_contribution``, P_conf.
 """
 

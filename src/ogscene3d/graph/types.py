@@ -172,7 +172,7 @@ class SceneNode:
         return self._shape
 
     def to_dict(self) -> dict:
-        """The node as graph.json stores it (DESIGN.md "Files" keys plus oriented box and caption source)."""
+        """The node as graph.json stores it (README "File formats")."""
         return {
             "id": int(self.id),
             "label": int(self.id),

@@ -1,6 +1,6 @@
 """The incremental semantic mapper: runs the paper's per-keyframe loop on a stream of frames.
 
-Per keyframe (DESIGN.md "Mapping loop"):
+Per keyframe:
 1. segments (the frame's precomputed ones, else the optional segmenter; none -> geometry only);
 2. render the map at the frame's pose (alpha + expected depth) to find the pixels it does not explain;
 3. probes: grid-subsampled back-projected pixels per segment (``init.make_probes``);

@@ -1,6 +1,6 @@
 """Reading a saved run directory for browsing (``ogscene3d-live RUN_DIR``).
 
-Only file formats are used here (DESIGN.md "Files"): ``gaussians.ply`` through plyfile, ``graph.json``,
+Only file formats are used here (README "File formats"): ``gaussians.ply`` through plyfile, ``graph.json``,
 ``timings.json``, ``config.yaml`` and, when present, the memory keyframe poses in ``map.npz``. Nothing
 from the mapper is imported, so a run can be browsed wherever the files are.
 """
