@@ -1,16 +1,44 @@
 """Shared helpers for the benchmark scripts: synthetic Gaussian scenes, a synchronising timer and a
-device-kernel timer."""
+device-kernel timer, and the scripts' command-line plumbing (argument types, clean errors)."""
 
 from __future__ import annotations
 
+import argparse
 import math
 import statistics
+import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import torch
 from torch.autograd import DeviceType
 from torch.profiler import ProfilerActivity, profile
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1 (zero iterations, rounds or pixels would divide by zero later)."""
+    try:
+        value = int(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from e
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {value}")
+    return value
+
+
+def run_main(main: Callable[[], int | None]) -> None:
+    """Run a script's ``main`` and exit with its status. ogscene3d's input errors (no CUDA GPU for
+    ``--device cuda``, a bad ``--set``) end the script with one line, as the ``ogscene3d`` CLI prints them,
+    instead of a traceback."""
+    from ogscene3d.errors import OGSceneError
+
+    try:
+        rc = main()
+    except OGSceneError as e:
+        print(f"{Path(sys.argv[0]).name}: error: {e}", file=sys.stderr)
+        sys.exit(2)
+    sys.exit(rc or 0)
 
 
 def parse_count(text: str) -> int:

@@ -1,4 +1,4 @@
-"""The paper's ablation (Tab. "Ablation study") on several synthetic seeds: mean and spread, and a plot.
+r"""The paper's ablation (Tab. "Ablation study") on several synthetic seeds: mean and spread, and a plot.
 
 Each seed's procedural room is mapped four times with ``mapping.ablation`` = naive (KNN-majority labels, no
 confidence, no refinement, no long-term), local (local 3D optimization only: the paper's row a), local+global
@@ -34,12 +34,16 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ogscene3d.batch import json_safe
-from ogscene3d.config import load_config
-from ogscene3d.datasets import make_synthetic_scene
-from ogscene3d.eval.protocols import CONCEPTGRAPHS_DEFAULT_IGNORE, HOVSG_DEFAULT_IGNORE
-from ogscene3d.mapping.ablation import run_ablation
-from ogscene3d.mapping.mapper import ABLATIONS
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import positive_int, run_main  # noqa: E402
+
+from ogscene3d.batch import json_safe  # noqa: E402
+from ogscene3d.config import load_config  # noqa: E402
+from ogscene3d.datasets import make_synthetic_scene  # noqa: E402
+from ogscene3d.device import resolve_device  # noqa: E402
+from ogscene3d.eval.protocols import CONCEPTGRAPHS_DEFAULT_IGNORE, HOVSG_DEFAULT_IGNORE  # noqa: E402
+from ogscene3d.mapping.ablation import run_ablation  # noqa: E402
+from ogscene3d.mapping.mapper import ABLATIONS  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 METRICS = (("miou", "mIoU"), ("fmiou", "F-mIoU"), ("macc", "mAcc"))
@@ -222,7 +226,9 @@ def main(argv: list[str] | None = None) -> int:
     default_cfg = ROOT / "configs" / "synthetic.yaml"
     ap.add_argument("--config", default=str(default_cfg) if default_cfg.is_file() else None)
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--frames", type=int, default=None, help="frames per scene (default: the config's)")
+    ap.add_argument(
+        "--frames", type=positive_int, default=None, help="frames per scene (default: the config's)"
+    )
     ap.add_argument("--size", default=None, help="WxH (default: the config's)")
     ap.add_argument("--noise", default=None, help="simulated-SAM noise: none | low | default | high")
     ap.add_argument("--ablations", default=",".join(ABLATIONS), help=f"subset of {','.join(ABLATIONS)}")
@@ -237,6 +243,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=Path("ablation_out"), help="runs, scenes, JSON and PNG")
     args = ap.parse_args(argv)
 
+    if args.device is not None:
+        resolve_device(args.device)  # no CUDA GPU for --device cuda: say so before any scene is made
     seeds = parse_seeds(args.seeds)
     ablations = [a.strip() for a in args.ablations.split(",") if a.strip()]
     for a in ablations:
@@ -342,4 +350,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main)

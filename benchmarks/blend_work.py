@@ -22,7 +22,7 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import SEMANTIC_SCENES, camera, parse_count, print_table  # noqa: E402
+from _common import SEMANTIC_SCENES, camera, parse_count, positive_int, print_table, run_main  # noqa: E402
 
 from ogscene3d.render import _Project, bin_gaussians  # noqa: E402
 
@@ -141,9 +141,9 @@ def count(scene: str, n: int, width: int, height: int, semantic: bool, max_tiles
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--counts", default="500k")
-    ap.add_argument("--width", type=int, default=1200)
-    ap.add_argument("--height", type=int, default=680)
-    ap.add_argument("--max-tiles", type=int, default=800, help="tiles sampled evenly (all if fewer)")
+    ap.add_argument("--width", type=positive_int, default=1200)
+    ap.add_argument("--height", type=positive_int, default=680)
+    ap.add_argument("--max-tiles", type=positive_int, default=800, help="tiles sampled evenly (all if fewer)")
     ap.add_argument("--scene", choices=sorted(SEMANTIC_SCENES), action="append", help="default: both")
     args = ap.parse_args()
     rows = [
@@ -157,4 +157,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

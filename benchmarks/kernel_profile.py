@@ -1,10 +1,10 @@
-"""Where the time goes: torch.profiler tables (device kernels and host calls) for the three GPU benchmarks.
+r"""Where the time goes: torch.profiler tables (device kernels and host calls) for the three GPU benchmarks.
 
     python benchmarks/kernel_profile.py --device cuda --out OUTDIR   # 500k at 1200x680, mapping at 1M
     python benchmarks/kernel_profile.py --device cpu --width 160 --height 120 \
         --gaussians 5k --map-gaussians 20k
 
-Writes OUTDIR/raster.txt (ours, and gsplat when importable: forward and forward+backward),
+Writes OUTDIR/raster.txt (ours, and gsplat on CUDA when importable: forward and forward+backward),
 OUTDIR/semantic.txt (labels + P_conf in one call and a colour forward of the same scene, on both scenes),
 OUTDIR/mapping.txt (the ``mapping.py modules`` round with each module inside a named range
 ``M:<function>``) and OUTDIR/summary.txt: per call, the device-kernel time (host-independent) next to the
@@ -29,10 +29,12 @@ from _common import (  # noqa: E402
     SEMANTIC_SCENES,
     camera,
     parse_count,
+    positive_int,
     profile_activities,
     profiled,
     profiled_kernel_ms,
     render_fns,
+    run_main,
     sync,
     synthetic_gaussians,
     time_ms,
@@ -60,6 +62,17 @@ def _write_tables(prof, path: Path, title: str, device: torch.device, rows: int 
         fh.write(ka.table(sort_by="self_cpu_time_total", row_limit=rows, max_name_column_width=70))
 
 
+NO_KERNELS = "n/a (no device kernels on the CPU)"
+
+
+def _kernels_text(prof, device: torch.device, calls: int) -> str:
+    """Device-kernel milliseconds per call, or why there are none (the CPU profile has no device
+    timeline: its 0.000 would read as 'free')."""
+    if device.type != "cuda":
+        return NO_KERNELS
+    return f"{profiled_kernel_ms(prof) / calls:.3f} ms per call"
+
+
 def _host_ms(fn, device: torch.device, calls: int = 20) -> float:
     """Milliseconds per call spent on the host queueing work (includes any syncs the call makes)."""
     sync(device)
@@ -76,13 +89,15 @@ def profile_raster(args, device, out: Path, summary: list[str]) -> None:
     scene = synthetic_gaussians(n, device)
     vm, K = camera(args.width, args.height, device)
     renderers = [("ours", rasterization)]
-    try:
-        import gsplat
+    if device.type != "cuda":
+        summary.append("gsplat comparison skipped (gsplat needs CUDA)")
+    else:
+        try:
+            import gsplat
 
-        if device.type == "cuda":
             renderers.append(("gsplat", gsplat.rasterization))
-    except Exception as e:  # noqa: BLE001 - any import failure means "not available"
-        summary.append(f"gsplat not available ({type(e).__name__}: {e})")
+        except Exception as e:  # noqa: BLE001 - any import failure means "not available"
+            summary.append(f"gsplat not available ({type(e).__name__}: {e})")
     for name, render in renderers:
         forward, forward_backward = render_fns(render, scene, vm, K, args.width, args.height)
         for label, fn in (("fwd", forward), ("fwd+bwd", forward_backward)):
@@ -90,7 +105,7 @@ def profile_raster(args, device, out: Path, summary: list[str]) -> None:
             _write_tables(prof, out / "raster.txt", f"{name} {label} x{args.calls}", device)
             summary.append(
                 f"raster {name:6s} {label:8s} N={n}: wall {time_ms(fn, device, iters=args.calls):.3f} ms, "
-                f"kernels {profiled_kernel_ms(prof) / args.calls:.3f} ms per call"
+                f"kernels {_kernels_text(prof, device, args.calls)}"
             )
         summary.append(f"raster {name:6s} fwd host-side {_host_ms(forward, device):.3f} ms per call")
 
@@ -115,12 +130,12 @@ def _profile_semantic_scene(scene: str, make, args, device, out: Path) -> str:
         prof = profiled(fn, device, args.calls)
         _write_tables(prof, out / "semantic.txt", f"{scene} {label} x{args.calls}", device)
         kernels[label] = profiled_kernel_ms(prof) / args.calls
+    wall = f"semantic {scene:8s} 1call N={n}: wall {time_ms(one_call, device, iters=args.calls):.3f} ms"
+    if device.type != "cuda":
+        return f"{wall}, kernels {NO_KERNELS}"
     both, col = kernels["labels + P_conf"], kernels["colour fwd"]
-    ratio = both / col if col else float("nan")  # no device kernels on the CPU
-    return (
-        f"semantic {scene:8s} 1call N={n}: wall {time_ms(one_call, device, iters=args.calls):.3f} ms, "
-        f"kernels {both:.3f} ms per call; colour fwd kernels {col:.3f} ms; ratio {ratio:.2f}"
-    )
+    ratio = f"{both / col:.2f}" if col else "n/a"
+    return f"{wall}, kernels {both:.3f} ms per call; colour fwd kernels {col:.3f} ms; ratio {ratio}"
 
 
 def profile_semantic(args, device, out: Path, summary: list[str]) -> None:
@@ -147,7 +162,7 @@ def profile_mapping(args, device, out: Path, summary: list[str]) -> None:
         config=str(Path(__file__).resolve().parents[1] / "configs" / "synthetic.yaml"),
         overrides=[],
     )
-    mapping_bench.modules(margs)  # compile and warm up
+    mapping_bench.modules(margs)  # repeat=0: compile and warm up only (nothing timed or printed)
     margs.repeat = 2
     with profile(activities=profile_activities(device)) as prof:
         res = mapping_bench.modules(margs)
@@ -163,11 +178,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", default=None)
     ap.add_argument("--out", default="runs/profile")
-    ap.add_argument("--width", type=int, default=1200)
-    ap.add_argument("--height", type=int, default=680)
+    ap.add_argument("--width", type=positive_int, default=1200)
+    ap.add_argument("--height", type=positive_int, default=680)
     ap.add_argument("--gaussians", default="500k", help="for the rasterizer and the semantic kernels")
     ap.add_argument("--map-gaussians", default="1M", help="for the mapping modules")
-    ap.add_argument("--calls", type=int, default=5, help="profiled calls per table")
+    ap.add_argument("--calls", type=positive_int, default=5, help="profiled calls per table (default 5)")
     ap.add_argument("--only", choices=["raster", "semantic", "mapping"], action="append")
     args = ap.parse_args()
     device = resolve_device(args.device)
@@ -184,4 +199,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -118,10 +118,16 @@ def kernel_resources(kernel, arch: int, workdir: Path) -> dict[str, int]:
 
 
 def main() -> None:
+    # imported here: the tests load this module for its functions, without the benchmarks' torch helpers
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from _common import positive_int
+
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--arch", type=int, action="append", choices=sorted(MAX_WARPS_PER_SM))
     ap.add_argument("--channels", default="1,3", help="colour channel counts of the raster kernels")
-    ap.add_argument("--buffer-size", type=int, default=8, help="the semantic kernels' per-pixel buffer")
+    ap.add_argument(
+        "--buffer-size", type=positive_int, default=8, help="the semantic kernels' per-pixel buffer"
+    )
     args = ap.parse_args()
     from ogscene3d.device import init_warp
 
@@ -147,4 +153,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from _common import run_main
+
+    run_main(main)

@@ -19,8 +19,10 @@ from _common import (  # noqa: E402
     kernel_ms,
     parse_count,
     peak_mb,
+    positive_int,
     print_table,
     render_fns,
+    run_main,
     synthetic_gaussians,
     time_ms,
 )
@@ -37,6 +39,12 @@ def _gsplat():
     except Exception as e:  # noqa: BLE001 - any import failure means "not available"
         print(f"gsplat not available ({type(e).__name__}: {e}); reporting ours only", file=sys.stderr)
         return None
+
+
+def _no_gsplat_on_cpu() -> None:
+    """gsplat has CUDA kernels only: say so, instead of a table that silently lacks its columns."""
+    print("gsplat comparison skipped (gsplat needs CUDA); reporting ours only", file=sys.stderr)
+    return None
 
 
 def _intersections(meta: dict) -> int | None:
@@ -64,12 +72,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", default=None)
     ap.add_argument("--counts", default="50k,200k,500k,2M")
-    ap.add_argument("--width", type=int, default=1200)
-    ap.add_argument("--height", type=int, default=680)
-    ap.add_argument("--iters", type=int, default=10)
+    ap.add_argument("--width", type=positive_int, default=1200)
+    ap.add_argument("--height", type=positive_int, default=680)
+    ap.add_argument("--iters", type=positive_int, default=10, help="calls per timed block (default 10)")
     args = ap.parse_args()
     device = resolve_device(args.device)
-    gs = _gsplat() if device.type == "cuda" else None
+    gs = _gsplat() if device.type == "cuda" else _no_gsplat_on_cpu()
     rows = []
     for n in (parse_count(c) for c in args.counts.split(",")):
         scene = synthetic_gaussians(n, device)
@@ -94,4 +102,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -1,4 +1,4 @@
-"""Whole run per scene: map each scene end to end and print one comparable row per scene.
+r"""Whole run per scene: map each scene end to end and print one comparable row per scene.
 
 Columns: frames, keyframes, Gaussians, per-module seconds (from the run's timings.json), mapping
 seconds (process + finalize) and frames per second, peak host RSS and peak CUDA memory, and 3D
@@ -27,7 +27,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import print_table  # noqa: E402
+from _common import print_table, run_main  # noqa: E402
 
 from ogscene3d.batch import (  # noqa: E402
     EvalOptions,
@@ -38,6 +38,7 @@ from ogscene3d.batch import (  # noqa: E402
     parse_scene_entry,
     read_scenes_file,
 )
+from ogscene3d.device import resolve_device  # noqa: E402
 
 
 def _measure(
@@ -109,6 +110,8 @@ def main(argv: list[str] | None = None) -> int:
         specs.append(SceneSpec(**d))
     if not specs:
         ap.error("give scenes as arguments or --scenes-file")
+    if args.device is not None:
+        resolve_device(args.device)  # no CUDA GPU: one line now, not one failure per scene
     tmp = None
     out = args.out
     if out is None:
@@ -192,4 +195,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main)

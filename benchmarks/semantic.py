@@ -25,12 +25,15 @@ from _common import (  # noqa: E402
     kernel_ms,
     parse_count,
     peak_mb,
+    positive_int,
     print_table,
+    run_main,
     time_ms,
 )
 
 import ogscene3d  # noqa: E402
 from ogscene3d import rasterization, render_semantics, rendering_contribution  # noqa: E402
+from ogscene3d.batch import json_safe  # noqa: E402
 from ogscene3d.device import resolve_device  # noqa: E402
 
 
@@ -79,12 +82,16 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", default=None)
     ap.add_argument("--counts", default="500k")
-    ap.add_argument("--width", type=int, default=1200)
-    ap.add_argument("--height", type=int, default=680)
-    ap.add_argument("--labels", type=int, default=2000)
-    ap.add_argument("--iters", type=int, default=10)
+    ap.add_argument("--width", type=positive_int, default=1200)
+    ap.add_argument("--height", type=positive_int, default=680)
+    ap.add_argument("--labels", type=positive_int, default=2000)
+    ap.add_argument("--iters", type=positive_int, default=10, help="calls per timed block (default 10)")
     ap.add_argument("--scene", choices=sorted(SEMANTIC_SCENES), action="append", help="default: both")
-    ap.add_argument("--json", type=Path, help="also write the rows here")
+    ap.add_argument(
+        "--json",
+        type=Path,
+        help="also write the rows here (figures not measured, such as kernel times on the CPU, are null)",
+    )
     args = ap.parse_args()
     device = resolve_device(args.device)
     W, H = args.width, args.height
@@ -98,8 +105,8 @@ def main() -> None:
     print("wall ms: median of 5 timed blocks; kernel ms: device-kernel time per call (torch.profiler)")
     print_table(rows, list(rows[0].keys()))
     if args.json:
-        args.json.write_text(json.dumps(rows, indent=1))
+        args.json.write_text(json.dumps(json_safe(rows), indent=1))  # strict JSON: NaN -> null
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

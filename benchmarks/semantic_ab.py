@@ -26,6 +26,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+from _common import positive_int  # noqa: E402
 
 
 def prepare(rev: str, dest: Path) -> None:
@@ -59,7 +61,9 @@ def _bench(tree: str, baseline: Path | None, passthrough: list[str]) -> list[dic
         print(f"--- {tree}\n{proc.stdout}{proc.stderr[-2000:] if proc.returncode else ''}", flush=True)
         if proc.returncode:
             raise SystemExit(f"semantic.py failed for {tree} (exit {proc.returncode})")
-        return json.loads(out.read_text())
+        rows = json.loads(out.read_text())
+    # semantic.py writes figures it did not measure (kernel times on the CPU) as null: back to NaN here
+    return [{k: float("nan") if v is None else v for k, v in row.items()} for row in rows]
 
 
 def run(baseline: Path, rounds: int, passthrough: list[str]) -> None:
@@ -96,7 +100,7 @@ def main() -> None:
     p.add_argument("dir", type=Path)
     r = sub.add_parser("run", help="time this tree and the baseline in turn (other args go to semantic.py)")
     r.add_argument("dir", type=Path)
-    r.add_argument("--rounds", type=int, default=2)
+    r.add_argument("--rounds", type=positive_int, default=2, help="rounds of both trees (default 2)")
     args, rest = ap.parse_known_args()
     if args.cmd == "prepare":
         if rest:

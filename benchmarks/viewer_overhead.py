@@ -18,8 +18,9 @@ import statistics
 import time
 
 import torch
-from _common import parse_count, synthetic_gaussians
+from _common import parse_count, positive_int, run_main, synthetic_gaussians
 
+from ogscene3d.device import resolve_device
 from ogscene3d.gaussians import GaussianMap
 from ogscene3d.viewer.scene import SceneLayers, ViewerSettings
 from ogscene3d.viewer.snapshot import snapshot_from_mapper
@@ -80,11 +81,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", default="100k,1m")
     ap.add_argument("--device", default="cpu")
-    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--repeats", type=positive_int, default=3)
     args = ap.parse_args()
+    device = resolve_device(args.device)  # before viser starts a server: a missing GPU is one line
     import viser
 
-    device = torch.device(args.device)
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     print(f"{'N':>9} {'snapshot 1M':>12} {'snapshot 200k':>14} {'splats push':>12} {'points push':>12}  (ms)")
     try:
@@ -96,4 +97,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -545,3 +545,19 @@ def test_edge_entries_naming_other_nodes_fall_back_to_geometry(entry, caplog):
     with caplog.at_level(logging.WARNING):
         assert parse_edge_reply(_edge_reply([entry]), pairs) == {}
     assert "not the pair's nodes" in caplog.text
+
+
+def test_query_embedding_without_a_model_names_its_key(caplog):
+    """The query embeddings read graph.embedding_model (else the captioner's model): the error says so,
+    not the captioner's / relations' keys."""
+    with pytest.raises(ModelError, match=r"set graph\.embedding_model\)"):
+        ChatClient("http://127.0.0.1:9/v1", "", model_setting="graph.embedding_model")
+    with pytest.raises(ModelError, match=r"graph\.captioner\.model / graph\.relations\.model"):
+        ChatClient("http://127.0.0.1:9/v1", "")
+    g = SceneGraph(GraphConfig(query_embedding="openai"), node_confidence=MeanConfidence())
+    n = SceneNode.from_points(0, np.zeros((3, 3)))
+    n.tag, n.caption = "sofa", "a sofa"
+    g.nodes[0] = n
+    with caplog.at_level(logging.WARNING, logger="ogscene3d.graph.scenegraph"):
+        assert [m.id for m in g.query("sofa")] == [0]  # text matching still answers
+    assert "graph.embedding_model" in caplog.text and "graph.captioner.model" not in caplog.text

@@ -390,6 +390,45 @@ def test_cli_graph_query_and_graphml(tmp_path, capsys):
     assert main(["graph", str(tmp_path / "missing")]) == 2
 
 
+def test_cli_graph_lists_nodes(tmp_path, capsys):
+    from ogscene3d.cli import main
+
+    g = SceneGraph(GraphConfig(), captioner=HeuristicCaptioner(), node_confidence=MeanConfidence())
+    g.update(11, *blob_map([0, 1]))
+    g.nodes[0].tag, g.nodes[0].caption = "couch", "a grey fabric couch " + "with many cushions " * 10
+    g.nodes[0].confidence = 0.875
+    g.nodes[1].tag, g.nodes[1].caption = "", ""
+    g.save(tmp_path / "graph.json")
+    assert main(["graph", str(tmp_path)]) == 0
+    assert len(capsys.readouterr().out.splitlines()) == 1  # the summary line only, as before
+    assert main(["graph", str(tmp_path), "--nodes"]) == 0
+    summary, first, second = capsys.readouterr().out.splitlines()
+    assert "2 nodes" in summary
+    c = g.nodes[0].center
+    assert first.startswith(
+        f"  #0 'couch' 400 Gaussians, confidence 0.88 at [{c[0]:.2f}, {c[1]:.2f}, {c[2]:.2f}]: a grey fabric"
+    )
+    assert first.endswith("...") and len(first) < 160  # the long caption is shortened
+    assert second.startswith("  #1 (untagged) 400 Gaussians, confidence") and not second.endswith(": ")
+
+
+def test_cli_graph_rejects_an_empty_query(tmp_path, capsys):
+    from ogscene3d.cli import main
+    from ogscene3d.errors import ConfigError
+
+    g = SceneGraph(GraphConfig(), captioner=HeuristicCaptioner(), node_confidence=MeanConfidence())
+    g.update(11, *blob_map([0]))
+    g.save(tmp_path / "graph.json")
+    for bad in (["-q", ""], ["-q", "  "], ["--top-k", "0"]):
+        with pytest.raises(SystemExit) as e:
+            main(["graph", str(tmp_path), *bad])
+        assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "the query text is empty" in err and "Traceback" not in err
+    with pytest.raises(ConfigError, match="query text is empty"):
+        g.query(" ")
+
+
 def test_heuristic_captions_follow_growing_geometry():
     """A confident node first seen as a small patch is re-described by the (free) heuristic captioner once
     the map shows it is a wall, without a selective re-caption (last_updated unchanged)."""

@@ -11,11 +11,11 @@ from onnx_models import make_detector, make_sam_decoder, make_sam_encoder
 
 from ogscene3d.cli import main
 from ogscene3d.config import SegmentationConfig
-from ogscene3d.errors import ConfigError
+from ogscene3d.errors import ConfigError, DataError
 from ogscene3d.segmentation.classical import ClassicalSegmenter
 from ogscene3d.segmentation.factory import make_segmenter
 from ogscene3d.segmentation.fusion import SamDetectorSegmenter
-from ogscene3d.segmentation.precomputed import read_segments
+from ogscene3d.segmentation.precomputed import read_segmentation, read_segments, write_segments
 from ogscene3d.segmentation.sam_onnx import SamOnnx
 
 H, W = 96, 128
@@ -94,6 +94,26 @@ def test_sam_detector_backend_keeps_names(scene, tmp_path):
     assert payload["names"] == {"1": "chair", "2": "table"}
     assert len(payload["scores"]) == 4  # two boxes + the two grid discs off the boxes
     assert not (out / "frame-000001.color.png").exists()
+    seg = read_segmentation(out, "frame-000000.color", (H, W))  # the reader returns the names too
+    assert seg.names == {1: "chair", 2: "table"} and len(seg.scores) == 4
+
+
+def test_precomputed_names_round_trip(tmp_path):
+    ids = np.zeros((4, 5), np.int32)
+    ids[0, :2], ids[1, :2], ids[2] = 1, 2, 3
+    write_segments(tmp_path, "f", ids, {1: 0.5, 2: 0.7}, {1: "chair", 9: "gone"})
+    seg = read_segmentation(tmp_path, "f", (4, 5))
+    assert seg.scores == {1: 0.5, 2: 0.7, 3: 1.0}  # missing scores default to 1.0
+    assert seg.names == {1: "chair"}  # names of ids absent from the map are dropped
+    ids_only, scores = read_segments(tmp_path, "f")
+    assert np.array_equal(ids_only, ids) and scores == seg.scores
+    write_segments(tmp_path, "g", ids, None, {3: "table"})  # names alone: scores default to 1.0
+    assert read_segmentation(tmp_path, "g").names == {3: "table"}
+    write_segments(tmp_path, "h", ids)  # no JSON at all
+    assert not (tmp_path / "h.json").exists() and read_segmentation(tmp_path, "h").names == {}
+    (tmp_path / "f.json").write_text('{"scores": {}, "names": ["chair"]}')
+    with pytest.raises(DataError, match="f.json: malformed segments JSON"):
+        read_segmentation(tmp_path, "f")
 
 
 def _classical(data, out) -> list[str]:
@@ -158,6 +178,13 @@ def test_cli_errors(scene, tmp_path, capsys):
     assert main(["segment", "--data", str(tmp_path / "missing"), "--out", "o", "--backend", "classical"]) == 2
     assert main([*base, "--backend", "simulated"]) == 2  # no ground truth in a 7-Scenes folder
     assert "ground-truth instance maps" in capsys.readouterr().err
+    # a zero SAM grid: argparse names the option, --set gets a ConfigError naming the setting
+    with pytest.raises(SystemExit) as e:
+        main(sam_args(scene, tmp_path / "z", "--backend", "sam", "--points-per-side", "0"))  # the last wins
+    assert e.value.code == 2 and "--points-per-side: expected an integer >= 1" in capsys.readouterr().err
+    zero = [*base, "--backend", "sam", "--sam-encoder", str(scene["enc"]), "--sam-decoder", str(scene["dec"])]
+    assert main([*zero, "--set", "segmentation.points_per_side=0"]) == 2
+    assert "segmentation.points_per_side must be an integer >= 1, got 0" in capsys.readouterr().err
 
 
 def test_make_segmenter(scene):
@@ -175,5 +202,12 @@ def test_make_segmenter(scene):
             make_segmenter(SegmentationConfig(backend=backend))
     with pytest.raises(ConfigError, match="simulated_noise"):
         make_segmenter(SegmentationConfig(backend="simulated", simulated_noise="extreme"))
-    with pytest.raises(ConfigError, match="sam_encoder"):
+    # the hint fits `run` (config / --set) as well as `segment` (its own options)
+    with pytest.raises(
+        ConfigError, match=r"segmentation\.sam_encoder and segmentation\.sam_decoder \(config or --set"
+    ):
         make_segmenter(SegmentationConfig(backend="sam"))
+    with pytest.raises(
+        ConfigError, match=r"set segmentation\.detector \(config or --set; `ogscene3d segment`"
+    ):
+        make_segmenter(SegmentationConfig(backend="sam+detector"))

@@ -280,6 +280,11 @@ def test_synth_cli(tmp_path, capsys, monkeypatch):
         ["synth", "--out", str(out), "--seed", "2", "--frames", "2", "--size", "40x30", "--noise", "low"]
     )
     assert rc == 0 and len(open_dataset(out)) == 2
+    assert "synthetic scene written to" in capsys.readouterr().out
+    again = ["synth", "--out", str(out), "--seed", "2", "--frames", "2", "--size", "40x30", "--noise", "low"]
+    assert cli.main(again) == 0  # the same arguments: the scene is reused, and the last line says so
+    printed = capsys.readouterr().out
+    assert "synthetic scene reused from" in printed and "written" not in printed
     params = json.loads((out / "scene.json").read_text())
     assert (params["width"], params["height"], params["noise"], params["seed"]) == (40, 30, "low", 2)
     assert cli.main(["synth", "--out", str(out), "--frames", "3"]) == 2

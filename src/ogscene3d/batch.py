@@ -907,10 +907,18 @@ def add_parser(subparsers: Any) -> None:
     q.set_defaults(func=_eval_batch_cli)
 
 
+def protocol_line(name: str, text: str) -> str:
+    """The footer line of one protocol. Its text usually starts with the name ("hovsg (k=5 ...)"): say it
+    once ("protocol hovsg (k=5 ...)"), not "protocol hovsg: hovsg (...)"."""
+    if text == name or text.startswith((f"{name} ", f"{name}:")):
+        return f"protocol {text}"
+    return f"protocol {name}: {text}"
+
+
 def _report(res: BatchResult) -> int:
     print(res.table)
     for p, text in res.protocols.items():
-        print(f"protocol {p}: {text}")
+        print(protocol_line(p, text))
     print(f"wrote {res.summary_path}")
     if res.num_failed == len(res.records):
         raise OGSceneError(f"all {len(res.records)} scene(s) failed")

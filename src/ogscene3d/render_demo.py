@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import argparse
 import math
+import numbers
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from .device import resolve_device
+from .errors import ConfigError, DataError
 
 
 def procedural_scene(n: int, seed: int = 0, device: torch.device | str = "cpu") -> list[torch.Tensor]:
@@ -51,13 +53,31 @@ def orbit_viewmat(angle: float, radius: float = 5.0, height: float = -2.0) -> to
     return V
 
 
+def check_demo_args(out: Path, n: int, width: int, height: int, views: int) -> None:
+    """Raise :class:`ConfigError` for arguments the renderer or the PNG writer would fail on deep inside
+    (an empty list of views, a zero-size image, a file name OpenCV has no writer for)."""
+    import cv2
+
+    for name, value in (("n", n), ("width", width), ("height", height), ("views", views)):
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
+            raise ConfigError(f"render_demo: {name} must be an integer >= 1, got {value!r}")
+    if not cv2.haveImageWriter(str(out)):
+        raise ConfigError(
+            f"render_demo: out={str(out)!r} is not an image file OpenCV can write; give a file name ending "
+            "in .png (or .jpg)"
+        )
+
+
 def render_demo(
     out: Path, n: int = 20000, width: int = 320, height: int = 240, views: int = 4, device: str | None = None
 ) -> Path:
+    """Render ``views`` orbit views of :func:`procedural_scene` side by side into the image file ``out``."""
     import cv2
 
     from .render import rasterization
 
+    out = Path(out)
+    check_demo_args(out, n, width, height, views)
     dev = resolve_device(device)
     scene = procedural_scene(n, device=dev)
     viewmats = torch.stack([orbit_viewmat(2 * math.pi * i / views) for i in range(views)]).to(dev)
@@ -69,29 +89,63 @@ def render_demo(
     mosaic = np.concatenate(list(tiles), axis=1)
     out.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(out), cv2.cvtColor(mosaic, cv2.COLOR_RGB2BGR)):
-        raise OSError(f"could not write {out}")
+        raise DataError(f"could not write {out}")
     return out
+
+
+# ---------------------------------------------------------------------------------------------- CLI
+# argparse types: the CLI names the option in its message (the library checks again, naming the argument)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from e
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {value}")
+    return value
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"expected WxH such as 320x240, got {text!r}") from e
+    if w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"width and height must be >= 1, got {text!r}")
+    return w, h
+
+
+def _image_path(text: str) -> Path:
+    import cv2
+
+    if not cv2.haveImageWriter(text):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not an image file name OpenCV can write; end it in .png (or .jpg)"
+        )
+    return Path(text)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "render-demo", help="render a procedural Gaussian scene to a PNG (rasterizer smoke test)"
     )
-    p.add_argument("--out", type=Path, default=Path("outputs/render_demo.png"))
-    p.add_argument("--gaussians", type=int, default=20000)
-    p.add_argument("--size", default="320x240", help="WxH of each view")
-    p.add_argument("--views", type=int, default=4)
+    p.add_argument(
+        "--out",
+        type=_image_path,
+        default=Path("outputs/render_demo.png"),
+        help="image file to write, e.g. render.png (default outputs/render_demo.png)",
+    )
+    p.add_argument("--gaussians", type=_positive_int, default=20000, help="Gaussians (default 20000)")
+    p.add_argument("--size", type=_size, default=(320, 240), metavar="WxH", help="each view's size (320x240)")
+    p.add_argument("--views", type=_positive_int, default=4, help="orbit views side by side (default 4)")
     p.add_argument("--device", default=None, help="cpu, cuda or cuda:N (default: cuda when available)")
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
-    from .errors import ConfigError
-
-    try:
-        w, h = (int(v) for v in args.size.lower().split("x"))
-    except ValueError as e:
-        raise ConfigError(f"--size must look like 320x240, got {args.size!r}") from e
+    w, h = args.size
     path = render_demo(args.out, args.gaussians, w, h, args.views, args.device)
     print(f"wrote {path}")
     return 0

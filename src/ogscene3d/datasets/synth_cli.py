@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import time
+from pathlib import Path
 
 from ..config import add_override_argument, load_config
 from ..errors import ConfigError, OGSceneError
@@ -43,6 +45,21 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+def _reusable(out: str | Path, params: dict, overwrite: bool) -> bool:
+    """Whether ``make_synthetic_scene`` will reuse ``out`` as is: it holds a scene made with the same
+    arguments (its scene.json) and --force was not given. Decided before the call, so that the final
+    line can say "reused" instead of "written"."""
+    from .synthetic import _scene_params
+
+    marker = Path(out) / "scene.json"
+    if overwrite or not marker.is_file():
+        return False
+    try:
+        return json.loads(marker.read_text()) == _scene_params(**params)
+    except (OSError, json.JSONDecodeError):
+        return False
+
+
 def run(args: argparse.Namespace) -> int:
     from .synthetic import make_synthetic_scene
 
@@ -58,6 +75,7 @@ def run(args: argparse.Namespace) -> int:
         pose_noise=cfg.pose_noise if args.pose_noise is None else args.pose_noise,
     )
     try:
+        reused = _reusable(args.out, params, args.force)
         t0 = time.perf_counter()
         out = make_synthetic_scene(
             args.out, **params, overwrite=args.force, device=args.device, progress=True
@@ -67,5 +85,9 @@ def run(args: argparse.Namespace) -> int:
             raise
         # Bad argument values (frames, size, noise std, device): print them like config errors.
         raise ConfigError(f"synth: {e}") from e
-    print(f"synthetic scene written to {out} ({params['frames']} frames, {time.perf_counter() - t0:.1f} s)")
+    if reused:
+        print(f"synthetic scene reused from {out} ({params['frames']} frames, made with the same arguments)")
+    else:
+        dt = time.perf_counter() - t0
+        print(f"synthetic scene written to {out} ({params['frames']} frames, {dt:.1f} s)")
     return 0

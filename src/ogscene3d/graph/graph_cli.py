@@ -3,26 +3,57 @@
 from __future__ import annotations
 
 import argparse
+import textwrap
 from pathlib import Path
 
 from ..config import add_override_argument, load_config
 from ..errors import DataError
 from .scenegraph import SceneGraph
+from .types import SceneNode
+
+
+def _query_text(text: str) -> str:
+    """argparse type: a query with some text in it (matching an empty string means nothing)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("the query text is empty")
+    return text
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from e
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {value}")
+    return value
 
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser(
         "graph",
         help="inspect, query or export a scene graph",
-        description="Print a scene graph (graph.json of a run directory), query its nodes by text, or export "
-        "it to GraphML.",
+        description="Print a scene graph (graph.json of a run directory): a summary line, and with --nodes / "
+        "--edges one line per node / edge; query its nodes by text, or export it to GraphML.",
     )
     p.add_argument("path", help="graph.json, or a run directory that contains one")
-    p.add_argument("--query", "-q", action="append", default=[], help="text to look up in node tags/captions")
-    p.add_argument("--top-k", type=int, default=5, help="results per query (default 5)")
+    p.add_argument(
+        "--query",
+        "-q",
+        action="append",
+        default=[],
+        type=_query_text,
+        help="text to look up in node tags/captions",
+    )
+    p.add_argument("--top-k", type=_positive_int, default=5, help="results per query (default 5)")
     p.add_argument("--graphml", help="write the graph as GraphML to this path (needs networkx)")
     p.add_argument("--config", help="YAML config (for graph.query_embedding and its endpoint)")
     add_override_argument(p, "graph.query_embedding=openai --set graph.embedding_model=MODEL")
+    p.add_argument(
+        "--nodes",
+        action="store_true",
+        help="list every node: id, tag, caption (shortened), Gaussians, confidence, center",
+    )
     p.add_argument("--edges", action="store_true", help="list every edge")
     p.set_defaults(func=run)
 
@@ -30,6 +61,21 @@ def add_parser(subparsers) -> None:
 def _name(g: SceneGraph, i: int) -> str:
     n = g.nodes.get(i)
     return f"{(n.tag or 'node') if n else 'node'}#{i}"
+
+
+def node_line(n: SceneNode, caption_width: int = 60) -> str:
+    """One node as ``--nodes`` lists it: ``#id 'tag' N Gaussians, confidence C at [x, y, z]: caption``
+    (the Gaussian count only when the graph stores one; long captions shortened to ``caption_width``)."""
+    c = n.center
+    tag = textwrap.shorten(n.tag, 30, placeholder="...") if n.tag else "(untagged)"
+    parts = [f"#{n.id} {tag!r}" if n.tag else f"#{n.id} {tag}"]
+    if n.num_gaussians > 0:
+        parts.append(f"{n.num_gaussians} Gaussians,")
+    parts.append(f"confidence {n.confidence:.2f} at [{c[0]:.2f}, {c[1]:.2f}, {c[2]:.2f}]")
+    line = " ".join(parts)
+    if n.caption:
+        line += ": " + textwrap.shorten(n.caption, caption_width, placeholder="...")
+    return line
 
 
 def run(args: argparse.Namespace) -> int:
@@ -47,6 +93,9 @@ def run(args: argparse.Namespace) -> int:
         f"{path}: {len(g.nodes)} nodes, {len(g.edges)} edges "
         f"({', '.join(f'{k}: {v}' for k, v in sorted(rels.items())) or 'none'})"
     )
+    if args.nodes:
+        for i in sorted(g.nodes):
+            print("  " + node_line(g.nodes[i]))
     if args.edges:
         for k in sorted(g.edges):
             e = g.edges[k]

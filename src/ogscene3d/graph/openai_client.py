@@ -160,15 +160,17 @@ class ChatClient:
         max_retries: int = 2,
         backoff_s: float = 1.0,
         max_backoff_s: float = 8.0,
+        model_setting: str = "graph.captioner.model / graph.relations.model",
     ) -> None:
+        """``model_setting`` names the config key that gives ``model``, for the error when it is empty (the
+        captioner, the relations LLM and the query embeddings each read their own)."""
         if not base_url or not re.match(r"^https?://", base_url):
             raise ModelError(
                 f"OpenAI-compatible endpoint: base_url must start with http:// or https://, got {base_url!r}"
             )
         if not model:
             raise ModelError(
-                f"OpenAI-compatible endpoint {base_url}: no model name configured "
-                "(set graph.captioner.model / graph.relations.model)"
+                f"OpenAI-compatible endpoint {base_url}: no model name configured (set {model_setting})"
             )
         if not timeout_s > 0 or max_retries < 0 or backoff_s < 0:
             raise ModelError(

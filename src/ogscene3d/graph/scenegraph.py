@@ -803,7 +803,7 @@ class SceneGraph:
         """
         q = " ".join(str(text).lower().split())
         if not q:
-            raise ValueError("SceneGraph.query: empty query")
+            raise ConfigError("SceneGraph.query: the query text is empty")
         terms = {q: 1.0}
         for group in SYNONYM_GROUPS:
             if q in group:
@@ -856,6 +856,7 @@ class SceneGraph:
                     cc.timeout_s,
                     cc.max_retries,
                     cc.backoff_s,
+                    model_setting="graph.embedding_model",
                 )
             else:
                 raise ConfigError(f"graph.query_embedding must be none, clip or openai, got {kind!r}")

@@ -5,7 +5,7 @@ from .classical import ClassicalSegmenter
 from .detector_onnx import DetectorOnnx
 from .factory import make_segmenter
 from .fusion import SamDetectorSegmenter, fuse_segmentations
-from .precomputed import read_segments, write_segments
+from .precomputed import read_segmentation, read_segments, write_segments
 from .sam_onnx import SamOnnx
 
 __all__ = [
@@ -17,6 +17,7 @@ __all__ = [
     "Segmenter",
     "fuse_segmentations",
     "make_segmenter",
+    "read_segmentation",
     "read_segments",
     "write_segments",
 ]

@@ -16,9 +16,15 @@ def _sam(config: SegmentationConfig):
 
     if not config.sam_encoder or not config.sam_decoder:
         raise ConfigError(
-            f"segmentation backend {config.backend!r} needs segmentation.sam_encoder and "
-            "segmentation.sam_decoder (ONNX files of the split SAM export; --sam-encoder/--sam-decoder)"
+            f"segmentation backend {config.backend!r} needs the ONNX files of the split SAM export: set "
+            "segmentation.sam_encoder and segmentation.sam_decoder (config or --set; `ogscene3d segment` "
+            "also takes --sam-encoder/--sam-decoder)"
         )
+    # SamOnnx checks its grid too, but as a plain ValueError; name the setting here
+    for key in ("points_per_side", "points_per_batch"):
+        value = getattr(config, key)
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ConfigError(f"segmentation.{key} must be an integer >= 1, got {value!r}")
     return SamOnnx(
         config.sam_encoder,
         config.sam_decoder,
@@ -51,7 +57,8 @@ def make_segmenter(config: SegmentationConfig, K: np.ndarray | None = None) -> S
 
         if not config.detector:
             raise ConfigError(
-                "segmentation backend 'sam+detector' needs segmentation.detector (an ONNX file; --detector)"
+                "segmentation backend 'sam+detector' needs a detector ONNX file: set segmentation.detector "
+                "(config or --set; `ogscene3d segment` also takes --detector)"
             )
         sam = _sam(config)
         det = DetectorOnnx(

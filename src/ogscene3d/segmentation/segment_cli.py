@@ -10,18 +10,27 @@ skipping those frames (``--overwrite`` redoes them).
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import time
 from pathlib import Path
 
-from ..atomic import atomic_write_text
 from ..config import add_override_argument, load_config
 from ..errors import ConfigError, DataError
 from .base import Segmentation
 from .precomputed import segments_paths, write_segments
 
 log = logging.getLogger(__name__)
+
+
+def _positive_int(text: str) -> int:
+    """argparse type: an integer >= 1 (a zero grid or stride would fail deep inside the front-end)."""
+    try:
+        value = int(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from e
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {value}")
+    return value
 
 
 def add_parser(subparsers) -> None:
@@ -52,7 +61,9 @@ def add_parser(subparsers) -> None:
         default=None,
         help="the detector's class names in export order: comma-separated, or a text file with one per line",
     )
-    p.add_argument("--points-per-side", type=int, default=None, help="SAM grid prompts per side (default 32)")
+    p.add_argument(
+        "--points-per-side", type=_positive_int, default=None, help="SAM grid prompts per side (default 32)"
+    )
     p.add_argument("--provider", default=None, choices=["auto", "cpu", "cuda"], help="onnxruntime provider")
     p.add_argument("--config", default=None, help="YAML config; its `segmentation` and `data` sections apply")
     add_override_argument(p, "segmentation.pred_iou_thresh=0.9")
@@ -79,12 +90,7 @@ def parse_classes(text: str) -> list[str]:
 
 def write_frame_segments(out: Path, stem: str, seg: Segmentation) -> Path:
     """Write one frame's segments: the JSON (scores, names) first, the PNG (the 'done' marker) last."""
-    payload: dict = {"scores": {str(int(k)): float(v) for k, v in sorted(seg.scores.items())}}
-    if seg.names:
-        payload["names"] = {str(int(k)): str(v) for k, v in sorted(seg.names.items())}
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(segments_paths(out, stem)[1], json.dumps(payload))
-    return write_segments(out, stem, seg.ids, None)
+    return write_segments(out, stem, seg.ids, seg.scores, seg.names)
 
 
 def run(args: argparse.Namespace) -> int:
