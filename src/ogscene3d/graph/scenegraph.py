@@ -600,7 +600,7 @@ class SceneGraph:
     # ------------------------------------------------------------------------------------------ output
 
     def to_json(self) -> dict:
-        """The graph.json document (DESIGN.md "Files"): version, nodes sorted by id, edges, and
+        """The graph.json document (README "File formats"): version, nodes sorted by id, edges, and
         :meth:`stats` (derived from the nodes; readers may ignore it)."""
         with self._lock:
             return {

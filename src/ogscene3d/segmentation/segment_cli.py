@@ -1,6 +1,6 @@
 """``ogscene3d segment``: run a 2D open-set front-end over a dataset and write precomputed segments.
 
-Output (DESIGN.md "Files"): ``OUT/<rgb stem>.png`` uint16 ids and ``OUT/<rgb stem>.json`` with
+Output (README "File formats"): ``OUT/<rgb stem>.png`` uint16 ids and ``OUT/<rgb stem>.json`` with
 ``{"scores": {"<id>": predicted IoU}, "names": {"<id>": detector class}}`` (``names`` only for
 segments that came with a detector label). The JSON is written first and the PNG last, both
 atomically, so a frame counts as done exactly when its PNG exists: an interrupted run resumes by
