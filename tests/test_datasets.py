@@ -239,9 +239,11 @@ def test_segments_dir_is_read_and_checked(tmp_path):
     ids = np.zeros((24, 32), np.int32)
     ids[:, 16:] = 7
     for i in range(3):
-        write_segments(seg, f"frame{i:06d}", ids, {7: 0.93})
+        write_segments(seg, f"frame{i:06d}", ids, {7: 0.93}, names={7: "chair"} if i == 1 else None)
     f = open_dataset(scene, segments_dir=seg)[1]
     assert np.array_equal(f.segments, ids) and f.segment_scores == {7: pytest.approx(0.93)}
+    assert f.segment_names == {7: "chair"}  # a detector's class, as `segment --backend sam+detector` wrote
+    assert open_dataset(scene, segments_dir=seg)[0].segment_names == {}
     write_segments(seg, "frame000002", np.zeros((12, 16), np.int32))
     with pytest.raises(DataError, match=r"frame000002\.png.*16x12"):
         open_dataset(scene, segments_dir=seg)[2]

@@ -243,6 +243,30 @@ def test_an_up_axis_far_from_the_cameras_up_warns(up, warns, caplog):
         assert "90 deg" in warned[0] and "-y-up, set --set graph.up_axis=[0,-1,0]" in warned[0]
 
 
+def test_detector_class_names_become_node_tags(tmp_path):
+    """Segments a detector named (Frame.segment_names, from precomputed segments or a sam+detector
+    segmenter) name the scene labels they were given: the offline captions take them as tags."""
+    cfg = load_config(
+        None,
+        ["mapping.opt_iters=1", "mapping.knn_radius=0.1", "graph.init_keyframes=2", "graph.update_every=1",
+         "graph.min_gaussians=5"],
+    )  # fmt: skip
+    m = Mapper(cfg, "cpu")
+    for i in range(3):
+        f = _frame(i, (1 + i, 5 + i))
+        f.segment_names = {1 + i: "sofa"} if i != 1 else {1 + i: "sofa", 5 + i: "lamp"}  # the right one once
+        m.process(f)
+    m.finalize()
+    m.save(tmp_path)
+    nodes = json.loads((tmp_path / "graph.json").read_text())["nodes"]
+    by_tag = {n["tag"]: n for n in nodes}
+    assert set(by_tag) == {"sofa", "lamp"}
+    assert all(n["caption_source"] == "detector" for n in nodes)
+    assert by_tag["sofa"]["caption"].startswith("sofa (detector class); ")
+    left = m.map.means[:, 0].cpu() < -0.05
+    assert by_tag["sofa"]["id"] == int(m.map.labels.cpu()[left][0])
+
+
 def test_resume_keeps_the_scene_graph(tmp_path):
     cfg = load_config(
         None,

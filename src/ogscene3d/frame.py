@@ -56,6 +56,7 @@ class Frame:
     name: str = ""  # the rgb file stem; precomputed segments are looked up by it
     segments: np.ndarray | None = None
     segment_scores: dict[int, float] = field(default_factory=dict)
+    segment_names: dict[int, str] = field(default_factory=dict)  # detector class of a segment, where known
     gt_instances: np.ndarray | None = None
     gt_classes: np.ndarray | None = None
 

@@ -21,7 +21,8 @@ from ..camera import Camera
 from ..config import DataConfig
 from ..errors import DataError
 from ..frame import Frame, check_pose, implausible_median_depth
-from ..segmentation.precomputed import has_segments, read_segments
+from ..segmentation.base import Segmentation
+from ..segmentation.precomputed import has_segments, read_segmentation
 
 log = logging.getLogger(__name__)
 
@@ -362,9 +363,11 @@ class RGBDDataset:
                 )
             except ValueError as e:
                 raise DataError(str(e)) from e
-        segments, scores = None, {}
+        segments, scores, names = None, {}, {}
         if self.segments_dir is not None:
-            segments, scores = self._read_segments(rec, depth.shape)
+            seg = self._read_segments(rec, depth.shape)
+            if seg is not None:
+                segments, scores, names = seg.ids, seg.scores, seg.names
         gt_instances, gt_classes = self._load_gt(rec, depth.shape)
         return Frame(
             index=i,
@@ -376,14 +379,13 @@ class RGBDDataset:
             name=rec.rgb_path.stem,
             segments=segments,
             segment_scores=scores,
+            segment_names=names,
             gt_instances=gt_instances,
             gt_classes=gt_classes,
         )
 
-    def _read_segments(
-        self, rec: FrameRecord, shape: tuple[int, int]
-    ) -> tuple[np.ndarray | None, dict[int, float]]:
-        """The frame's precomputed segments, or (None, {}) when it has no segments file: the mapper's
+    def _read_segments(self, rec: FrameRecord, shape: tuple[int, int]) -> Segmentation | None:
+        """The frame's precomputed segments, or None when it has no segments file: the mapper's
         segmentation.backend then segments it live (frames may be segmented in part, e.g. while
         ``ogscene3d segment`` is still running). A corrupt or wrong-size file is an error."""
         assert self.segments_dir is not None
@@ -398,8 +400,8 @@ class RGBDDataset:
                     stem,
                 )
                 self._warned_no_segments = True
-            return None, {}
-        return read_segments(self.segments_dir, stem, shape)
+            return None
+        return read_segmentation(self.segments_dir, stem, shape)
 
     def _check_depth_range(self, depth: np.ndarray, path: Path) -> bool:
         """Warn once when the first frame with depth has a median outside what an RGB-D camera sees (a wrong

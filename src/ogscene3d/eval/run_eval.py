@@ -79,7 +79,7 @@ def build_label_mapping(
             tag = n.get("tag") or ""
             if isinstance(tag, str) and tag.strip():
                 tags[int(n["id"])] = tag
-                if n.get("caption_source") == "heuristic":
+                if n.get("caption_source") == "heuristic":  # ("detector" tags are class names: they count)
                     heuristic.add(int(n["id"]))
     labels_present = np.unique(run.labels[run.labels >= 0])
     text = text_label_mapping(tags, gt.class_names, embedder=embedder) if tags else {}

@@ -289,6 +289,15 @@ class HeuristicCaptioner:
         return {r.node.id: self.describe_one(r) for r in requests}
 
     def describe_one(self, req: CaptionRequest) -> Description:
+        """The geometric caption; where a detector named the node's segments, its majority class is the
+        tag and leads the caption (source "detector")."""
+        desc = self._geometric(req)
+        if not req.detector_name_votes:
+            return desc
+        name, _ = max(req.detector_name_votes.items(), key=lambda kv: (kv[1], kv[0]))
+        return Description(f"{name} (detector class); {desc.caption}", name, "detector")
+
+    def _geometric(self, req: CaptionRequest) -> Description:
         node, ctx = req.node, req.context
         s = node.shape(ctx.up)
         colour = color_name(node.color)

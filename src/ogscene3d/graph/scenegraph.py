@@ -53,6 +53,7 @@ from .confidence import MeanConfidence, NodeConfidence, build_confidence
 from .geometry import directed_ratios, proximate_points, unit_up
 from .relations import GeometricRelations, RelationPredictor, build_relations
 from .types import (
+    OFFLINE_SOURCES,
     VLM_CAPTION_SOURCES,
     CaptionRequest,
     ObservationSet,
@@ -156,6 +157,7 @@ class SceneGraph:
         self.edges: dict[tuple[int, int], SceneEdge] = {}  # key: (min id, max id), one relation per pair
         self._obs: dict[int, ObservationSet] = {}
         self._gt_class_votes: dict[int, dict[int, int]] = {}
+        self._name_votes: dict[int, dict[str, int]] = {}
         self._gt_instance_votes: dict[int, dict[int, int]] = {}
         self._lock = threading.RLock()
         self._initialized = False
@@ -170,7 +172,13 @@ class SceneGraph:
 
     # ----------------------------------------------------------------------------------------- observe
 
-    def observe(self, keyframe_index: int, frame: Frame, label_map: np.ndarray) -> None:
+    def observe(
+        self,
+        keyframe_index: int,
+        frame: Frame,
+        label_map: np.ndarray,
+        name_votes: Mapping[int, Mapping[str, int]] | None = None,
+    ) -> None:
         """Record the keyframe's views of every labelled region into the observation sets O_i.
 
         ``label_map``: int [H, W] scene labels of the keyframe (e.g. the rendered semantic labels or the
@@ -178,9 +186,16 @@ class SceneGraph:
         ``context_pad`` margin, masked view with everything but the region blacked out) are made only when
         they enter O_i, downscaled to ``crop_max_side``. With ground-truth maps in ``frame``
         (synthetic scenes), the overlap votes label -> GT class / instance are accumulated too.
+        ``name_votes``: {label: {detector class name: pixels}} of this keyframe, accumulated for the offline
+        captions (a node then takes its majority name as tag).
         """
         if not self.config.enabled:
             return
+        with self._lock:
+            for lab, d in (name_votes or {}).items():
+                acc = self._name_votes.setdefault(int(lab), {})
+                for name, n in d.items():
+                    acc[str(name)] = acc.get(str(name), 0) + int(n)
         lm = np.asarray(label_map)
         H, W = frame.rgb.shape[:2]
         if lm.shape != (H, W):
@@ -354,11 +369,11 @@ class SceneGraph:
         prose = st["caption_sources"].get("vlm-text", 0)
         log.log(
             logging.WARNING if k == 0 else logging.INFO,
-            "scene graph: %d of %d nodes captioned by the VLM%s; %d keep a heuristic caption",
+            "scene graph: %d of %d nodes captioned by the VLM%s; %d keep an offline caption",
             k,
             n,
             f" ({prose} from replies that were not JSON)" if prose else "",
-            st["caption_sources"].get("heuristic", 0),
+            sum(st["caption_sources"].get(s, 0) for s in OFFLINE_SOURCES),
         )
 
     def close(self) -> None:
@@ -456,6 +471,7 @@ class SceneGraph:
                     context=ctx,
                     gt_class_votes=dict(self._gt_class_votes.get(i, {})),
                     gt_instance_votes=dict(self._gt_instance_votes.get(i, {})),
+                    detector_name_votes=dict(self._name_votes.get(i, {})),
                 )
                 for i in todo
             ]
@@ -472,7 +488,7 @@ class SceneGraph:
         need = [
             r
             for r in requests
-            if r.node.id not in descs and (not r.node.caption or r.node.caption_source == "heuristic")
+            if r.node.id not in descs and (not r.node.caption or r.node.caption_source in OFFLINE_SOURCES)
         ]
         if need:
             descs.update(self._fallback_captioner.describe(need))
@@ -485,14 +501,21 @@ class SceneGraph:
             # Heuristic captions cost nothing and describe geometry that keeps growing, so they follow it
             # at every update (the selective schedule exists to save VLM calls, not to freeze captions).
             done = {r.node.id for r in requests}
-            stale = [n for i, n in self.nodes.items() if n.caption_source == "heuristic" and i not in done]
+            stale = [
+                n for i, n in self.nodes.items() if n.caption_source in OFFLINE_SOURCES and i not in done
+            ]
             if stale:
                 fresh = self._fallback_captioner.describe(
-                    [CaptionRequest(n, ObservationSet(), ctx) for n in stale]
+                    [
+                        CaptionRequest(
+                            n, ObservationSet(), ctx, detector_name_votes=dict(self._name_votes.get(n.id, {}))
+                        )
+                        for n in stale
+                    ]
                 )
                 for n in stale:
                     d = fresh[n.id]
-                    n.caption, n.tag = d.caption, d.tag
+                    n.caption, n.tag, n.caption_source = d.caption, d.tag, d.source
         self._time("graph_caption", time.perf_counter() - t0, len(requests))
 
         t0 = time.perf_counter()
@@ -536,7 +559,7 @@ class SceneGraph:
         was skipped, or it had nothing to go on yet. Call with the lock held."""
         if isinstance(self.captioner, HeuristicCaptioner):
             return set()  # heuristic captions are final (and refreshed at every update anyway)
-        return {i for i, n in self.nodes.items() if n.caption_source == "heuristic"}
+        return {i for i, n in self.nodes.items() if n.caption_source in OFFLINE_SOURCES}
 
     def _scene_context(self) -> SceneContext:
         if not self.nodes:

@@ -14,6 +14,9 @@ from .geometry import Shape, oriented_box, shape_of
 
 #: ``caption_source`` values of captions written by a VLM.
 VLM_CAPTION_SOURCES: frozenset[str] = frozenset({"vlm", "vlm-text"})
+#: ``caption_source`` values of the offline captioner's captions: refreshed at every update, and asked for
+#: again from a VLM captioner whose request failed.
+OFFLINE_SOURCES: frozenset[str] = frozenset({"heuristic", "detector"})
 
 
 @dataclass
@@ -233,12 +236,14 @@ class CaptionRequest:
     context: SceneContext
     gt_class_votes: dict[int, int] = field(default_factory=dict)
     gt_instance_votes: dict[int, int] = field(default_factory=dict)
+    # {class name: pixels} of the segments a detector named that were given this node's label
+    detector_name_votes: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass
 class Description:
     """A captioner's answer for one node. ``source``: "vlm", "vlm-text" (prose reply, not the requested
-    JSON), "heuristic" or "groundtruth"."""
+    JSON), "heuristic", "detector" (the offline caption named by the detector's class) or "groundtruth"."""
 
     caption: str
     tag: str

@@ -76,6 +76,19 @@ def _segment_ids(ids, frame: Frame, source: str) -> np.ndarray:
     return ids
 
 
+def _name_votes(segments: np.ndarray, lut: np.ndarray, names: dict[int, str]) -> dict[int, dict[str, int]]:
+    """{scene label: {detector class name: pixels}} from a keyframe's named segments (``lut``: segment id
+    -> scene label, -1 = none)."""
+    area = np.bincount(segments.reshape(-1).astype(np.int64), minlength=len(lut))
+    votes: dict[int, dict[str, int]] = {}
+    for sid, name in names.items():
+        if not 0 < sid < len(lut) or lut[sid] < 0 or area[sid] == 0:
+            continue
+        d = votes.setdefault(int(lut[sid]), {})
+        d[name] = d.get(name, 0) + int(area[sid])
+    return votes
+
+
 class Timings:
     """Accumulated wall time (s) and call counts per module, plus free-form counters."""
 
@@ -229,9 +242,11 @@ class Mapper:
                 "[" + ",".join(f"{v:g}" for v in guess) + "]",
             )
 
-    def _segments(self, frame: Frame) -> tuple[np.ndarray | None, dict[int, float]]:
+    def _segments(self, frame: Frame) -> tuple[np.ndarray | None, dict[int, float], dict[int, str]]:
+        """The keyframe's segment ids, scores and (where a detector named them) class names."""
         if frame.segments is not None:
-            return _segment_ids(frame.segments, frame, "frame.segments"), dict(frame.segment_scores)
+            ids = _segment_ids(frame.segments, frame, "frame.segments")
+            return ids, dict(frame.segment_scores), dict(frame.segment_names)
         if self.segmenter is None:
             self.segmenter = _default_segmenter(self.config, frame.K)
         if self.segmenter is not None:
@@ -240,11 +255,12 @@ class Mapper:
                     seg = self.segmenter.segment_frame(frame)
                 else:
                     seg = self.segmenter(frame.rgb, frame.depth)
-            return _segment_ids(seg.ids, frame, type(self.segmenter).__name__), dict(seg.scores)
+            ids = _segment_ids(seg.ids, frame, type(self.segmenter).__name__)
+            return ids, dict(seg.scores), dict(getattr(seg, "names", {}) or {})
         if not self._warned_no_segments:
             log.warning("frames carry no segments and no segmenter was given: mapping geometry only")
             self._warned_no_segments = True
-        return None, {}
+        return None, {}, {}
 
     def _track(self, frame: Frame) -> bool:
         """With ``tracking.poses: odometry``, replace the frame's pose by the tracked one (False: skip it)."""
@@ -325,7 +341,7 @@ class Mapper:
         self.timings.add("frames")
         if not self.keyframes(frame.pose):
             return False
-        segments, scores = self._segments(frame)
+        segments, scores, names = self._segments(frame)
         cfg = self.cfg
         kf = self.keyframe_count
         self.keyframe_count += 1
@@ -445,7 +461,7 @@ class Mapper:
             self._refine()
         if self.config.graph.enabled and not self._graph_failed:
             with self.timings.section("graph"):
-                self._graph_step(kf, frame, segments, seg_to_label)
+                self._graph_step(kf, frame, segments, seg_to_label, names)
         self.timings.counts["gaussians"] = len(self.map)
         self.timings.counts["labels"] = int(torch.unique(self.map.labels[self.map.labels >= 0]).numel())
         self.timings.counts["memory_size"] = len(self.memory)
@@ -543,25 +559,30 @@ class Mapper:
         frame: Frame,
         segments: np.ndarray | None,
         seg_to_label: tuple[np.ndarray, np.ndarray] | None,
+        names: dict[int, str] | None = None,
     ) -> None:
         """Feed the scene graph; any failure there disables it for the run, mapping goes on.
 
         The keyframe's label map is its segmentation with each segment replaced by the scene label it was
-        given (exact SAM boundaries); without segments, the map's rendered labels."""
+        given (exact SAM boundaries); without segments, the map's rendered labels. A detector's class
+        ``names`` of segments vote, by area, for the name of the scene label each segment was given."""
         if not self._up_checked:
             self._up_checked = True
             self._check_up_axis()
         try:
             if self._graph is None:
                 self._graph = self._new_graph()
+            name_votes: dict[int, dict[str, int]] = {}
             if segments is not None and seg_to_label is not None:
                 ids, labs = seg_to_label
                 lut = np.full(int(max(ids.max(initial=0), segments.max(initial=0))) + 1, -1, dtype=np.int32)
                 lut[ids] = labs
                 label_map = lut[np.asarray(segments)]
+                if names:
+                    name_votes = _name_votes(np.asarray(segments), lut, names)
             else:
                 label_map = self._render_labels(frame)
-            self._graph.observe(kf, frame, label_map)
+            self._graph.observe(kf, frame, label_map, name_votes=name_votes)
             if self._graph.is_due(kf):
                 gm = self.map
                 self._graph.update(kf, gm.means, gm.labels, gm.confidences, gm.colors)

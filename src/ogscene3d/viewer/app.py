@@ -44,6 +44,7 @@ _CAPTION_SOURCES = {
     "vlm": "VLM",
     "vlm-text": "VLM, prose reply instead of JSON",
     "heuristic": "geometric heuristic",
+    "detector": "detector class + geometric heuristic",
     "groundtruth": "ground truth",
 }
 _MAX_NODE_OPTIONS = 500
