@@ -189,3 +189,57 @@ def test_odometry_run_writes_its_trajectory_and_fails_when_nothing_tracks(tmp_pa
         "none of the 3 frames read could be mapped, 3 of them untracked by odometry"
         in capsys.readouterr().err
     )
+
+
+def test_ctrl_c_stops_after_the_frame_and_saves_the_map(tmp_path, capsys, monkeypatch):
+    import signal
+
+    from ogscene3d.mapping.mapper import Mapper
+
+    scene = _replica_scene(tmp_path / "scene", frames=4)
+    out = tmp_path / "run"
+    process = Mapper.process
+
+    def interrupted_at_frame_1(self, frame):
+        kept = process(self, frame)
+        if frame.index == 1:
+            signal.raise_signal(signal.SIGINT)  # Ctrl-C while frame 1 is being mapped
+        return kept
+
+    monkeypatch.setattr(Mapper, "process", interrupted_at_frame_1)
+    assert main(["run", *_common(scene, out)]) == 130
+    assert "stopped after 2 frames; the map so far is in" in capsys.readouterr().out
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handlers restored
+    monkeypatch.setattr(Mapper, "process", process)
+    assert main(["run", *_common(scene, out), "--resume"]) == 0
+    assert "read 2 frames: 2 mapped (4 keyframes in all)" in capsys.readouterr().out
+
+
+def test_resume_cleans_up_and_refuses_another_camera(tmp_path, capsys):
+    scene = _replica_scene(tmp_path / "scene", frames=2)
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out), "--max-frames", "1"]) == 0
+    leftover = out / ".map.k3wvhg1h.npz"  # a killed write's temporary file
+    leftover.write_bytes(b"x" * 100)
+    cam = json.loads((scene / "cam_params.json").read_text())
+    cam["camera"]["fx"] = 30.0
+    (scene / "cam_params.json").write_text(json.dumps(cam))
+    capsys.readouterr()
+    assert main(["run", *_common(scene, out), "--resume"]) == 2
+    assert "mapped with intrinsics" in capsys.readouterr().err
+    assert not leftover.exists()
+
+
+def test_a_corrupt_checkpoint_and_an_unwritable_out_are_clean_errors(tmp_path, capsys):
+    scene = _replica_scene(tmp_path / "scene", frames=2)
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out), "--max-frames", "1"]) == 0
+    data = (out / "map.npz").read_bytes()
+    (out / "map.npz").write_bytes(data[: len(data) // 2])
+    capsys.readouterr()
+    assert main(["run", *_common(scene, out), "--resume"]) == 2
+    assert "corrupt or truncated" in capsys.readouterr().err
+    (tmp_path / "file").write_text("")
+    assert main(["run", *_common(scene, tmp_path / "file" / "run")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("ogscene3d run: error: ") and "Traceback" not in err

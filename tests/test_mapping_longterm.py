@@ -66,6 +66,18 @@ def test_memory_max_size(device):
     assert [e.keyframe for e in mem.entries] == [2, 3]
 
 
+def test_memory_cap_holds_after_a_resume_and_empty_views_stay_out(device):
+    dev = torch.device(device)
+    mem = MemoryBuffer(tau_long=0.5, r_search=0.1, max_size=2, point_step=4)
+    for i, deg in enumerate([0, 90, 180]):  # a checkpoint written with a larger memory_max
+        mem.restore(_entry(_rot_y(deg), i), dev)
+    assert [e.keyframe for e in mem.entries] == [1, 2]
+    blind = _entry(_rot_y(270), 3)
+    blind.depth = np.zeros_like(blind.depth)  # no valid depth: could judge nothing, would evict a view
+    assert not mem.consider(blind, dev)
+    assert [e.keyframe for e in mem.entries] == [1, 2]
+
+
 def test_remap_and_class_iou(device):
     seg = torch.tensor([[1, 1, 2, 2], [1, 1, 2, 2], [0, 0, 3, 3]], device=device)
     ren = torch.tensor([[7, 7, 7, 8], [7, 9, 8, 8], [7, 7, -1, -1]], device=device)

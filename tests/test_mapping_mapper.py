@@ -267,6 +267,31 @@ def test_detector_class_names_become_node_tags(tmp_path):
     assert by_tag["sofa"]["id"] == int(m.map.labels.cpu()[left][0])
 
 
+def test_checkpoint_state_and_write_order(tmp_path, monkeypatch, caplog):
+    m = Mapper(_config("mapping.checkpoint_every=1"), "cpu")
+    m.set_checkpoint_dir(tmp_path)
+    m.process(_frame(0))
+    m.rng.random(5)
+    # a full disk at a periodic checkpoint: a warning, and mapping goes on
+    real = Mapper.save_checkpoint
+    monkeypatch.setattr(Mapper, "save_checkpoint", lambda self, p: (_ for _ in ()).throw(OSError(28, "full")))
+    with caplog.at_level("WARNING", logger="ogscene3d.mapping.mapper"):
+        assert m.process(_frame(1))
+    assert any("checkpoint not written" in r.message for r in caplog.records)
+    assert m.timings.counts["checkpoint_errors"] == 1
+
+    def last(self, path):  # map.npz (finalized: "nothing left to do") comes after every other output
+        assert {p.name for p in tmp_path.iterdir()} >= {"gaussians.ply", "graph.json", "timings.json"}
+        real(self, path)
+
+    monkeypatch.setattr(Mapper, "save_checkpoint", last)
+    m.finalize()
+    m.save(tmp_path)
+    r = Mapper(_config(), "cpu")
+    r.load_checkpoint(tmp_path / "map.npz")
+    assert r.rng.random() == m.rng.random()  # the random stream goes on where it was
+
+
 def test_resume_keeps_the_scene_graph(tmp_path):
     cfg = load_config(
         None,

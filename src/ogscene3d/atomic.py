@@ -52,10 +52,35 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         # Some filesystems (e.g. SMB mounts) refuse chmod: the output is still written, if less readable.
         with contextlib.suppress(OSError):
             os.chmod(tmp, _final_mode(path))
+        # on disk before the rename, or a power loss can leave the new name on an empty file
+        _fsync(tmp)
         os.replace(tmp, path)
+        with contextlib.suppress(OSError):  # the rename itself (not every platform opens directories)
+            _fsync(path.parent)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+
+
+def _fsync(path: str | Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def remove_stale_temps(path: str | Path) -> list[Path]:
+    """Delete the temporary files that writes of ``path`` left behind when their process was killed
+    (``.<stem>.<random><suffix>`` beside it; a checkpoint's can be hundreds of MB). -> the removed ones.
+    Call only when nothing else is writing ``path``."""
+    path = Path(path)
+    removed = []
+    for tmp in path.parent.glob(f".{path.stem}.*{path.suffix or '.tmp'}"):
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+            removed.append(tmp)
+    return removed
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:

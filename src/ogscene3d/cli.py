@@ -53,14 +53,20 @@ def main(argv: list[str] | None = None) -> int:
     except OGSceneError as e:
         print(f"ogscene3d {args.command}: error: {e}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"ogscene3d {args.command}: interrupted", file=sys.stderr)
-        return 130
     except BrokenPipeError:
         # the reader went away (`ogscene3d graph RUN --nodes | head`): no traceback, and none at exit
         # either when Python flushes stdout
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 1
+    except OSError as e:
+        if args.verbose:
+            raise
+        # a full disk, a read-only --out, a permission: the file and the reason say it all
+        print(f"ogscene3d {args.command}: error: {e} (-v for the traceback)", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"ogscene3d {args.command}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -16,6 +16,7 @@ Files: ``save_npz``/``load_npz`` hold everything needed to resume mapping; ``exp
 from __future__ import annotations
 
 import math
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +50,15 @@ PLY_PROPERTIES: list[tuple[str, str]] = (
     + [(f"rot_{i}", "<f4") for i in range(4)]
     + [("label", "<i4"), ("confidence", "<f4")]
 )
+
+
+def corrupt_npz_message(path: Path, error: Exception) -> str:
+    """The error for an npz file np.load cannot read (truncated by a full disk, damaged in a copy)."""
+    # np.load calls any non-zip file "pickled (object) data" and suggests unpickling it: never for a map
+    return (
+        f"{path}: not a readable map npz, corrupt or truncated ({type(error).__name__}); restore a copy or "
+        "start a new run"
+    )
 
 
 def _logit(p: torch.Tensor | float) -> torch.Tensor:
@@ -302,9 +312,10 @@ class GaussianMap:
             raise DataError(f"{p}: map file does not exist")
         try:
             with np.load(p, allow_pickle=False) as z:
-                state = {k: z[k] for k in z.files}
-        except (OSError, ValueError, EOFError) as e:
-            raise DataError(f"{p}: cannot read map npz ({e})") from e
+                # only the map's arrays: a mapper checkpoint also holds its memory views (hundreds of MB)
+                state = {k: z[k] for k in z.files if k in FIELDS or k == "next_label"}
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+            raise DataError(corrupt_npz_message(p, e)) from e
         return cls.from_state_dict(state, device, what=str(p))
 
     def export_ply(self, path: str | Path) -> None:

@@ -29,6 +29,10 @@ from .init import grid_mask
 from .local import group_top2
 from .neighbors import any_within, knn
 
+# a memory candidate needs this many back-projected points (on the memory_point_step grid): a view with
+# (almost) no valid depth can judge no Gaussian, and would evict one that can
+MIN_MEMORY_POINTS = 16
+
 
 @dataclass
 class MemoryEntry:
@@ -97,9 +101,16 @@ class MemoryBuffer:
         return pc, pw
 
     def restore(self, entry: MemoryEntry, device: torch.device) -> None:
-        """Append an entry without testing the criteria (resuming from a checkpoint)."""
+        """Append an entry without testing the criteria (resuming from a checkpoint); the oldest go when a
+        resumed run's ``max_size`` is smaller than the checkpoint's."""
         entry.points = self._points(entry, device)[1]
         self.entries.append(entry)
+        self._trim()
+
+    def _trim(self) -> None:
+        while len(self.entries) > self.max_size:
+            self.entries.pop(0)
+            self._cursor = max(0, self._cursor - 1)
 
     def criteria(self, entry: MemoryEntry, device: torch.device) -> tuple[float, float, torch.Tensor]:
         """(R_in, R_overlap, world points of the candidate)."""
@@ -116,13 +127,13 @@ class MemoryBuffer:
     def consider(self, entry: MemoryEntry, device: torch.device) -> bool:
         """Add ``entry`` when both criteria hold (always for the first one); returns whether it was added."""
         r_in, r_overlap, pw = self.criteria(entry, device)
+        if len(pw) < MIN_MEMORY_POINTS:
+            return False  # (nearly) no valid depth: nothing to check the map against, it would only evict
         if self.entries and not (r_in < self.tau_long and r_overlap < self.tau_long):
             return False
         entry.points = pw
         self.entries.append(entry)
-        if len(self.entries) > self.max_size:
-            self.entries.pop(0)
-            self._cursor = max(0, self._cursor - 1)
+        self._trim()
         return True
 
     def next_views(self, count: int) -> list[MemoryEntry]:

@@ -29,6 +29,7 @@ import json
 import logging
 import math
 import time
+import zipfile
 from collections import deque
 from contextlib import contextmanager
 from dataclasses import replace
@@ -43,7 +44,7 @@ from ..config import Config, config_to_dict
 from ..device import resolve_device
 from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame, implausible_median_depth
-from ..gaussians import GaussianMap
+from ..gaussians import GaussianMap, corrupt_npz_message
 from .init import make_probes
 from .keyframes import KeyframeSelector
 from .local import CASE_AMBIGUOUS, CASE_MATCHED, associate_segments, fill_unlabeled
@@ -471,7 +472,14 @@ class Mapper:
             and self.keyframe_count % cfg.checkpoint_every == 0
         ):
             with self.timings.section("checkpoint"):
-                self.save_checkpoint(self._checkpoint_dir / "map.npz")
+                try:
+                    self.save_checkpoint(self._checkpoint_dir / "map.npz")
+                except OSError as e:
+                    # a safety net: a full disk must not stop the mapping (the previous checkpoint stays)
+                    log.warning(
+                        "checkpoint not written (%s); mapping goes on, the next checkpoint tries again", e
+                    )
+                    self.timings.add("checkpoint_errors")
         return True
 
     def _inner_probes(self, segments: np.ndarray, pix: torch.Tensor) -> torch.Tensor:
@@ -666,6 +674,8 @@ class Mapper:
             "mapper_keyframe_count": np.array(self.keyframe_count),
             "mapper_memory_cursor": np.array(self.memory._cursor),
             "mapper_finalized": np.array(self.finalized),
+            # a resumed run draws the same random numbers as one that was never interrupted
+            "mapper_rng": np.array(json.dumps(self.rng.bit_generator.state)),
             "mapper_source": np.array(json.dumps(self.source)),
             # the module times of a run go on across resumes (ms per keyframe divides by all keyframes)
             "mapper_timings": np.array(json.dumps(self.timings.state())),
@@ -712,6 +722,8 @@ class Mapper:
                 self.keyframe_count = int(z["mapper_keyframe_count"])
                 # older checkpoints lack these: not finalized, no source, times from zero
                 self.finalized = bool(z["mapper_finalized"]) if "mapper_finalized" in z.files else False
+                if "mapper_rng" in z.files:
+                    self.rng.bit_generator.state = json.loads(str(z["mapper_rng"]))
                 self.source = json.loads(str(z["mapper_source"])) if "mapper_source" in z.files else {}
                 if "mapper_timings" in z.files:
                     self.timings.load_state(json.loads(str(z["mapper_timings"])))
@@ -721,22 +733,27 @@ class Mapper:
                 self.memory.entries = []
                 if "mem_keyframe" in z.files:
                     scores = json.loads(str(z["mem_scores"]))
+                    # each z[...] reads (and decompresses) the whole array: once per array, not per view
+                    mem = {k: z[f"mem_{k}"] for k in ("rgb", "depth", "K", "pose", "segments")}
                     for i, kf in enumerate(z["mem_keyframe"]):
                         entry = MemoryEntry(
                             int(kf),
-                            z["mem_rgb"][i],
-                            z["mem_depth"][i],
-                            z["mem_K"][i],
-                            z["mem_pose"][i],
-                            z["mem_segments"][i],
+                            mem["rgb"][i].copy(),
+                            mem["depth"][i].copy(),
+                            mem["K"][i].copy(),
+                            mem["pose"][i].copy(),
+                            mem["segments"][i].copy(),
                             {int(k): float(v) for k, v in scores[i].items()},
                         )
                         self.memory.restore(entry, self.device)
+                    del mem
                     self.memory._cursor = int(z["mapper_memory_cursor"]) % max(1, len(self.memory.entries))
                 tracker_state = {k: z[k] for k in z.files if k.startswith("trk_")}
                 graph_state = str(z["graph_state"]) if "graph_state" in z.files else None
         except KeyError as e:
             raise DataError(f"{p}: not a mapper checkpoint (missing {e})") from e
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:  # a damaged array, read late
+            raise DataError(corrupt_npz_message(p, e)) from e
         self._graph, self._graph_failed = None, False
         if graph_state is not None and self.config.graph.enabled:
             try:
@@ -769,7 +786,6 @@ class Mapper:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         self.map.export_ply(out / "gaussians.ply")
-        self.save_checkpoint(out / "map.npz")
         atomic_write_text(out / "config.yaml", yaml.safe_dump(config_to_dict(self.config), sort_keys=False))
         timings = self.timings.as_dict()
         timings["device"] = str(self.device)
@@ -786,6 +802,9 @@ class Mapper:
                 filled.append(held)
             atomic_write_text(out / "traj.txt", trajectory_text(filled))
         self._save_graph(out / "graph.json")
+        # last: a finalized checkpoint tells --resume there is nothing left to do, so the other outputs must
+        # be there by then
+        self.save_checkpoint(out / "map.npz")
         return out
 
     def _save_graph(self, path: Path) -> None:

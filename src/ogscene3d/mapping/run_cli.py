@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import argparse
 import logging
+import signal
 import time
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import yaml
 
-from ..atomic import atomic_write_text
+from ..atomic import atomic_write_text, remove_stale_temps
 from ..config import add_override_argument, config_to_dict, load_config
 from ..device import resolve_device
 from ..errors import DataError
@@ -102,7 +105,11 @@ def run(args: argparse.Namespace) -> int:
     ds = open_dataset(max_frames=args.max_frames, config=cfg.data)
     if len(ds) == 0:
         raise DataError(f"{data}: the dataset has no frames")
-    source = {"path": cfg.data.path, "frames": len(ds), "first": ds.records[0].name}
+    K = [round(float(v), 4) for v in np.asarray(ds.K).reshape(-1)]
+    source = {"path": cfg.data.path, "frames": len(ds), "first": ds.records[0].name, "K": K}
+    for name in ("map.npz", "gaussians.ply", "graph.json", "timings.json", "config.yaml", "traj.txt"):
+        for tmp in remove_stale_temps(out / name):  # left by a killed run's writes
+            log.info("removed %s, a killed write's leftover", tmp)
 
     mapper = Mapper(cfg, cfg.device)
     mapper.set_checkpoint_dir(out)
@@ -132,12 +139,16 @@ def run(args: argparse.Namespace) -> int:
         frames = tqdm(frames, desc="mapping", unit="frame", total=max(0, len(ds) - start))
     t0 = time.perf_counter()
     given, seen0 = 0, mapper.frames_seen
+    stop = _StopRequest()
     try:
-        for frame in frames:
-            mapper.process(frame)
-            given += 1
-            if hasattr(frames, "set_postfix"):
-                frames.set_postfix(gaussians=len(mapper.map), kf=mapper.keyframe_count)
+        with stop:
+            for frame in frames:
+                mapper.process(frame)
+                given += 1
+                if hasattr(frames, "set_postfix"):
+                    frames.set_postfix(gaussians=len(mapper.map), kf=mapper.keyframe_count)
+                if stop.requested:
+                    break
     except DataError:
         if mapper.keyframe_count:
             # a bad frame late in a long sequence must not cost the map built so far
@@ -147,6 +158,13 @@ def run(args: argparse.Namespace) -> int:
                 out / "map.npz",
             )
         raise
+    if stop.requested:
+        if mapper.keyframe_count:
+            mapper.save_checkpoint(out / "map.npz")
+            print(f"stopped after {given} frames; the map so far is in {out / 'map.npz'}: --resume goes on")
+        else:
+            print(f"stopped after {given} frames, before any keyframe: nothing to save")
+        return 130
     if given == 0 and mapper.finalized:
         print(f"nothing to do: {out} has mapped every frame of {data} (--resume read no new frame)")
         return 0
@@ -167,6 +185,33 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+class _StopRequest:
+    """Ctrl-C or SIGTERM while mapping: finish the frame, then stop (the caller saves a checkpoint);
+    a second one stops at once. Saving from inside a frame could write a half-updated state."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous: dict[int, Any] = {}
+
+    def __enter__(self) -> _StopRequest:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            try:
+                self._previous[sig] = signal.signal(sig, self._handle)
+            except ValueError:  # not the main thread (an embedding application): its handlers stay
+                break
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+
+    def _handle(self, signum, frame) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+        log.warning("stopping after this frame to save the map (again to stop at once, losing it)")
+
+
 def _recorded_data_path(saved: Path) -> str | None:
     """data.path from a run's config.yaml (None when absent or unreadable)."""
     try:
@@ -180,6 +225,11 @@ def _recorded_data_path(saved: Path) -> str | None:
 
 def _check_same_source(ckpt: Path, recorded: dict, current: dict) -> None:
     """Refuse to resume a map with frames of another sequence; a moved dataset (same frames) is fine."""
+    if recorded.get("K") is not None and not np.allclose(recorded["K"], current["K"], atol=1e-3):
+        raise DataError(
+            f"{ckpt} was mapped with intrinsics {recorded['K']}, these frames have {current['K']} (another "
+            "camera or image size): map them into a new --out"
+        )
     if not recorded or recorded.get("path") == current["path"]:
         return
     same = recorded.get("frames") == current["frames"] and recorded.get("first") == current["first"]
