@@ -3,7 +3,6 @@ device-kernel timer, and the scripts' command-line plumbing (argument types, cle
 
 from __future__ import annotations
 
-import argparse
 import math
 import statistics
 import sys
@@ -15,16 +14,7 @@ import torch
 from torch.autograd import DeviceType
 from torch.profiler import ProfilerActivity, profile
 
-
-def positive_int(text: str) -> int:
-    """argparse type: an integer >= 1 (zero iterations, rounds or pixels would divide by zero later)."""
-    try:
-        value = int(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from e
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {value}")
-    return value
+from ogscene3d.cli_types import positive_int  # noqa: F401 - the benchmarks' argparse type, from here
 
 
 def run_main(main: Callable[[], int | None]) -> None:

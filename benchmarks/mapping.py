@@ -33,6 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import positive_int, run_main  # noqa: E402
 
 from ogscene3d.batch import json_safe  # noqa: E402
+from ogscene3d.cli_types import image_size  # noqa: E402
 from ogscene3d.config import load_config  # noqa: E402
 from ogscene3d.gaussians import GaussianMap  # noqa: E402
 from ogscene3d.mapping.init import make_probes  # noqa: E402
@@ -55,7 +56,7 @@ def _rss_mb() -> float:
 def stream(args) -> dict:
     from ogscene3d.datasets import make_synthetic_scene, open_dataset
 
-    w, h = (int(v) for v in args.size.split("x"))
+    w, h = args.size
     scene = make_synthetic_scene(
         Path(args.out) / f"scene_{args.frames}_{w}x{h}",
         args.seed,
@@ -92,7 +93,7 @@ def stream(args) -> dict:
     return {
         "mode": "stream",
         "device": str(dev),
-        "size": args.size,
+        "size": "{}x{}".format(*args.size),
         "frames": args.frames,
         "timings": mapper.timings.as_dict(),
         "history": history,
@@ -125,7 +126,7 @@ def modules(args) -> dict | None:
     from ogscene3d.device import resolve_device
 
     dev = resolve_device(args.device)
-    w, h = (int(v) for v in args.size.split("x"))
+    w, h = args.size
     cfg = load_config(args.config, args.overrides).mapping
     gm = _box_map(args.gaussians, 50, dev, args.seed)
     # a camera at the box centre looking at the +z wall; depth from the wall plane, 40 rectangular segments
@@ -212,7 +213,13 @@ def modules(args) -> dict | None:
     # per keyframe: local every keyframe, refinement and long-term every 6 keyframes (the paper's schedule)
     ms["per_keyframe_amortised"] = ms["local"] + (ms["refine"] + ms["longterm"]) / 6.0
     ms["all_three"] = ms["local"] + ms["refine"] + ms["longterm"]
-    out = {"mode": "modules", "device": str(dev), "size": args.size, "gaussians": len(gm), "ms": ms}
+    out = {
+        "mode": "modules",
+        "device": str(dev),
+        "size": "{}x{}".format(*args.size),
+        "gaussians": len(gm),
+        "ms": ms,
+    }
     print(json.dumps(out, indent=1))
     return out
 
@@ -221,7 +228,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("mode", choices=["stream", "modules"])
     ap.add_argument("--device", default=None)
-    ap.add_argument("--size", type=_size, default="160x120", metavar="WxH")
+    ap.add_argument("--size", type=image_size(), default=(160, 120), metavar="WxH")
     ap.add_argument("--frames", type=positive_int, default=120, help="stream: frames of the scene")
     ap.add_argument("--gaussians", type=positive_int, default=100_000, help="modules: Gaussians in the map")
     ap.add_argument("--repeat", type=positive_int, default=3, help="modules: timed rounds (default 3)")
@@ -237,17 +244,6 @@ def main() -> None:
     res = stream(args) if args.mode == "stream" else modules(args)
     if args.json:
         Path(args.json).write_text(json.dumps(json_safe(res), indent=1))  # strict JSON: NaN -> null
-
-
-def _size(text: str) -> str:
-    """argparse type: ``WxH`` with both sides >= 1 (kept as text: the modes parse it)."""
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"expected WxH such as 160x120, got {text!r}") from e
-    if w < 1 or h < 1:
-        raise argparse.ArgumentTypeError(f"width and height must be >= 1, got {text!r}")
-    return f"{w}x{h}"
 
 
 if __name__ == "__main__":

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from .cli_types import image_size, positive_int
 from .device import resolve_device
 from .errors import ConfigError, DataError
 
@@ -97,26 +98,6 @@ def render_demo(
 # argparse types: the CLI names the option in its message (the library checks again, naming the argument)
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from e
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {value}")
-    return value
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"expected WxH such as 320x240, got {text!r}") from e
-    if w < 1 or h < 1:
-        raise argparse.ArgumentTypeError(f"width and height must be >= 1, got {text!r}")
-    return w, h
-
-
 def _image_path(text: str) -> Path:
     import cv2
 
@@ -137,9 +118,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=Path("outputs/render_demo.png"),
         help="image file to write, e.g. render.png (default outputs/render_demo.png)",
     )
-    p.add_argument("--gaussians", type=_positive_int, default=20000, help="Gaussians (default 20000)")
-    p.add_argument("--size", type=_size, default=(320, 240), metavar="WxH", help="each view's size (320x240)")
-    p.add_argument("--views", type=_positive_int, default=4, help="orbit views side by side (default 4)")
+    p.add_argument("--gaussians", type=positive_int, default=20000, help="Gaussians (default 20000)")
+    p.add_argument(
+        "--size",
+        type=image_size(1, "320x240"),
+        default=(320, 240),
+        metavar="WxH",
+        help="each view's size (320x240)",
+    )
+    p.add_argument("--views", type=positive_int, default=4, help="orbit views side by side (default 4)")
     p.add_argument("--device", default=None, help="cpu, cuda or cuda:N (default: cuda when available)")
     p.set_defaults(func=_run)
 

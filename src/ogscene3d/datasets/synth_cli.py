@@ -8,20 +8,11 @@ import logging
 import time
 from pathlib import Path
 
+from ..cli_types import image_size
 from ..config import add_override_argument, load_config
 from ..errors import ConfigError, OGSceneError
 
 log = logging.getLogger(__name__)
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"size must look like 160x120, got {text!r}") from e
-    if w < 8 or h < 8:
-        raise argparse.ArgumentTypeError(f"size must be at least 8x8, got {text!r}")
-    return w, h
 
 
 def add_parser(subparsers) -> None:
@@ -35,7 +26,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--config", default=None, help="YAML config (its `synthetic` section gives the defaults)")
     p.add_argument("--seed", type=int, default=None, help="scene, trajectory and noise seed")
     p.add_argument("--frames", type=int, default=None, help="number of frames")
-    p.add_argument("--size", type=_size, default=None, metavar="WxH", help="image size, e.g. 160x120")
+    p.add_argument("--size", type=image_size(8), default=None, metavar="WxH", help="image size, e.g. 160x120")
     p.add_argument("--noise", default=None, choices=["none", "low", "default", "high"], help="segment noise")
     p.add_argument("--depth-noise", type=float, default=None, help="depth noise std in metres")
     p.add_argument("--pose-noise", type=float, default=None, help="pose translation noise std in metres")

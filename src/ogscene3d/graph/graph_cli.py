@@ -6,6 +6,7 @@ import argparse
 import textwrap
 from pathlib import Path
 
+from ..cli_types import positive_int
 from ..config import add_override_argument, load_config
 from ..errors import DataError
 from .scenegraph import SceneGraph
@@ -17,16 +18,6 @@ def _query_text(text: str) -> str:
     if not text.strip():
         raise argparse.ArgumentTypeError("the query text is empty")
     return text
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from e
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {value}")
-    return value
 
 
 def add_parser(subparsers) -> None:
@@ -45,7 +36,7 @@ def add_parser(subparsers) -> None:
         type=_query_text,
         help="text to look up in node tags/captions",
     )
-    p.add_argument("--top-k", type=_positive_int, default=5, help="results per query (default 5)")
+    p.add_argument("--top-k", type=positive_int, default=5, help="results per query (default 5)")
     p.add_argument("--graphml", help="write the graph as GraphML to this path (needs networkx)")
     p.add_argument("--config", help="YAML config (for graph.query_embedding and its endpoint)")
     add_override_argument(p, "graph.query_embedding=openai --set graph.embedding_model=MODEL")

@@ -14,23 +14,13 @@ import logging
 import time
 from pathlib import Path
 
+from ..cli_types import positive_int
 from ..config import add_override_argument, load_config
 from ..errors import ConfigError, DataError
 from .base import Segmentation
 from .precomputed import segments_paths, write_segments
 
 log = logging.getLogger(__name__)
-
-
-def _positive_int(text: str) -> int:
-    """argparse type: an integer >= 1 (a zero grid or stride would fail deep inside the front-end)."""
-    try:
-        value = int(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from e
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {value}")
-    return value
 
 
 def add_parser(subparsers) -> None:
@@ -62,7 +52,7 @@ def add_parser(subparsers) -> None:
         help="the detector's class names in export order: comma-separated, or a text file with one per line",
     )
     p.add_argument(
-        "--points-per-side", type=_positive_int, default=None, help="SAM grid prompts per side (default 32)"
+        "--points-per-side", type=positive_int, default=None, help="SAM grid prompts per side (default 32)"
     )
     p.add_argument("--provider", default=None, choices=["auto", "cpu", "cuda"], help="onnxruntime provider")
     p.add_argument("--config", default=None, help="YAML config; its `segmentation` and `data` sections apply")

@@ -17,20 +17,11 @@ import threading
 import time
 from pathlib import Path
 
+from ..cli_types import image_size, positive_int
 from ..config import add_override_argument
 from ..errors import ConfigError, DataError, OGSceneError
 
 log = logging.getLogger(__name__)
-
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from e
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {v}")
-    return v
 
 
 def _positive_float(text: str) -> float:
@@ -53,16 +44,6 @@ def _port(text: str) -> int:
     return v
 
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"size must look like 1280x800, got {text!r}") from e
-    if w < 64 or h < 64:
-        raise argparse.ArgumentTypeError(f"size must be at least 64x64, got {text!r}")
-    return w, h
-
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "run_dir", nargs="?", default=None, metavar="RUN_DIR", help="saved run directory to browse"
@@ -73,7 +54,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", default=None, help="YAML config (e.g. configs/replica.yaml)")
     p.add_argument("--segments", default=None, help="folder of precomputed segments (<rgb stem>.png/.json)")
     p.add_argument("--device", default=None, help="mapping device: cpu, cuda or cuda:N")
-    p.add_argument("--max-frames", type=_positive_int, default=None, help="map at most this many frames")
+    p.add_argument("--max-frames", type=positive_int, default=None, help="map at most this many frames")
     p.add_argument(
         "--out",
         default=None,
@@ -95,9 +76,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="port to try first (the next free one is used if busy; 0: any free port)",
     )
     p.add_argument("--rate", type=_positive_float, default=4.0, help="maximum viewer updates per second")
-    p.add_argument("--max-splats", type=_positive_int, default=200_000, help="most Gaussians drawn as splats")
+    p.add_argument("--max-splats", type=positive_int, default=200_000, help="most Gaussians drawn as splats")
     p.add_argument(
-        "--max-points", type=_positive_int, default=1_000_000, help="most Gaussians drawn as points"
+        "--max-points", type=positive_int, default=1_000_000, help="most Gaussians drawn as points"
     )
     p.add_argument(
         "--render",
@@ -124,7 +105,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="render the view in headless chromium into PNG and exit (after mapping, in live mode)",
     )
     p.add_argument(
-        "--screenshot-size", type=_size, default=(1280, 800), metavar="WxH", help="screenshot size"
+        "--screenshot-size",
+        type=image_size(64, "1280x800"),
+        default=(1280, 800),
+        metavar="WxH",
+        help="screenshot size",
     )
     p.add_argument(
         "--screenshot-wait", type=_positive_float, default=8.0, help="seconds to let the browser draw first"
