@@ -297,4 +297,10 @@ def test_a_bad_frame_keeps_the_scenes_map_so_far(tmp_path: Path, tiny_scene: Pat
     assert main(argv) == 2  # every scene failed
     rec = json.loads((tmp_path / "out" / "run_batch.json").read_text())["scenes"][0]
     assert rec["status"] == "failed" and "depth000004.png" in rec["error"]
-    assert (tmp_path / "out" / rec["name"] / "map.npz").is_file()
+    run = tmp_path / "out" / rec["name"]
+    assert (run / "map.npz").is_file()
+    # its config.yaml (the data and the batch's settings) is there too: `run --resume --out` goes on with it
+    import yaml
+
+    saved = yaml.safe_load((run / "config.yaml").read_text())
+    assert saved["data"]["path"] == str(scene.resolve()) and saved["mapping"]["opt_iters"] == 1

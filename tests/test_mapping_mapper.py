@@ -265,6 +265,15 @@ def test_detector_class_names_become_node_tags(tmp_path):
     assert by_tag["sofa"]["caption"].startswith("sofa (detector class); ")
     left = m.map.means[:, 0].cpu() < -0.05
     assert by_tag["sofa"]["id"] == int(m.map.labels.cpu()[left][0])
+    # the votes go on after a resume: the next update names the nodes as before
+    r = Mapper(cfg, "cpu")
+    r.load_checkpoint(tmp_path / "map.npz")
+    r.process(_frame(3, (4, 8)))
+    r.finalize()
+    assert sorted((n.tag, n.caption_source) for n in r.graph.nodes.values()) == [
+        ("lamp", "detector"),
+        ("sofa", "detector"),
+    ]
 
 
 def test_checkpoint_state_and_write_order(tmp_path, monkeypatch, caplog):

@@ -252,6 +252,7 @@ def map_scene(
     from .config import load_config
     from .datasets import make_synthetic_scene, open_dataset
     from .mapping.mapper import Mapper
+    from .mapping.source import dataset_source, record_data, remove_run_temps, start_run_dir
 
     t_start = time.perf_counter()
     ov = [*overrides, *spec.overrides]
@@ -268,17 +269,16 @@ def map_scene(
     else:
         data = Path(str(spec.data))
     # Recorded in config.yaml: where the frames came from (and where `eval` looks for ground truth).
-    cfg.data.path = str(Path(data).resolve())
-    if spec.segments is not None:
-        cfg.data.segments_dir = spec.segments
+    record_data(cfg, data, spec.segments)
     ds = open_dataset(data, config=cfg.data)
     if len(ds) == 0:
         raise DataError(f"{data}: the dataset has no frames")
-    run_dir.mkdir(parents=True, exist_ok=True)
 
     mapper = Mapper(cfg, cfg.device)
+    remove_run_temps(run_dir)
+    start_run_dir(run_dir, cfg)  # a scene stopped by a bad frame resumes with `run --resume --out`
     mapper.set_checkpoint_dir(run_dir)
-    mapper.source = {"path": cfg.data.path, "frames": len(ds), "first": ds.records[0].name}
+    mapper.source = dataset_source(cfg, ds)
     dev = mapper.device
     if dev.type == "cuda":
         torch.cuda.reset_peak_memory_stats(dev)

@@ -682,15 +682,16 @@ class SceneGraph:
         return g
 
     def state(self) -> dict:
-        """The graph and its update schedule, for a mapping checkpoint (``load_state`` resumes from it).
-        Observations and ground-truth votes are not kept: after a resume they start from the next
-        keyframe."""
+        """The graph, its update schedule and the detector name votes (they name nodes at every update),
+        for a mapping checkpoint (``load_state`` resumes from it). Observations and ground-truth votes are
+        not kept: after a resume they start from the next keyframe."""
         with self._lock:
             return {
                 "graph": self.to_json(),
                 "last_update_count": self._last_update_count,
                 "last_update_keyframe": self.last_update_keyframe,
                 "num_updates": self.num_updates,
+                "name_votes": {str(k): dict(v) for k, v in self._name_votes.items()},
             }
 
     def load_state(self, state: Any, source: str = "checkpoint") -> None:
@@ -702,7 +703,14 @@ class SceneGraph:
             schedule = [int(state[k]) for k in ("last_update_count", "last_update_keyframe", "num_updates")]
         except (KeyError, TypeError, ValueError) as e:
             raise DataError(f"{source}: scene graph state has no valid schedule ({e})") from None
+        try:  # absent from checkpoints written before detector names reached the graph
+            name_votes = {
+                int(k): {str(n): int(c) for n, c in v.items()} for k, v in state.get("name_votes", {}).items()
+            }
+        except (AttributeError, TypeError, ValueError) as e:
+            raise DataError(f"{source}: scene graph state has invalid name votes ({e})") from None
         with self._lock:
+            self._name_votes = name_votes
             self._read_json(state["graph"], source)
             self._last_update_count, self.last_update_keyframe, self.num_updates = schedule
             self._initialized = bool(self.num_updates)

@@ -218,16 +218,20 @@ class Mapper:
         return SceneGraph(self.config.graph)
 
     def _check_up_axis(self) -> None:
-        """Warn when graph.up_axis is far from where the cameras' up points on average: relations (on,
-        under) and floor / wall / ceiling tags would then use a wrong vertical (worlds differ: Replica's and
-        ScanNet's are z-up, an OpenCV camera's first frame is -y up)."""
+        """Warn (once, at the first graph update: the mean over the keyframes until then) when graph.up_axis
+        is far from where the cameras' up points on average: relations (on, under) and floor / wall /
+        ceiling tags would then use a wrong vertical (worlds differ: Replica's and ScanNet's are z-up, an
+        OpenCV camera's first frame is -y up). 75 deg leaves room for cameras pitched down at a table."""
+        if self._up_checked:
+            return
+        self._up_checked = True
         norm = float(np.linalg.norm(self._camera_up_sum))
         up = np.asarray(self.config.graph.up_axis, dtype=np.float64)
         if norm < 1e-9 or up.shape != (3,) or not np.linalg.norm(up) > 0:
             return
         cam_up = self._camera_up_sum / norm
         angle = math.degrees(math.acos(float(np.clip(cam_up @ up / np.linalg.norm(up), -1.0, 1.0))))
-        if angle > 60.0:
+        if angle > 75.0:
             axis = int(np.argmax(np.abs(cam_up)))
             guess = [0.0, 0.0, 0.0]
             guess[axis] = 1.0 if cam_up[axis] > 0 else -1.0
@@ -311,7 +315,8 @@ class Mapper:
 
     def process(self, frame: Frame) -> bool:
         """Map one frame. Returns True when it was a keyframe (non-keyframes are only counted)."""
-        # checked before the frame counts as read, so that a resume after this error retries it
+        # checked before the frame counts as read, so that a resume after this error retries it (a segmenter's
+        # bad output is found later, at a keyframe, and a resume goes on after that frame)
         if not np.all(np.isfinite(frame.depth)):
             raise DataError(f"frame {frame.index} ({frame.name or 'unnamed'}): depth contains NaN or inf")
         odometry = self.config.tracking.poses == "odometry"
@@ -574,9 +579,6 @@ class Mapper:
         The keyframe's label map is its segmentation with each segment replaced by the scene label it was
         given (exact SAM boundaries); without segments, the map's rendered labels. A detector's class
         ``names`` of segments vote, by area, for the name of the scene label each segment was given."""
-        if not self._up_checked:
-            self._up_checked = True
-            self._check_up_axis()
         try:
             if self._graph is None:
                 self._graph = self._new_graph()
@@ -592,6 +594,7 @@ class Mapper:
                 label_map = self._render_labels(frame)
             self._graph.observe(kf, frame, label_map, name_votes=name_votes)
             if self._graph.is_due(kf):
+                self._check_up_axis()
                 gm = self.map
                 self._graph.update(kf, gm.means, gm.labels, gm.confidences, gm.colors)
         except Exception as e:  # noqa: BLE001 - the graph is optional; mapping must go on
@@ -657,6 +660,7 @@ class Mapper:
             # is the only update there is
             with self.timings.section("graph"):
                 try:
+                    self._check_up_axis()
                     gm = self.map
                     self._graph.finalize(
                         self.keyframe_count - 1, gm.means, gm.labels, gm.confidences, gm.colors
@@ -754,16 +758,21 @@ class Mapper:
             raise DataError(f"{p}: not a mapper checkpoint (missing {e})") from e
         except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:  # a damaged array, read late
             raise DataError(corrupt_npz_message(p, e)) from e
-        self._graph, self._graph_failed = None, False
-        if graph_state is not None and self.config.graph.enabled:
-            try:
-                graph = self._new_graph()
-                graph.load_state(json.loads(graph_state), source=f"{p} (graph_state)")
-                self._graph = graph
-            except Exception as e:  # noqa: BLE001 - the graph is optional: the map resumes without it
-                log.warning(
-                    "scene graph not restored (%s: %s): the next update builds it anew", type(e).__name__, e
-                )
+        self._graph_failed = False
+        if self.config.graph.enabled:
+            # the graph built with the Mapper takes the checkpoint's state (its models are loaded once)
+            if self._graph is None or self._graph.num_updates or self._graph.nodes:
+                self._graph = self._new_graph()
+            if graph_state is not None:
+                try:
+                    self._graph.load_state(json.loads(graph_state), source=f"{p} (graph_state)")
+                except Exception as e:  # noqa: BLE001 - the graph is optional: the map resumes without it
+                    log.warning(
+                        "scene graph not restored (%s: %s): the next update builds it anew",
+                        type(e).__name__,
+                        e,
+                    )
+                    self._graph = self._new_graph()
         self._tracker = None
         if self.config.tracking.poses == "odometry":
             if tracker_state:

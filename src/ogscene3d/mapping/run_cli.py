@@ -9,14 +9,13 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import yaml
 
-from ..atomic import atomic_write_text, remove_stale_temps
-from ..config import add_override_argument, config_to_dict, load_config
+from ..config import add_override_argument, load_config
 from ..device import resolve_device
 from ..errors import DataError
 from ..tracking import add_poses_argument
+from .source import check_same_source, dataset_source, record_data, remove_run_temps, start_run_dir
 
 log = logging.getLogger(__name__)
 
@@ -98,18 +97,13 @@ def run(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
         )
     # the run's config.yaml records what was mapped: eval finds the ground truth and --resume the frames
-    cfg.data.path = str(Path(data).resolve())
-    if args.segments:
-        cfg.data.segments_dir = str(Path(args.segments).resolve())
+    record_data(cfg, data, args.segments)
     # --max-frames bounds this invocation only (a resume without it goes on to the end)
     ds = open_dataset(max_frames=args.max_frames, config=cfg.data)
     if len(ds) == 0:
         raise DataError(f"{data}: the dataset has no frames")
-    K = [round(float(v), 4) for v in np.asarray(ds.K).reshape(-1)]
-    source = {"path": cfg.data.path, "frames": len(ds), "first": ds.records[0].name, "K": K}
-    for name in ("map.npz", "gaussians.ply", "graph.json", "timings.json", "config.yaml", "traj.txt"):
-        for tmp in remove_stale_temps(out / name):  # left by a killed run's writes
-            log.info("removed %s, a killed write's leftover", tmp)
+    source = dataset_source(cfg, ds)
+    remove_run_temps(out)
 
     mapper = Mapper(cfg, cfg.device)
     mapper.set_checkpoint_dir(out)
@@ -119,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
         if not ckpt.is_file():
             raise DataError(f"{ckpt}: --resume needs a checkpoint from an earlier run in --out")
         mapper.load_checkpoint(ckpt)
-        _check_same_source(ckpt, mapper.source, source)
+        check_same_source(ckpt, mapper.source, source)
         start = mapper.next_index
         log.info(
             "resuming at frame %d (%d frames mapped, %d keyframes, %d Gaussians)",
@@ -129,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
             len(mapper.map),
         )
     mapper.source = source
-    atomic_write_text(saved, yaml.safe_dump(config_to_dict(cfg), sort_keys=False))
+    start_run_dir(out, cfg)
 
     # bad frames raise, or are skipped with a warning under data.on_bad_frame: skip
     frames = ds.frames(start)
@@ -221,28 +215,3 @@ def _recorded_data_path(saved: Path) -> str | None:
     data = loaded.get("data") if isinstance(loaded, dict) else None
     path = data.get("path") if isinstance(data, dict) else None
     return path if isinstance(path, str) else None
-
-
-def _check_same_source(ckpt: Path, recorded: dict, current: dict) -> None:
-    """Refuse to resume a map with frames of another sequence; a moved dataset (same frames) is fine."""
-    if recorded.get("K") is not None and not np.allclose(recorded["K"], current["K"], atol=1e-3):
-        raise DataError(
-            f"{ckpt} was mapped with intrinsics {recorded['K']}, these frames have {current['K']} (another "
-            "camera or image size): map them into a new --out"
-        )
-    if not recorded or recorded.get("path") == current["path"]:
-        return
-    same = recorded.get("frames") == current["frames"] and recorded.get("first") == current["first"]
-    if same:
-        log.warning(
-            "%s was mapped from %s; resuming with the same frames from %s",
-            ckpt,
-            recorded["path"],
-            current["path"],
-        )
-        return
-    raise DataError(
-        f"{ckpt} was mapped from {recorded['path']} ({recorded.get('frames')} frames, first "
-        f"{recorded.get('first')!r}), not from {current['path']} ({current['frames']} frames, first "
-        f"{current['first']!r}): resume with the same --data, or map the other sequence into a new --out"
-    )

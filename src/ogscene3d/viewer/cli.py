@@ -250,6 +250,7 @@ def _start_live(args: argparse.Namespace):
     from ..config import load_config
     from ..datasets import make_synthetic_scene, open_dataset
     from ..mapping.mapper import Mapper
+    from ..mapping.source import dataset_source, record_data
     from .app import LiveViewer
     from .live import LiveSession
 
@@ -279,10 +280,13 @@ def _start_live(args: argparse.Namespace):
             s.pose_noise,
             progress=True,
         )
-    ds = open_dataset(data, segments_dir=args.segments, max_frames=args.max_frames, config=cfg.data)
+    if data is not None or cfg.data.path is not None:  # a saved run records its data, as `run` does
+        record_data(cfg, data if data is not None else cfg.data.path, args.segments)
+    ds = open_dataset(max_frames=args.max_frames, config=cfg.data)
     if len(ds) == 0:
         raise DataError(f"{data}: the dataset has no frames")
     mapper = Mapper(cfg, cfg.device)
+    mapper.source = dataset_source(cfg, ds)
 
     up = args.up or _up_from_config(cfg)
     viewer = LiveViewer(

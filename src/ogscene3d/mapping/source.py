@@ -1,0 +1,73 @@
+"""What a run's frames come from, recorded the same way by ``run``, ``run-batch`` and the live viewer: in
+``config.yaml`` (``eval`` finds the ground truth there, ``run --resume`` the frames) and in the checkpoint
+(a resume refuses another sequence's frames)."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..atomic import atomic_write_text, remove_stale_temps
+from ..config import Config, config_to_dict
+from ..errors import DataError
+
+log = logging.getLogger(__name__)
+
+
+def record_data(cfg: Config, data: str | Path, segments_dir: str | Path | None = None) -> None:
+    """Set ``cfg.data.path`` (and ``segments_dir`` when given) to absolute paths."""
+    cfg.data.path = str(Path(data).resolve())
+    if segments_dir is not None:
+        cfg.data.segments_dir = str(Path(segments_dir).resolve())
+
+
+def dataset_source(cfg: Config, ds) -> dict:
+    """The identity of the frames of ``ds`` (an opened dataset of ``cfg.data``), for ``Mapper.source``."""
+    K = [round(float(v), 4) for v in np.asarray(ds.K).reshape(-1)]
+    return {"path": cfg.data.path, "frames": len(ds), "first": ds.records[0].name, "K": K}
+
+
+RUN_FILES = ("map.npz", "gaussians.ply", "graph.json", "timings.json", "config.yaml", "traj.txt")
+
+
+def remove_run_temps(out: Path) -> None:
+    """Remove the temporary files that a killed run's writes left in ``out``."""
+    for name in RUN_FILES:
+        for tmp in remove_stale_temps(out / name):
+            log.info("removed %s, a killed write's leftover", tmp)
+
+
+def start_run_dir(out: Path, cfg: Config) -> None:
+    """Before the first frame (after a resume was accepted): write the config with the data it records, so
+    that a run stopped before its end can be resumed with its settings."""
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "config.yaml", yaml.safe_dump(config_to_dict(cfg), sort_keys=False))
+
+
+def check_same_source(ckpt: Path, recorded: dict, current: dict) -> None:
+    """Refuse to resume a map with frames of another sequence or camera; a moved dataset (same frames) is
+    fine."""
+    if recorded.get("K") is not None and not np.allclose(recorded["K"], current["K"], atol=1e-3):
+        raise DataError(
+            f"{ckpt} was mapped with intrinsics {recorded['K']}, these frames have {current['K']} (another "
+            "camera or image size): map them into a new --out"
+        )
+    if not recorded or recorded.get("path") == current["path"]:
+        return
+    same = recorded.get("frames") == current["frames"] and recorded.get("first") == current["first"]
+    if same:
+        log.warning(
+            "%s was mapped from %s; resuming with the same frames from %s",
+            ckpt,
+            recorded["path"],
+            current["path"],
+        )
+        return
+    raise DataError(
+        f"{ckpt} was mapped from {recorded['path']} ({recorded.get('frames')} frames, first "
+        f"{recorded.get('first')!r}), not from {current['path']} ({current['frames']} frames, first "
+        f"{current['first']!r}): resume with the same --data, or map the other sequence into a new --out"
+    )
