@@ -15,6 +15,7 @@ from typing import Any
 
 import yaml
 
+from .atomic import atomic_write_text
 from .errors import ConfigError
 
 
@@ -400,4 +401,5 @@ def config_to_dict(cfg: Any) -> dict:
 
 
 def save_config(cfg: Config, path: str | Path) -> None:
-    Path(path).write_text(yaml.safe_dump(config_to_dict(cfg), sort_keys=False))
+    """Write ``cfg`` as YAML (``load_config`` reads it back), atomically."""
+    atomic_write_text(path, yaml.safe_dump(config_to_dict(cfg), sort_keys=False))

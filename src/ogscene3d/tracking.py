@@ -78,7 +78,7 @@ from __future__ import annotations
 import logging
 import math
 import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -801,17 +801,25 @@ def track_sequence(
         infos.append(tracker.last)
     if not raw:
         raise OGSceneError("track: no frames given")
-    first = next((p for p in raw if p is not None), None)
-    if first is None:
+    poses = hold_last_good(raw)
+    if not poses:
         raise OGSceneError(f"track: none of the {len(raw)} frames could be tracked ({infos[0].reason})")
-    poses: list[np.ndarray] = []
-    held = first
-    for p in raw:
-        if p is not None:
-            held = p
-        poses.append(held.copy())
     valid = np.array([p is not None for p in raw], dtype=bool)
     return TrackResult(poses, valid, infos)
+
+
+def hold_last_good(poses: Sequence[np.ndarray | None]) -> list[np.ndarray]:
+    """Every pose, an untracked one (None) replaced by the last good pose before it (by the first good one
+    before any); [] when none is good. One pose per frame, as trajectory files and ATE need them."""
+    held = next((p for p in poses if p is not None), None)
+    if held is None:
+        return []
+    out = []
+    for p in poses:
+        if p is not None:
+            held = p
+        out.append(np.array(held, dtype=np.float64))
+    return out
 
 
 def track(
@@ -912,13 +920,9 @@ def run(args: Any) -> int:
     seconds = time.perf_counter() - t0
     if not poses:
         raise OGSceneError(f"track: the dataset at {ds.root} yielded no frames")
-    first = next((q for q in poses if q is not None), None)
-    if first is None:
+    filled = hold_last_good(poses)
+    if not filled:
         raise OGSceneError(f"track: none of the {len(poses)} frames could be tracked ({rows[0]['reason']})")
-    held, filled = first, []
-    for q in poses:
-        held = q if q is not None else held
-        filled.append(held)
     valid = [q is not None for q in poses]
     summary: dict[str, Any] = {
         "frames": len(poses),

@@ -37,10 +37,9 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import yaml
 
 from ..atomic import atomic_write_text
-from ..config import Config, config_to_dict
+from ..config import Config, save_config
 from ..device import resolve_device
 from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame, implausible_median_depth
@@ -580,8 +579,6 @@ class Mapper:
         given (exact SAM boundaries); without segments, the map's rendered labels. A detector's class
         ``names`` of segments vote, by area, for the name of the scene label each segment was given."""
         try:
-            if self._graph is None:
-                self._graph = self._new_graph()
             name_votes: dict[int, dict[str, int]] = {}
             if segments is not None and seg_to_label is not None:
                 ids, labs = seg_to_label
@@ -795,20 +792,15 @@ class Mapper:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         self.map.export_ply(out / "gaussians.ply")
-        atomic_write_text(out / "config.yaml", yaml.safe_dump(config_to_dict(self.config), sort_keys=False))
+        save_config(self.config, out / "config.yaml")
         timings = self.timings.as_dict()
         timings["device"] = str(self.device)
         timings["ablation"] = self.cfg.ablation
         atomic_write_text(out / "timings.json", json.dumps(timings, indent=2))
-        tracked = [p for p in self.trajectory if p is not None]
-        if tracked:
-            from ..tracking import trajectory_text
+        from ..tracking import hold_last_good, trajectory_text
 
-            # as `ogscene3d track` writes it: one pose per frame read, an untracked one repeats the last
-            held, filled = tracked[0], []
-            for p in self.trajectory:
-                held = p if p is not None else held
-                filled.append(held)
+        filled = hold_last_good(self.trajectory)  # as `ogscene3d track` writes it: one pose per frame read
+        if filled:
             atomic_write_text(out / "traj.txt", trajectory_text(filled))
         self._save_graph(out / "graph.json")
         # last: a finalized checkpoint tells --resume there is nothing left to do, so the other outputs must

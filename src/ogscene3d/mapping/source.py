@@ -8,10 +8,9 @@ import logging
 from pathlib import Path
 
 import numpy as np
-import yaml
 
-from ..atomic import atomic_write_text, remove_stale_temps
-from ..config import Config, config_to_dict
+from ..atomic import remove_stale_temps
+from ..config import Config, save_config
 from ..errors import DataError
 
 log = logging.getLogger(__name__)
@@ -44,7 +43,7 @@ def start_run_dir(out: Path, cfg: Config) -> None:
     """Before the first frame (after a resume was accepted): write the config with the data it records, so
     that a run stopped before its end can be resumed with its settings."""
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "config.yaml", yaml.safe_dump(config_to_dict(cfg), sort_keys=False))
+    save_config(cfg, out / "config.yaml")
 
 
 def check_same_source(ckpt: Path, recorded: dict, current: dict) -> None:
