@@ -10,6 +10,7 @@ from ogscene3d.mapping.local import (
     fill_unlabeled,
     group_top2,
     rescale_sam_scores,
+    update_confidences,
 )
 
 
@@ -155,6 +156,30 @@ def test_eq5_inconsistent_matches_lose_confidence(device):
     torch.testing.assert_close(res.r.cpu(), torch.tensor([0.1]))
     torch.testing.assert_close(conf[:10].cpu(), torch.full((10,), 0.4 + 0.75 * p * 0.6))
     torch.testing.assert_close(conf[10:].cpu(), torch.tensor([0.8 - 0.75 * p * 0.8]))
+
+
+
+def test_eq5_deferred_runs_once_for_the_cases_as_they_stand(device):
+    """eq5=False leaves confidences alone; update_confidences then updates the matches of every segment
+    that is case (ii) by then (a caller may turn an ambiguous one into a matched one first), once."""
+    means, labels, conf = _scene(device)
+    eps = torch.tensor([0.0, 0.0, 0.005])
+    probes = torch.cat([_patch(0.0, n=2) + eps, _patch(1.0, n=2) + eps]).to(device)
+    seg = torch.zeros(8, dtype=torch.long, device=device)
+    pconf = torch.full((8,), 0.9, device=device)
+    res = associate_segments(
+        probes, seg, pconf, 1, means, labels, conf, _Labels(10), k=1, radius=0.02, eq5=False
+    )
+    assert res.seg_case.tolist() == [CASE_AMBIGUOUS] and res.updated is None and torch.all(conf == 0.6)
+    # as the mapper's merge does: labels 3 and 4 become one, the segment matched with p = 1
+    labels[labels == 4] = 3
+    res.seg_case[0], res.seg_labels[0], res.p[0] = CASE_MATCHED, 3, 1.0
+    upd = update_confidences(res, pconf, labels, conf)
+    assert sorted(upd.tolist()) == [0, 1, 4, 5, 16, 17, 20, 21]
+    torch.testing.assert_close(conf[upd].cpu(), torch.full((8,), 0.6 + 0.9 * 0.4))
+    assert res.counts()["conf_updates"] == 8
+    with pytest.raises(RuntimeError, match="already ran"):
+        update_confidences(res, pconf, labels, conf)
 
 
 def test_naive_takes_majority_without_ambiguity_test(device):

@@ -149,3 +149,24 @@ def test_low_scored_segments_do_not_merge(device):
     m.process(_frame(0, first))
     m.process(_frame(1, _halves(), {1: 0.9, 2: 0.97}))  # below mapping.merge_min_score (0.95)
     assert "labels_merged" not in m.timings.as_dict()["counts"]
+
+
+def test_a_merged_segment_gets_the_eq5_update_of_a_matched_one(device):
+    """The merge turns the left segment into case (ii) after the association: its matches must get Eq. 5
+    like the right segment's, with p(m) counted over both merged labels (1 here, not 1/2)."""
+    first = _halves()
+    first[H // 2 :, : W // 2] = 3
+    m = _mapper(device)
+    m.process(_frame(0, first))
+    before = m.map.confidences.clone()
+    n0 = len(m.map)
+    m.process(_frame(1, _halves()))  # same pose: every probe lies on a Gaussian of frame 0
+    assert m.timings.as_dict()["counts"]["segments_merged"] == 1
+    c_sam = 0.5 + 0.5 * (0.97 - 0.88) / 0.12  # segment score 0.97 rescaled into [0.5, 1]
+    left = m.map.means[:n0, 0].cpu() < 0
+    conf = m.map.confidences[:n0].cpu()
+    want = before.cpu() + c_sam * 1.0 * (1 - before.cpu())
+    assert left.any() and (~left).any()
+    torch.testing.assert_close(conf[left], want[left])  # the merged segment: left unchanged before the fix
+    torch.testing.assert_close(conf[~left], want[~left])  # the segment matched in the first place
+    assert m.timings.as_dict()["counts"]["segments_conf_updates"] == n0

@@ -2,7 +2,7 @@
 optimization, geometry/appearance optimization, global refinement, long-term optimization, the Mapper."""
 
 from .keyframes import KeyframeSelector
-from .local import associate_segments, eq5_update, rescale_sam_scores
+from .local import associate_segments, eq5_update, rescale_sam_scores, update_confidences
 from .longterm import MemoryBuffer, eq16_update
 from .mapper import ABLATIONS, Mapper
 from .neighbors import any_within, count_within, knn
@@ -22,4 +22,5 @@ __all__ = [
     "global_refinement",
     "knn",
     "rescale_sam_scores",
+    "update_confidences",
 ]

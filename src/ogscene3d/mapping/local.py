@@ -41,6 +41,12 @@ conf' = conf - c_sam * p(m) * conf. Matches of case-(i) and case-(iii) segments 
 ``probe_updates`` can restrict the updates to some probes: the mapper passes the probes off their
 segment's boundary when ``mapping.eq5_skip_edges`` is set (see config.py for the trade-off).
 
+The update is its own step (``update_confidences``) because the mapper's duplicate-label merge
+(``merge.py``) runs between the association and Eq. 5: it turns some case-(i) segments into case (ii),
+and they must be updated like any other case-(ii) segment, in the same single pass (a Gaussian is updated
+once, from its nearest case-(ii) probe, whichever segment that probe belongs to). ``associate_segments``
+runs both steps unless told not to (``eq5=False``).
+
 The naive baseline (ablation) takes l*_m when the segment has any match and a new label otherwise, with
 no ambiguity test and no confidence updates.
 """
@@ -173,7 +179,12 @@ class Association:
     p: torch.Tensor  # [S] float32 spatial-semantic coherence
     top_label: torch.Tensor  # [S] int64 l*_m (-1 when no match)
     second_label: torch.Tensor  # [S] int64 the second most frequent matched label (-1 when none)
-    updated: torch.Tensor  # [U] int64 scene Gaussian indices whose confidence was updated (Eq. 5)
+    probe_seg: torch.Tensor  # [P] int64 segment index of each probe
+    match_labels: torch.Tensor  # [P,k] int64 scene label of each probe's KNN matches (-1 = no match)
+    nearest: torch.Tensor  # [P] int64 scene index of each probe's nearest labeled match (-1 = none)
+    nearest_dist: torch.Tensor  # [P] float32 its distance (inf = none)
+    # [U] int64 scene Gaussian indices whose confidence was updated (Eq. 5; set by update_confidences)
+    updated: torch.Tensor | None = None
     filled: int = 0  # unlabeled scene Gaussians that took a segment's label (set by the caller's fill)
 
     def counts(self) -> dict[str, int]:
@@ -181,7 +192,7 @@ class Association:
             "ambiguous": int((self.seg_case == CASE_AMBIGUOUS).sum()),
             "matched": int((self.seg_case == CASE_MATCHED).sum()),
             "novel": int((self.seg_case == CASE_NOVEL).sum()),
-            "conf_updates": int(self.updated.numel()),
+            "conf_updates": 0 if self.updated is None else int(self.updated.numel()),
             "filled": self.filled,
         }
 
@@ -204,6 +215,7 @@ def associate_segments(
     probe_radius: torch.Tensor | None = None,
     novel_before_ambiguous: bool = True,
     probe_updates: torch.Tensor | None = None,
+    eq5: bool = True,
 ) -> Association:
     """Associate segments with the scene and update scene confidences in place (Eq. 5).
 
@@ -215,6 +227,8 @@ def associate_segments(
     used instead of ``radius`` where it is larger (matches the sampling density at the probe's depth).
     ``novel_before_ambiguous``: test case (iii) before case (i) (see the module docstring).
     ``probe_updates`` [P] bool (optional): the probes that may make Eq. 5 updates (default all).
+    ``eq5=False`` leaves ``scene_conf`` alone: the caller runs ``update_confidences`` once it has settled
+    the cases (the mapper merges duplicate labels first).
     """
     dev = probe_means.device
     S = int(num_segments)
@@ -242,11 +256,7 @@ def associate_segments(
     pair_seg = probe_seg[:, None].expand_as(idx)[valid]
     top1, c1, top2, c2 = group_top2(pair_seg, match_lab[valid], S)
     r = torch.where(c1 > 0, c2.float() / c1.clamp(min=1).float(), torch.zeros(S, device=dev))
-    # p(m): fraction of the segment's probes whose own matched label is l*_m
-    hat = row_majority(match_lab, valid)
-    agree = (hat == top1[probe_seg]) & (hat >= 0)
-    size = torch.bincount(probe_seg, minlength=S).float()
-    p = torch.bincount(probe_seg, weights=agree.float(), minlength=S) / size.clamp(min=1)
+    p = coherence(match_lab, probe_seg, top1, S)
 
     if naive:
         case = torch.where(c1 > 0, CASE_MATCHED, CASE_NOVEL)
@@ -261,27 +271,62 @@ def associate_segments(
     if novel.numel():
         seg_labels[novel] = new_labels(int(novel.numel())).to(dev, torch.int32)
 
-    updated = torch.zeros(0, dtype=torch.int64, device=dev)
-    if not naive:
-        # Eq. 5: the scene Gaussians that are the nearest match of a probe of a case-(ii) segment (the
-        # probe's correspondence); each is updated once, from its nearest such probe. The other k-1 matches
-        # count towards c1/c2 but are not correspondences: near object boundaries they mostly belong to
-        # the neighbouring object and would lower its confidence at every keyframe.
-        use = valid[:, 0] & matched[probe_seg]
-        if probe_updates is not None:
-            use &= probe_updates
-        pj = scene_idx[use, 0]
-        pd = dist[use, 0]
-        pp = torch.nonzero(use).squeeze(1)
-        if pj.numel():
-            order = torch.argsort(pd, stable=True)
-            order = order[torch.argsort(pj[order], stable=True)]
-            pj, pp = pj[order], pp[order]
-            first = torch.ones_like(pj, dtype=torch.bool)
-            first[1:] = pj[1:] != pj[:-1]
-            pj, pp = pj[first], pp[first]
-            seg = probe_seg[pp]
-            consistent = scene_labels[pj].long() == seg_labels[seg].long()
-            scene_conf[pj] = eq5_update(scene_conf[pj], probe_conf[pp], p[seg], consistent)
-            updated = pj
-    return Association(seg_labels, case, r, p, top1, top2, updated)
+    res = Association(seg_labels, case, r, p, top1, top2, probe_seg, match_lab, scene_idx[:, 0], dist[:, 0])
+    if naive:
+        res.updated = torch.zeros(0, dtype=torch.int64, device=dev)
+    elif eq5:
+        update_confidences(res, probe_conf, scene_labels, scene_conf, probe_updates)
+    return res
+
+
+def coherence(
+    match_labels: torch.Tensor, probe_seg: torch.Tensor, top_label: torch.Tensor, num_segments: int
+) -> torch.Tensor:
+    """p(m) of Eq. 4 [S]: the fraction of segment m's probes whose own KNN-matched label (the majority of
+    its matches ``match_labels`` [P,k], -1 = none) is l*_m = ``top_label[m]``; |G_m| counts every probe."""
+    hat = row_majority(match_labels, match_labels >= 0)
+    agree = (hat == top_label[probe_seg]) & (hat >= 0)
+    size = torch.bincount(probe_seg, minlength=num_segments).float()
+    return torch.bincount(probe_seg, weights=agree.float(), minlength=num_segments) / size.clamp(min=1)
+
+
+def update_confidences(
+    assoc: Association,
+    probe_conf: torch.Tensor,
+    scene_labels: torch.Tensor,
+    scene_conf: torch.Tensor,
+    probe_updates: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """Eq. 5 for the case-(ii) segments of ``assoc`` (its ``seg_case``, ``seg_labels`` and ``p`` as they
+    stand now): ``scene_conf`` [N] is updated in place and ``assoc.updated`` set. Call it once per keyframe,
+    after the cases are final; a second call would update the same Gaussians again. ``probe_conf`` [P] is
+    the probes' rescaled SAM confidence, ``probe_updates`` [P] bool (optional) the probes that may update.
+    Returns the indices of the updated scene Gaussians."""
+    if assoc.updated is not None:
+        raise RuntimeError("update_confidences: Eq. 5 already ran for this association")
+    probe_seg = assoc.probe_seg
+    matched = assoc.seg_case == CASE_MATCHED
+    # the scene Gaussians that are the nearest match of a probe of a case-(ii) segment (the probe's
+    # correspondence); each is updated once, from its nearest such probe. The other k-1 matches count
+    # towards c1/c2 but are not correspondences: near object boundaries they mostly belong to the
+    # neighbouring object and would lower its confidence at every keyframe.
+    use = (assoc.nearest >= 0) & matched[probe_seg]
+    if probe_updates is not None:
+        use &= probe_updates
+    pj = assoc.nearest[use]
+    pd = assoc.nearest_dist[use]
+    pp = torch.nonzero(use).squeeze(1)
+    updated = torch.zeros(0, dtype=torch.int64, device=probe_seg.device)
+    if pj.numel():
+        order = torch.argsort(pd, stable=True)
+        order = order[torch.argsort(pj[order], stable=True)]
+        pj, pp = pj[order], pp[order]
+        first = torch.ones_like(pj, dtype=torch.bool)
+        first[1:] = pj[1:] != pj[:-1]
+        pj, pp = pj[first], pp[first]
+        seg = probe_seg[pp]
+        consistent = scene_labels[pj].long() == assoc.seg_labels[seg].long()
+        scene_conf[pj] = eq5_update(scene_conf[pj], probe_conf[pp], assoc.p[seg], consistent)
+        updated = pj
+    assoc.updated = updated
+    return updated

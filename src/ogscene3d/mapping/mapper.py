@@ -4,10 +4,11 @@ Per keyframe:
 1. segments (the frame's precomputed ones, else the optional segmenter; none -> geometry only);
 2. render the map at the frame's pose (alpha + expected depth) to find the pixels it does not explain;
 3. probes: grid-subsampled back-projected pixels per segment (``init.make_probes``);
-4. local 3D optimization: KNN association, r(m)/p(m), three cases, Eq. 5 (``local.associate_segments``);
+4. local 3D optimization: KNN association, r(m)/p(m), three cases (``local.associate_segments``);
    beyond the paper, an ambiguous confident segment that holds the whole visible extent of its two labels
-   merges them (``merge.py``, ``mapping.merge_duplicates``); unlabeled Gaussians under a now-labeled
-   segment take its label (``mapping.fill_unlabeled``);
+   merges them and becomes case (ii) (``merge.py``, ``mapping.merge_duplicates``); then Eq. 5 for every
+   case-(ii) segment, merged ones included (``local.update_confidences``); unlabeled Gaussians under a
+   now-labeled segment take its label (``mapping.fill_unlabeled``);
 5. the unexplained probes become Gaussians with their segment's label and rescaled SAM confidence
    (unlabeled Gaussians, from ambiguous segments or pixels outside every segment, get confidence 0, so
    the individual refinement may label them: ``mapping.refine_unlabeled``);
@@ -46,7 +47,14 @@ from ..frame import Frame, implausible_median_depth
 from ..gaussians import GaussianMap, corrupt_npz_message
 from .init import make_probes
 from .keyframes import KeyframeSelector
-from .local import CASE_AMBIGUOUS, CASE_MATCHED, associate_segments, fill_unlabeled
+from .local import (
+    CASE_AMBIGUOUS,
+    CASE_MATCHED,
+    associate_segments,
+    coherence,
+    fill_unlabeled,
+    update_confidences,
+)
 from .longterm import MemoryBuffer, MemoryEntry, label_edges, longterm_view_update
 from .merge import duplicate_label_pairs, merge_labels, relabel, visible_pixels
 from .optimize import View, optimize_map
@@ -394,18 +402,24 @@ class Mapper:
                     tau_p=cfg.tau_p,
                     naive=self.naive,
                     novel_before_ambiguous=cfg.novel_before_ambiguous,
-                    probe_updates=(
-                        self._inner_probes(segments, probes.pix[sel]) if cfg.eq5_skip_edges else None
-                    ),
                     # a probe's log-scale is log(grid spacing at its depth): see init.make_probes
                     probe_radius=(
                         torch.exp(probes.log_scales[sel]) * cfg.knn_radius_spacing
                         if cfg.knn_radius_spacing > 0
                         else None
                     ),
+                    eq5=False,  # below, once the merge has turned some ambiguous segments into matched ones
                 )
                 if self._merging(segments):
                     self._merge_duplicates(frame, segments, scores, probes, res)
+                if not self.naive:
+                    update_confidences(
+                        res,
+                        probes.conf[sel],
+                        self.map.labels,
+                        self.map.confidences,
+                        self._inner_probes(segments, probes.pix[sel]) if cfg.eq5_skip_edges else None,
+                    )
                 if cfg.fill_unlabeled:
                     pconf = probes.conf[sel]
                     res.filled = fill_unlabeled(
@@ -503,7 +517,8 @@ class Mapper:
         self, frame: Frame, segments: np.ndarray, scores: dict[int, float], probes, res
     ) -> None:
         """Merge scene labels that one confident ambiguous segment shows to be one object (``merge.py``);
-        the segment then takes the merged label (case ii), and this keyframe's segment labels follow."""
+        the segment then takes the merged label (case ii), and this keyframe's segment labels follow. Runs
+        before Eq. 5, so that the merged segments' matches get their confidence update too."""
         cfg = self.cfg
         seg_ids = probes.seg_ids
         score = torch.tensor(
@@ -545,6 +560,11 @@ class Mapper:
             merged = amb[res.top_label[amb] == res.second_label[amb]]
             res.seg_labels[merged] = res.top_label[merged].to(torch.int32)
             res.seg_case[merged] = CASE_MATCHED
+            # p(m) as Eq. 5 must see it now: the probes on either merged label agree with l*_m (a merged
+            # segment's p counted only one of the two; a matched one's may have had probes on a dropped label)
+            res.match_labels = relabel(res.match_labels, mapping)
+            p = coherence(res.match_labels, res.probe_seg, res.top_label, int(res.seg_case.numel()))
+            res.p = torch.where(res.seg_case == CASE_MATCHED, p, res.p)
             self.timings.add("labels_merged", len(mapping))
             self.timings.add("segments_merged", int(merged.numel()))
 
