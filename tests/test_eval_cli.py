@@ -220,9 +220,10 @@ def test_eval_cli_on_a_generated_synthetic_scene(tmp_path, monkeypatch, capsys):
     run = tmp_path / "run"
     _run_from_ground_truth(gt, run)
     argv = ["eval", str(run), "--gt", str(scene_dir), "--views", "1", "--protocol", "both"]
-    assert _main(argv, monkeypatch) == 0
+    assert _main(argv + ["--cg-voxel-size", "0"], monkeypatch) == 0
     report = json.loads((run / "metrics.json").read_text())
-    # Every Gaussian sits on its own GT point: exact under ConceptGraphs' nearest-point protocol; the
+    # Every Gaussian sits on its own GT point: exact under ConceptGraphs' nearest-point protocol (not
+    # resampled: a voxel's mean can lie nearer another class, e.g. the wall behind a picture); the
     # HOV-SG k=5 vote blurs thin objects (doors, pictures) into the wall behind them.
     assert report["semantic_3d"]["conceptgraphs"]["miou"] == pytest.approx(1.0)
     assert 0.7 < report["semantic_3d"]["hovsg"]["miou"] < 1.0
@@ -336,6 +337,54 @@ def test_unlabelled_gaussians_are_misses_under_conceptgraphs_only(scene, tmp_pat
     _set_gaussians(run, label=np.full(15, -1))
     with pytest.raises(DataError, match="no labelled Gaussians"):
         evaluate_run(run, scene_dir, protocols=["conceptgraphs"])
+
+
+def test_void_gt_points_are_hovsg_false_positives(scene):
+    """A GT point of a class id absent from the table is void; HOV-SG counts the class predicted on it
+    as a false positive (its ignore list holds -1 like wall), ConceptGraphs skips it."""
+    run, scene_dir = scene
+    ply = scene_dir / "gt" / "points.ply"
+    v = PlyData.read(str(ply))["vertex"].data.copy()
+    v["instance"][14] = 99  # the wall point at x = 24, beside wall Gaussians: no instance, no class
+    _write_ply(ply, v)
+    res = evaluate_run(run, scene_dir, protocols=["hovsg", "conceptgraphs"], ignore=[], gt_points="all")
+    h = res.semantic["hovsg"]
+    np.testing.assert_allclose(h.iou, [1.0, 1.0, 4 / 5])  # the k=5 vote outvotes the stray chair label
+    assert res.report["semantic_3d"]["hovsg"]["void_false_positives"] == 1
+    c = res.semantic["conceptgraphs"]
+    assert c.iou[2] == 1.0 and c.support[2] == 4
+
+
+def test_eval_cli_conceptgraphs_voxel_size(scene, monkeypatch, capsys):
+    run, scene_dir = scene
+    argv = [
+        "eval",
+        str(run),
+        "--gt",
+        str(scene_dir),
+        "--protocol",
+        "conceptgraphs",
+        "--no-plots",
+        "--views",
+        "0",
+    ]
+
+    def counted(extra):
+        assert _main(argv + extra, monkeypatch) == 0
+        block = json.loads((run / "metrics.json").read_text())["semantic_3d"]["conceptgraphs"]
+        return block["protocol"], sum(c["support"] for c in block["per_class"])
+
+    # The Gaussians are 1 m apart: the default 2.5 cm voxels keep every one of them.
+    proto, n = counted([])
+    assert "0.025 m voxel" in proto and n == 15
+    proto, n = counted(["--cg-voxel-size", "0"])
+    assert "not resampled" in proto and n == 15
+    # 3 m voxels merge each label's neighbours (x = 0..4 chair, 11..14 table, 20..24 wall).
+    proto, n = counted(["--cg-voxel-size", "3"])
+    assert "3 m voxel" in proto and n < 15
+    capsys.readouterr()
+    assert _main(argv + ["--cg-voxel-size", "-1"], monkeypatch) == 2
+    assert "--cg-voxel-size" in capsys.readouterr().err
 
 
 def test_unknown_ignore_names_are_warned_and_reported(scene, monkeypatch, capsys, caplog):

@@ -9,6 +9,7 @@ from ogscene3d.eval.metrics import (
     confusion_matrix,
     format_metrics_table,
     segmentation_metrics,
+    void_predictions,
     warn_unknown_ignore,
 )
 
@@ -76,6 +77,25 @@ def test_ignore_drop_versus_false_positive():
     assert fp.miou == pytest.approx(0.75)
     assert fp.fmiou == pytest.approx((2 * 0.5 + 2 * 1.0) / 4)
     assert fp.macc == 1.0  # recall is unaffected by false positives
+
+
+def test_void_predictions_are_false_positives_only_where_ignored_points_are():
+    names = ["chair", "table"]
+    gt = np.array([0, 0, 1, 1, -1, -1, -1])
+    pred = np.array([0, 0, 1, 1, 0, 1, -1])  # void points predicted chair, table, no class
+    cm = confusion_matrix(gt, pred, 2)
+    void = void_predictions(gt, pred, 2)
+    assert void.tolist() == [1, 1]
+    fp = segmentation_metrics(cm, names, ignored_gt_points="false_positive", void_predicted=void)
+    np.testing.assert_allclose(fp.iou, [2 / 3, 2 / 3])
+    assert fp.predicted.tolist() == [3, 3] and fp.support.tolist() == [2, 2]
+    assert fp.macc == 1.0 and fp.fmiou == pytest.approx(2 / 3)
+    assert fp.to_dict()["void_false_positives"] == 2
+    assert "void GT points predicted as a class (false positives): 2" in format_metrics_table(fp)
+    drop = segmentation_metrics(cm, names, ignored_gt_points="drop", void_predicted=void)
+    assert drop.miou == 1.0 and drop.to_dict()["void_false_positives"] == 0
+    with pytest.raises(ValueError, match="void_predicted"):
+        segmentation_metrics(cm, names, void_predicted=np.array([1, 2, 3]))
 
 
 def test_ignore_by_index_and_unknown_names_tolerated():

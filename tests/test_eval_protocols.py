@@ -5,6 +5,7 @@ import pytest
 import torch
 
 from ogscene3d.eval.protocols import (
+    CONCEPTGRAPHS_VOXEL_SIZE,
     conceptgraphs_protocol,
     evaluate_semantic_3d,
     hovsg_protocol,
@@ -13,6 +14,7 @@ from ogscene3d.eval.protocols import (
     nearest_neighbors,
     novel_view_metrics,
     rendered_view_metrics,
+    voxel_resample,
 )
 
 
@@ -245,5 +247,112 @@ def test_protocols_match_brute_force_with_small_chunks(monkeypatch):
     h_ref, cg_ref = _brute_force_confusions(pred_pts, pred_cls, gt_pts, gt_cls, 4, 5)
     h = protocols.hovsg_protocol(pred_pts, pred_cls, gt_pts, gt_cls, names, ignore=())
     np.testing.assert_array_equal(h.confusion, h_ref)
-    cg = protocols.conceptgraphs_protocol(pred_pts, pred_cls, gt_pts, gt_cls, names, ignore=())
+    cg = protocols.conceptgraphs_protocol(pred_pts, pred_cls, gt_pts, gt_cls, names, ignore=(), voxel_size=0)
     np.testing.assert_array_equal(cg.confusion, cg_ref)
+
+
+def _hovsg_reference(pred, gt, ignore):
+    """HOV-SG's metric.py formulas (mean_IU, frequency_weighted_IU, mean_accuracy, pixel_accuracy), restated
+    on 1-D label arrays; ``ignore`` holds -1 (void) like HOV-SG's list."""
+    gt_cls = [c for c in np.unique(gt) if c not in ignore]
+    iou = {}
+    for c in np.union1d(np.unique(pred), np.unique(gt)):
+        n_pred, n_gt = (pred == c).sum(), (gt == c).sum()
+        if c in ignore or n_pred == 0 or n_gt == 0:
+            continue
+        tp = ((pred == c) & (gt == c)).sum()
+        iou[c] = tp / (n_gt + n_pred - tp)  # n_pred counts every point, void and ignored ones included
+    miou = sum(iou.values()) / len(gt_cls)
+    n_scored = gt.size - sum((gt == c).sum() for c in ignore)
+    fmiou = sum((gt == c).sum() * v for c, v in iou.items()) / n_scored
+    recall = [((pred == c) & (gt == c)).sum() / (gt == c).sum() for c in gt_cls]
+    oacc = sum(((pred == c) & (gt == c)).sum() for c in gt_cls) / sum((gt == c).sum() for c in gt_cls)
+    return miou, fmiou, np.mean(recall), oacc
+
+
+def test_hovsg_matches_its_metric_code_with_void_and_ignored_points():
+    # k = 1 and each GT point's own prediction right beside it: the vote is the prediction itself.
+    rng = np.random.default_rng(7)
+    gt_pts = _line(np.arange(400))
+    gt_cls = rng.integers(-1, 5, 400)  # -1 = void; class 4 = wall, ignored
+    pred_cls = np.where(rng.random(400) < 0.6, gt_cls, rng.integers(0, 6, 400))  # 5 never in the GT
+    pred_cls[gt_cls == -1] = rng.integers(0, 5, (gt_cls == -1).sum())  # void points get a class
+    names = ["chair", "table", "lamp", "sofa", "wall", "bed"]
+    m = hovsg_protocol(gt_pts + [0.1, 0, 0], pred_cls, gt_pts, gt_cls, names, ignore=["wall"], k=1)
+    ref = _hovsg_reference(pred_cls, gt_cls, ignore=[-1, 4])
+    np.testing.assert_allclose([m.miou, m.fmiou, m.macc, m.overall_acc], ref)
+    assert m.to_dict()["void_false_positives"] == (gt_cls == -1).sum()
+
+
+def test_hovsg_void_gt_points_are_false_positives_unless_dropped():
+    gt_pts = _line([0, 1, 2, 3])
+    gt_cls = np.array([0, 0, -1, 1])  # x = 2 is void
+    pred_cls = np.array([0, 0, 0, 1])  # its nearest prediction says chair
+    fp = hovsg_protocol(gt_pts + [0.1, 0, 0], pred_cls, gt_pts, gt_cls, NAMES, ignore=(), k=1)
+    np.testing.assert_allclose(fp.iou, [2 / 3, 1.0])
+    assert fp.predicted.tolist() == [3, 1] and fp.support.tolist() == [2, 1]
+    drop = hovsg_protocol(
+        gt_pts + [0.1, 0, 0], pred_cls, gt_pts, gt_cls, NAMES, ignore=(), k=1, ignored_gt_points="drop"
+    )
+    assert drop.miou == 1.0 and drop.predicted.tolist() == [2, 1]
+
+
+def test_voxel_resample_groups_by_label_and_voxel():
+    v = 0.1
+    pts = np.array([[0.0, 0, 0], [0.02, 0, 0], [0.04, 0, 0], [0.01, 0.01, 0], [0.5, 0, 0], [0.52, 0, 0]])
+    cls = np.array([0, 0, 1, -1, -1, -1])
+    labels = np.array([3, 3, 4, -1, -1, -1])  # labels 3 and 4 share the first voxel
+    out_pts, out_cls = voxel_resample(pts, cls, labels, voxel_size=v)
+    rows = sorted(zip(out_cls.tolist(), out_pts.round(6).tolist()))
+    # label 3: one point at its mean; label 4: its own point; unlabelled: one per voxel.
+    assert rows == [
+        (-1, [0.01, 0.01, 0.0]),
+        (-1, [0.51, 0.0, 0.0]),
+        (0, [0.01, 0.0, 0.0]),
+        (1, [0.04, 0.0, 0.0]),
+    ]
+    # Without labels the class stands for the label.
+    assert voxel_resample(pts, cls, None, voxel_size=v)[0].shape == (4, 3)
+    with pytest.raises(ValueError, match="voxel_size"):
+        voxel_resample(pts, cls, labels, voxel_size=0.0)
+
+
+def test_conceptgraphs_resampling_makes_the_score_density_invariant():
+    # A wrong "chair" blob at the table end of the line; then 40 more Gaussians in its voxel.
+    pts = np.concatenate([PRED_PTS, _line([8.5])])
+    cls = np.concatenate([PRED_CLS, [0]])
+    labels = np.where(cls == 0, 10, 11)
+    dense_pts = np.concatenate([pts, _line(8.5 + np.linspace(0, 0.01, 40))])
+    dense_cls = np.concatenate([cls, np.zeros(40, int)])
+    dense_labels = np.concatenate([labels, np.full(40, 10)])
+    sparse = conceptgraphs_protocol(pts, cls, GT_PTS, GT_CLS, NAMES, ignore=(), pred_labels=labels)
+    dense = conceptgraphs_protocol(
+        dense_pts, dense_cls, GT_PTS, GT_CLS, NAMES, ignore=(), pred_labels=dense_labels
+    )
+    np.testing.assert_array_equal(dense.confusion, sparse.confusion)
+    # chair: TP 4, FN 1 (4.1), FP 1 (8.5); table: TP 5, FN 1, FP 1.
+    np.testing.assert_allclose(sparse.iou, [4 / 6, 5 / 7])
+    assert f"{CONCEPTGRAPHS_VOXEL_SIZE:g} m voxel" in sparse.protocol
+    # voxel_size 0: every point counts, as before: the blob's 41 points are 41 false positives.
+    raw = conceptgraphs_protocol(
+        dense_pts, dense_cls, GT_PTS, GT_CLS, NAMES, ignore=(), pred_labels=dense_labels, voxel_size=0
+    )
+    np.testing.assert_allclose(raw.iou, [4 / 46, 5 / 47])
+    assert "not resampled" in raw.protocol
+    via = evaluate_semantic_3d(
+        dense_pts, dense_cls, GT_PTS, GT_CLS, NAMES, protocol="conceptgraphs", ignore=(),
+        pred_labels=dense_labels, voxel_size=0,
+    )  # fmt: skip
+    np.testing.assert_array_equal(via.confusion, raw.confusion)
+    with pytest.raises(ValueError, match="voxel_size"):
+        conceptgraphs_protocol(pts, cls, GT_PTS, GT_CLS, NAMES, voxel_size=-1.0)
+
+
+def test_conceptgraphs_resampling_keeps_labels_apart_in_one_voxel():
+    # Two scene labels on the same spot (both named chair) stay two points, as two ConceptGraphs
+    # objects keep their own clouds; the same points under one label make one.
+    pts = _line([0.0, 0.001, 5.0])
+    cls = np.array([0, 0, 1])
+    two = conceptgraphs_protocol(pts, cls, GT_PTS, GT_CLS, NAMES, ignore=(), pred_labels=np.array([1, 2, 3]))
+    one = conceptgraphs_protocol(pts, cls, GT_PTS, GT_CLS, NAMES, ignore=(), pred_labels=np.array([1, 1, 3]))
+    assert two.support.sum() == 3 and one.support.sum() == 2

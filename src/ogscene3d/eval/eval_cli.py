@@ -12,7 +12,7 @@ from ..atomic import atomic_write_text
 from ..errors import ConfigError, DataError, OGSceneError
 from .metrics import format_metrics_table
 from .plots import iou_bar_chart, write_png
-from .protocols import PROTOCOLS
+from .protocols import CONCEPTGRAPHS_VOXEL_SIZE, PROTOCOLS
 from .readers import find_ground_truth
 from .run_eval import evaluate_run
 from .trajectory import ate, read_trajectory
@@ -61,6 +61,14 @@ def add_parser(subparsers: Any) -> None:
     )
     p.add_argument("--classes", type=Path, default=None, help="class-name JSON for a bare labelled PLY")
     p.add_argument("--k", type=int, default=5, help="neighbours of the HOV-SG majority vote (default 5)")
+    p.add_argument(
+        "--cg-voxel-size",
+        type=float,
+        default=CONCEPTGRAPHS_VOXEL_SIZE,
+        help="metres; conceptgraphs resamples the Gaussians to one point per scene label and voxel, like "
+        f"ConceptGraphs' voxel-downsampled object clouds (default {CONCEPTGRAPHS_VOXEL_SIZE:g}, its "
+        "downsample_voxel_size; 0 = every Gaussian counts)",
+    )
     p.add_argument("--min-opacity", type=float, default=0.0, help="drop Gaussians below this opacity")
     p.add_argument(
         "--assoc-radius",
@@ -160,6 +168,8 @@ def _run(args: argparse.Namespace) -> int:
     ignore = None if args.ignore is None else [s.strip() for s in args.ignore.split(",") if s.strip()]
     if args.k < 1:
         raise ConfigError(f"--k must be >= 1, got {args.k}")
+    if not (math.isfinite(args.cg_voxel_size) and args.cg_voxel_size >= 0):
+        raise ConfigError(f"--cg-voxel-size must be >= 0 metres (0 = none), got {args.cg_voxel_size}")
     gt_path = args.gt
     if gt_path is None:
         gt_path = find_ground_truth(args.run_dir)
@@ -186,6 +196,7 @@ def _run(args: argparse.Namespace) -> int:
         out_dir=None if args.no_plots else (args.out or args.run_dir),
         device=args.device,
         gt_points=args.gt_points,
+        cg_voxel_size=args.cg_voxel_size,
     )
     report = result.report
     if traj is not None:

@@ -6,7 +6,10 @@ Conventions (the ones HOV-SG and ConceptGraphs use, stated once here):
   a last column ``C`` that counts points whose prediction is *no class* (prediction ``< 0``: an
   unlabeled Gaussian, or a scene label that the label mapping could not name). Such points are
   false negatives of their ground-truth class and false positives of nobody.
-* Ground truth ``< 0`` is *void* (unannotated): those points never enter the matrix.
+* Ground truth ``< 0`` is *void* (unannotated): those points never enter the matrix. A protocol that
+  counts predictions on void points as false positives (HOV-SG) passes their counts separately
+  (``void_predicted``, see :func:`void_predictions`); they count only where ignored GT points do
+  (``ignored_gt_points="false_positive"``).
 * A class is **evaluated** when it has ground-truth support (> 0 points) and is not in the ignore
   list. Classes absent from the ground truth are left out of every mean (their IoU is reported
   as NaN/None), even when the method predicted them: their false positives still lower the IoU of
@@ -19,10 +22,13 @@ Conventions (the ones HOV-SG and ConceptGraphs use, stated once here):
 * Ignored classes (e.g. wall/floor/ceiling) are left out of the means. What happens to the points
   whose ground truth is an ignored class is protocol dependent (``ignored_gt_points``):
   ``"drop"`` removes them entirely (ConceptGraphs, ScanNet benchmark); ``"false_positive"`` keeps
-  them, so a wall point predicted as ``table`` still counts as a false positive of ``table``
-  (HOV-SG's ``metric.py`` computes IoU over all points this way).
+  them, so a wall point (or a void point, given ``void_predicted``) predicted as ``table`` still
+  counts as a false positive of ``table``: HOV-SG's ``metric.py`` counts a class's predictions over
+  all points (``n_ij = sum(eval == c)``), and its ``ignore`` list holds void (-1) and background (0)
+  like wall and floor.
 
-Formulas over the evaluated set E, with TP_c, FP_c, FN_c from the matrix and support t_c = TP_c + FN_c:
+Formulas over the evaluated set E, with TP_c, FP_c, FN_c from the matrix (FP_c plus the predictions of c
+on void points where those count) and support t_c = TP_c + FN_c:
 
     IoU_c  = TP_c / (TP_c + FP_c + FN_c)
     mIoU   = mean_{c in E} IoU_c
@@ -89,6 +95,22 @@ def confusion_matrix(gt: Any, pred: Any, num_classes: int) -> np.ndarray:
     return counts.reshape(num_classes, width).astype(np.int64)
 
 
+def void_predictions(gt: Any, pred: Any, num_classes: int) -> np.ndarray:
+    """[C] int64: how many void ground-truth points (gt < 0) each class was predicted on.
+
+    The confusion matrix leaves void points out; protocols that count these predictions as false
+    positives (HOV-SG) pass this to :func:`segmentation_metrics` as ``void_predicted``.
+    """
+    g = _as_int_array(gt, "gt")
+    p = _as_int_array(pred, "pred")
+    if g.shape != p.shape:
+        raise ValueError(f"gt and pred differ in size: {np.asarray(gt).shape} vs {np.asarray(pred).shape}")
+    if p.size and p.max() >= num_classes:
+        raise ValueError(f"pred has class {int(p.max())} >= num_classes={num_classes}")
+    hit = p[(g < 0) & (p >= 0)]
+    return np.bincount(hit, minlength=num_classes).astype(np.int64)
+
+
 def _nan_to_none(x: float) -> float | None:
     return None if (x is None or math.isnan(x)) else float(x)
 
@@ -103,10 +125,12 @@ class SegmentationMetrics:
     iou: np.ndarray  # [C] float64
     acc: np.ndarray  # [C] float64, per-class recall
     support: np.ndarray  # [C] int64, ground-truth count per class
-    predicted: np.ndarray  # [C] int64, prediction count per class (column sums)
+    predicted: np.ndarray  # [C] int64, prediction count per class (column sums, plus void_fp)
     evaluated: np.ndarray  # [C] bool
     ignored: list[str] = field(default_factory=list)
     ignore_unknown: list[str] = field(default_factory=list)  # ignore names that matched no class
+    # [C] int64, predictions on void GT points counted as false positives (zeros where they are dropped)
+    void_fp: np.ndarray | None = None
     miou: float = float("nan")
     fmiou: float = float("nan")
     macc: float = float("nan")
@@ -142,6 +166,7 @@ class SegmentationMetrics:
             "ignored_classes": list(self.ignored),
             "ignore_unknown": list(self.ignore_unknown),
             "unassigned_predictions": int(self.confusion[:, -1].sum()),
+            "void_false_positives": 0 if self.void_fp is None else int(self.void_fp.sum()),
             "per_class": self.per_class(),
         }
 
@@ -224,6 +249,7 @@ def segmentation_metrics(
     ignored_gt_points: IgnoredGtPoints = "drop",
     protocol: str = "confusion",
     gt_present: Any | None = None,
+    void_predicted: Any | None = None,
 ) -> SegmentationMetrics:
     """mIoU, F-mIoU, mAcc and per-class IoU/accuracy from a confusion matrix (see the module docstring).
 
@@ -238,6 +264,9 @@ def segmentation_metrics(
             do not count GT points (ConceptGraphs counts predicted points): these classes, less the
             ignored ones, are evaluated even with no counted point (IoU 0, recall 0). None = the
             classes with support > 0.
+        void_predicted: [C] counts of predictions on void GT points (:func:`void_predictions`); with
+            ``ignored_gt_points="false_positive"`` they are false positives of their class, with
+            "drop" they are dropped like every void point. None = none.
 
     Raises:
         ValueError: bad shapes/values, or no evaluated class has any counted point.
@@ -259,13 +288,20 @@ def segmentation_metrics(
     if ignored_gt_points not in ("drop", "false_positive"):
         raise ValueError(f"ignored_gt_points must be 'drop' or 'false_positive', got {ignored_gt_points!r}")
     ignore_idx, ignore_unknown = resolve_ignore(ignore, names)
+    void_fp = np.zeros(c, dtype=np.int64)
+    if void_predicted is not None:
+        vp = np.asarray(void_predicted)
+        if vp.shape != (c,) or not np.issubdtype(vp.dtype, np.integer) or np.any(vp < 0):
+            raise ValueError(f"void_predicted must be [{c}] non-negative counts, got {vp.dtype} {vp.shape}")
+        if ignored_gt_points == "false_positive":
+            void_fp = vp.astype(np.int64)
 
     cm = cm.copy()
     if ignored_gt_points == "drop" and ignore_idx:
         cm[ignore_idx, :] = 0
     tp = np.diag(cm[:, :c]).astype(np.float64)
     support = cm.sum(axis=1)
-    predicted = cm[:, :c].sum(axis=0)
+    predicted = cm[:, :c].sum(axis=0) + void_fp
     fp = predicted - tp
     fn = support - tp
     ignored_mask = np.zeros(c, dtype=bool)
@@ -294,6 +330,7 @@ def segmentation_metrics(
         evaluated=evaluated,
         ignored=[names[i] for i in ignore_idx],
         ignore_unknown=ignore_unknown,
+        void_fp=void_fp,
         miou=float(np.mean(iou[evaluated])),
         fmiou=float(np.sum(t * iou[evaluated]) / t.sum()),
         macc=float(np.mean(acc[evaluated])),
@@ -313,6 +350,8 @@ def format_metrics_table(metrics: SegmentationMetrics, per_class: bool = True) -
     lines = [f"protocol: {metrics.protocol}"]
     if metrics.ignored:
         lines.append(f"ignored classes: {', '.join(metrics.ignored)}")
+    if metrics.void_fp is not None and metrics.void_fp.any():
+        lines.append(f"void GT points predicted as a class (false positives): {int(metrics.void_fp.sum())}")
     lines.append(
         f"mIoU {100 * metrics.miou:6.2f}   F-mIoU {100 * metrics.fmiou:6.2f}   "
         f"mAcc {100 * metrics.macc:6.2f}   oAcc {100 * metrics.overall_acc:6.2f}   "

@@ -12,13 +12,46 @@ numbers are not interchangeable and every result names the protocol that produce
   of its class (on a tie a real class wins over *no class*). Metrics are counted on ground-truth
   points. Background classes (default wall/floor/ceiling) are left out of the means, but their
   points stay in the count, so predicting ``table`` on a wall point is a false positive of
-  ``table`` (``ignored_gt_points="false_positive"``), as in HOV-SG's metric code.
+  ``table`` (``ignored_gt_points="false_positive"``), and so is predicting it on a void GT point
+  (class -1): HOV-SG's ``ignore`` list holds -1 (void) and 0 (background) like wall and floor, and
+  its ``per_class_IU`` counts a class's predictions over all GT points. In ``"drop"`` mode (the
+  ScanNet convention) ignored and void points leave the count.
+
+  Checked against HOV-SG's ``hovsg/utils/metric.py`` (commit 0613d61), the same figures on the same
+  votes: ``mean_IU`` sums the IoU of the classes with both a prediction and a GT point but divides by
+  the number of GT classes not ignored, so a GT class without any prediction adds 0, which is its
+  IoU anyway (TP = 0, support > 0), and a predicted class absent from the GT is in neither sum nor
+  count: our mean over the non-ignored GT classes. ``frequency_weighted_IU`` divides by all points
+  less those of ignored GT classes (void included), i.e. the support of the non-ignored GT classes,
+  as our F-mIoU. ``mean_accuracy`` (mAcc) and ``pixel_accuracy`` (our oAcc) average recall over the
+  same classes. Where we differ: (a) our per-class IoU of a class absent from the GT is NaN (HOV-SG
+  reports 0; neither enters the means); (b) a GT point whose vote *no class* wins is predicted -1,
+  a miss of its class and a false positive of nobody (HOV-SG's masks always carry a class, so it
+  has no such case; its -1 is an ignored class, which gives the same counts); (c) HOV-SG scores
+  every point of the GT mesh, while ``ogscene3d eval`` by default removes the GT points no frame of
+  a synthetic sequence saw (``--gt-points all`` keeps them): removed, not made void, so they are no
+  false positives; (d) the vote runs on Gaussian centres, not on HOV-SG's voxel-downsampled mask
+  clouds; counted on GT points, the predicted density only matters where classes meet.
 * ``"conceptgraphs"`` (ConceptGraphs, ``scripts/eval_replica_semseg.py``): every predicted point takes
   the class of its nearest ground-truth point as its reference; metrics are counted on predicted
-  points. Predicted points whose reference is an ignored class are dropped. Predicted points with
-  no class (unlabelled, or unnamed by the label mapping) count as misses of their reference class.
-  The classes averaged are those present in the ground-truth cloud (less the ignored ones), as in
-  ConceptGraphs' ``keep_index``: a class no predicted point reached scores IoU 0 and recall 0.
+  points. Predicted points whose reference is an ignored class (or void) are dropped. Predicted
+  points with no class (unlabelled, or unnamed by the label mapping) count as misses of their
+  reference class. The classes averaged are those present in the ground-truth cloud (less the
+  ignored ones), as in ConceptGraphs' ``keep_index``: a class no predicted point reached scores IoU
+  0 and recall 0.
+
+  Counted on predicted points, the score weighs every region by its predicted density. ConceptGraphs'
+  predicted cloud is the union of its objects' point clouds, each voxel-downsampled at
+  ``downsample_voxel_size`` = 0.025 m (``configs/slam_pipeline/base.yaml`` and
+  ``hydra_configs/base_mapping.yaml``); ours are Gaussian centres, whose density follows the map's
+  densification. So the predicted points are first resampled the same way (:func:`voxel_resample`):
+  one point per (scene label, voxel) at the mean of its points, unlabelled points per voxel alone,
+  ``voxel_size`` = 0.025 m by default (0 = every Gaussian centre counts, as before). Where we differ:
+  Open3D's ``voxel_down_sample`` anchors each object's grid at that object's own minimum corner, ours
+  is one grid anchored at the whole cloud's (a sub-voxel phase); and ConceptGraphs'
+  ``eval_replica_semseg.py`` (commit 231e638) then moves the object classes onto its SLAM
+  reconstruction (``rgb_cloud``: each reconstructed point takes its nearest object point's class)
+  and counts on those points, a cloud we do not have: the voxel grid stands in for it.
 
 Nearest neighbours come from a KD-tree (``scipy.spatial.cKDTree``), queried in chunks, so memory is
 O(N + M), never O(N * M).
@@ -36,7 +69,13 @@ from typing import Any, Literal
 
 import numpy as np
 
-from .metrics import IgnoredGtPoints, SegmentationMetrics, confusion_matrix, segmentation_metrics
+from .metrics import (
+    IgnoredGtPoints,
+    SegmentationMetrics,
+    confusion_matrix,
+    segmentation_metrics,
+    void_predictions,
+)
 
 Protocol3D = Literal["hovsg", "conceptgraphs"]
 PROTOCOLS: tuple[str, ...] = ("hovsg", "conceptgraphs")
@@ -46,6 +85,8 @@ PROTOCOLS: tuple[str, ...] = ("hovsg", "conceptgraphs")
 HOVSG_DEFAULT_IGNORE: tuple[str, ...] = ("wall", "floor", "ceiling")
 #: ConceptGraphs' default run ignores only its catch-all "other" class.
 CONCEPTGRAPHS_DEFAULT_IGNORE: tuple[str, ...] = ("other",)
+#: ConceptGraphs' ``downsample_voxel_size`` (metres): its object clouds are voxel-downsampled at this size.
+CONCEPTGRAPHS_VOXEL_SIZE = 0.025
 
 _CHUNK = 1 << 16
 
@@ -189,7 +230,9 @@ def hovsg_protocol(
         class_names: the C ground-truth class names.
         ignore: background class names/indices left out of the means.
         k: neighbours in the majority vote (HOV-SG uses 5).
-        ignored_gt_points: HOV-SG keeps them as false positives; "drop" gives the ScanNet convention.
+        ignored_gt_points: "false_positive" (HOV-SG): predictions on the points of ignored classes and
+            on void points are false positives of the predicted class; "drop" (the ScanNet
+            convention) leaves both out.
         pred_labelled: [N] bool, which predicted points carry a scene label. Unlabelled points do not
             vote; labelled points with class -1 (a label the mapping could not name) vote *no class*.
             None = ``pred_classes >= 0`` (every point without a class is taken as unlabelled).
@@ -201,8 +244,50 @@ def hovsg_protocol(
     labelled = _labelled_mask(pred_labelled, pc)
     voted = hovsg_vote(pp, pc, labelled, gp, len(class_names), k=k, workers=workers)
     cm = confusion_matrix(gc, voted, len(class_names))
+    void = void_predictions(gc, voted, len(class_names))
     desc = f"hovsg (k={k} nearest predicted points vote for each GT point; counted on GT points)"
-    return segmentation_metrics(cm, class_names, ignore, ignored_gt_points, protocol=desc)
+    return segmentation_metrics(
+        cm, class_names, ignore, ignored_gt_points, protocol=desc, void_predicted=void
+    )
+
+
+def voxel_resample(
+    points: Any, classes: Any, labels: Any | None = None, voxel_size: float = CONCEPTGRAPHS_VOXEL_SIZE
+) -> tuple[np.ndarray, np.ndarray]:
+    """One point per (scene label, voxel) at the mean of its points, with their class.
+
+    The analogue of ConceptGraphs' object clouds, each voxel-downsampled (Open3D's
+    ``voxel_down_sample`` averages the points of a voxel): a region weighs by the voxels it fills, not
+    by how many points the map put there. Unlabelled points (label < 0) are grouped by voxel alone.
+
+    Args:
+        points: [N, 3] predicted points.
+        classes: [N] class per point, -1 = no class.
+        labels: [N] scene label per point, -1 = unlabelled; None = group by class (one object per class).
+        voxel_size: voxel edge in metres; the grid starts half a voxel below the cloud's minimum
+            corner, as Open3D's does.
+
+    Returns:
+        (points [G, 3] float64, classes [G] int64), one row per group, ordered by (label, class, voxel).
+    """
+    pts = _points(points, "points")
+    cls = _labels(classes, pts.shape[0], "classes")
+    lab = cls if labels is None else _labels(labels, pts.shape[0], "labels")
+    if not (np.isfinite(voxel_size) and voxel_size > 0):
+        raise ValueError(f"voxel_size must be a positive number of metres, got {voxel_size}")
+    if pts.shape[0] == 0:
+        return pts.copy(), cls.copy()
+    lab = np.maximum(lab, -1)  # every unlabelled point shares one group key per voxel
+    cell = np.floor((pts - (pts.min(axis=0) - 0.5 * voxel_size)) / voxel_size).astype(np.int64)
+    # The class is part of the key so that a group never mixes classes, whatever the caller passes.
+    keys = np.concatenate([lab[:, None], cls[:, None], cell], axis=1)
+    uniq, group = np.unique(keys, axis=0, return_inverse=True)
+    group = group.reshape(-1)
+    count = np.bincount(group, minlength=uniq.shape[0]).astype(np.float64)
+    mean = np.stack(
+        [np.bincount(group, weights=pts[:, d], minlength=uniq.shape[0]) / count for d in range(3)], axis=1
+    )
+    return mean, uniq[:, 1].copy()
 
 
 def conceptgraphs_protocol(
@@ -213,12 +298,17 @@ def conceptgraphs_protocol(
     class_names: Sequence[str],
     ignore: Iterable[str | int] | None = CONCEPTGRAPHS_DEFAULT_IGNORE,
     workers: int = 1,
+    pred_labels: Any | None = None,
+    voxel_size: float = CONCEPTGRAPHS_VOXEL_SIZE,
 ) -> SegmentationMetrics:
     """ConceptGraphs 3D semantic segmentation protocol (see the module docstring).
 
-    Arguments as :func:`hovsg_protocol`. Every predicted point counts, unlabelled ones too (class -1:
-    a miss of its reference class); predicted points whose nearest GT point is void are skipped. The
-    classes averaged are those with a (non-void) point in ``gt_classes``, less the ignored ones.
+    Arguments as :func:`hovsg_protocol`. The predicted points are first resampled to one point per
+    (scene label, voxel of ``voxel_size`` metres) by :func:`voxel_resample` (``pred_labels``: [N]
+    scene labels, -1 = unlabelled; None = group by class; ``voxel_size`` 0 = no resampling). Every
+    resampled point counts, unlabelled ones too (class -1: a miss of its reference class); points
+    whose nearest GT point is void are skipped. The classes averaged are those with a (non-void)
+    point in ``gt_classes``, less the ignored ones.
     """
     pp = _points(pred_points, "pred_points")
     pc = _labels(pred_classes, pp.shape[0], "pred_classes")
@@ -226,6 +316,13 @@ def conceptgraphs_protocol(
     gc = _labels(gt_classes, gp.shape[0], "gt_classes")
     if pp.shape[0] == 0:
         raise ValueError("pred_points is empty: the ConceptGraphs protocol counts on predicted points")
+    if not (np.isfinite(voxel_size) and voxel_size >= 0):
+        raise ValueError(f"voxel_size must be >= 0 metres (0 = no resampling), got {voxel_size}")
+    if voxel_size > 0:
+        pp, pc = voxel_resample(pp, pc, pred_labels, voxel_size)
+        sampling = f"predicted points resampled to one per scene label and {voxel_size:g} m voxel"
+    else:
+        sampling = "every predicted point counts, not resampled"
     _, idx = nearest_neighbors(gp, pp, k=1, workers=workers)
     ref = gc[idx[:, 0]]
     c = len(class_names)
@@ -234,8 +331,8 @@ def conceptgraphs_protocol(
     # averaged anyway (IoU 0), like ConceptGraphs' keep_index of the classes in the GT cloud.
     gt_present = np.bincount(gc[(gc >= 0) & (gc < c)], minlength=c)[:c] > 0
     desc = (
-        "conceptgraphs (each predicted point takes its nearest GT point's class; counted on predicted "
-        "points; the classes present in the GT are averaged)"
+        f"conceptgraphs ({sampling}; each predicted point takes its nearest GT point's class; counted on "
+        "predicted points; the classes present in the GT are averaged)"
     )
     return segmentation_metrics(cm, class_names, ignore, "drop", protocol=desc, gt_present=gt_present)
 
@@ -251,12 +348,15 @@ def evaluate_semantic_3d(
     k: int = 5,
     workers: int = 1,
     pred_labelled: Any | None = None,
+    pred_labels: Any | None = None,
+    voxel_size: float = CONCEPTGRAPHS_VOXEL_SIZE,
 ) -> SegmentationMetrics:
     """Dispatch to :func:`hovsg_protocol` or :func:`conceptgraphs_protocol`.
 
     ``ignore=None`` uses the protocol's default (HOV-SG: wall/floor/ceiling, ConceptGraphs: other).
     ``pred_labelled`` (which predicted points carry a scene label) only matters to HOV-SG's vote;
-    ConceptGraphs counts every predicted point.
+    ConceptGraphs counts every predicted point. ``pred_labels`` (scene labels, -1 = unlabelled) and
+    ``voxel_size`` (metres, 0 = none) set ConceptGraphs' resampling of the predicted points.
     """
     if protocol == "hovsg":
         ign = HOVSG_DEFAULT_IGNORE if ignore is None else ignore
@@ -267,8 +367,9 @@ def evaluate_semantic_3d(
     if protocol == "conceptgraphs":
         ign = CONCEPTGRAPHS_DEFAULT_IGNORE if ignore is None else ignore
         return conceptgraphs_protocol(
-            pred_points, pred_classes, gt_points, gt_classes, class_names, ign, workers=workers
-        )
+            pred_points, pred_classes, gt_points, gt_classes, class_names, ign, workers=workers,
+            pred_labels=pred_labels, voxel_size=voxel_size,
+        )  # fmt: skip
     raise ValueError(f"unknown protocol {protocol!r}; expected one of {PROTOCOLS}")
 
 

@@ -23,7 +23,13 @@ from ..errors import DataError
 from .graph_metrics import match_nodes_by_overlap, relation_recall
 from .label_mapping import TextEmbedder, majority_overlap_mapping, text_label_mapping
 from .metrics import SegmentationMetrics, warn_unknown_ignore
-from .protocols import PROTOCOLS, evaluate_semantic_3d, label_lookup, nearest_neighbors
+from .protocols import (
+    CONCEPTGRAPHS_VOXEL_SIZE,
+    PROTOCOLS,
+    evaluate_semantic_3d,
+    label_lookup,
+    nearest_neighbors,
+)
 from .readers import GroundTruth, RunData, load_ground_truth, read_run
 
 log = logging.getLogger(__name__)
@@ -149,6 +155,7 @@ def evaluate_run(
     out_dir: str | Path | None = None,
     device: str | torch.device = "cpu",
     gt_points: Literal["observed", "all"] = "observed",
+    cg_voxel_size: float = CONCEPTGRAPHS_VOXEL_SIZE,
 ) -> EvalResult:
     """Evaluate ``run_dir`` against ``gt_path`` (see the module docstring).
 
@@ -170,8 +177,11 @@ def evaluate_run(
         out_dir: where the side-by-side view PNGs go (None = no pictures).
         device: rendering device.
         gt_points: "observed" scores only the GT points that some frame of the sequence saw, when the
-            ground truth says which (synthetic scenes: ``observed`` in gt/points.ply; unobserved points
-            become void); "all" scores every point, as HOV-SG does on its meshes.
+            ground truth says which (synthetic scenes: ``observed`` in gt/points.ply; hovsg scores no
+            unobserved point, conceptgraphs skips the Gaussians nearest to one); "all" scores every
+            point, as HOV-SG does on its meshes.
+        cg_voxel_size: metres; the conceptgraphs protocol resamples the Gaussians to one point per
+            scene label and voxel of this size, like ConceptGraphs' object clouds (0 = every Gaussian).
     """
     if gt_points not in ("observed", "all"):
         raise ValueError(f"gt_points must be 'observed' or 'all', got {gt_points!r}")
@@ -222,16 +232,23 @@ def evaluate_run(
     semantic: dict[str, SegmentationMetrics] = {}
     scored_classes = label_lookup(label_to_class, scored.labels)
     for p in protocols:
+        gt_pts, gt_cls = gt.points, gt_classes
+        if p == "hovsg" and gt_block["points"] == "observed":
+            # HOV-SG counts predictions on void GT points as false positives: unobserved points leave
+            # the cloud instead (HOV-SG's vote of a GT point does not depend on the other GT points).
+            gt_pts, gt_cls = gt.points[gt.observed], gt_classes[gt.observed]
         semantic[p] = evaluate_semantic_3d(
             scored.means,
             scored_classes,
-            gt.points,
-            gt_classes,
+            gt_pts,
+            gt_cls,
             gt.class_names,
             protocol=p,  # type: ignore[arg-type]
             ignore=ignore,
             k=k,
             pred_labelled=labelled,
+            pred_labels=scored.labels,
+            voxel_size=cg_voxel_size,
         )
 
     graph_block: dict[str, Any] | None = None
