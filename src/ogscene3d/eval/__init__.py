@@ -19,10 +19,17 @@ from .label_mapping import (
     normalize_label,
     text_label_mapping,
 )
-from .metrics import SegmentationMetrics, confusion_matrix, format_metrics_table, segmentation_metrics
+from .metrics import (
+    SegmentationMetrics,
+    confusion_matrix,
+    format_metrics_table,
+    segmentation_metrics,
+    void_predictions,
+)
 from .plots import colorize_confidence, colorize_labels, iou_bar_chart, label_colors, side_by_side, write_png
 from .protocols import (
     CONCEPTGRAPHS_DEFAULT_IGNORE,
+    CONCEPTGRAPHS_VOXEL_SIZE,
     HOVSG_DEFAULT_IGNORE,
     PROTOCOLS,
     conceptgraphs_protocol,
@@ -33,6 +40,7 @@ from .protocols import (
     nearest_neighbors,
     novel_view_metrics,
     rendered_view_metrics,
+    voxel_resample,
 )
 from .readers import GroundTruth, RunData, find_ground_truth, load_ground_truth, read_graph_json, read_run
 from .run_eval import EvalResult, build_label_mapping, evaluate_run
@@ -41,6 +49,7 @@ from .views import ViewsResult, evaluate_views, pick_frames
 
 __all__ = [
     "CONCEPTGRAPHS_DEFAULT_IGNORE",
+    "CONCEPTGRAPHS_VOXEL_SIZE",
     "DEFAULT_SYNONYMS",
     "HOVSG_DEFAULT_IGNORE",
     "PROTOCOLS",
@@ -87,5 +96,7 @@ __all__ = [
     "side_by_side",
     "text_label_mapping",
     "umeyama_alignment",
+    "void_predictions",
+    "voxel_resample",
     "write_png",
 ]
