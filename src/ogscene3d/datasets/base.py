@@ -426,6 +426,18 @@ class RGBDDataset:
         """Ground-truth (instance map, class map) for layouts that have them; None otherwise."""
         return None, None
 
+    @property
+    def class_names(self) -> dict[int, str] | None:
+        """Class id -> name of the ids in ``Frame.gt_classes``, when the layout defines them (None: the
+        data set's own table must be given, e.g. label-fusion's)."""
+        return None
+
+    @property
+    def has_class_maps(self) -> bool:
+        """Whether frames come with ground-truth class maps (``Frame.gt_classes``), as far as the files
+        say (nothing is read): what eval's rendered-view scores need."""
+        return False
+
 
 def _missing_files(rec: FrameRecord) -> list[Path]:
     """The files ``rec`` needs that do not exist (a stat each; nothing is read)."""
@@ -436,9 +448,18 @@ def _missing_files(rec: FrameRecord) -> list[Path]:
 
 
 def read_label_png(
-    path: Path, shape: tuple[int, int], what: str, transform: Callable | None = None
+    path: Path,
+    shape: tuple[int, int],
+    what: str,
+    transform: Callable | None = None,
+    resize: bool = False,
 ) -> np.ndarray:
-    """Read an 8/16-bit single-channel label PNG as int32 [H, W], checking its size."""
+    """Read an 8/16-bit single-channel label PNG as int32 [H, W], checking its size.
+
+    ``resize``: a label image of another size but the same aspect ratio (within 2%) is resampled to
+    ``shape`` by nearest neighbour (ScanNet's label images have the colour camera's size, and colour is
+    resampled to depth's); otherwise the size must be ``shape``.
+    """
     data = _read_bytes(path, what)
     _check_complete(path, data, what)
     img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
@@ -447,9 +468,13 @@ def read_label_png(
     if img.ndim != 2:
         raise DataError(f"{path}: {what} image must be single-channel, got shape {img.shape}")
     if img.shape != tuple(shape):
-        raise DataError(
-            f"{path}: {what} is {img.shape[1]}x{img.shape[0]}, the depth image is {shape[1]}x{shape[0]}"
-        )
+        aspect, target = img.shape[1] / img.shape[0], shape[1] / shape[0]
+        if not resize or abs(aspect / target - 1.0) > 0.02:
+            raise DataError(
+                f"{path}: {what} is {img.shape[1]}x{img.shape[0]}, the depth image is {shape[1]}x{shape[0]}"
+            )
+        # nearest neighbour: label ids must not be blended
+        img = cv2.resize(img, (shape[1], shape[0]), interpolation=cv2.INTER_NEAREST)
     out = img.astype(np.int32)
     return transform(out) if transform is not None else out
 

@@ -8,19 +8,89 @@ camera's intrinsics (the two are registered in ScanNet's export).
 
 The same layout with zero-padded names (``color/000000.png``, ``depth/000000.png``, ``intrinsics.txt``:
 a bring-your-own-camera export) is read too; files are matched by frame number.
+
+Per-frame labels: when ``SCENE/label-filt/N.png`` exist (ScanNet's ``*_2d-label-filt.zip`` unpacked into the
+scene folder: uint16 raw ScanNet category ids at the colour camera's size) and
+``scannetv2-labels.combined.tsv`` lies in the scene folder or one of its two parents, frames carry
+``gt_classes`` in NYU40 ids (the tsv's ``id`` -> ``nyu40id`` columns), the id space of the 3D ground truth
+``*_vh_clean_2.labels.ply``; 0 (unannotated, or a raw id the tsv lacks) is void. Label images are resampled
+to the depth size by nearest neighbour, as colour is.
 """
 
 from __future__ import annotations
 
+import csv
+import logging
 from pathlib import Path
 
 import numpy as np
 
 from ..config import DataConfig
 from ..errors import DataError
-from .base import FrameRecord, RGBDDataset, read_depth_raw, read_matrix, read_rgb
+from .base import FrameRecord, RGBDDataset, read_depth_raw, read_label_png, read_matrix, read_rgb
+
+log = logging.getLogger(__name__)
 
 _RGB_SUFFIXES = (".jpg", ".jpeg", ".png")
+
+LABEL_DIR = "label-filt"
+LABEL_MAP_NAME = "scannetv2-labels.combined.tsv"
+
+#: NYU40 class names by id (1..40), the id space of ScanNet's ``*_vh_clean_2.labels.ply`` and of the frames'
+#: ``gt_classes``; spelled as ScanNet's benchmark scripts spell them (0 = unannotated is not a class).
+NYU40_CLASSES: dict[int, str] = dict(
+    enumerate(
+        [
+            "wall", "floor", "cabinet", "bed", "chair", "sofa", "table", "door", "window", "bookshelf",
+            "picture", "counter", "blinds", "desk", "shelves", "curtain", "dresser", "pillow", "mirror",
+            "floor mat", "clothes", "ceiling", "books", "refrigerator", "television", "paper", "towel",
+            "shower curtain", "box", "whiteboard", "person", "night stand", "toilet", "sink", "lamp",
+            "bathtub", "bag", "otherstructure", "otherfurniture", "otherprop",
+        ],
+        start=1,
+    )
+)  # fmt: skip
+
+
+def find_label_map(root: Path) -> Path | None:
+    """``scannetv2-labels.combined.tsv`` in ``root`` or one of its two parents (ScanNet keeps it at the top
+    of the download, beside ``scans/``), or None."""
+    for d in (root, root.parent, root.parent.parent):
+        if (d / LABEL_MAP_NAME).is_file():
+            return d / LABEL_MAP_NAME
+    return None
+
+
+def read_label_map(path: str | Path, src: str = "id", dst: str = "nyu40id") -> np.ndarray:
+    """Lookup table raw ScanNet category id -> ``dst`` id (0 where the tsv has no row or no value) from
+    ``scannetv2-labels.combined.tsv``."""
+    path = Path(path)
+    try:
+        with path.open(newline="", encoding="utf-8") as f:
+            rows = list(csv.DictReader(f, delimiter="\t"))
+    except OSError as e:
+        raise DataError(f"{path}: cannot read the label map ({e})") from e
+    if not rows or src not in rows[0] or dst not in rows[0]:
+        have = list(rows[0]) if rows else []
+        raise DataError(
+            f"{path}: a ScanNet label map needs tab-separated columns {src!r} and {dst!r}; has {have}"
+        )
+    pairs: dict[int, int] = {}
+    for line, row in enumerate(rows, start=2):
+        if not (row[dst] or "").strip():
+            continue  # a category without an NYU40 class: its pixels stay void
+        try:
+            pairs[int(row[src])] = int(row[dst])
+        except (TypeError, ValueError):
+            raise DataError(
+                f"{path}: line {line}: {src}={row[src]!r}, {dst}={row[dst]!r} are not integers"
+            ) from None
+    if any(k < 0 or k > 65535 for k in pairs):
+        raise DataError(f"{path}: raw category ids must lie in 0..65535 (16-bit label images)")
+    lut = np.zeros(max(pairs, default=0) + 1, dtype=np.int32)
+    for k, v in pairs.items():
+        lut[k] = v
+    return lut
 
 
 def _numeric_stems(folder: Path, suffixes: tuple[str, ...]) -> dict[int, Path]:
@@ -58,6 +128,7 @@ class ScanNetDataset(RGBDDataset):
         pose_dir = root / "pose"
         poses = _numeric_stems(pose_dir, (".txt",))
         has_poses = bool(poses)  # without pose files (no pose/ or an empty one) the frames need tracking
+        labels = self._label_files(root)
         records = [
             FrameRecord(
                 name=color[n].stem,
@@ -65,6 +136,7 @@ class ScanNetDataset(RGBDDataset):
                 depth_path=depth.get(n, root / "depth" / f"{color[n].stem}.png"),
                 pose_path=poses.get(n, pose_dir / f"{color[n].stem}.txt") if has_poses else None,
                 timestamp=float(n),
+                extras={"label": labels[n]} if n in labels else {},
             )
             for n in sorted(color)
         ]
@@ -72,6 +144,45 @@ class ScanNetDataset(RGBDDataset):
         if config.intrinsics is None:
             K = self._intrinsics(root, records)
         super().__init__(root, records, K, config, segments_dir, resize_rgb_to_depth=True)
+
+    def _label_files(self, root: Path) -> dict[int, Path]:
+        """The frames' label-filt images, with ``self._label_lut`` set to translate them; none (with a
+        warning) when there is no label map to translate them with."""
+        self._label_lut: np.ndarray | None = None
+        labels = _numeric_stems(root / LABEL_DIR, (".png",))
+        if not labels:
+            return {}
+        tsv = find_label_map(root)
+        if tsv is None:
+            log.warning(
+                "%s: %s/ holds raw ScanNet category ids, but no %s was found in the scene folder or its two "
+                "parents to map them to NYU40: frames carry no ground-truth class maps",
+                root,
+                LABEL_DIR,
+                LABEL_MAP_NAME,
+            )
+            return {}
+        self._label_lut = read_label_map(tsv)
+        return labels
+
+    @property
+    def class_names(self) -> dict[int, str] | None:
+        return dict(NYU40_CLASSES) if self.has_class_maps else None
+
+    @property
+    def has_class_maps(self) -> bool:
+        return self._label_lut is not None and any("label" in rec.extras for rec in self.records)
+
+    def _load_gt(
+        self, rec: FrameRecord, shape: tuple[int, int]
+    ) -> tuple[np.ndarray | None, np.ndarray | None]:
+        path = rec.extras.get("label")
+        if path is None or self._label_lut is None:
+            return None, None
+        raw = read_label_png(path, shape, "ScanNet label", resize=True)
+        lut = self._label_lut
+        # a raw id beyond the tsv's rows has no class: void (0), as unannotated pixels are
+        return None, np.where(raw < lut.size, lut[np.minimum(raw, lut.size - 1)], 0).astype(np.int32)
 
     @staticmethod
     def _intrinsics(root: Path, records: list[FrameRecord]) -> np.ndarray:

@@ -114,6 +114,10 @@ class LabelFusionDataset(SevenScenesDataset):
             or any(any(d.glob("frame-*.segm.png")) for d in dirs)
         )
 
+    @property
+    def has_class_maps(self) -> bool:
+        return any(rec.extras["segm"].is_file() for rec in self.records)
+
     def _load_gt(
         self, rec: FrameRecord, shape: tuple[int, int]
     ) -> tuple[np.ndarray | None, np.ndarray | None]:

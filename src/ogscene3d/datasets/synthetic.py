@@ -572,6 +572,10 @@ class SyntheticDataset(ReplicaDataset):
     def class_names(self) -> dict[int, str]:
         return dict(self.gt["classes"])
 
+    @property
+    def has_class_maps(self) -> bool:
+        return True
+
     def _load_gt(
         self, rec: FrameRecord, shape: tuple[int, int]
     ) -> tuple[np.ndarray | None, np.ndarray | None]:

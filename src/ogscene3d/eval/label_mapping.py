@@ -173,6 +173,7 @@ def majority_overlap_mapping(
     gt_ids: Any,
     id_to_class: Mapping[int, int] | None = None,
     min_points: int = 1,
+    weights: Any | None = None,
 ) -> dict[int, int]:
     """Name each scene label by the ground-truth id it overlaps most with.
 
@@ -183,6 +184,7 @@ def majority_overlap_mapping(
         id_to_class: instance id -> class index; when given the result holds class indices
             (instance ids missing from it map to -1).
         min_points: overlaps smaller than this leave the label unmapped.
+        weights: [N] non-negative count of each entry (e.g. pixel counts of (label, class) pairs); None = 1.
 
     Returns:
         {scene label: class index (or GT id without ``id_to_class``)}; labels with no valid overlap
@@ -194,11 +196,20 @@ def majority_overlap_mapping(
         raise ValueError(f"pred_labels {p.shape} and gt_ids {g.shape} must be equal 1-D arrays")
     if not (np.issubdtype(p.dtype, np.integer) and np.issubdtype(g.dtype, np.integer)):
         raise ValueError("pred_labels and gt_ids must be integer arrays")
+    w = None
+    if weights is not None:
+        w = np.asarray(weights)
+        if w.shape != p.shape or not np.all(np.isfinite(w)) or np.any(w < 0):
+            raise ValueError(f"weights {w.shape} must be finite, non-negative and shaped like pred_labels")
     keep = (p >= 0) & (g >= 0)
     if not keep.any():
         return {}
     pairs = np.stack([p[keep].astype(np.int64), g[keep].astype(np.int64)], axis=1)
-    uniq, counts = np.unique(pairs, axis=0, return_counts=True)
+    if w is None:
+        uniq, counts = np.unique(pairs, axis=0, return_counts=True)
+    else:
+        uniq, inverse = np.unique(pairs, axis=0, return_inverse=True)
+        counts = np.bincount(inverse.reshape(-1), weights=w[keep], minlength=uniq.shape[0])
     # Sort by label, then count descending, then GT id ascending: the first row per label wins.
     order = np.lexsort((uniq[:, 1], -counts, uniq[:, 0]))
     uniq, counts = uniq[order], counts[order]

@@ -13,8 +13,14 @@ Ground truth, any of:
   class of a point is taken from its instance);
 * a labelled PLY file with ``x y z`` and a class field (``class``, ``label``, ``semantic``,
   ``class_id`` or ``category_id``), optionally an ``instance``/``object_id`` field, plus a class-name
-  table: ``--classes FILE.json``, else ``<ply stem>.json`` or ``classes.json`` beside the PLY. The
-  table is a JSON list (index = class id), a ``{"<id>": name}`` object, or either under ``"classes"``.
+  table: ``--classes FILE.json``, else ``<ply stem>.json`` or ``classes.json`` beside the PLY, else, for
+  ScanNet's ``*_vh_clean_2.labels.ply`` (NYU40 ids), the built-in NYU40 names. The table is a JSON list
+  (index = class id), a ``{"<id>": name}`` object, or either under ``"classes"``. A folder holding such a
+  PLY (a ScanNet scene folder: its ``*_vh_clean_2.labels.ply`` is preferred) may be given instead;
+* an RGB-D sequence folder whose frames carry class maps but that holds no 3D ground truth (label-fusion's
+  ``frame-N.segm.png``, ScanNet's ``label-filt/`` without a labels PLY): a ground truth with no points
+  (``has_3d`` False) that only rendered views can be scored against. Its class table: ``--classes``, else
+  ``classes.json`` in the folder, else the layout's own (ScanNet: NYU40).
 
 Class ids are re-indexed to 0..C-1 in table order; points whose id is not in the table are void (-1).
 """
@@ -63,6 +69,7 @@ class GroundTruth:
     class_ids: list[int] | None = None  # the dataset's own id of each class (for its 2D label maps)
     source: str = ""
     observed: np.ndarray | None = None  # [M] bool, seen by some frame (synthetic scenes); None = unknown
+    has_3d: bool = True  # False: per-frame class maps only (points is empty), 2D scores only
 
     def class_index_of_ids(self, ids: Any) -> np.ndarray:
         """Dataset class ids (e.g. a GT class image) -> indices into ``class_names``, -1 if unknown."""
@@ -73,28 +80,56 @@ class GroundTruth:
         return out
 
 
-def find_ground_truth(run_dir: str | Path) -> Path | None:
-    """The synthetic scene a run was made from, if it can be found: ``RUN_DIR/scene`` (where
-    ``ogscene3d run`` without ``--data`` generates it), else ``data.path`` of ``RUN_DIR/config.yaml``;
-    either must hold ``gt/instances.json``. None when neither does."""
+def run_data_path(run_dir: str | Path) -> Path | None:
+    """``data.path`` of ``RUN_DIR/config.yaml`` (relative to the run directory when relative), or None."""
     run = Path(run_dir)
-    candidates = [run / "scene"]
     cfg = run / "config.yaml"
-    if cfg.is_file():
-        import yaml
+    if not cfg.is_file():
+        return None
+    import yaml
 
-        try:
-            data = yaml.safe_load(cfg.read_text()) or {}
-        except yaml.YAMLError as e:
-            raise DataError(f"{cfg}: invalid YAML ({e})") from None
-        path = (data.get("data") or {}).get("path") if isinstance(data, dict) else None
-        if path:
-            p = Path(path)
-            candidates.append(p if p.is_absolute() else run / p)
-    for c in candidates:
-        if (c / "gt" / "instances.json").is_file():
+    try:
+        data = yaml.safe_load(cfg.read_text()) or {}
+    except yaml.YAMLError as e:
+        raise DataError(f"{cfg}: invalid YAML ({e})") from None
+    path = (data.get("data") or {}).get("path") if isinstance(data, dict) else None
+    if not path:
+        return None
+    p = Path(path)
+    return p if p.is_absolute() else run / p
+
+
+def find_ground_truth(run_dir: str | Path) -> Path | None:
+    """The ground truth of the scene a run was made from, if it can be found: ``RUN_DIR/scene`` (where
+    ``ogscene3d run`` without ``--data`` generates a synthetic scene) or ``data.path`` of
+    ``RUN_DIR/config.yaml`` holding ``gt/instances.json``; else ``data.path`` when it holds ScanNet's
+    labels PLY or is a sequence whose frames carry class maps (label-fusion; 2D scores only). None when
+    none does."""
+    run = Path(run_dir)
+    data = run_data_path(run)
+    for c in (run / "scene", data):
+        if c is not None and (c / "gt" / "instances.json").is_file():
             return c
+    if data is not None and data.is_dir() and (_scannet_label_ply(data) is not None or _frame_classes(data)):
+        return data
     return None
+
+
+def _scannet_label_ply(folder: Path) -> Path | None:
+    """ScanNet's 3D semantic ground truth in ``folder`` (``*_vh_clean_2.labels.ply``, NYU40 ids), if one."""
+    found = sorted(folder.glob("*_vh_clean_2.labels.ply"))
+    return found[0] if len(found) == 1 else None
+
+
+def _frame_classes(folder: Path) -> Any:
+    """The dataset in ``folder`` when it is an RGB-D sequence whose frames carry class maps, else None."""
+    from ..datasets import open_dataset
+
+    try:
+        ds = open_dataset(folder)
+    except DataError:
+        return None
+    return ds if ds.has_class_maps else None
 
 
 def _read_ply_vertices(path: Path) -> Any:
@@ -293,6 +328,9 @@ def _find_gt_ply(folder: Path) -> Path:
         raise DataError(f"{folder}: no labelled point cloud (*.ply) found")
     if len(plys) == 1:
         return plys[0]
+    scannet = _scannet_label_ply(folder)  # beside it lie the unlabelled meshes of the scan
+    if scannet is not None:
+        return scannet
     for name in ("points.ply", "gt_points.ply", "labels.ply", "pointcloud.ply", "semantic.ply"):
         if (folder / name).is_file():
             return folder / name
@@ -309,6 +347,10 @@ def load_ground_truth(gt: str | Path, classes: str | Path | None = None) -> Grou
         inst_json = folder / "instances.json"
         if inst_json.is_file():
             return _load_instance_gt(folder, inst_json)
+        if _scannet_label_ply(folder) is None and (ds := _frame_classes(folder)) is not None:
+            # A sequence's PLYs (if any) are meshes, not labelled clouds: only the scanner's labels
+            # PLY (above) or a gt/ folder is 3D ground truth there.
+            return _frames_only_gt(folder, ds, classes)
         ply = _find_gt_ply(folder)
     else:
         ply = path
@@ -371,6 +413,32 @@ def _load_instance_gt(folder: Path, inst_json: Path) -> GroundTruth:
     )
 
 
+def _frames_only_gt(folder: Path, ds: Any, classes: str | Path | None) -> GroundTruth:
+    """Ground truth with no 3D points: the class table of the per-frame class maps of sequence ``ds``."""
+    table_path = Path(classes) if classes is not None else None
+    if table_path is None and (folder / "classes.json").is_file():
+        table_path = folder / "classes.json"
+    if table_path is not None:
+        table = read_class_table(table_path)
+        source = f"{folder} (per-frame class maps, names from {table_path.name})"
+    elif ds.class_names is not None:
+        table = ds.class_names
+        source = f"{folder} (per-frame class maps, {ds.kind} class names)"
+    else:
+        raise DataError(
+            f"{folder}: its {ds.kind} frames carry class ids but no class names: pass --classes FILE.json "
+            "(a list of names or {id: name}) or put classes.json in the folder"
+        )
+    return GroundTruth(
+        points=np.zeros((0, 3)),
+        classes=np.zeros(0, np.int64),
+        class_names=[table[i] for i in sorted(table)],
+        class_ids=sorted(table),
+        source=source,
+        has_3d=False,
+    )
+
+
 def _load_labelled_ply(ply: Path, classes: str | Path | None) -> GroundTruth:
     v = _read_ply_vertices(ply)
     names = v.dtype.names or ()
@@ -385,11 +453,17 @@ def _load_labelled_ply(ply: Path, classes: str | Path | None) -> GroundTruth:
             if cand.is_file():
                 table_path = cand
                 break
-    if table_path is None:
+    if table_path is None and ply.name.endswith("_vh_clean_2.labels.ply"):
+        from ..datasets.scannet import NYU40_CLASSES
+
+        table = dict(NYU40_CLASSES)  # ScanNet's labels PLY holds NYU40 ids
+        table_path = Path("NYU40 (built in)")
+    elif table_path is None:
         raise DataError(
             f"{ply}: no class-name table; pass --classes FILE.json (a list of names or {{id: name}})"
         )
-    table = read_class_table(table_path)
+    else:
+        table = read_class_table(table_path)
     cls, class_names = _reindex(raw, table)
     void = int(((raw >= 0) & (cls < 0)).sum())
     if void:

@@ -1,28 +1,36 @@
 """Render a run's semantic map at dataset poses: 2D semantic metrics and side-by-side pictures.
 
-For scenes whose frames carry ground-truth class maps (synthetic scenes), the map in
+For sequences whose frames carry ground-truth class maps (``Frame.gt_classes``: synthetic scenes,
+label-fusion's ``segm`` images, ScanNet's ``label-filt`` with its label map), the map in
 ``gaussians.ply`` is rendered with :func:`ogscene3d.render_semantics` at a few poses of the
-scene's trajectory; rendered scene labels are named with the run's label mapping and compared with
-the ground-truth class maps (:func:`~ogscene3d.eval.protocols.rendered_view_metrics`, paper Table I).
-The poses are those the dataset reports (``traj.txt``, what the mapper was given): these are frames
-of the mapped sequence, not held-out novel views (at most, frames a strided run skipped), and the
-protocol string says so; the report lists the frames used.
+sequence; rendered scene labels are named with the run's label mapping and compared with the
+ground-truth class maps (:func:`~ogscene3d.eval.protocols.rendered_view_metrics`, paper Table I).
+The poses are those the dataset reports (what the mapper was given): these are frames of the mapped
+sequence, not held-out novel views (at most, frames a strided run skipped), and the protocol string
+says so; the report lists the frames used.
+
+Without 3D ground truth the scene labels can also be named from the renders
+(:func:`overlap_mapping_2d`, majority overlap with the GT class maps: an oracle naming, like the 3D
+overlap mapping); the frames it used are reported beside the frames scored.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..errors import DataError
+from .label_mapping import majority_overlap_mapping
 from .metrics import SegmentationMetrics
 from .plots import side_by_side, write_png
 from .protocols import label_lookup, rendered_view_metrics
-from .readers import GroundTruth
+from .readers import GroundTruth, run_data_path
 
 log = logging.getLogger(__name__)
 
@@ -34,11 +42,140 @@ class ViewsResult:
     pictures: list[Path]  # side-by-side PNGs written (empty when out_dir is None)
 
 
+@dataclass
+class RenderedView:
+    """One dataset frame with the map rendered at its pose."""
+
+    frame: int  # index in the dataset (all frames, stride 1)
+    name: str  # the frame's file stem
+    labels: np.ndarray  # [H, W] int64 scene labels, -1 where nothing labelled was rendered
+    weights: np.ndarray  # [H, W] float32 rendered label confidence
+    gt: np.ndarray  # [H, W] int64 GT class indices, -1 = void
+    rgb: np.ndarray  # [H, W, 3] uint8
+
+
 def pick_frames(num_frames: int, num_views: int) -> list[int]:
     """``num_views`` frame indices spread evenly over ``[0, num_frames)`` (first and last included)."""
     if num_frames <= 0 or num_views <= 0:
         return []
     return sorted({int(round(x)) for x in np.linspace(0, num_frames - 1, min(num_views, num_frames))})
+
+
+def open_view_dataset(scene_dir: str | Path, run_dir: str | Path | None = None) -> Any:
+    """Every frame of the sequence in ``scene_dir``, read with the run's data settings (layout, intrinsics,
+    depth format) when ``run_dir`` mapped that folder, so that renders use the camera the mapper used; the
+    run's frame selection (start, stride, max_frames) is not applied."""
+    from ..config import DataConfig
+    from ..datasets import open_dataset
+
+    cfg = DataConfig()
+    if run_dir is not None:
+        recorded = run_data_path(run_dir)
+        if recorded is not None and recorded.resolve() == Path(scene_dir).resolve():
+            from ..config import load_config
+            from ..errors import ConfigError
+
+            try:
+                data = load_config(Path(run_dir) / "config.yaml").data
+                cfg = dataclasses.replace(data, start=0, stride=1, max_frames=None)
+            except ConfigError as e:  # e.g. written by another version: the files' own settings then
+                log.warning("%s; rendering with %s's own camera settings", e, scene_dir)
+    cfg.path = str(scene_dir)
+    return open_dataset(config=cfg)
+
+
+def render_views(
+    run_dir: str | Path,
+    ds: Any,
+    gt: GroundTruth,
+    frames: Iterable[int],
+    device: str = "cpu",
+) -> dict[int, RenderedView]:
+    """Render ``run_dir/gaussians.ply`` at the poses of ``frames`` of dataset ``ds``.
+
+    Raises:
+        DataError: a frame index is out of range, or a frame has no ground-truth class map or no pose.
+    """
+    import torch
+
+    from ..gaussians import GaussianMap
+    from ..semantics import render_semantics
+
+    idx = sorted(set(frames))
+    for i in idx:
+        if not 0 <= i < len(ds):
+            raise DataError(f"{ds.root}: view frame {i} out of range [0, {len(ds)})")
+    gm = GaussianMap.read_ply(Path(run_dir) / "gaussians.ply", device=device)
+    out: dict[int, RenderedView] = {}
+    for i in idx:
+        frame = ds[i]
+        if frame.gt_classes is None:
+            raise DataError(f"{ds.root}: frame {i} ({frame.name}) has no ground-truth class map")
+        if frame.pose is None:
+            raise DataError(f"{ds.root}: frame {i} ({frame.name}) has no pose to render from")
+        viewmat = torch.as_tensor(np.linalg.inv(frame.pose), dtype=torch.float32, device=device)[None]
+        K = torch.as_tensor(frame.K, dtype=torch.float32, device=device)[None]
+        sem = render_semantics(
+            gm.means, gm.quats, gm.scales, gm.opacities, gm.labels, gm.confidences, viewmat, K,
+            frame.width, frame.height,
+        )  # fmt: skip
+        out[i] = RenderedView(
+            frame=i,
+            name=frame.name or f"{i:06d}",
+            labels=sem.labels[0].cpu().numpy().astype(np.int64),
+            weights=sem.weights[0].cpu().numpy(),
+            gt=gt.class_index_of_ids(frame.gt_classes),
+            rgb=frame.rgb,
+        )
+    return out
+
+
+def overlap_mapping_2d(views: Iterable[RenderedView]) -> dict[int, int]:
+    """Scene label -> GT class index by majority pixel overlap of the rendered labels with the GT class
+    maps of ``views`` (pixels summed over all of them; ties go to the smaller class index). It reads
+    the ground truth to name labels: an oracle naming, as the 3D overlap mapping is."""
+    labels, classes, counts = [], [], []
+    for v in views:
+        ok = (v.labels >= 0) & (v.gt >= 0)
+        pairs, n = np.unique(np.stack([v.labels[ok], v.gt[ok]]), axis=1, return_counts=True)
+        labels.append(pairs[0])
+        classes.append(pairs[1])
+        counts.append(n)
+    if not labels:
+        return {}
+    mapping = majority_overlap_mapping(
+        np.concatenate(labels), np.concatenate(classes), weights=np.concatenate(counts)
+    )
+    return {k: c for k, c in mapping.items() if c >= 0}
+
+
+def score_views(
+    views: Mapping[int, RenderedView],
+    frames: Sequence[int],
+    gt: GroundTruth,
+    label_to_class: Mapping[int, int],
+    out_dir: str | Path | None = None,
+    ignore: Sequence[str] | None = None,
+) -> ViewsResult:
+    """2D metrics of the rendered ``frames`` (keys of ``views``) and, with ``out_dir``, one
+    ``view_<frame name>.png`` (RGB | rendered | GT | confidence) per frame."""
+    if not frames:
+        raise ValueError("no frames to score")
+    pictures = []
+    for i in frames:
+        v = views[i]
+        if out_dir is not None:
+            pred_cls = label_lookup(label_to_class, v.labels)
+            weights = np.where(v.labels >= 0, v.weights, np.nan)
+            pic = side_by_side(v.rgb, pred_cls, v.gt, weights,
+                               titles=("RGB", "rendered labels", "ground truth", "confidence"))  # fmt: skip
+            pictures.append(write_png(Path(out_dir) / f"view_{v.name}.png", pic))
+    metrics = rendered_view_metrics(
+        [views[i].labels for i in frames], [views[i].gt for i in frames], label_to_class, gt.class_names,
+        ignore=ignore,
+    )  # fmt: skip
+    metrics = dataclasses.replace(metrics, protocol=f"{metrics.protocol}; frames {list(frames)}")
+    return ViewsResult(metrics=metrics, frames=list(frames), pictures=pictures)
 
 
 def evaluate_views(
@@ -66,53 +203,9 @@ def evaluate_views(
     Raises:
         DataError: the scene has no ground-truth class maps, or a frame has no pose.
     """
-    import torch
-
-    from ..datasets import open_dataset
-    from ..gaussians import GaussianMap
-    from ..semantics import render_semantics
-
-    ds = open_dataset(scene_dir)
+    ds = open_view_dataset(scene_dir, run_dir)
     idx = list(frames) if frames is not None else pick_frames(len(ds), num_views)
-    for i in idx:
-        if not 0 <= i < len(ds):
-            raise DataError(f"{scene_dir}: view frame {i} out of range [0, {len(ds)})")
     if not idx:
         raise DataError(f"{scene_dir}: no frames to render")
-    gm = GaussianMap.read_ply(Path(run_dir) / "gaussians.ply", device=device)
-    rendered, gts, pictures = [], [], []
-    for i in idx:
-        frame = ds[i]
-        if frame.gt_classes is None:
-            raise DataError(
-                f"{scene_dir}: frame {i} has no ground-truth class map (only synthetic scenes do)"
-            )
-        if frame.pose is None:
-            raise DataError(f"{scene_dir}: frame {i} has no pose to render from")
-        viewmat = torch.as_tensor(np.linalg.inv(frame.pose), dtype=torch.float32, device=device)[None]
-        K = torch.as_tensor(frame.K, dtype=torch.float32, device=device)[None]
-        sem = render_semantics(
-            gm.means, gm.quats, gm.scales, gm.opacities, gm.labels, gm.confidences, viewmat, K,
-            frame.width, frame.height,
-        )  # fmt: skip
-        labels = sem.labels[0].cpu().numpy()
-        gt_cls = gt.class_index_of_ids(frame.gt_classes)
-        rendered.append(labels)
-        gts.append(gt_cls)
-        if out_dir is not None:
-            pred_cls = label_lookup(label_to_class, labels)
-            weights = sem.weights[0].cpu().numpy()
-            weights = np.where(labels >= 0, weights, np.nan)
-            pic = side_by_side(frame.rgb, pred_cls, gt_cls, weights,
-                               titles=("RGB", "rendered labels", "ground truth", "confidence"))  # fmt: skip
-            name = frame.name or f"{i:06d}"
-            pictures.append(write_png(Path(out_dir) / f"view_{name}.png", pic))
-    metrics = rendered_view_metrics(rendered, gts, label_to_class, gt.class_names, ignore=ignore)
-    metrics = _with_protocol(metrics, f"{metrics.protocol}; frames {idx}")
-    return ViewsResult(metrics=metrics, frames=idx, pictures=pictures)
-
-
-def _with_protocol(m: SegmentationMetrics, protocol: str) -> SegmentationMetrics:
-    from dataclasses import replace
-
-    return replace(m, protocol=protocol)
+    views = render_views(run_dir, ds, gt, idx, device)
+    return score_views(views, idx, gt, label_to_class, out_dir, ignore)

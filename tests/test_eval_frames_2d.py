@@ -1,0 +1,201 @@
+"""2D rendered-view evaluation of real-data layouts whose frames carry class maps: label-fusion's segm
+images, ScanNet's label-filt (raw ids -> NYU40 through scannetv2-labels.combined.tsv), with or without 3D
+ground truth."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_datasets import _png, _rgb
+from test_eval_cli import GAUSSIAN_DTYPE, _write_ply
+
+from ogscene3d.datasets import open_dataset
+from ogscene3d.datasets.scannet import NYU40_CLASSES
+from ogscene3d.errors import DataError
+from ogscene3d.eval import load_ground_truth
+from ogscene3d.eval.views import open_view_dataset, overlap_mapping_2d, render_views
+
+W, H = 32, 24
+K = np.array([[30.0, 0, 16], [0, 30.0, 12], [0, 0, 1]])
+Z = 0.6  # metres: label-fusion's bit-shifted uint16 depth reaches 0.82 m at most
+SHIFTS = (0.0, 0.025, 0.06)  # camera x per frame (no pixel centre on the wall's class boundary)
+
+
+def _pose(tx: float) -> np.ndarray:
+    p = np.eye(4)
+    p[0, 3] = tx
+    return p
+
+
+def _left_right(tx: float, left: int, right: int, w: int = W, h: int = H) -> np.ndarray:
+    """Class image of a wall at Z whose world x < 0 half is ``left`` and the other half ``right``."""
+    u = (np.arange(w) + 0.5) * (W / w)  # pixel centres in the WxH camera
+    world_x = (u - K[0, 2]) / K[0, 0] * Z + tx
+    row = np.where(world_x < 0, left, right)
+    return np.repeat(row[None], h, axis=0)
+
+
+def make_labelfusion(root: Path) -> Path:
+    """Three frames of a wall whose left half is class 8 and right half class 22 (segm value = id * 6)."""
+    root.mkdir(parents=True)
+    np.savetxt(root / "camera-intrinsics.color.txt", K)
+    for i, tx in enumerate(SHIFTS):
+        _png(root / f"frame-{i:06d}.color.png", _rgb(H, W, i))
+        _png(root / f"frame-{i:06d}.depth.png", np.full((H, W), int(Z * 1e4) << 3, np.uint16))
+        np.savetxt(root / f"frame-{i:06d}.pose.txt", _pose(tx))
+        _png(root / f"frame-{i:06d}.segm.png", (_left_right(tx, 8, 22) * 6).astype(np.uint8))
+    return root
+
+
+TSV = (
+    "id\traw_category\tcategory\tcount\tnyu40id\teigen13id\tnyu40class\n"
+    "1\tchair\tchair\t10\t5\t4\tchair\n"
+    "40\ttable\ttable\t10\t7\t10\ttable\n"
+    "41\tdecoration\tdecoration\t3\t\t\t\n"  # a category without an NYU40 class
+)
+
+
+def make_scannet(root: Path, tsv: bool = True, label_scale: int = 2) -> Path:
+    """A ScanNet export of the same wall: colour (and label-filt) at twice the depth size, raw category 1
+    (NYU40 chair) left, 40 (table) right, a column of raw 41 (no NYU40 class) and one of 999 (not in the
+    tsv)."""
+    for i, tx in enumerate(SHIFTS):
+        _png(root / "color" / f"{i}.jpg", _rgb(H * label_scale, W * label_scale, i))
+        _png(root / "depth" / f"{i}.png", np.full((H, W), int(Z * 1000), np.uint16))
+        (root / "pose").mkdir(exist_ok=True)
+        np.savetxt(root / "pose" / f"{i}.txt", _pose(tx))
+        raw = _left_right(tx, 1, 40, W * label_scale, H * label_scale).astype(np.uint16)
+        raw[:, :label_scale] = 41
+        raw[:, -label_scale:] = 999
+        _png(root / "label-filt" / f"{i}.png", raw)
+    (root / "intrinsic").mkdir()
+    np.savetxt(
+        root / "intrinsic" / "intrinsic_depth.txt", np.pad(K, ((0, 1), (0, 1))) + np.diag([0, 0, 0, 1])
+    )
+    if tsv:
+        (root.parent / "scannetv2-labels.combined.tsv").write_text(
+            TSV
+        )  # beside the scenes, as ScanNet has it
+    return root
+
+
+def write_wall_run(run: Path, labels: tuple[int, int] = (3, 7), graph: dict | None = None) -> Path:
+    """A run whose Gaussians tile the wall: scene label ``labels[0]`` where x < 0, ``labels[1]`` elsewhere."""
+    xs, ys = np.meshgrid(np.arange(-0.4, 0.46, 0.01), np.arange(-0.3, 0.31, 0.01))
+    n = xs.size
+    g = np.zeros(n, dtype=GAUSSIAN_DTYPE)
+    g["x"], g["y"], g["z"] = xs.ravel(), ys.ravel(), Z
+    g["opacity"] = 4.0
+    g["rot_0"] = 1.0
+    for i in range(3):
+        g[f"scale_{i}"] = np.log(0.006)
+    g["label"] = np.where(xs.ravel() < 0, labels[0], labels[1])
+    g["confidence"] = 0.9
+    run.mkdir(parents=True)
+    _write_ply(run / "gaussians.ply", g)
+    if graph is not None:
+        (run / "graph.json").write_text(json.dumps(graph))
+    return run
+
+
+# --------------------------------------------------------------------------------------- readers
+
+
+def test_scannet_label_filt_becomes_nyu40_class_maps(tmp_path):
+    ds = open_dataset(make_scannet(tmp_path / "scans" / "scene0000_00"))
+    assert ds.kind == "scannet" and ds.has_class_maps and ds.class_names == NYU40_CLASSES
+    f = ds[1]
+    # resampled from 64x48 to the depth size by nearest neighbour; raw ids -> NYU40, unmapped -> 0 (void)
+    expected = _left_right(SHIFTS[1], 5, 7)
+    expected[:, 0] = 0
+    expected[:, -1] = 0
+    np.testing.assert_array_equal(f.gt_classes, expected)
+
+
+def test_scannet_label_filt_without_label_map_is_warned_about(tmp_path, caplog):
+    root = make_scannet(tmp_path / "scene0000_00", tsv=False)
+    with caplog.at_level(logging.WARNING):
+        ds = open_dataset(root)
+    assert not ds.has_class_maps and ds[0].gt_classes is None and ds.class_names is None
+    assert any("scannetv2-labels.combined.tsv" in r.getMessage() for r in caplog.records)
+
+
+def test_scannet_label_image_of_another_shape_is_an_error(tmp_path):
+    root = make_scannet(tmp_path / "scans" / "scene0000_00")
+    _png(root / "label-filt" / "2.png", np.zeros((H, 2 * W), np.uint16))
+    with pytest.raises(DataError, match=r"label-filt/2\.png: ScanNet label is 64x24"):
+        open_dataset(root)[2]
+
+
+def test_bad_scannet_label_map_is_an_error_naming_the_file(tmp_path):
+    root = make_scannet(tmp_path / "scans" / "scene0000_00")
+    tsv = tmp_path / "scans" / "scannetv2-labels.combined.tsv"
+    tsv.write_text("id\tnyu40\n1\t5\n")
+    with pytest.raises(DataError, match=r"scannetv2-labels\.combined\.tsv: .*'nyu40id'"):
+        open_dataset(root)
+    tsv.write_text("id\tnyu40id\nchair\t5\n")
+    with pytest.raises(DataError, match=r"tsv: line 2: id='chair'"):
+        open_dataset(root)
+
+
+def test_labelfusion_folder_is_a_2d_only_ground_truth(tmp_path):
+    seq = make_labelfusion(tmp_path / "shelf")
+    with pytest.raises(
+        DataError, match=r"shelf: its labelfusion frames carry class ids but no class names.*--classes"
+    ):
+        load_ground_truth(seq)
+    (seq / "classes.json").write_text(json.dumps({"0": "background", "8": "mug", "22": "box"}))
+    gt = load_ground_truth(seq)
+    assert not gt.has_3d and gt.points.shape == (0, 3)
+    assert gt.class_names == ["background", "mug", "box"] and gt.class_ids == [0, 8, 22]
+    table = tmp_path / "names.json"
+    table.write_text(json.dumps(["a"] * 8 + ["cup"] + ["b"] * 13 + ["crate"]))
+    assert load_ground_truth(seq, classes=table).class_names[8] == "cup"  # --classes wins
+
+
+def test_scannet_labels_ply_gets_nyu40_names_and_is_preferred(tmp_path):
+    root = make_scannet(tmp_path / "scans" / "scene0000_00")
+    gt = load_ground_truth(root)  # no labels PLY: the frames' NYU40 maps only
+    assert not gt.has_3d and gt.class_names == list(NYU40_CLASSES.values())
+    _write_labels_ply(root)
+    mesh = np.zeros(3, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
+    _write_ply(root / "scene0000_00_vh_clean_2.ply", mesh)  # the unlabelled mesh beside it
+    gt = load_ground_truth(root)
+    assert gt.has_3d and gt.source.endswith("scene0000_00_vh_clean_2.labels.ply")
+    assert gt.class_names[gt.classes[0]] == "chair" and gt.class_names[gt.classes[-1]] == "table"
+
+
+def _write_labels_ply(root: Path) -> None:
+    xs, ys = np.meshgrid(np.arange(-0.4, 0.46, 0.02), np.arange(-0.3, 0.31, 0.02))
+    pts = np.zeros(xs.size, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("label", "<u2")])
+    pts["x"], pts["y"], pts["z"] = xs.ravel(), ys.ravel(), Z
+    pts["label"] = np.where(xs.ravel() < 0, 5, 7)  # NYU40 chair, table
+    order = np.argsort(pts["x"], kind="stable")
+    _write_ply(root / "scene0000_00_vh_clean_2.labels.ply", pts[order])
+
+
+# --------------------------------------------------------------------------------------- rendering
+
+
+def test_rendered_views_name_scene_labels_by_2d_overlap(tmp_path):
+    seq = make_labelfusion(tmp_path / "shelf")
+    (seq / "classes.json").write_text(json.dumps({"8": "mug", "22": "box"}))
+    gt = load_ground_truth(seq)
+    run = write_wall_run(tmp_path / "run")
+    views = render_views(run, open_view_dataset(seq, run), gt, [0, 2])
+    assert sorted(views) == [0, 2] and views[2].name == "frame-000002.color"
+    assert overlap_mapping_2d(views.values()) == {3: 0, 7: 1}
+    assert overlap_mapping_2d([]) == {}
+
+
+def test_overlap_mapping_counts_weights():
+    from ogscene3d.eval import majority_overlap_mapping
+
+    assert majority_overlap_mapping(np.array([1, 1]), np.array([0, 2])) == {1: 0}  # a tie: smaller id
+    assert majority_overlap_mapping(np.array([1, 1]), np.array([0, 2]), weights=[1, 5]) == {1: 2}
+    with pytest.raises(ValueError, match="weights"):
+        majority_overlap_mapping(np.array([1, 1]), np.array([0, 2]), weights=[1, -5])
