@@ -313,6 +313,11 @@ def test_voxel_resample_groups_by_label_and_voxel():
     ]
     # Without labels the class stands for the label.
     assert voxel_resample(pts, cls, None, voxel_size=v)[0].shape == (4, 3)
+    # A key space too large for one int64 per row (km apart at 0.1 mm) takes the row-wise path.
+    far = np.array([[0.0, 0, 0], [2e-5, 0, 0], [1e5, 1e5, 1e5]])
+    far_pts, far_cls = voxel_resample(far, np.array([0, 0, 1]), np.array([5, 5, 6]), voxel_size=1e-4)
+    np.testing.assert_allclose(far_pts, [[1e-5, 0, 0], [1e5, 1e5, 1e5]])
+    assert far_cls.tolist() == [0, 1]
     with pytest.raises(ValueError, match="voxel_size"):
         voxel_resample(pts, cls, labels, voxel_size=0.0)
 

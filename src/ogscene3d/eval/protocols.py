@@ -281,13 +281,21 @@ def voxel_resample(
     cell = np.floor((pts - (pts.min(axis=0) - 0.5 * voxel_size)) / voxel_size).astype(np.int64)
     # The class is part of the key so that a group never mixes classes, whatever the caller passes.
     keys = np.concatenate([lab[:, None], cls[:, None], cell], axis=1)
-    uniq, group = np.unique(keys, axis=0, return_inverse=True)
+    keys -= keys.min(axis=0)
+    dims = keys.max(axis=0) + 1
+    if np.prod(dims.astype(np.float64)) < 2.0**62:
+        # One int64 per row: a 1-D unique is an order of magnitude faster than unique(axis=0).
+        _, first, group = np.unique(
+            np.ravel_multi_index(tuple(keys.T), tuple(dims)), return_index=True, return_inverse=True
+        )
+    else:
+        _, first, group = np.unique(keys, axis=0, return_index=True, return_inverse=True)
     group = group.reshape(-1)
-    count = np.bincount(group, minlength=uniq.shape[0]).astype(np.float64)
+    count = np.bincount(group, minlength=first.shape[0]).astype(np.float64)
     mean = np.stack(
-        [np.bincount(group, weights=pts[:, d], minlength=uniq.shape[0]) / count for d in range(3)], axis=1
+        [np.bincount(group, weights=pts[:, d], minlength=first.shape[0]) / count for d in range(3)], axis=1
     )
-    return mean, uniq[:, 1].copy()
+    return mean, cls[first]
 
 
 def conceptgraphs_protocol(
@@ -319,7 +327,8 @@ def conceptgraphs_protocol(
     if not (np.isfinite(voxel_size) and voxel_size >= 0):
         raise ValueError(f"voxel_size must be >= 0 metres (0 = no resampling), got {voxel_size}")
     if voxel_size > 0:
-        pp, pc = voxel_resample(pp, pc, pred_labels, voxel_size)
+        labels = None if pred_labels is None else _labels(pred_labels, pp.shape[0], "pred_labels")
+        pp, pc = voxel_resample(pp, pc, labels, voxel_size)
         sampling = f"predicted points resampled to one per scene label and {voxel_size:g} m voxel"
     else:
         sampling = "every predicted point counts, not resampled"
