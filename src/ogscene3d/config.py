@@ -93,6 +93,12 @@ class MappingConfig:
     keyframe_every: int = 1
     keyframe_translation: float = 0.0  # metres; 0 = unused
     keyframe_rotation_deg: float = 0.0  # 0 = unused
+    # Pose-jump check (mapping/pose_jump.py): the most a camera may move between two consecutive frames of
+    # the selection (after data.stride), times the steps since the last accepted frame; 0 = no limit. About
+    # twice the largest steps of the samples here (7-Scenes every 20th frame: 0.26 m, 13.6 deg).
+    max_pose_step: float = 0.5  # metres
+    max_pose_step_deg: float = 30.0
+    on_pose_jump: str = "warn"  # warn (map it anyway) | skip (leave the frame out) | error (stop, map saved)
     pixels_per_gaussian: int = 4  # subsampling of back-projected pixels per segment
     # Neighbours per probe in the association (the paper gives no k). Each probe votes once, for its nearest
     # labelled Gaussian: with k=5 the few boundary matches of a mostly new segment (a door in a wall) drew

@@ -19,6 +19,10 @@ Per keyframe:
    inconsistent Gaussians and the refinement relabels them in the same keyframe;
 9. scene-graph observation/update when ``config.graph.enabled`` (failures there never stop mapping).
 
+Every frame's pose (the dataset's, or the tracker's under ``tracking.poses: odometry``) is first compared
+with the last accepted frame's: a jump beyond ``mapping.max_pose_step`` / ``max_pose_step_deg`` warns, leaves
+the frame out or stops the run (``mapping.on_pose_jump``, ``pose_jump.py``).
+
 Ablations (``mapping.ablation``): "naive" (majority label of the KNN matches or a new label, no ambiguity
 test, all confidences 1, no refinement, no long-term), "local", "local+global", "full".
 Per-module wall time and counts are kept in ``timings`` (written to ``timings.json``).
@@ -58,6 +62,7 @@ from .local import (
 from .longterm import MemoryBuffer, MemoryEntry, label_edges, longterm_view_update
 from .merge import duplicate_label_pairs, merge_labels, relabel, visible_pixels
 from .optimize import View, optimize_map
+from .pose_jump import PoseJumpCheck, PoseJumpError
 from .refine import global_refinement
 
 log = logging.getLogger(__name__)
@@ -169,6 +174,7 @@ class Mapper:
             cfg.keyframe_every, cfg.keyframe_translation, cfg.keyframe_rotation_deg
         )
         self.memory = MemoryBuffer(cfg.tau_long, cfg.r_search, cfg.memory_max, cfg.memory_point_step)
+        self.pose_check = PoseJumpCheck(cfg.max_pose_step, cfg.max_pose_step_deg, cfg.on_pose_jump)
         self.recent: deque[MemoryEntry] = deque(maxlen=max(1, cfg.opt_memory_frames))
         self.timings = Timings(self.device)
         self.frames_seen = 0
@@ -290,6 +296,26 @@ class Mapper:
         frame.pose = pose
         return True
 
+    def _pose_jumped(self, frame: Frame) -> bool:
+        """Check the frame's pose against the last accepted frame's (``pose_jump.py``). True: leave the frame
+        out (``on_pose_jump: skip``); raises :class:`PoseJumpError` under ``on_pose_jump: error``."""
+        jump = self.pose_check.check(frame.index, frame.pose, frame.name or "unnamed")
+        if jump is not None:
+            action = self.pose_check.action
+            if action == "error":
+                raise PoseJumpError(
+                    f"{jump.describe()}; fix the pose, or set mapping.on_pose_jump to skip (leave the frame "
+                    "out) or warn (map it anyway)"
+                )
+            self.timings.add("pose_jumps")
+            if action == "skip":
+                log.warning("%s: frame left out (mapping.on_pose_jump: skip)", jump.describe())
+                self.timings.add("frames_skipped_pose_jump")
+                return True
+            log.warning("%s: mapped anyway (mapping.on_pose_jump: warn)", jump.describe())
+        self.pose_check.accept(frame.index, frame.pose)
+        return False
+
     def _get_tracker(self):
         if self._tracker is None:
             from ..tracking import Tracker
@@ -332,11 +358,13 @@ class Mapper:
                 f"frame {frame.index} ({frame.name or 'unnamed'}): no camera pose; use a dataset with "
                 "poses or track them (--poses odometry, config tracking.poses: odometry)"
             )
-        self.next_index = frame.index + 1
         tracked = self._track(frame)
+        # may raise (mapping.on_pose_jump: error) before the frame counts as read: a resume retries it
+        jumped = tracked and self._pose_jumped(frame)
+        self.next_index = frame.index + 1
         if odometry:
             self.trajectory.append(np.array(frame.pose, dtype=np.float64) if tracked else None)
-        if not tracked:
+        if not tracked or jumped:
             return False
         self._camera_up_sum -= np.asarray(frame.pose, dtype=np.float64)[:3, 1]
         if not self._checked_depth_range and np.any(frame.depth > 0):
@@ -705,6 +733,7 @@ class Mapper:
             nan = np.full((4, 4), np.nan)
             extra["mapper_trajectory"] = np.stack([nan if p is None else p for p in self.trajectory])
         extra.update(self.keyframes.state())
+        extra.update(self.pose_check.state())
         if self._tracker is not None:
             extra.update(self._tracker.state())  # the odometry goes on in the same trajectory
         if self._graph is not None and not self._graph_failed:
@@ -751,6 +780,7 @@ class Mapper:
                 traj = z["mapper_trajectory"] if "mapper_trajectory" in z.files else np.zeros((0, 4, 4))
                 self.trajectory = [None if np.isnan(p).any() else p for p in traj]
                 self.keyframes.load_state({k: z[k] for k in ("kf_since_last", "kf_last_pose")})
+                self.pose_check.load_state({k: z[k] for k in z.files if k.startswith("posecheck_")})
                 self.memory.entries = []
                 if "mem_keyframe" in z.files:
                     scores = json.loads(str(z["mem_scores"]))

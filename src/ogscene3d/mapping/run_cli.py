@@ -15,6 +15,7 @@ from ..config import add_override_argument, load_config
 from ..device import resolve_device
 from ..errors import DataError
 from ..tracking import add_poses_argument
+from .pose_jump import PoseJumpError
 from .source import check_same_source, dataset_source, record_data, remove_run_temps, start_run_dir
 
 log = logging.getLogger(__name__)
@@ -132,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
 
         frames = tqdm(frames, desc="mapping", unit="frame", total=max(0, len(ds) - start))
     t0 = time.perf_counter()
-    given, seen0 = 0, mapper.frames_seen
+    given, seen0, counts0 = 0, mapper.frames_seen, dict(mapper.timings.counts)
     stop = _StopRequest()
     try:
         with stop:
@@ -143,14 +144,16 @@ def run(args: argparse.Namespace) -> int:
                     frames.set_postfix(gaussians=len(mapper.map), kf=mapper.keyframe_count)
                 if stop.requested:
                     break
-    except DataError:
+    except DataError as e:
         if mapper.keyframe_count:
             # a bad frame late in a long sequence must not cost the map built so far
             mapper.save_checkpoint(out / "map.npz")
-            log.error(
-                "the map so far is in %s: fix the frame (or --set data.on_bad_frame=skip), then --resume",
-                out / "map.npz",
+            fix = (
+                "fix the pose (or --set mapping.on_pose_jump=skip, or =warn to map it)"
+                if isinstance(e, PoseJumpError)
+                else "fix the frame (or --set data.on_bad_frame=skip)"
             )
+            log.error("the map so far is in %s: %s, then --resume", out / "map.npz", fix)
         raise
     if stop.requested:
         if mapper.keyframe_count:
@@ -170,7 +173,11 @@ def run(args: argparse.Namespace) -> int:
     mapper.save(out)
     dt = time.perf_counter() - t0
     mapped = mapper.frames_seen - seen0
-    skipped = f", {given - mapped} untracked" if given > mapped else ""
+    skipped = ""
+    # this invocation's frames only: the counts go on across resumes
+    for key, what in (("frames_untracked", "untracked"), ("frames_skipped_pose_jump", "pose jumps")):
+        n = int(mapper.timings.counts.get(key, 0) - counts0.get(key, 0))
+        skipped += f", {n} {what} left out" if n else ""
     print(
         f"read {given} frames: {mapped} mapped ({mapper.keyframe_count} keyframes in all){skipped}, "
         f"in {dt:.1f} s on {mapper.device}: {len(mapper.map)} Gaussians -> {out}"
