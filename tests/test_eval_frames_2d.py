@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from test_datasets import _png, _rgb
-from test_eval_cli import GAUSSIAN_DTYPE, _write_ply
+from test_eval_cli import GAUSSIAN_DTYPE, _main, _write_ply
 
 from ogscene3d.datasets import open_dataset
 from ogscene3d.datasets.scannet import NYU40_CLASSES
@@ -199,3 +199,122 @@ def test_overlap_mapping_counts_weights():
     assert majority_overlap_mapping(np.array([1, 1]), np.array([0, 2]), weights=[1, 5]) == {1: 2}
     with pytest.raises(ValueError, match="weights"):
         majority_overlap_mapping(np.array([1, 1]), np.array([0, 2]), weights=[1, -5])
+
+
+# --------------------------------------------------------------------------------------- eval
+
+
+def _labelfusion_run(tmp_path, graph=None):
+    seq = make_labelfusion(tmp_path / "shelf")
+    (seq / "classes.json").write_text(json.dumps({"0": "background", "8": "mug", "22": "box"}))
+    return seq, write_wall_run(tmp_path / "run", graph=graph)
+
+
+def test_labelfusion_eval_is_2d_only_with_an_oracle_2d_naming(tmp_path, monkeypatch, capsys):
+    seq, run = _labelfusion_run(tmp_path)
+    assert _main(["eval", str(run), "--gt", str(seq), "--views", "3"], monkeypatch) == 0
+    out = capsys.readouterr().out
+    assert (
+        "label mapping: overlap (oracle: names scene labels from the GT) from the rendered frames [0, 1, 2]"
+        in out
+    )
+    assert "no 3D ground truth: 2D only" in out and "frames scored: frame-000000.color" in out
+    report = json.loads((run / "metrics.json").read_text())
+    assert not report["has_3d_ground_truth"] and report["semantic_3d"] == {} and report["gt_points"] is None
+    assert report["scene_graph"] is None and any(
+        "rendered-view (2D) scores only" in n for n in report["notes"]
+    )
+    m = report["label_mapping"]
+    assert m["method"] == "overlap" and m["space"] == "2d" and m["frames"] == [0, 1, 2]
+    assert "oracle" in m["description"] and m["num_mapped_labels"] == 2
+    v = report["semantic_2d"]
+    assert (
+        v["frames"] == [0, 1, 2] and v["mapping_frames"] == [0, 1, 2] and v["dataset_kind"] == "labelfusion"
+    )
+    # the splats reproduce the two halves but for the class boundary's column
+    assert v["miou"] > 0.9 and {c["name"] for c in v["per_class"] if c["iou"] is not None} == {"mug", "box"}
+    assert len(v["pictures"]) == 3 and (run / v["pictures"][0]).is_file()
+
+
+def test_2d_naming_frames_and_scored_frames_are_reported_apart(tmp_path, monkeypatch):
+    seq, run = _labelfusion_run(tmp_path)
+    argv = ["eval", str(run), "--gt", str(seq), "--view-frames", "2", "--mapping-frames", "0,1", "--no-plots"]
+    assert _main(argv, monkeypatch) == 0
+    report = json.loads((run / "metrics.json").read_text())
+    assert report["label_mapping"]["frames"] == [0, 1]
+    assert report["semantic_2d"]["frames"] == [2] and report["semantic_2d"]["mapping_frames"] == [0, 1]
+    assert report["semantic_2d"]["frame_names"] == ["frame-000002.color"]
+
+
+def test_2d_only_eval_names_labels_by_text_without_3d_ground_truth(tmp_path, monkeypatch, capsys):
+    graph = {"nodes": [{"id": 3, "tag": "mugs"}, {"id": 7, "tag": "box"}], "edges": []}
+    seq, run = _labelfusion_run(tmp_path, graph=graph)
+    (run / "config.yaml").write_text(f"data:\n  path: {seq}\n  stride: 2\n")  # eval finds the GT here
+    assert _main(["eval", str(run), "--views", "2", "--no-plots"], monkeypatch) == 0
+    assert "oracle" not in capsys.readouterr().out
+    report = json.loads((run / "metrics.json").read_text())
+    assert report["label_mapping"]["method"] == "text" and report["semantic_2d"]["mapping_frames"] is None
+    assert report["semantic_2d"]["frames"] == [0, 2]  # every frame of the sequence, not the run's stride
+    assert report["semantic_2d"]["miou"] > 0.9
+
+
+def test_2d_only_eval_needs_views(tmp_path, monkeypatch, capsys):
+    seq, run = _labelfusion_run(tmp_path)
+    assert _main(["eval", str(run), "--gt", str(seq), "--views", "0"], monkeypatch) == 2
+    assert "no 3D ground truth, only per-frame class maps: render views" in capsys.readouterr().err
+    assert _main(["eval", str(run), "--gt", str(seq), "--view-frames", "7"], monkeypatch) == 2
+    assert "view frame 7 out of range [0, 3)" in capsys.readouterr().err
+
+
+def test_scannet_folder_scored_in_2d_alone_then_in_3d_and_2d(tmp_path, monkeypatch):
+    root = make_scannet(tmp_path / "scans" / "scene0000_00")
+    run = write_wall_run(tmp_path / "run")
+    assert _main(["eval", str(run), "--gt", str(root), "--views", "2", "--no-plots"], monkeypatch) == 0
+    report = json.loads((run / "metrics.json").read_text())
+    assert not report["has_3d_ground_truth"] and report["label_mapping"]["space"] == "2d"
+    named = {c["name"]: c["iou"] for c in report["semantic_2d"]["per_class"] if c["iou"] is not None}
+    assert set(named) == {"chair", "table"} and min(named.values()) > 0.85  # NYU40 names, void edges
+
+    _write_labels_ply(root)  # ScanNet's 3D ground truth: now the naming is 3D overlap, both blocks scored
+    argv = ["eval", str(run), "--gt", str(root), "--views", "2", "--no-plots", "--mapping-frames", "1"]
+    assert _main(argv, monkeypatch) == 0
+    report = json.loads((run / "metrics.json").read_text())
+    assert report["has_3d_ground_truth"] and report["label_mapping"]["space"] == "3d"
+    assert report["semantic_3d"]["hovsg"]["miou"] == pytest.approx(1.0)
+    assert report["semantic_2d"]["miou"] > 0.85 and report["semantic_2d"]["mapping_frames"] is None
+    assert any("mapping frames not used" in n for n in report["notes"])
+    # the labels PLY inside the scene folder: its frames are rendered when the run mapped that folder
+    (run / "config.yaml").write_text(f"data:\n  path: {root}\n")
+    argv = ["eval", str(run), "--gt", str(root / "scene0000_00_vh_clean_2.labels.ply"), "--views", "1"]
+    assert _main([*argv, "--no-plots"], monkeypatch) == 0
+    assert json.loads((run / "metrics.json").read_text())["semantic_2d"]["frames"] == [0]
+
+
+def test_shared_labelfusion_sample_end_to_end(shared_data, tmp_path, monkeypatch, capsys):
+    """Map the real label-fusion sample (every third frame, no optimisation steps, classical segments),
+    then score it in 2D against its segm images."""
+    from ogscene3d import cli
+
+    seq = shared_data / "labelfusion_shelf_labels"
+    run = tmp_path / "run"
+    sets = [
+        "data.stride=3",
+        "mapping.pixels_per_gaussian=64",
+        "mapping.opt_iters=0",
+        "segmentation.backend=classical",
+    ]
+    argv = ["run", "--data", str(seq), "--out", str(run), "--device", "cpu", "--no-progress"]
+    for s in sets:
+        argv += ["--set", s]
+    monkeypatch.setattr(cli, "_COMMAND_MODULES", ["ogscene3d.mapping.run_cli", "ogscene3d.eval.eval_cli"])
+    assert cli.main(argv) == 0
+    table = tmp_path / "classes.json"
+    table.write_text(json.dumps({"0": "background", "8": "object 8", "22": "object 22"}))
+    assert cli.main(["eval", str(run), "--classes", str(table), "--views", "3", "--no-plots"]) == 0
+    report = json.loads((run / "metrics.json").read_text())
+    assert report["ground_truth"].startswith(str(seq)) and not report["has_3d_ground_truth"]
+    v = report["semantic_2d"]
+    assert v["frames"] == [0, 7, 14] and report["label_mapping"]["frames"] == [0, 7, 14]
+    assert 0.0 < v["miou"] <= 1.0 and 0.0 < v["overall_acc"] <= 1.0
+    print(json.dumps({k: v[k] for k in ("miou", "fmiou", "macc", "overall_acc")}))
+    print({c["name"]: c["iou"] for c in v["per_class"]})

@@ -24,8 +24,10 @@ def add_parser(subparsers: Any) -> None:
         help="evaluate a run directory against ground truth (3D semantics, scene graph, trajectory)",
         description=(
             "Score RUN_DIR (gaussians.ply, graph.json) against ground truth GT: a synthetic scene directory "
-            "(found automatically for runs of synthetic scenes), its gt/ folder, or a labelled PLY "
-            "(x, y, z, class[, instance]) with a class-name table. "
+            "(found automatically for runs of synthetic scenes), its gt/ folder, a labelled PLY "
+            "(x, y, z, class[, instance]) with a class-name table, a ScanNet scene folder "
+            "(*_vh_clean_2.labels.ply, NYU40; label-filt/ for 2D), or an RGB-D sequence whose frames carry "
+            "class maps but which has no 3D ground truth (label-fusion: scored in 2D only). "
             "Prints a table and writes metrics.json and a per-class IoU bar chart into the run directory."
         ),
     )
@@ -34,8 +36,9 @@ def add_parser(subparsers: Any) -> None:
         "--gt",
         type=Path,
         default=None,
-        help="ground truth: scene dir, gt/ folder or labelled PLY (default: the synthetic scene the run was "
-        "made from, RUN_DIR/scene or config.yaml's data.path)",
+        help="ground truth: scene dir, gt/ folder, labelled PLY, ScanNet scene folder or a sequence with "
+        "per-frame class maps (default: the scene the run was made from, RUN_DIR/scene or config.yaml's "
+        "data.path, when it holds one of these)",
     )
     p.add_argument(
         "--protocol",
@@ -59,7 +62,13 @@ def add_parser(subparsers: Any) -> None:
         help="naming of scene labels: text (graph node tags vs class names), overlap (majority overlap with "
         "GT instances: oracle), auto (text when tags match, else overlap)",
     )
-    p.add_argument("--classes", type=Path, default=None, help="class-name JSON for a bare labelled PLY")
+    p.add_argument(
+        "--classes",
+        type=Path,
+        default=None,
+        help="class-name JSON (list or {id: name}) for a bare labelled PLY or a sequence's per-frame class "
+        "ids (label-fusion; default classes.json beside them; ScanNet's NYU40 names are built in)",
+    )
     p.add_argument("--k", type=int, default=5, help="neighbours of the HOV-SG majority vote (default 5)")
     p.add_argument(
         "--cg-voxel-size",
@@ -97,10 +106,17 @@ def add_parser(subparsers: Any) -> None:
         "--views",
         type=int,
         default=3,
-        help="render the map at this many evenly spread frames of a synthetic GT scene: 2D metrics and "
-        "RGB | labels | GT | confidence PNGs (default 3; 0 = none; --no-plots keeps the metrics only)",
+        help="render the map at this many evenly spread frames of a GT sequence whose frames carry class "
+        "maps (synthetic, label-fusion, ScanNet label-filt/): 2D metrics and RGB | labels | GT | confidence "
+        "PNGs (default 3; 0 = none; --no-plots keeps the metrics only)",
     )
     p.add_argument("--view-frames", default=None, help="comma-separated frame indices to render instead")
+    p.add_argument(
+        "--mapping-frames",
+        default=None,
+        help="without 3D GT: comma-separated frame indices whose renders the overlap mapping reads "
+        "(default: the scored frames)",
+    )
     p.add_argument("--device", default="cpu", help="rendering device for --views (cpu, cuda, cuda:0)")
     p.add_argument("--align", default="se3", choices=["se3", "sim3", "none"], help="trajectory alignment")
     p.add_argument(
@@ -125,13 +141,13 @@ def _json_safe(x: Any) -> Any:
     return x
 
 
-def _int_list(text: str | None) -> list[int] | None:
+def _int_list(text: str | None, option: str = "--view-frames") -> list[int] | None:
     if text is None:
         return None
     try:
         return [int(x) for x in text.split(",") if x.strip()]
     except ValueError:
-        raise ConfigError(f"--view-frames: expected comma-separated integers, got {text!r}") from None
+        raise ConfigError(f"{option}: expected comma-separated integers, got {text!r}") from None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -149,6 +165,8 @@ def _mapping_line(report: dict[str, Any]) -> str:
     m = report["label_mapping"]
     # Overlap naming reads the GT classes, so its scores measure segmentation, not naming.
     oracle = " (oracle: names scene labels from the GT)" if m["method"] == "overlap" else ""
+    if m.get("space") == "2d":
+        oracle += f" from the rendered frames {m['frames']}"
     return (
         f"label mapping: {m['method']}{oracle}, "
         f"{m['num_mapped_labels']}/{m['num_scene_labels']} scene labels named"
@@ -157,6 +175,11 @@ def _mapping_line(report: dict[str, Any]) -> str:
 
 def _gaussians_line(report: dict[str, Any]) -> str:
     unlabelled = report.get("unlabelled_fraction", 0.0)
+    if not report.get("has_3d_ground_truth", True):
+        return (
+            f"{report['num_gaussians_evaluated']} Gaussians ({100 * unlabelled:.1f}% unlabelled); "
+            "no 3D ground truth: 2D only (rendered frames vs their class maps)"
+        )
     return (
         f"{report['num_gaussians_evaluated']} Gaussians ({100 * unlabelled:.1f}% unlabelled: no vote under "
         f"hovsg, misses under conceptgraphs), {report['num_gt_points']} GT points"
@@ -175,8 +198,9 @@ def _run(args: argparse.Namespace) -> int:
         gt_path = find_ground_truth(args.run_dir)
         if gt_path is None:
             raise DataError(
-                f"{args.run_dir}: no --gt given and no synthetic scene with gt/ found "
-                "(RUN_DIR/scene or config.yaml data.path)"
+                f"{args.run_dir}: no --gt given and no ground truth found (a synthetic scene with gt/ in "
+                "RUN_DIR/scene or config.yaml data.path, or a data.path holding a ScanNet labels PLY or "
+                "frames with class maps)"
             )
     # Read the trajectories first so that a bad file fails before the (longer) map evaluation.
     traj = None if args.traj is None else [read_trajectory(p) for p in args.traj]
@@ -197,6 +221,7 @@ def _run(args: argparse.Namespace) -> int:
         device=args.device,
         gt_points=args.gt_points,
         cg_voxel_size=args.cg_voxel_size,
+        mapping_frames=_int_list(args.mapping_frames, "--mapping-frames"),
     )
     report = result.report
     if traj is not None:
@@ -207,7 +232,7 @@ def _run(args: argparse.Namespace) -> int:
     print(_mapping_line(report))
     print(_gaussians_line(report))
     gp = report["gt_points"]
-    if gp["points"] == "observed":
+    if gp is not None and gp["points"] == "observed":
         print(
             f"scored on the {gp['num_scored']} labelled GT points some frame saw "
             f"({100 * gp['observed_fraction']:.0f}% of all; --gt-points all scores every point)"
@@ -227,7 +252,8 @@ def _run(args: argparse.Namespace) -> int:
     v = report.get("semantic_2d")
     if v:
         print()
-        print(format_metrics_table(result.views, per_class=False) if result.views else v["protocol"])
+        print(format_metrics_table(result.views, per_class=not report["has_3d_ground_truth"]))
+        print(f"frames scored: {', '.join(v['frame_names'])} ({v['dataset_kind']} {v['source']})")
         if v["pictures"]:
             print(f"pictures: {', '.join(v['pictures'])}")
     g = report.get("scene_graph")

@@ -3,7 +3,9 @@
 Steps: read ``gaussians.ply`` (+ ``graph.json``) and the ground truth; name the scene labels with GT
 classes (text matching of node tags, or majority overlap); score 3D semantic segmentation with the
 requested protocol(s); score relation recall when the ground truth has relation triplets and the
-run has a graph; optionally score the trajectory. The result is a JSON-safe dict in which every
+run has a graph; score renders at dataset frames that carry class maps; optionally score the
+trajectory. A sequence with per-frame class maps but no 3D ground truth (label-fusion) is scored in
+2D only, its overlap naming made from the renders. The result is a JSON-safe dict in which every
 block states its protocol.
 """
 
@@ -31,6 +33,7 @@ from .protocols import (
     nearest_neighbors,
 )
 from .readers import GroundTruth, RunData, load_ground_truth, read_run
+from .views import ViewSet, overlap_mapping_2d, prepare_views, score_views
 
 log = logging.getLogger(__name__)
 
@@ -70,13 +73,15 @@ def build_label_mapping(
     method: MappingMethod = "auto",
     assoc: np.ndarray | None = None,
     embedder: TextEmbedder | None = None,
+    overlap_2d: tuple[dict[int, int], list[int]] | None = None,
 ) -> tuple[dict[int, int], dict[str, Any]]:
     """Scene label -> GT class index, and a JSON-safe description of how it was built.
 
     ``auto`` uses text matching when ``graph.json`` has node tags from a real captioner (not the offline
     heuristic one, whose "floor"/"wall"/"small red object" tags name no objects) and at least one of them
-    names a class, and majority overlap otherwise. ``assoc`` (Gaussian -> GT point index, -1 = none) is
-    needed for the overlap method.
+    names a class, and majority overlap otherwise. The overlap method needs ``assoc`` (Gaussian -> GT
+    point index, -1 = none) or, without 3D ground truth, ``overlap_2d``: the mapping
+    :func:`~ogscene3d.eval.views.overlap_mapping_2d` made from renders, and the frames it used.
     """
     tags: dict[int, str] = {}
     heuristic: set[int] = set()
@@ -115,6 +120,15 @@ def build_label_mapping(
                 for k, m in sorted(text.items())
             },
         }
+    elif method == "overlap" and assoc is None and overlap_2d is not None:
+        mapping = dict(overlap_2d[0])
+        info = {
+            "method": "overlap",
+            "description": "majority pixel overlap of the rendered labels with the GT class maps of "
+            f"frames {overlap_2d[1]} (uses the ground truth: an oracle naming)",
+            "space": "2d",
+            "frames": list(overlap_2d[1]),
+        }
     elif method == "overlap":
         if assoc is None:
             raise ValueError("overlap label mapping needs the Gaussian -> GT point association")
@@ -128,7 +142,11 @@ def build_label_mapping(
             mapping = majority_overlap_mapping(run.labels, gt_ids)
             desc = "majority overlap with GT classes"
         mapping = {k: v for k, v in mapping.items() if v >= 0}
-        info = {"method": "overlap", "description": desc + " (uses the ground truth: an oracle naming)"}
+        info = {
+            "method": "overlap",
+            "description": desc + " (uses the ground truth: an oracle naming)",
+            "space": "3d",
+        }
     else:
         raise ValueError(f"unknown label mapping method {method!r}; expected auto, text or overlap")
     info["num_scene_labels"] = int(labels_present.size)
@@ -156,6 +174,7 @@ def evaluate_run(
     device: str | torch.device = "cpu",
     gt_points: Literal["observed", "all"] = "observed",
     cg_voxel_size: float = CONCEPTGRAPHS_VOXEL_SIZE,
+    mapping_frames: Sequence[int] | None = None,
 ) -> EvalResult:
     """Evaluate ``run_dir`` against ``gt_path`` (see the module docstring).
 
@@ -163,7 +182,7 @@ def evaluate_run(
         protocols: any of "hovsg", "conceptgraphs".
         ignore: class names left out of the means; None = each protocol's default.
         mapping: "auto", "text" or "overlap" (see :func:`build_label_mapping`).
-        classes: class-name table for a bare labelled PLY ground truth.
+        classes: class-name table for a bare labelled PLY ground truth or a sequence's class maps.
         k: neighbours of the HOV-SG vote.
         min_opacity: Gaussians below this opacity are left out (floaters); 0 keeps all. Unlabelled
             Gaussians stay: misses under conceptgraphs, no vote under hovsg (``unlabelled_fraction``).
@@ -172,8 +191,9 @@ def evaluate_run(
             no radius, as in the original code.
         min_node_iou: IoU a node needs to match a GT instance for relation recall.
         num_views, view_frames: render the map at that many evenly spread dataset frames (or at the
-            given frame indices) of ``gt_path`` when it is a scene with ground-truth class maps, and
-            report 2D semantic metrics ("semantic_2d"); 0 / None = no rendering.
+            given frame indices) of ``gt_path`` when it is a sequence with ground-truth class maps
+            (synthetic, label-fusion, ScanNet with label-filt/), and report 2D semantic metrics
+            ("semantic_2d"); 0 / None = no rendering, which a ground truth without 3D points refuses.
         out_dir: where the side-by-side view PNGs go (None = no pictures).
         device: rendering device.
         gt_points: "observed" scores only the GT points that some frame of the sequence saw, when the
@@ -182,6 +202,8 @@ def evaluate_run(
             point, as HOV-SG does on its meshes.
         cg_voxel_size: metres; the conceptgraphs protocol resamples the Gaussians to one point per
             scene label and voxel of this size, like ConceptGraphs' object clouds (0 = every Gaussian).
+        mapping_frames: without 3D ground truth, the frames whose renders the overlap naming reads
+            (None = the scored frames); both lists are in the report.
     """
     if gt_points not in ("observed", "all"):
         raise ValueError(f"gt_points must be 'observed' or 'all', got {gt_points!r}")
@@ -191,6 +213,9 @@ def evaluate_run(
             raise ValueError(f"unknown protocol {p!r}; expected one of {PROTOCOLS}")
     run = read_run(run_dir)
     gt = load_ground_truth(gt_path, classes)
+    want_views = num_views > 0 or bool(view_frames)
+    if not gt.has_3d and not want_views:
+        raise DataError(f"{gt.source}: no 3D ground truth, only per-frame class maps: render views to score")
     # Every protocol is given the Gaussians above min_opacity, unlabelled ones included: ConceptGraphs
     # counts on predicted points, so an unlabelled Gaussian is a miss there, while HOV-SG's vote
     # leaves it out (pred_labelled). Label naming and node matching look at labelled Gaussians only.
@@ -201,11 +226,28 @@ def evaluate_run(
     if not labelled.any():
         raise DataError(f"{run_dir}: no labelled Gaussians to evaluate (min_opacity={min_opacity})")
     run = _subset(scored, labelled)
-    assoc = _associate(run, gt, assoc_radius)
-    label_to_class, mapping_info = build_label_mapping(run, gt, mapping, assoc, embedder)
+    notes: list[str] = []
+    if not gt.has_3d:
+        notes.append(f"no 3D ground truth in {gt_path}: rendered-view (2D) scores only")
+    elif mapping_frames:
+        notes.append("mapping frames not used: with 3D ground truth the overlap mapping is made in 3D")
+        mapping_frames = None
+    # Rendered before the naming: without 3D ground truth the overlap naming reads the renders.
+    rendered: ViewSet | None = None
+    if want_views:
+        rendered, why = prepare_views(run_dir, gt_path, gt, num_views, view_frames, mapping_frames, device)
+        if rendered is None and not gt.has_3d:
+            raise DataError(f"nothing to score: {why}")
+        if rendered is None:
+            notes.append(f"2D views skipped: {why}")
+    assoc = _associate(run, gt, assoc_radius) if gt.has_3d else None
+    overlap_2d = None
+    if rendered is not None and not gt.has_3d:
+        pick = rendered.mapping_frames
+        overlap_2d = (overlap_mapping_2d(rendered.views[i] for i in pick), pick)
+    label_to_class, mapping_info = build_label_mapping(run, gt, mapping, assoc, embedder, overlap_2d)
     named = float((label_lookup(label_to_class, run.labels) >= 0).mean())
     mapping_info["fraction_of_gaussians_named"] = named
-    notes: list[str] = []
     if named < 0.5:
         notes.append(
             f"only {100 * named:.0f}% of the labelled Gaussians have a GT class under the "
@@ -218,8 +260,10 @@ def evaluate_run(
         warn_unknown_ignore(ignore, gt.class_names)
 
     gt_classes = gt.classes
-    gt_block: dict[str, Any] = {"points": "all", "num_scored": int((gt.classes >= 0).sum())}
-    if gt_points == "observed" and gt.observed is not None:
+    gt_block: dict[str, Any] | None = {"points": "all", "num_scored": int((gt.classes >= 0).sum())}
+    if not gt.has_3d:
+        gt_block = None
+    elif gt_points == "observed" and gt.observed is not None:
         gt_classes = np.where(gt.observed, gt.classes, -1)
         gt_block = {
             "points": "observed",
@@ -231,9 +275,9 @@ def evaluate_run(
 
     semantic: dict[str, SegmentationMetrics] = {}
     scored_classes = label_lookup(label_to_class, scored.labels)
-    for p in protocols:
+    for p in protocols if gt.has_3d else ():
         gt_pts, gt_cls = gt.points, gt_classes
-        if p == "hovsg" and gt_block["points"] == "observed":
+        if p == "hovsg" and gt_block is not None and gt_block["points"] == "observed":
             # HOV-SG counts predictions on void GT points as false positives: unobserved points leave
             # the cloud instead (HOV-SG's vote of a GT point does not depend on the other GT points).
             gt_pts, gt_cls = gt.points[gt.observed], gt_classes[gt.observed]
@@ -252,13 +296,16 @@ def evaluate_run(
         )
 
     graph_block: dict[str, Any] | None = None
-    if not gt.relations:
+    if not gt.has_3d:
+        pass  # nodes are matched to GT instances in 3D
+    elif not gt.relations:
         notes.append("scene graph not scored: the ground truth has no relation triplets")
     elif run.graph is None:
         notes.append("scene graph not scored: the run directory has no graph.json")
     elif gt.instances is None:
         notes.append("scene graph not scored: the ground truth has no instance ids")
     else:
+        assert assoc is not None  # (there is 3D ground truth)
         gt_inst = np.where(assoc >= 0, gt.instances[np.maximum(assoc, 0)], -1)
         # Only labels that are graph nodes compete for GT instances.
         node_ids = np.array(sorted({int(n["id"]) for n in run.graph["nodes"]}), dtype=np.int64)
@@ -282,9 +329,9 @@ def evaluate_run(
 
     semantic_2d: dict[str, Any] | None = None
     views: SegmentationMetrics | None = None
-    if num_views > 0 or view_frames:
+    if rendered is not None:
         semantic_2d, views = _views_block(
-            run_dir, gt_path, gt, label_to_class, num_views, view_frames, out_dir, device, ignore, notes
+            rendered, gt, label_to_class, out_dir, ignore, mapping_info.get("space") == "2d"
         )
 
     report: dict[str, Any] = {
@@ -295,6 +342,7 @@ def evaluate_run(
         "num_gaussians_labelled": int(labelled.sum()),
         "unlabelled_fraction": unlabelled_fraction,
         "num_gt_points": int(gt.points.shape[0]),
+        "has_3d_ground_truth": gt.has_3d,
         "gt_points": gt_block,
         "label_mapping": mapping_info,
         "semantic_3d": {p: m.to_dict() for p, m in semantic.items()},
@@ -306,37 +354,22 @@ def evaluate_run(
 
 
 def _views_block(
-    run_dir: str | Path,
-    gt_path: str | Path,
+    rendered: ViewSet,
     gt: GroundTruth,
     label_to_class: dict[int, int],
-    num_views: int,
-    view_frames: Sequence[int] | None,
     out_dir: str | Path | None,
-    device: torch.device,
     ignore: Iterable[str] | None,
-    notes: list[str],
-) -> tuple[dict[str, Any] | None, SegmentationMetrics | None]:
-    """2D metrics + pictures, or None with a note when the ground truth has no per-frame class maps."""
-    from ..datasets import detect_kind
-    from .views import evaluate_views
-
-    if not Path(gt_path).is_dir() or gt.class_ids is None:
-        notes.append("2D views skipped: the ground truth is not a scene folder with per-frame class maps")
-        return None, None
-    try:
-        kind, root = detect_kind(gt_path)
-    except DataError:
-        notes.append(f"2D views skipped: {gt_path} is not an RGB-D sequence folder")
-        return None, None
-    if kind != "synthetic":
-        notes.append(f"2D views skipped: {kind} frames carry no ground-truth class maps")
-        return None, None
-    res = evaluate_views(
-        run_dir, root, gt, label_to_class, num_views=num_views, frames=view_frames, out_dir=out_dir,
-        device=device, ignore=None if ignore is None else list(ignore),
-    )  # fmt: skip
+    named_from_views: bool,
+) -> tuple[dict[str, Any], SegmentationMetrics]:
+    """2D metrics + pictures of the scored frames; the naming frames are listed when they named labels."""
+    res = score_views(
+        rendered.views, rendered.frames, gt, label_to_class, out_dir, None if ignore is None else list(ignore)
+    )
     block = res.metrics.to_dict()
+    block["source"] = rendered.source
+    block["dataset_kind"] = rendered.kind
     block["frames"] = res.frames
+    block["frame_names"] = [rendered.views[i].name for i in res.frames]
+    block["mapping_frames"] = rendered.mapping_frames if named_from_views else None
     block["pictures"] = [p.name for p in res.pictures]
     return block, res.metrics

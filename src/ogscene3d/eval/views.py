@@ -149,6 +149,66 @@ def overlap_mapping_2d(views: Iterable[RenderedView]) -> dict[int, int]:
     return {k: c for k, c in mapping.items() if c >= 0}
 
 
+@dataclass
+class ViewSet:
+    """The renders eval needs: the frames scored and the frames that name scene labels (2D overlap)."""
+
+    source: str  # the sequence folder
+    kind: str  # its layout
+    views: dict[int, RenderedView]  # every frame of either list, rendered once
+    frames: list[int]  # scored
+    mapping_frames: list[int]  # for a 2D overlap naming
+
+
+def prepare_views(
+    run_dir: str | Path,
+    gt_path: str | Path,
+    gt: GroundTruth,
+    num_views: int = 3,
+    frames: Sequence[int] | None = None,
+    mapping_frames: Sequence[int] | None = None,
+    device: str = "cpu",
+) -> tuple[ViewSet | None, str]:
+    """Render the frames eval scores (``frames``, else ``num_views`` evenly spread) and those that may name
+    the scene labels (``mapping_frames``, else the scored ones).
+
+    The sequence is ``gt_path`` when it is a folder whose frames carry class maps, else the run's
+    ``data.path`` when ``gt_path`` lies inside it (``SCENE/gt``, ``SCENE/*_vh_clean_2.labels.ply``): the
+    same scene, whose class ids the ground truth's table covers.
+
+    Returns:
+        (the renders, "") or (None, why no frame can be scored) when no such sequence is at hand.
+
+    Raises:
+        DataError: a frame is out of range, or a chosen frame has no class map or no pose.
+    """
+    from ..datasets import detect_kind
+
+    if gt.class_ids is None:
+        return None, "the ground truth has no class-id table to read per-frame class maps with"
+    gt_path = Path(gt_path)
+    candidates = [gt_path] if gt_path.is_dir() else []
+    data = run_data_path(run_dir)
+    if data is not None and gt_path.resolve().is_relative_to(data.resolve()):
+        candidates.append(data)
+    for folder in candidates:
+        try:
+            detect_kind(folder)
+        except DataError:
+            continue
+        ds = open_view_dataset(folder, run_dir)
+        if not ds.has_class_maps:
+            continue
+        idx = list(frames) if frames else pick_frames(len(ds), num_views)
+        if not idx:
+            return None, f"no frames of {ds.root} asked for"
+        naming = list(mapping_frames) if mapping_frames else idx
+        views = render_views(run_dir, ds, gt, [*idx, *naming], device)
+        return ViewSet(str(ds.root), ds.kind, views, idx, naming), ""
+    where = " or ".join(str(c) for c in candidates) or str(gt_path)
+    return None, f"{where} is no RGB-D sequence whose frames carry ground-truth class maps"
+
+
 def score_views(
     views: Mapping[int, RenderedView],
     frames: Sequence[int],
