@@ -52,12 +52,11 @@ class PoseJump:
 
     def describe(self) -> str:
         steps = self.index - self.previous
-        over = f"{steps} steps" if steps > 1 else "one step"
+        times = f"{steps} x " if steps > 1 else ""
         return (
             f"frame {self.index} ({self.name}): the camera pose jumped {self.translation:.3f} m and "
-            f"{self.rotation_deg:.1f} deg from frame {self.previous} ({over}; limits "
-            f"{self.limit_translation:g} m, {self.limit_rotation_deg:g} deg: mapping.max_pose_step, "
-            "mapping.max_pose_step_deg per step)"
+            f"{self.rotation_deg:.1f} deg from frame {self.previous} (limits {self.limit_translation:g} m, "
+            f"{self.limit_rotation_deg:g} deg: {times}mapping.max_pose_step, max_pose_step_deg)"
         )
 
 
