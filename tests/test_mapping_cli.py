@@ -243,3 +243,16 @@ def test_a_corrupt_checkpoint_and_an_unwritable_out_are_clean_errors(tmp_path, c
     assert main(["run", *_common(scene, tmp_path / "file" / "run")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("ogscene3d run: error: ") and "Traceback" not in err
+
+
+def test_resume_names_a_missing_memory_view_file(tmp_path, capsys):
+    scene = _replica_scene(tmp_path / "scene", frames=2)
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out), "--max-frames", "1"]) == 0
+    (view,) = (out / "map_memory").iterdir()  # the first keyframe's view, in its own file
+    view.unlink()
+    capsys.readouterr()
+    assert main(["run", *_common(scene, out), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert f"{view}: memory view of keyframe 0 that map.npz needs does not exist" in err
+    assert "Traceback" not in err

@@ -44,6 +44,9 @@ class MemoryEntry:
     segments: np.ndarray | None  # int32 [H,W], 0 = none
     scores: dict[int, float] = field(default_factory=dict)
     points: torch.Tensor | None = None  # [M,3] world, subsampled valid-depth points
+    # the files this view is already stored in, by folder (memory_files.store_view): a checkpoint writes
+    # each view once, not every view again
+    saved: dict = field(default_factory=dict, compare=False, repr=False)
 
 
 def camera_points(depth: np.ndarray, K: np.ndarray, step: int) -> np.ndarray:

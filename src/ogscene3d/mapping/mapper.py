@@ -60,6 +60,7 @@ from .local import (
     update_confidences,
 )
 from .longterm import MemoryBuffer, MemoryEntry, label_edges, longterm_view_update
+from .memory_files import load_view, manifest, read_manifest, remove_unreferenced, store_view
 from .merge import duplicate_label_pairs, merge_labels, relabel, visible_pixels
 from .optimize import View, optimize_map
 from .pose_jump import PoseJumpCheck, PoseJumpError
@@ -739,24 +740,21 @@ class Mapper:
         if self._graph is not None and not self._graph_failed:
             # captions (possibly paid VLM calls), first_seen and the update schedule go on after a resume
             extra["graph_state"] = np.array(json.dumps(self._graph.state()))
-        mem = self.memory.entries
-        if mem and len({e.depth.shape for e in mem}) == 1:
-            extra["mem_keyframe"] = np.array([e.keyframe for e in mem])
-            extra["mem_rgb"] = np.stack([e.rgb for e in mem])
-            extra["mem_depth"] = np.stack([e.depth for e in mem])
-            extra["mem_K"] = np.stack([e.K for e in mem])
-            extra["mem_pose"] = np.stack([e.pose for e in mem])
-            extra["mem_segments"] = np.stack(
-                [e.segments if e.segments is not None else np.zeros(e.depth.shape, np.int32) for e in mem]
-            )
-            extra["mem_scores"] = np.array(
-                json.dumps([{str(k): v for k, v in e.scores.items()} for e in mem])
-            )
         return extra
 
     def save_checkpoint(self, path: str | Path) -> None:
-        """Write ``map.npz``: the Gaussians plus the mapper state needed to resume (atomically)."""
-        self.map.save_npz(path, extra=self._state_extra())
+        """Write ``map.npz``: the Gaussians plus the mapper state needed to resume (atomically), and the
+        memory views it does not have on disk yet, each in its own file (``memory_files``)."""
+        path = Path(path)
+        extra = self._state_extra()
+        mem = self.memory.entries
+        # the order makes a kill at any point safe: the views the new map.npz names are on disk before it,
+        # and the evicted views go only once it has replaced the map.npz that named them
+        files = [store_view(path, e) for e in mem]
+        extra.update(manifest(mem, files))
+        self.map.save_npz(path, extra=extra)
+        for f in remove_unreferenced(path, files):
+            log.debug("removed %s, a view no longer in the memory", f)
 
     def load_checkpoint(self, path: str | Path) -> None:
         """Restore the map and mapper state from ``map.npz`` (written by ``save``/``save_checkpoint``)."""
@@ -782,7 +780,10 @@ class Mapper:
                 self.keyframes.load_state({k: z[k] for k in ("kf_since_last", "kf_last_pose")})
                 self.pose_check.load_state({k: z[k] for k in z.files if k.startswith("posecheck_")})
                 self.memory.entries = []
-                if "mem_keyframe" in z.files:
+                cursor = int(z["mapper_memory_cursor"]) if "mapper_memory_cursor" in z.files else 0
+                views = read_manifest(z, p) if "mem_file" in z.files else []
+                if "mem_file" not in z.files and "mem_keyframe" in z.files:
+                    # a checkpoint from before the views had their own files: all of them inline
                     scores = json.loads(str(z["mem_scores"]))
                     # each z[...] reads (and decompresses) the whole array: once per array, not per view
                     mem = {k: z[f"mem_{k}"] for k in ("rgb", "depth", "K", "pose", "segments")}
@@ -798,13 +799,18 @@ class Mapper:
                         )
                         self.memory.restore(entry, self.device)
                     del mem
-                    self.memory._cursor = int(z["mapper_memory_cursor"]) % max(1, len(self.memory.entries))
                 tracker_state = {k: z[k] for k in z.files if k.startswith("trk_")}
                 graph_state = str(z["graph_state"]) if "graph_state" in z.files else None
+        except DataError:
+            raise
         except KeyError as e:
             raise DataError(f"{p}: not a mapper checkpoint (missing {e})") from e
         except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:  # a damaged array, read late
             raise DataError(corrupt_npz_message(p, e)) from e
+        # a smaller memory_max keeps the newest views: the older ones are not even read
+        for record in views[max(0, len(views) - self.memory.max_size) :]:
+            self.memory.restore(load_view(p, record), self.device)  # one file read per view
+        self.memory._cursor = cursor % max(1, len(self.memory.entries))
         self._graph_failed = False
         if self.config.graph.enabled:
             # the graph built with the Mapper takes the checkpoint's state (its models are loaded once)

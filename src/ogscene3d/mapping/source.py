@@ -12,6 +12,7 @@ import numpy as np
 from ..atomic import remove_stale_temps
 from ..config import Config, save_config
 from ..errors import DataError
+from .memory_files import remove_leftovers
 
 log = logging.getLogger(__name__)
 
@@ -33,10 +34,13 @@ RUN_FILES = ("map.npz", "gaussians.ply", "graph.json", "timings.json", "config.y
 
 
 def remove_run_temps(out: Path) -> None:
-    """Remove the temporary files that a killed run's writes left in ``out``."""
+    """Remove the temporary files that a killed run's writes left in ``out``, and the memory view files
+    that its ``map.npz`` does not name (a killed checkpoint's)."""
     for name in RUN_FILES:
         for tmp in remove_stale_temps(out / name):
             log.info("removed %s, a killed write's leftover", tmp)
+    for f in remove_leftovers(out / "map.npz"):
+        log.info("removed %s, a killed checkpoint's leftover", f)
 
 
 def start_run_dir(out: Path, cfg: Config) -> None:
