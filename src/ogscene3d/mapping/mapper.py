@@ -843,8 +843,9 @@ class Mapper:
         self.timings.counts["frames"] = self.frames_seen
 
     def save(self, out_dir: str | Path) -> Path:
-        """Write the run directory: gaussians.ply, map.npz, graph.json, timings.json, config.yaml, and under
-        odometry traj.txt (the tracked poses, one row-major c2w 4x4 per frame read)."""
+        """Write the run directory: gaussians.ply, map.npz (with its memory views in map_memory/),
+        graph.json, timings.json, config.yaml, and under odometry traj.txt (the tracked poses, one row-major
+        c2w 4x4 per frame read)."""
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         self.map.export_ply(out / "gaussians.ply")

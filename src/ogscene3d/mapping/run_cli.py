@@ -25,9 +25,10 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser(
         "run",
         help="map an RGB-D sequence into semantic Gaussians and a scene graph",
-        description="Incremental semantic mapping (paper Sec. III). Writes gaussians.ply, map.npz, "
-        "graph.json, timings.json and config.yaml to --out. Without --data a synthetic scene is generated "
-        "(in OUT/scene) from the config's `synthetic` section and mapped.",
+        description="Incremental semantic mapping (paper Sec. III). Writes gaussians.ply, map.npz (and "
+        "its memory views in map_memory/), graph.json, timings.json and config.yaml to --out. Without "
+        "--data a synthetic scene is generated (in OUT/scene) from the config's `synthetic` section and "
+        "mapped.",
     )
     p.add_argument(
         "--config", default=None, help="YAML config (e.g. configs/replica.yaml); defaults otherwise"
