@@ -44,7 +44,7 @@ class Frame:
 
     ``segments`` is an int id map (0 or negative = no segment) with ``segment_scores`` {id: SAM predicted
     IoU}; ``gt_instances`` / ``gt_classes`` are ground-truth maps when the dataset has them (synthetic
-    scenes).
+    scenes; class maps also for label-fusion's segm images and ScanNet's label-filt, in NYU40 ids).
     """
 
     index: int
