@@ -225,6 +225,22 @@ def test_eval_batch_matches_run_batch(sequential_batch, capsys: pytest.CaptureFi
     assert recs["seed1"]["gt"] == run["seed1"]["gt"]  # explicit gt from the scenes file
 
 
+def test_eval_batch_passes_the_conceptgraphs_voxel_size(
+    sequential_batch, capsys: pytest.CaptureFixture
+) -> None:
+    _, out = sequential_batch
+    protocols = {}
+    for size in ("0", "0.05"):
+        main(["eval-batch", str(out), "--protocol", "conceptgraphs", "--no-plots", "--cg-voxel-size", size])
+        ev = json.loads((out / "eval_batch.json").read_text())
+        rec = {r["name"]: r for r in ev["scenes"]}["seed1"]
+        protocols[size] = rec["semantic_3d"]["conceptgraphs"]["protocol"]
+    assert "not resampled" in protocols["0"] and "0.05 m voxel" in protocols["0.05"]
+    capsys.readouterr()
+    assert main(["eval-batch", str(out), "--no-plots", "--cg-voxel-size", "-1"]) == 2
+    assert "--cg-voxel-size must be >= 0" in capsys.readouterr().err
+
+
 @pytest.fixture(scope="module")
 def local_ray():
     ray = pytest.importorskip("ray")

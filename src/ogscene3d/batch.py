@@ -48,6 +48,7 @@ import yaml
 from .atomic import atomic_write_text
 from .config import add_override_argument
 from .errors import ConfigError, DataError, OGSceneError
+from .eval.protocols import CONCEPTGRAPHS_VOXEL_SIZE
 
 log = logging.getLogger(__name__)
 
@@ -221,6 +222,7 @@ class EvalOptions:
     num_views: int = 0
     plots: bool = True
     gt_points: str = "observed"
+    cg_voxel_size: float = CONCEPTGRAPHS_VOXEL_SIZE
 
 
 def _peak_rss_mb() -> float:
@@ -348,7 +350,8 @@ def evaluate_scene(
     """Evaluate one run directory like ``ogscene3d eval`` (writes ``RUN_DIR/metrics.json`` and, with
     ``options.plots``, per-protocol IoU bar charts); return a compact record.
 
-    ``gt`` None: the synthetic scene the run was made from (:func:`ogscene3d.eval.find_ground_truth`).
+    ``gt`` None: the ground truth of the scene the run was made from
+    (:func:`ogscene3d.eval.find_ground_truth`).
     The record holds, per protocol, ``miou``/``fmiou``/``macc``/``oacc`` (fractions, None when not
     defined) and the protocol text, plus relation recall when the graph was scored.
     """
@@ -360,7 +363,10 @@ def evaluate_scene(
         raise DataError(f"{run}: not a run directory (no gaussians.ply)")
     gt_path = Path(gt) if gt is not None else find_ground_truth(run)
     if gt_path is None:
-        raise DataError(f"{run}: no ground truth given and no synthetic scene with gt/ found for this run")
+        raise DataError(
+            f"{run}: no ground truth given and none found for this run (a synthetic scene's gt/, ScanNet's "
+            "*_vh_clean_2.labels.ply, or frames with class maps in its data.path)"
+        )
     res = evaluate_run(
         run,
         gt_path,
@@ -374,6 +380,7 @@ def evaluate_scene(
         out_dir=run if opts.plots else None,
         device=device,
         gt_points=opts.gt_points,  # type: ignore[arg-type]
+        cg_voxel_size=opts.cg_voxel_size,
     )
     report = res.report
     if opts.plots:
@@ -839,9 +846,19 @@ def _add_eval_args(p: Any) -> None:
         help="naming of scene labels (see `ogscene3d eval --help`; default auto)",
     )
     p.add_argument("--k", type=int, default=5, help="neighbours of the HOV-SG vote (default 5)")
+    p.add_argument(
+        "--cg-voxel-size",
+        type=float,
+        default=CONCEPTGRAPHS_VOXEL_SIZE,
+        help="metres; conceptgraphs' per-label voxel resampling of the Gaussians (see `ogscene3d eval "
+        f"--help`; default {CONCEPTGRAPHS_VOXEL_SIZE:g}, 0 = every Gaussian counts)",
+    )
     p.add_argument("--min-opacity", type=float, default=0.0, help="drop Gaussians below this opacity")
     p.add_argument(
-        "--views", type=int, default=0, help="also render this many views per synthetic scene (2D)"
+        "--views",
+        type=int,
+        default=0,
+        help="also render this many views per scene whose frames carry class maps (2D)",
     )
     p.add_argument("--no-plots", action="store_true", help="write no PNG")
     p.add_argument(
@@ -859,6 +876,8 @@ def _eval_options(args: argparse.Namespace) -> EvalOptions:
         raise ConfigError(f"--k must be >= 1, got {args.k}")
     if args.views < 0:
         raise ConfigError(f"--views must be >= 0, got {args.views}")
+    if not (args.cg_voxel_size >= 0 and math.isfinite(args.cg_voxel_size)):
+        raise ConfigError(f"--cg-voxel-size must be >= 0 metres (0 = none), got {args.cg_voxel_size}")
     ignore = None if args.ignore is None else tuple(s.strip() for s in args.ignore.split(",") if s.strip())
     return EvalOptions(
         protocols=tuple(PROTOCOLS) if args.protocol == "both" else (args.protocol,),
@@ -869,6 +888,7 @@ def _eval_options(args: argparse.Namespace) -> EvalOptions:
         num_views=args.views,
         plots=not args.no_plots,
         gt_points=args.gt_points,
+        cg_voxel_size=args.cg_voxel_size,
     )
 
 
