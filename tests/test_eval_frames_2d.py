@@ -106,10 +106,11 @@ def write_wall_run(run: Path, labels: tuple[int, int] = (3, 7), graph: dict | No
 
 
 def test_scannet_label_filt_becomes_nyu40_class_maps(tmp_path):
-    ds = open_dataset(make_scannet(tmp_path / "scans" / "scene0000_00"))
+    # at 3x the depth size a depth pixel's centre is a label pixel's centre (at 2x it lies between two)
+    ds = open_dataset(make_scannet(tmp_path / "scans" / "scene0000_00", label_scale=3))
     assert ds.kind == "scannet" and ds.has_class_maps and ds.class_names == NYU40_CLASSES
     f = ds[1]
-    # resampled from 64x48 to the depth size by nearest neighbour; raw ids -> NYU40, unmapped -> 0 (void)
+    # resampled from 96x72 to the depth size by nearest neighbour; raw ids -> NYU40, unmapped -> 0 (void)
     expected = _left_right(SHIFTS[1], 5, 7)
     expected[:, 0] = 0
     expected[:, -1] = 0
@@ -129,6 +130,21 @@ def test_scannet_label_image_of_another_shape_is_an_error(tmp_path):
     _png(root / "label-filt" / "2.png", np.zeros((H, 2 * W), np.uint16))
     with pytest.raises(DataError, match=r"label-filt/2\.png: ScanNet label is 64x24"):
         open_dataset(root)[2]
+
+
+def test_scannet_label_resampling_samples_pixel_centres(tmp_path):
+    """ScanNet's 1296x968 labels go to 640x480 depth beside INTER_AREA colour: each label pixel must come from
+    the source pixel under its centre (INTER_NEAREST takes the top-left one, ~1 source pixel off)."""
+    from ogscene3d.datasets.base import read_label_png
+
+    src_w, src_h = 65, 49  # 2.03x the 32x24 depth, as 1296x968 is 2.025x 640x480
+    cols = np.repeat(np.arange(src_w, dtype=np.uint16)[None], src_h, axis=0)
+    rows = np.repeat(np.arange(src_h, dtype=np.uint16)[:, None], src_w, axis=1)
+    for img, n_src, n_dst, axis in ((cols, src_w, W, 1), (rows, src_h, H, 0)):
+        out = read_label_png(_png(tmp_path / f"l{axis}.png", img), (H, W), "label", resize=True)
+        centre = (np.arange(n_dst) + 0.5) * n_src / n_dst - 0.5  # source coordinate under each pixel centre
+        got = out.mean(axis=1 - axis)
+        assert np.abs(got - centre).max() <= 0.55 and abs(float(np.mean(got - centre))) < 0.2
 
 
 def test_bad_scannet_label_map_is_an_error_naming_the_file(tmp_path):
