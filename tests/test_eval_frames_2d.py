@@ -306,6 +306,39 @@ def test_scannet_folder_scored_in_2d_alone_then_in_3d_and_2d(tmp_path, monkeypat
     assert json.loads((run / "metrics.json").read_text())["semantic_2d"]["frames"] == [0]
 
 
+def test_scannet20_classes_give_hovsg_scannet_preset_its_class_set(tmp_path, monkeypatch):
+    """HOV-SG scores ScanNet on the 20 benchmark classes: --classes scannet20 keeps those (other NYU40 ids
+    void: their predictions are HOV-SG false positives), and the preset over all 40 NYU40 names says that
+    classes outside the 20 stay in the means."""
+    from ogscene3d.datasets.scannet import SCANNET20_IDS
+
+    root = make_scannet(tmp_path / "scans" / "scene0000_00")
+    xs, ys = np.meshgrid(np.arange(-0.4, 0.46, 0.02), np.arange(-0.3, 0.31, 0.02))
+    pts = np.zeros(xs.size, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("label", "<u2")])
+    pts["x"], pts["y"], pts["z"] = xs.ravel(), ys.ravel(), Z
+    # NYU40 chair | table, and a top band of ceiling (22), which is not one of ScanNet's 20 classes
+    pts["label"] = np.where(ys.ravel() > 0.2, 22, np.where(xs.ravel() < 0, 5, 7))
+    _write_ply(root / "scene0000_00_vh_clean_2.labels.ply", pts)
+    run = write_wall_run(tmp_path / "run")
+    argv = ["eval", str(run), "--gt", str(root), "--views", "0", "--no-plots", "--mapping", "overlap",
+            "--ignore", "preset:hovsg-scannet"]  # fmt: skip
+
+    assert _main(argv, monkeypatch) == 0
+    report = json.loads((run / "metrics.json").read_text())
+    hovsg = report["semantic_3d"]["hovsg"]
+    assert [c["name"] for c in hovsg["per_class"] if c["evaluated"]] == ["chair", "table", "ceiling"]
+    assert any("preset:hovsg-scannet" in n and "ceiling" in n for n in report["notes"])
+
+    assert _main([*argv, "--classes", "scannet20"], monkeypatch) == 0
+    report = json.loads((run / "metrics.json").read_text())
+    hovsg = report["semantic_3d"]["hovsg"]
+    assert len(hovsg["per_class"]) == 20 and "ceiling" not in [c["name"] for c in hovsg["per_class"]]
+    assert [c["name"] for c in hovsg["per_class"] if c["evaluated"]] == ["chair", "table"]
+    assert hovsg["void_false_positives"] == int((pts["label"] == 22).sum())
+    assert not any("preset:hovsg-scannet" in n for n in report["notes"])
+    assert load_ground_truth(root, "scannet20").class_ids == list(SCANNET20_IDS)
+
+
 def test_shared_labelfusion_sample_end_to_end(shared_data, tmp_path, monkeypatch, capsys):
     """Map the real label-fusion sample (every third frame, no optimisation steps, classical segments),
     then score it in 2D against its segm images."""

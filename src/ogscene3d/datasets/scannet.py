@@ -52,6 +52,15 @@ NYU40_CLASSES: dict[int, str] = dict(
 )  # fmt: skip
 
 
+#: The NYU40 ids of ScanNet's 20-class benchmark (its ``VALID_CLASS_IDS``), the classes HOV-SG and most
+#: open-vocabulary methods report on ScanNet; ``--classes scannet20`` scores these, the other ids are void.
+SCANNET20_IDS: tuple[int, ...] = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 14, 16, 24, 28, 33, 34, 36, 39)
+SCANNET20_CLASSES: dict[int, str] = {i: NYU40_CLASSES[i] for i in SCANNET20_IDS}
+
+#: Class tables ``--classes`` takes by name: ScanNet's ids are NYU40 ids in both.
+BUILTIN_CLASS_TABLES: dict[str, dict[int, str]] = {"nyu40": NYU40_CLASSES, "scannet20": SCANNET20_CLASSES}
+
+
 def find_label_map(root: Path) -> Path | None:
     """``scannetv2-labels.combined.tsv`` in ``root`` or one of its two parents (ScanNet keeps it at the top
     of the download, beside ``scans/``), or None."""

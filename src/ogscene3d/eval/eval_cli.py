@@ -67,7 +67,8 @@ def add_parser(subparsers: Any) -> None:
         type=Path,
         default=None,
         help="class-name JSON (list or {id: name}) for a bare labelled PLY or a sequence's per-frame class "
-        "ids (label-fusion; default classes.json beside them; ScanNet's NYU40 names are built in)",
+        "ids (label-fusion; default classes.json beside them; ScanNet's NYU40 names are built in); "
+        "'scannet20': ScanNet's 20 benchmark classes (the other NYU40 ids void), as HOV-SG scores ScanNet",
     )
     p.add_argument("--k", type=int, default=5, help="neighbours of the HOV-SG majority vote (default 5)")
     p.add_argument(

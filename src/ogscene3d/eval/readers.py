@@ -15,8 +15,10 @@ Ground truth, any of:
   ``class_id`` or ``category_id``), optionally an ``instance``/``object_id`` field, plus a class-name
   table: ``--classes FILE.json``, else ``<ply stem>.json`` or ``classes.json`` beside the PLY, else, for
   ScanNet's ``*_vh_clean_2.labels.ply`` (NYU40 ids), the built-in NYU40 names. The table is a JSON list
-  (index = class id), a ``{"<id>": name}`` object, or either under ``"classes"``. A folder holding such a
-  PLY (a ScanNet scene folder: its ``*_vh_clean_2.labels.ply`` is preferred) may be given instead;
+  (index = class id), a ``{"<id>": name}`` object, or either under ``"classes"``; ``--classes scannet20``
+  (ScanNet's 20 benchmark classes, the other NYU40 ids void) or ``nyu40`` names a built-in one. A folder
+  holding such a PLY (a ScanNet scene folder: its ``*_vh_clean_2.labels.ply`` is preferred) may be given
+  instead;
 * an RGB-D sequence folder whose frames carry class maps but that holds no 3D ground truth (label-fusion's
   ``frame-N.segm.png``, ScanNet's ``label-filt/`` without a labels PLY): a ground truth with no points
   (``has_3d`` False) that only rendered views can be scored against. Its class table: ``--classes``, else
@@ -235,7 +237,13 @@ def _load_json(path: Path) -> Any:
 
 
 def read_class_table(path: str | Path) -> dict[int, str]:
-    """Class id -> name from a JSON list, ``{"<id>": name}`` object, or either under ``"classes"``."""
+    """Class id -> name from a JSON list, ``{"<id>": name}`` object, or either under ``"classes"``; or a
+    built-in table by name (``nyu40``, ``scannet20``: ScanNet's NYU40 ids) when no such file exists."""
+    from ..datasets.scannet import BUILTIN_CLASS_TABLES
+
+    key = str(path).strip().lower()
+    if key in BUILTIN_CLASS_TABLES and not Path(path).exists():
+        return dict(BUILTIN_CLASS_TABLES[key])
     path = Path(path)
     data = _load_json(path)
     if isinstance(data, dict) and "classes" in data:
