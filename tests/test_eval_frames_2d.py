@@ -339,6 +339,23 @@ def test_scannet20_classes_give_hovsg_scannet_preset_its_class_set(tmp_path, mon
     assert load_ground_truth(root, "scannet20").class_ids == list(SCANNET20_IDS)
 
 
+def test_eval_batch_takes_a_class_table_for_2d_only_scenes(tmp_path, capsys):
+    """A label-fusion run whose data folder has no classes.json: eval-batch's error asks for --classes, so
+    eval-batch must take it (and --views, which 2D-only scenes need)."""
+    from ogscene3d.cli import main
+
+    data = make_labelfusion(tmp_path / "shelf")
+    run = write_wall_run(tmp_path / "out" / "shelf")
+    (run / "config.yaml").write_text(f"data:\n  path: {data}\n")
+    (tmp_path / "names.json").write_text(json.dumps({"8": "box", "22": "mug"}))
+    argv = ["eval-batch", str(tmp_path / "out"), "--no-plots", "--views", "2"]
+    assert main(argv) == 2  # (every scene failed)
+    assert "--classes" in capsys.readouterr().out
+    assert main([*argv, "--classes", str(tmp_path / "names.json")]) == 0
+    rec = json.loads((tmp_path / "out" / "eval_batch.json").read_text())["scenes"][0]
+    assert rec["status"] == "ok" and rec["semantic_3d"] == {} and rec["semantic_2d"]["miou"] > 0.85
+
+
 def test_shared_labelfusion_sample_end_to_end(shared_data, tmp_path, monkeypatch, capsys):
     """Map the real label-fusion sample (every third frame, no optimisation steps, classical segments),
     then score it in 2D against its segm images."""

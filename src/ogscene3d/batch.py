@@ -223,6 +223,7 @@ class EvalOptions:
     plots: bool = True
     gt_points: str = "observed"
     cg_voxel_size: float = CONCEPTGRAPHS_VOXEL_SIZE
+    classes: str | None = None  # class table (file or built-in name) for every scene's ground truth
 
 
 def _peak_rss_mb() -> float:
@@ -377,6 +378,7 @@ def evaluate_scene(
         min_opacity=opts.min_opacity,
         assoc_radius=opts.assoc_radius,
         num_views=opts.num_views,
+        classes=opts.classes,
         out_dir=run if opts.plots else None,
         device=device,
         gt_points=opts.gt_points,  # type: ignore[arg-type]
@@ -855,6 +857,12 @@ def _add_eval_args(p: Any) -> None:
     )
     p.add_argument("--min-opacity", type=float, default=0.0, help="drop Gaussians below this opacity")
     p.add_argument(
+        "--classes",
+        default=None,
+        help="class-name JSON (list or {id: name}) or built-in table (scannet20, nyu40) for every scene's "
+        "ground truth, as `ogscene3d eval --classes` (default: each scene's own, e.g. its classes.json)",
+    )
+    p.add_argument(
         "--views",
         type=int,
         default=0,
@@ -889,6 +897,7 @@ def _eval_options(args: argparse.Namespace) -> EvalOptions:
         plots=not args.no_plots,
         gt_points=args.gt_points,
         cg_voxel_size=args.cg_voxel_size,
+        classes=args.classes,
     )
 
 

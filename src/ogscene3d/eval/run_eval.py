@@ -215,7 +215,9 @@ def evaluate_run(
     gt = load_ground_truth(gt_path, classes)
     want_views = num_views > 0 or bool(view_frames)
     if not gt.has_3d and not want_views:
-        raise DataError(f"{gt.source}: no 3D ground truth, only per-frame class maps: render views to score")
+        raise DataError(
+            f"{gt.source}: no 3D ground truth, only per-frame class maps: render views to score (--views N)"
+        )
     # Every protocol is given the Gaussians above min_opacity, unlabelled ones included: ConceptGraphs
     # counts on predicted points, so an unlabelled Gaussian is a miss there, while HOV-SG's vote
     # leaves it out (pred_labelled). Label naming and node matching look at labelled Gaussians only.
