@@ -306,6 +306,22 @@ def test_scannet_folder_scored_in_2d_alone_then_in_3d_and_2d(tmp_path, monkeypat
     assert json.loads((run / "metrics.json").read_text())["semantic_2d"]["frames"] == [0]
 
 
+def test_evenly_spread_views_pass_over_lost_tracking_poses(tmp_path, monkeypatch, capsys):
+    """ScanNet writes -inf poses where tracking was lost: an even spread of views picks other frames (and
+    says so); a lost frame asked for by number is an error naming its pose file."""
+    root = make_scannet(tmp_path / "scans" / "scene0000_00")
+    np.savetxt(root / "pose" / "1.txt", np.full((4, 4), -np.inf))
+    run = write_wall_run(tmp_path / "run")
+    assert _main(["eval", str(run), "--gt", str(root), "--views", "3", "--no-plots"], monkeypatch) == 0
+    report = json.loads((run / "metrics.json").read_text())
+    assert report["semantic_2d"]["frames"] == [0, 2]
+    assert any("1 frames without a valid pose" in n for n in report["notes"])
+    capsys.readouterr()
+    argv = ["eval", str(run), "--gt", str(root), "--view-frames", "1", "--no-plots"]
+    assert _main(argv, monkeypatch) == 2
+    assert "1.txt" in capsys.readouterr().err
+
+
 def test_scannet20_classes_give_hovsg_scannet_preset_its_class_set(tmp_path, monkeypatch):
     """HOV-SG scores ScanNet on the 20 benchmark classes: --classes scannet20 keeps those (other NYU40 ids
     void: their predictions are HOV-SG false positives), and the preset over all 40 NYU40 names says that

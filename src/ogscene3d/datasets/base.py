@@ -384,6 +384,22 @@ class RGBDDataset:
             gt_classes=gt_classes,
         )
 
+    def has_valid_pose(self, i: int) -> bool:
+        """Whether frame ``i`` has a finite rigid camera pose, reading its pose only (no pixels): real
+        sequences mark lost tracking with a non-finite pose (ScanNet writes -inf), and a caller choosing
+        frames to render must pass over those without reading every image."""
+        rec = self.records[i]
+        raw = rec.pose
+        try:
+            if rec.pose_path is not None:
+                raw = read_matrix(rec.pose_path, (4, 4), "pose")
+            if raw is None:
+                return False
+            check_pose(raw, rec.pose_source or str(rec.pose_path or f"pose of frame {rec.name}"))
+        except (DataError, ValueError):
+            return False
+        return True
+
     def _read_segments(self, rec: FrameRecord, shape: tuple[int, int]) -> Segmentation | None:
         """The frame's precomputed segments, or None when it has no segments file: the mapper's
         segmentation.backend then segments it live (frames may be segmented in part, e.g. while

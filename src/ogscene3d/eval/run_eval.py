@@ -242,6 +242,11 @@ def evaluate_run(
             raise DataError(f"nothing to score: {why}")
         if rendered is None:
             notes.append(f"2D views skipped: {why}")
+        elif rendered.passed_over:
+            notes.append(
+                f"2D views: {rendered.passed_over} frames without a valid pose (lost tracking) were not "
+                "among the evenly spread frames"
+            )
     assoc = _associate(run, gt, assoc_radius) if gt.has_3d else None
     overlap_2d = None
     if rendered is not None and not gt.has_3d:

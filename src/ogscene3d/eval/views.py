@@ -61,6 +61,17 @@ def pick_frames(num_frames: int, num_views: int) -> list[int]:
     return sorted({int(round(x)) for x in np.linspace(0, num_frames - 1, min(num_views, num_frames))})
 
 
+def spread_frames(ds: Any, num_views: int) -> tuple[list[int], int]:
+    """``num_views`` frames of ``ds`` spread evenly over those with a valid pose, and how many frames were
+    passed over for want of one. Frames asked for by number must render; an even spread need not land
+    on a frame whose tracking was lost (ScanNet writes -inf poses there)."""
+    usable = [i for i in range(len(ds)) if ds.has_valid_pose(i)]
+    passed_over = len(ds) - len(usable)
+    if passed_over:
+        log.warning("%s: %d frames without a valid pose are not rendered", ds.root, passed_over)
+    return [usable[j] for j in pick_frames(len(usable), num_views)], passed_over
+
+
 def open_view_dataset(scene_dir: str | Path, run_dir: str | Path | None = None) -> Any:
     """Every frame of the sequence in ``scene_dir``, read with the run's data settings (layout, intrinsics,
     depth format) when ``run_dir`` mapped that folder, so that renders use the camera the mapper used; the
@@ -158,6 +169,7 @@ class ViewSet:
     views: dict[int, RenderedView]  # every frame of either list, rendered once
     frames: list[int]  # scored
     mapping_frames: list[int]  # for a 2D overlap naming
+    passed_over: int = 0  # frames without a valid pose the even spread of ``num_views`` left out
 
 
 def prepare_views(
@@ -199,12 +211,17 @@ def prepare_views(
         ds = open_view_dataset(folder, run_dir)
         if not ds.has_class_maps:
             continue
-        idx = list(frames) if frames else pick_frames(len(ds), num_views)
+        idx, passed_over = (list(frames), 0) if frames else spread_frames(ds, num_views)
         if not idx:
-            return None, f"no frames of {ds.root} asked for"
+            why = (
+                f"no frame of {ds.root} has a valid pose"
+                if passed_over
+                else f"no frames of {ds.root} asked for"
+            )
+            return None, why
         naming = list(mapping_frames) if mapping_frames else idx
         views = render_views(run_dir, ds, gt, [*idx, *naming], device)
-        return ViewSet(str(ds.root), ds.kind, views, idx, naming), ""
+        return ViewSet(str(ds.root), ds.kind, views, idx, naming, passed_over), ""
     where = " or ".join(str(c) for c in candidates) or str(gt_path)
     return None, f"{where} is no RGB-D sequence whose frames carry ground-truth class maps"
 
@@ -264,7 +281,7 @@ def evaluate_views(
         DataError: the scene has no ground-truth class maps, or a frame has no pose.
     """
     ds = open_view_dataset(scene_dir, run_dir)
-    idx = list(frames) if frames is not None else pick_frames(len(ds), num_views)
+    idx = list(frames) if frames is not None else spread_frames(ds, num_views)[0]
     if not idx:
         raise DataError(f"{scene_dir}: no frames to render")
     views = render_views(run_dir, ds, gt, idx, device)
