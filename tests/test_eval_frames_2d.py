@@ -194,6 +194,22 @@ def _write_labels_ply(root: Path) -> None:
     _write_ply(root / "scene0000_00_vh_clean_2.labels.ply", pts[order])
 
 
+def test_scannet_labels_ply_warns_only_about_ids_no_table_explains(tmp_path, caplog):
+    """ScanNet's id 0 (unannotated) and the NYU40 ids a scannet20 table voids on purpose are void without
+    a warning; an id outside NYU40 is warned about."""
+    pts = np.zeros(4, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("label", "<u2")])
+    pts["x"] = np.arange(4)
+    pts["label"] = [0, 5, 13, 45]  # unannotated, chair, blinds (not in the 20), no NYU40 class
+    _write_ply(tmp_path / "scene0000_00_vh_clean_2.labels.ply", pts)
+    for classes, void in ((None, [0, 3]), ("scannet20", [0, 2, 3])):
+        caplog.clear()
+        with caplog.at_level(logging.WARNING):
+            gt = load_ground_truth(tmp_path / "scene0000_00_vh_clean_2.labels.ply", classes=classes)
+        assert np.flatnonzero(gt.classes < 0).tolist() == void
+        warned = [r.getMessage() for r in caplog.records if "absent from" in r.getMessage()]
+        assert len(warned) == 1 and ": 1 points have class ids" in warned[0], warned
+
+
 # --------------------------------------------------------------------------------------- rendering
 
 
