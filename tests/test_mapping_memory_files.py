@@ -280,3 +280,53 @@ def test_an_unreadable_checkpoint_keeps_its_views_at_the_next_run(tmp_path):
     temp.write_bytes(b"x")
     remove_run_temps(tmp_path)
     assert _files(tmp_path) == files  # the temporary went, the view a repaired map.npz needs stayed
+
+
+def _wall_frame(i: int):
+    """Frame i of a camera moving 0.1 m per frame along a two-segment wall 2 m ahead."""
+    from ogscene3d.frame import Frame
+
+    pose = np.eye(4)
+    pose[0, 3] = 0.1 * i
+    seg = np.full((H, W), 2, np.int32)
+    seg[:, : W // 2] = 1
+    rng = np.random.default_rng(i)
+    rgb = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    depth = np.full((H, W), 2.0, np.float32)
+    return Frame(i, rgb, depth, K, pose, name=f"f{i}", segments=seg, segment_scores={1: 0.97, 2: 0.97})
+
+
+def test_a_resume_optimizes_with_the_same_recent_keyframes_as_an_uninterrupted_run(tmp_path):
+    """The keyframes the optimisation pairs with the next one (mapping.opt_memory_frames) are in the
+    checkpoint too, also those that never joined the memory: a resume maps exactly as if uninterrupted."""
+    settings = ["graph.enabled=false", "mapping.opt_iters=2", "mapping.opt_memory_frames=2"]
+    cfg = load_config(None, [*settings, "mapping.ablation=local"])
+
+    def run(split: int | None) -> Mapper:
+        m = Mapper(cfg, "cpu")
+        for i in range(6):
+            m.process(_wall_frame(i))
+            if i == split:
+                m.save_checkpoint(tmp_path / "map.npz")
+                m = Mapper(cfg, "cpu")
+                m.load_checkpoint(tmp_path / "map.npz")
+        return m
+
+    whole, resumed = run(None), run(3)
+    at_split = Mapper(cfg, "cpu")
+    at_split.load_checkpoint(tmp_path / "map.npz")
+    # the wall's later views overlap the first: only keyframe 0 is in the memory, keyframes 2 and 3 are not
+    assert [e.keyframe for e in at_split.memory.entries] == [0]
+    assert [e.keyframe for e in at_split.recent] == [2, 3]
+    assert torch.equal(whole.map.means, resumed.map.means)
+    assert torch.equal(whole.map.confidences, resumed.map.confidences)
+    # their files stay through the next run's clean-up; a smaller opt_memory_frames keeps the newest
+    with np.load(tmp_path / "map.npz") as z:
+        assert z["recent_keyframe"].tolist() == [2, 3] and z["mapper_recent"].tolist() == [2, 3]
+    names = sorted(_files(tmp_path))
+    assert [n.split("_")[1] for n in names] == ["000000", "000002", "000003"]
+    remove_run_temps(tmp_path)
+    assert sorted(_files(tmp_path)) == names
+    fewer = Mapper(load_config(None, [*settings, "mapping.opt_memory_frames=1"]), "cpu")
+    fewer.load_checkpoint(tmp_path / "map.npz")
+    assert [e.keyframe for e in fewer.recent] == [3]

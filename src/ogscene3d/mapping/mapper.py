@@ -748,12 +748,17 @@ class Mapper:
         path = Path(path)
         extra = self._state_extra()
         mem = self.memory.entries
+        # the keyframes the next one is optimised with (opt_memory_frames) that are not in the memory
+        recent = [e for e in self.recent if not any(e is m for m in mem)]
         # the order makes a kill at any point safe: the views the new map.npz names are on disk before it,
         # and the evicted views go only once it has replaced the map.npz that named them
         files = [store_view(path, e) for e in mem]
+        recent_files = [store_view(path, e) for e in recent]
         extra.update(manifest(mem, files))
+        extra.update(manifest(recent, recent_files, prefix="recent"))
+        extra["mapper_recent"] = np.array([e.keyframe for e in self.recent], dtype=np.int64)
         self.map.save_npz(path, extra=extra)
-        for f in remove_unreferenced(path, files):
+        for f in remove_unreferenced(path, files + recent_files):
             log.debug("removed %s, a view no longer in the memory", f)
 
     def load_checkpoint(self, path: str | Path) -> None:
@@ -781,7 +786,10 @@ class Mapper:
                 self.pose_check.load_state({k: z[k] for k in z.files if k.startswith("posecheck_")})
                 self.memory.entries = []
                 cursor = int(z["mapper_memory_cursor"]) if "mapper_memory_cursor" in z.files else 0
-                views = read_manifest(z, p) if "mem_file" in z.files else []
+                views = read_manifest(z, p)
+                recent_views = read_manifest(z, p, "recent")
+                # older checkpoints lack it: the first keyframes after the resume pair with memory views only
+                recent = [int(k) for k in z["mapper_recent"]] if "mapper_recent" in z.files else []
                 if "mem_file" not in z.files and "mem_keyframe" in z.files:
                     # a checkpoint from before the views had their own files: all of them inline
                     scores = json.loads(str(z["mem_scores"]))
@@ -811,6 +819,17 @@ class Mapper:
         for record in views[max(0, len(views) - self.memory.max_size) :]:
             self.memory.restore(load_view(p, record), self.device)  # one file read per view
         self.memory._cursor = cursor % max(1, len(self.memory.entries))
+        # the recent keyframes in the memory are its entries (one object, as while mapping); the others, and
+        # any that a smaller memory_max left out of it, are read from their own files
+        in_memory = {e.keyframe: e for e in self.memory.entries}
+        records = {r.keyframe: r for r in views + recent_views}
+        self.recent.clear()
+        for kf in recent[max(0, len(recent) - (self.recent.maxlen or 0)) :]:  # a smaller opt_memory_frames
+            entry = in_memory.get(kf)
+            if entry is None and kf in records:
+                entry = load_view(p, records[kf])
+            if entry is not None:
+                self.recent.append(entry)
         self._graph_failed = False
         if self.config.graph.enabled:
             # the graph built with the Mapper takes the checkpoint's state (its models are loaded once)

@@ -4,7 +4,10 @@ A checkpoint ``RUN/map.npz`` keeps its memory views in ``RUN/map_memory/view_<ke
 (``rgb``, ``depth``, ``keyframe`` and, when the view has them, ``segments``); ``map.npz`` lists the files
 it needs, relative to its own directory, with each file's size and CRC-32 (README "File formats"). A view
 never changes once in the memory, so a checkpoint writes only the views the previous one did not have,
-instead of every view again (hundreds of MB with 64 views at 1200x680).
+instead of every view again (hundreds of MB with 64 views at 1200x680). The optimisation's recent keyframes
+(``mapping.opt_memory_frames``) that are not in the memory are kept the same way, listed apart
+(``recent_*``): without them a resume would pair its first keyframes with other views than an uninterrupted
+run does (and draw other random numbers from then on).
 
 Crash safety comes from the order of the writes: every view file is on disk (atomic, fsynced) before the
 ``map.npz`` that names it, and the files of evicted views are removed only once the new ``map.npz`` is in
@@ -33,6 +36,8 @@ from .longterm import MemoryEntry
 
 log = logging.getLogger(__name__)
 
+# the lists of view files in map.npz: the memory's, and the recent keyframes' outside it (``manifest``)
+VIEW_LISTS = ("mem", "recent")
 VIEW_NAME = re.compile(r"view_\d+_[0-9a-f]{8}\.npz")
 # what atomic_path leaves behind when a write of a view file is killed
 VIEW_TEMP = re.compile(r"\.view_\d+_[0-9a-f]{8}\..+\.npz")
@@ -93,20 +98,21 @@ def store_view(checkpoint: Path, entry: MemoryEntry) -> ViewFile:
     return ref
 
 
-def manifest(entries: list[MemoryEntry], files: list[ViewFile]) -> dict[str, np.ndarray]:
-    """The arrays ``map.npz`` lists its memory views with (none for an empty memory). ``mem_keyframe`` and
+def manifest(entries: list[MemoryEntry], files: list[ViewFile], prefix: str = "mem") -> dict[str, np.ndarray]:
+    """The arrays ``map.npz`` lists views with (none for no views): the memory's under ``mem_``, the
+    optimisation's recent keyframes that are not in the memory under ``recent_``. ``mem_keyframe`` and
     ``mem_pose`` are what the viewer draws the camera path from."""
     if not entries:
         return {}
     return {
-        "mem_keyframe": np.array([e.keyframe for e in entries], dtype=np.int64),
-        "mem_K": np.stack([e.K for e in entries]),
-        "mem_pose": np.stack([e.pose for e in entries]),
-        "mem_scores": np.array(json.dumps([{str(k): v for k, v in e.scores.items()} for e in entries])),
-        "mem_shape": np.array([e.depth.shape for e in entries], dtype=np.int64),
-        "mem_file": np.array([f.name for f in files]),
-        "mem_bytes": np.array([f.nbytes for f in files], dtype=np.int64),
-        "mem_crc32": np.array([f.crc32 for f in files], dtype=np.int64),
+        f"{prefix}_keyframe": np.array([e.keyframe for e in entries], dtype=np.int64),
+        f"{prefix}_K": np.stack([e.K for e in entries]),
+        f"{prefix}_pose": np.stack([e.pose for e in entries]),
+        f"{prefix}_scores": np.array(json.dumps([{str(k): v for k, v in e.scores.items()} for e in entries])),
+        f"{prefix}_shape": np.array([e.depth.shape for e in entries], dtype=np.int64),
+        f"{prefix}_file": np.array([f.name for f in files]),
+        f"{prefix}_bytes": np.array([f.nbytes for f in files], dtype=np.int64),
+        f"{prefix}_crc32": np.array([f.crc32 for f in files], dtype=np.int64),
     }
 
 
@@ -119,14 +125,17 @@ def _check_name(checkpoint: Path, name: str) -> None:
         )
 
 
-def read_manifest(z, checkpoint: Path) -> list[ViewRecord]:
-    """The memory views listed by an opened ``map.npz`` ``z`` (raises KeyError for a missing array)."""
-    names = [str(n) for n in z["mem_file"]]
-    keyframes, nbytes, crcs = z["mem_keyframe"], z["mem_bytes"], z["mem_crc32"]
-    Ks, poses, shapes = z["mem_K"], z["mem_pose"], z["mem_shape"]
-    scores = json.loads(str(z["mem_scores"]))
+def read_manifest(z, checkpoint: Path, prefix: str = "mem") -> list[ViewRecord]:
+    """The views listed under ``prefix`` (``manifest``) by an opened ``map.npz`` ``z``: none when it has no
+    such list (raises KeyError for a missing array of one)."""
+    if f"{prefix}_file" not in z.files:
+        return []
+    names = [str(n) for n in z[f"{prefix}_file"]]
+    keyframes, nbytes, crcs = z[f"{prefix}_keyframe"], z[f"{prefix}_bytes"], z[f"{prefix}_crc32"]
+    Ks, poses, shapes = z[f"{prefix}_K"], z[f"{prefix}_pose"], z[f"{prefix}_shape"]
+    scores = json.loads(str(z[f"{prefix}_scores"]))
     if len({len(a) for a in (names, keyframes, nbytes, crcs, Ks, poses, shapes, scores)}) != 1:
-        raise DataError(f"{checkpoint}: its lists of memory views (mem_*) differ in length")
+        raise DataError(f"{checkpoint}: its lists of views ({prefix}_*) differ in length")
     out = []
     for i, name in enumerate(names):
         _check_name(checkpoint, name)
@@ -215,8 +224,7 @@ def remove_leftovers(checkpoint: Path) -> list[Path]:
     if checkpoint.is_file():
         try:
             with np.load(checkpoint, allow_pickle=False) as z:
-                if "mem_file" in z.files:
-                    keep = [r.file for r in read_manifest(z, checkpoint)]
+                keep = [r.file for prefix in VIEW_LISTS for r in read_manifest(z, checkpoint, prefix)]
         except (KeyError, OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
             log.warning("%s: unreadable (%s), its memory views are left alone", checkpoint, type(e).__name__)
             return _remove(views_dir(checkpoint), lambda name: bool(VIEW_TEMP.fullmatch(name)))
