@@ -48,6 +48,20 @@ def test_limits_scale_with_the_steps_since_the_last_accepted_frame():
     assert restored.check(1, _pose(0.6)) is None
 
 
+def test_limits_scale_with_the_data_stride():
+    """A run at data.stride=3 compares frames three folder frames apart: the per-step limits triple
+    (7-Scenes every 20th frame at stride 3 steps 0.58 m / 32 deg, under 0.5 m / 30 deg x 3)."""
+    cfg = load_config(None, ["data.stride=3"])
+    assert Mapper(cfg, "cpu").pose_check.stride == 3
+    c = PoseJumpCheck(0.5, 30.0, "warn", stride=3)
+    c.accept(0, _pose())
+    assert c.check(1, _pose(0.58, 32.0)) is None
+    jump = c.check(1, _pose(1.6), "f1")
+    assert jump is not None and jump.limit_translation == pytest.approx(1.5)
+    assert "3 x mapping.max_pose_step" in jump.describe()
+    assert c.check(2, _pose(3.1)).limit_translation == pytest.approx(3.0)  # a frame left out: 2 x 3
+
+
 @pytest.mark.parametrize(
     "args, match",
     [((-0.1, 30.0, "warn"), "max_pose_step"), ((0.5, math.nan, "warn"), "max_pose_step"),

@@ -175,7 +175,9 @@ class Mapper:
             cfg.keyframe_every, cfg.keyframe_translation, cfg.keyframe_rotation_deg
         )
         self.memory = MemoryBuffer(cfg.tau_long, cfg.r_search, cfg.memory_max, cfg.memory_point_step)
-        self.pose_check = PoseJumpCheck(cfg.max_pose_step, cfg.max_pose_step_deg, cfg.on_pose_jump)
+        self.pose_check = PoseJumpCheck(
+            cfg.max_pose_step, cfg.max_pose_step_deg, cfg.on_pose_jump, stride=config.data.stride
+        )
         self.recent: deque[MemoryEntry] = deque(maxlen=max(1, cfg.opt_memory_frames))
         self.timings = Timings(self.device)
         self.frames_seen = 0

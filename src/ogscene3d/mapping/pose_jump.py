@@ -4,12 +4,11 @@
 A dataset pose glitch (a row of another frame's pose, an identity written for a lost frame) or a tracker
 failure puts a frame's depth in the wrong place: the map gets a smeared copy of the scene there and every
 later association near it is ambiguous. Each frame the mapper is given a pose for is compared with the
-last frame it accepted; the limits are per step between consecutive frames of the selection (after
-``data.stride``), times the number of steps since that frame, so a frame after skipped or untracked ones
-may have moved proportionally further (as the tracker's own ``tracking.max_translation`` check does).
-They do not scale with ``data.stride`` itself: sample folders often hold every n-th frame already
-(7-Scenes here), which the loader cannot tell from a 1:1 recording, so the per-step limit has to cover
-strided data anyway.
+last frame it accepted; the limits are per step between consecutive frames of the folder, times
+``data.stride`` and the number of selected frames since that one, so a frame after skipped or untracked
+ones, or a strided run's next frame, may have moved proportionally further. The per-step limits still
+have to cover sample folders that hold every n-th frame already (7-Scenes here), which the loader cannot
+tell from a 1:1 recording.
 
 Defaults 0.5 m and 30 deg per step, about twice the largest steps measured here: 7-Scenes redkitchen every
 20th frame 0.26 m / 13.6 deg, LabelFusion shelf 0.08 m / 12.6 deg, Replica room0 (consecutive) 0.016 m /
@@ -49,10 +48,10 @@ class PoseJump:
     rotation_deg: float
     limit_translation: float  # the limits for this gap (per-step limits x steps)
     limit_rotation_deg: float
+    steps: int = 1  # folder frames since the last accepted one (selected frames x data.stride)
 
     def describe(self) -> str:
-        steps = self.index - self.previous
-        times = f"{steps} x " if steps > 1 else ""
+        times = f"{self.steps} x " if self.steps > 1 else ""
         return (
             f"frame {self.index} ({self.name}): the camera pose jumped {self.translation:.3f} m and "
             f"{self.rotation_deg:.1f} deg from frame {self.previous} (limits {self.limit_translation:g} m, "
@@ -64,9 +63,10 @@ class PoseJumpCheck:
     """Compares each frame's pose with the last accepted one (see the module docstring).
 
     ``max_translation`` (m) and ``max_rotation_deg`` are per step between consecutive frames of the
-    selection; 0 turns that limit off. ``check`` judges a frame, ``accept`` makes it the reference."""
+    folder, ``stride`` the selection's (``data.stride``); 0 turns a limit off. ``check`` judges a frame
+    (``index``: its position in the selection), ``accept`` makes it the reference."""
 
-    def __init__(self, max_translation: float, max_rotation_deg: float, action: str) -> None:
+    def __init__(self, max_translation: float, max_rotation_deg: float, action: str, stride: int = 1) -> None:
         if not (max_translation >= 0 and max_rotation_deg >= 0):  # also catches NaN
             raise ConfigError(
                 "mapping.max_pose_step and mapping.max_pose_step_deg must be >= 0 (0 = no limit), got "
@@ -77,6 +77,7 @@ class PoseJumpCheck:
         self.max_translation = float(max_translation)
         self.max_rotation_deg = float(max_rotation_deg)
         self.action = action
+        self.stride = max(1, int(stride))
         self.last_pose: np.ndarray | None = None
         self.last_index = -1
 
@@ -86,11 +87,11 @@ class PoseJumpCheck:
         if self.last_pose is None:
             return None
         # positions go up within a run; a smaller one (a caller restarting a sequence) counts as one step
-        steps = max(1, int(index) - self.last_index)
+        steps = max(1, int(index) - self.last_index) * self.stride
         t, r = pose_delta(self.last_pose, np.asarray(pose, dtype=np.float64))
         lt, lr = self.max_translation * steps, self.max_rotation_deg * steps
         if (lt > 0 and t > lt) or (lr > 0 and r > lr):
-            return PoseJump(int(index), name, self.last_index, t, r, lt, lr)
+            return PoseJump(int(index), name, self.last_index, t, r, lt, lr, steps)
         return None
 
     def accept(self, index: int, pose: np.ndarray) -> None:
