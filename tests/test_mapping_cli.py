@@ -53,6 +53,20 @@ def test_run_and_resume(tmp_path, capsys):
     assert "read 1 frames: 1 mapped (3 keyframes in all)" in capsys.readouterr().out
 
 
+def test_a_new_run_over_an_earlier_map_warns_that_it_replaces_it(tmp_path, caplog):
+    scene = _replica_scene(tmp_path / "scene", frames=2)
+    out = tmp_path / "run"
+    common = ["--data", str(scene), "--segments", str(scene / "segs"), "--out", str(out), "--device", "cpu",
+              "--no-progress", "--set", "mapping.opt_iters=1", "--set", "graph.enabled=false"]  # fmt: skip
+    assert main(["run", *common]) == 0
+    assert "holds a map from an earlier run" not in caplog.text
+    assert main(["run", *common]) == 0
+    assert "holds a map from an earlier run" in caplog.text and "--resume continues" in caplog.text
+    caplog.clear()
+    assert main(["run", *common, "--resume"]) == 0
+    assert "holds a map from an earlier run" not in caplog.text
+
+
 def test_run_errors(tmp_path, capsys):
     assert (
         main(["run", "--data", str(tmp_path / "missing"), "--out", str(tmp_path / "o"), "--no-progress"]) == 2

@@ -124,6 +124,14 @@ def run(args: argparse.Namespace) -> int:
             mapper.keyframe_count,
             len(mapper.map),
         )
+    elif (out / "map.npz").is_file():
+        # config.yaml is rewritten now, so a --resume after this run dies early would pair the old map
+        # with the new settings: say so while the old map can still be kept.
+        log.warning(
+            "%s holds a map from an earlier run: this run replaces it at its first save (--resume continues "
+            "that map instead; a new --out keeps it)",
+            out,
+        )
     mapper.source = source
     start_run_dir(out, cfg)
 
