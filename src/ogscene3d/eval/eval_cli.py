@@ -26,8 +26,10 @@ def add_parser(subparsers: Any) -> None:
             "Score RUN_DIR (gaussians.ply, graph.json) against ground truth GT: a synthetic scene directory "
             "(found automatically for runs of synthetic scenes), its gt/ folder, a labelled PLY "
             "(x, y, z, class[, instance]) with a class-name table, a ScanNet scene folder "
-            "(*_vh_clean_2.labels.ply, NYU40; label-filt/ for 2D), or an RGB-D sequence whose frames carry "
-            "class maps but which has no 3D ground truth (label-fusion: scored in 2D only). "
+            "(*_vh_clean_2.labels.ply, NYU40; label-filt/ for 2D), an original Replica scene folder "
+            "(habitat/mesh_semantic.ply + info_semantic.json, as HOV-SG scores Replica), or an RGB-D "
+            "sequence whose frames carry class maps but which has no 3D ground truth (label-fusion: scored "
+            "in 2D only). "
             "Prints a table and writes metrics.json and a per-class IoU bar chart into the run directory."
         ),
     )
@@ -36,9 +38,9 @@ def add_parser(subparsers: Any) -> None:
         "--gt",
         type=Path,
         default=None,
-        help="ground truth: scene dir, gt/ folder, labelled PLY, ScanNet scene folder or a sequence with "
-        "per-frame class maps (default: the scene the run was made from, RUN_DIR/scene or config.yaml's "
-        "data.path, when it holds one of these)",
+        help="ground truth: scene dir, gt/ folder, labelled PLY, ScanNet scene folder, Replica scene folder "
+        "(or its habitat/mesh_semantic.ply) or a sequence with per-frame class maps (default: the scene "
+        "the run was made from, RUN_DIR/scene or config.yaml's data.path, when it holds one of these)",
     )
     p.add_argument(
         "--protocol",

@@ -19,6 +19,9 @@ Ground truth, any of:
   (ScanNet's 20 benchmark classes, the other NYU40 ids void) or ``nyu40`` names a built-in one. A folder
   holding such a PLY (a ScanNet scene folder: its ``*_vh_clean_2.labels.ply`` is preferred) may be given
   instead;
+* the original Replica dataset's semantic annotation: a scene folder (``room_0``), its ``habitat/``
+  folder or ``habitat/mesh_semantic.ply`` itself, with ``info_semantic.json`` beside the PLY; one point
+  per face corner with the class of the face's object, as HOV-SG builds it (:mod:`.replica_gt`);
 * an RGB-D sequence folder whose frames carry class maps but that holds no 3D ground truth (label-fusion's
   ``frame-N.segm.png``, ScanNet's ``label-filt/`` without a labels PLY): a ground truth with no points
   (``has_3d`` False) that only rendered views can be scored against. Its class table: ``--classes``, else
@@ -38,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
+from .replica_gt import load_replica_ground_truth, replica_semantic_files
 
 log = logging.getLogger(__name__)
 
@@ -346,10 +350,16 @@ def _find_gt_ply(folder: Path) -> Path:
 
 
 def load_ground_truth(gt: str | Path, classes: str | Path | None = None) -> GroundTruth:
-    """Load ground truth from a synthetic scene directory, a ``gt/`` folder or a labelled PLY file."""
+    """Load ground truth from a synthetic scene directory, a ``gt/`` folder, a Replica scene (its folder,
+    ``habitat/`` or ``mesh_semantic.ply``), a labelled PLY file or a sequence with class maps."""
     path = Path(gt)
     if not path.exists():
         raise DataError(f"{path}: ground truth not found")
+    replica = None if (path / "gt" / "instances.json").is_file() else replica_semantic_files(path)
+    if replica is not None:
+        if classes is not None:
+            log.warning("--classes %s not used: Replica's class table is %s", classes, replica[1])
+        return load_replica_ground_truth(*replica)
     if path.is_dir():
         folder = path / "gt" if (path / "gt" / "instances.json").is_file() else path
         inst_json = folder / "instances.json"
