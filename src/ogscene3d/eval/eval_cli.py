@@ -111,14 +111,29 @@ def add_parser(subparsers: Any) -> None:
         default=3,
         help="render the map at this many evenly spread frames of a GT sequence whose frames carry class "
         "maps (synthetic, label-fusion, ScanNet label-filt/): 2D metrics and RGB | labels | GT | confidence "
-        "PNGs (default 3; 0 = none; --no-plots keeps the metrics only)",
+        "PNGs (default 3; 0 = none; --no-plots keeps the metrics only). The frames are spread over the whole "
+        "sequence, mostly frames the run mapped; --held-out picks frames it did not map",
     )
-    p.add_argument("--view-frames", default=None, help="comma-separated frame indices to render instead")
+    p.add_argument(
+        "--view-frames",
+        default=None,
+        help="comma-separated frame indices to render instead (positions in the whole sequence: the run's "
+        "data.start/stride/max_frames do not apply)",
+    )
+    p.add_argument(
+        "--held-out",
+        action="store_true",
+        help="score held-out novel views: the --views frames are spread over the frames the run did NOT "
+        "map (its config.yaml's data.start/stride/max_frames, and how far map.npz says it got), those "
+        "between its first and last mapped frames first (e.g. every odd frame of a run at --set "
+        "data.stride=2); frames outside that range only when no other is left (extrapolation, noted). "
+        "--view-frames that the run mapped are refused. A run that mapped every frame has none",
+    )
     p.add_argument(
         "--mapping-frames",
         default=None,
         help="without 3D GT: comma-separated frame indices whose renders the overlap mapping reads "
-        "(default: the scored frames)",
+        "(default: the scored frames; with --held-out as many evenly spread frames the run mapped)",
     )
     p.add_argument("--device", default="cpu", help="rendering device for --views (cpu, cuda, cuda:0)")
     p.add_argument("--align", default="se3", choices=["se3", "sim3", "none"], help="trajectory alignment")
@@ -176,6 +191,24 @@ def _mapping_line(report: dict[str, Any]) -> str:
     )
 
 
+def _views_kind_line(v: dict[str, Any]) -> str:
+    """Which kind of frames the 2D block scored: held out from the run, or frames of the mapped sequence."""
+    if v.get("held_out"):
+        r = v["run_frames"]
+        where = (
+            "outside the mapped range: extrapolated views"
+            if v["extrapolated"]
+            else "novel views between mapped frames"
+        )
+        return (
+            f"held-out views {v['frames']}: frames the run did not map ({where}; it mapped {r['num_mapped']} "
+            f"frames, {r['first']}..{r['last']}, {r['selection']})"
+        )
+    mapped = v.get("scored_frames_mapped")
+    known = "" if mapped is None else f", {len(mapped)} of the {len(v['frames'])} mapped by the run"
+    return f"views {v['frames']}: frames of the mapped sequence{known}, not held out (see --held-out)"
+
+
 def _gaussians_line(report: dict[str, Any]) -> str:
     unlabelled = report.get("unlabelled_fraction", 0.0)
     if not report.get("has_3d_ground_truth", True):
@@ -196,6 +229,8 @@ def _run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--k must be >= 1, got {args.k}")
     if not (math.isfinite(args.cg_voxel_size) and args.cg_voxel_size >= 0):
         raise ConfigError(f"--cg-voxel-size must be >= 0 metres (0 = none), got {args.cg_voxel_size}")
+    if args.held_out and args.views <= 0 and not args.view_frames:
+        raise ConfigError("--held-out needs views to score: --views N (N > 0) or --view-frames")
     gt_path = args.gt
     if gt_path is None:
         gt_path = find_ground_truth(args.run_dir)
@@ -225,6 +260,7 @@ def _run(args: argparse.Namespace) -> int:
         gt_points=args.gt_points,
         cg_voxel_size=args.cg_voxel_size,
         mapping_frames=_int_list(args.mapping_frames, "--mapping-frames"),
+        held_out=args.held_out,
     )
     report = result.report
     if traj is not None:
@@ -257,6 +293,7 @@ def _run(args: argparse.Namespace) -> int:
         print()
         print(format_metrics_table(result.views, per_class=not report["has_3d_ground_truth"]))
         print(f"frames scored: {', '.join(v['frame_names'])} ({v['dataset_kind']} {v['source']})")
+        print(_views_kind_line(v))
         if v["pictures"]:
             print(f"pictures: {', '.join(v['pictures'])}")
     g = report.get("scene_graph")

@@ -59,7 +59,8 @@ O(N + M), never O(N * M).
 The 2D rendered-view protocol (paper Table I, following OpenGS-SLAM) accumulates one confusion
 matrix over the rendered views: pixels with ground truth < 0 are void, rendered pixels with no label
 (-1) or a label the mapping does not name are misses. The views are frames of the mapped sequence
-(not held-out novel views), and the protocol string says so.
+(not held-out novel views), or with ``eval --held-out`` frames the run did not map (novel views), and
+the protocol string says which.
 """
 
 from __future__ import annotations
@@ -411,6 +412,14 @@ def label_lookup(mapping: Mapping[int, int] | np.ndarray, labels: Any) -> np.nda
 
 #: What the 2D block is: renders at poses of the sequence's own frames, so it is not a novel-view score.
 RENDERED_VIEW_PROTOCOL = "rendered-view-2d (dataset frames of the mapped sequence, not held-out novel views)"
+#: ``eval --held-out``: frames the run was not given, between its first and last mapped frames.
+HELD_OUT_VIEW_PROTOCOL = (
+    "rendered-view-2d (held-out novel views: frames between mapped frames the run did not map)"
+)
+#: ``eval --held-out`` where no unmapped frame lies inside the mapped range: views beyond it.
+EXTRAPOLATED_VIEW_PROTOCOL = (
+    "rendered-view-2d (held-out frames the run did not map, outside its mapped range: extrapolated views)"
+)
 
 
 def rendered_view_metrics(
@@ -419,6 +428,7 @@ def rendered_view_metrics(
     label_to_class: Mapping[int, int] | np.ndarray,
     class_names: Sequence[str],
     ignore: Iterable[str | int] | None = None,
+    views: str = RENDERED_VIEW_PROTOCOL,
 ) -> SegmentationMetrics:
     """2D semantic segmentation of rendered views (paper Table I): mIoU / mAcc over dataset frames.
 
@@ -429,6 +439,8 @@ def rendered_view_metrics(
         label_to_class: scene label -> GT class index (from :mod:`ogscene3d.eval.label_mapping`).
         class_names: C ground-truth class names.
         ignore: class names/indices left out of the means (their pixels are dropped).
+        views: what the views are, the protocol string's head (:data:`RENDERED_VIEW_PROTOCOL`,
+            :data:`HELD_OUT_VIEW_PROTOCOL` or :data:`EXTRAPOLATED_VIEW_PROTOCOL`).
 
     One confusion matrix is accumulated over all views, so large and small views weigh by pixels.
     """
@@ -449,7 +461,7 @@ def rendered_view_metrics(
         class_names,
         ignore,
         "drop",
-        protocol=f"{RENDERED_VIEW_PROTOCOL}: {len(rendered_labels)} views, confusion accumulated over pixels",
+        protocol=f"{views}: {len(rendered_labels)} views, confusion accumulated over pixels",
     )
 
 

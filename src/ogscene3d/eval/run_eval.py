@@ -175,6 +175,7 @@ def evaluate_run(
     gt_points: Literal["observed", "all"] = "observed",
     cg_voxel_size: float = CONCEPTGRAPHS_VOXEL_SIZE,
     mapping_frames: Sequence[int] | None = None,
+    held_out: bool = False,
 ) -> EvalResult:
     """Evaluate ``run_dir`` against ``gt_path`` (see the module docstring).
 
@@ -203,7 +204,10 @@ def evaluate_run(
         cg_voxel_size: metres; the conceptgraphs protocol resamples the Gaussians to one point per
             scene label and voxel of this size, like ConceptGraphs' object clouds (0 = every Gaussian).
         mapping_frames: without 3D ground truth, the frames whose renders the overlap naming reads
-            (None = the scored frames); both lists are in the report.
+            (None = the scored frames, or with ``held_out`` as many frames the run mapped); both lists are
+            in the report.
+        held_out: score frames the run did not map (novel views; :mod:`~ogscene3d.eval.held_out`):
+            ``num_views`` spread evenly over them, or ``view_frames``, refused if the run mapped one.
     """
     if gt_points not in ("observed", "all"):
         raise ValueError(f"gt_points must be 'observed' or 'all', got {gt_points!r}")
@@ -214,6 +218,8 @@ def evaluate_run(
     run = read_run(run_dir)
     gt = load_ground_truth(gt_path, classes)
     want_views = num_views > 0 or bool(view_frames)
+    if held_out and not want_views:
+        raise ValueError("held-out views need a number of views (--views N) or frames (--view-frames)")
     if not gt.has_3d and not want_views:
         raise DataError(
             f"{gt.source}: no 3D ground truth, only per-frame class maps: render views to score (--views N)"
@@ -237,7 +243,9 @@ def evaluate_run(
     # Rendered before the naming: without 3D ground truth the overlap naming reads the renders.
     rendered: ViewSet | None = None
     if want_views:
-        rendered, why = prepare_views(run_dir, gt_path, gt, num_views, view_frames, mapping_frames, device)
+        rendered, why = prepare_views(
+            run_dir, gt_path, gt, num_views, view_frames, mapping_frames, device, held_out
+        )
         if rendered is None and not gt.has_3d:
             raise DataError(f"nothing to score: {why}")
         if rendered is None:
@@ -253,6 +261,8 @@ def evaluate_run(
         pick = rendered.mapping_frames
         overlap_2d = (overlap_mapping_2d(rendered.views[i] for i in pick), pick)
     label_to_class, mapping_info = build_label_mapping(run, gt, mapping, assoc, embedder, overlap_2d)
+    if rendered is not None and rendered.held_out is not None:
+        notes.extend(_held_out_notes(rendered, mapping_info.get("space") == "2d"))
     named = float((label_lookup(label_to_class, run.labels) >= 0).mean())
     mapping_info["fraction_of_gaussians_named"] = named
     if named < 0.5:
@@ -396,7 +406,13 @@ def _views_block(
 ) -> tuple[dict[str, Any], SegmentationMetrics]:
     """2D metrics + pictures of the scored frames; the naming frames are listed when they named labels."""
     res = score_views(
-        rendered.views, rendered.frames, gt, label_to_class, out_dir, None if ignore is None else list(ignore)
+        rendered.views,
+        rendered.frames,
+        gt,
+        label_to_class,
+        out_dir,
+        None if ignore is None else list(ignore),
+        held_out=rendered.held_out,
     )
     block = res.metrics.to_dict()
     block["source"] = rendered.source
@@ -404,5 +420,38 @@ def _views_block(
     block["frames"] = res.frames
     block["frame_names"] = [rendered.views[i].name for i in res.frames]
     block["mapping_frames"] = rendered.mapping_frames if named_from_views else None
+    held = rendered.held_out
+    block["held_out"] = held is not None
+    # held-out frames outside the mapped range (none inside it): extrapolation rather than novel views
+    block["extrapolated"] = held.extrapolated if held is not None else None
+    block["run_frames"] = held.run.to_dict() if held is not None else None
+    # an ordinary eval: which of its frames the run mapped, when the run's config.yaml tells
+    block["scored_frames_mapped"] = rendered.scored_mapped
     block["pictures"] = [p.name for p in res.pictures]
     return block, res.metrics
+
+
+def _held_out_notes(rendered: ViewSet, named_from_views: bool) -> list[str]:
+    """What the report says about held-out views: which frames the run mapped, extrapolation, the naming."""
+    held = rendered.held_out
+    assert held is not None
+    notes = [f"2D views held out: the run was given {held.run.describe()}, none of the frames scored"]
+    if held.extrapolated:
+        notes.append(
+            "2D held-out views lie outside the run's mapped range (no unmapped frame between its first and "
+            "last mapped ones): extrapolated views, not novel views between mapped frames; map with "
+            "--set data.stride=2 to hold every other frame out"
+        )
+    if named_from_views:
+        reused = sorted(set(rendered.mapping_frames) & set(rendered.frames))
+        if reused:
+            notes.append(
+                f"the 2D overlap naming reads held-out frames {reused} that are scored (--mapping-frames): "
+                "an oracle naming of the very views scored"
+            )
+        else:
+            notes.append(
+                f"the 2D overlap naming reads frames {rendered.mapping_frames}, none of the held-out views "
+                "scored"
+            )
+    return notes

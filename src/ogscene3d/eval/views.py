@@ -5,13 +5,15 @@ label-fusion's ``segm`` images, ScanNet's ``label-filt`` with its label map), th
 ``gaussians.ply`` is rendered with :func:`ogscene3d.render_semantics` at a few poses of the
 sequence; rendered scene labels are named with the run's label mapping and compared with the
 ground-truth class maps (:func:`~ogscene3d.eval.protocols.rendered_view_metrics`, paper Table I).
-The poses are those the dataset reports (what the mapper was given): these are frames of the mapped
-sequence, not held-out novel views (at most, frames a strided run skipped), and the protocol string
-says so; the report lists the frames used.
+The poses are those the dataset reports (what the mapper was given): by default frames spread over the
+whole mapped sequence, not held-out novel views (at most, frames a strided run skipped), and the protocol
+string says so; the report lists the frames used. With ``held_out`` the frames are chosen among those the
+run did not map (:mod:`~ogscene3d.eval.held_out`): novel views, and the protocol string says that instead.
 
 Without 3D ground truth the scene labels can also be named from the renders
 (:func:`overlap_mapping_2d`, majority overlap with the GT class maps: an oracle naming, like the 3D
-overlap mapping); the frames it used are reported beside the frames scored.
+overlap mapping); the frames it used are reported beside the frames scored. Held-out views are not named
+from themselves: the naming frames default to mapped frames then.
 """
 
 from __future__ import annotations
@@ -26,10 +28,17 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
+from .held_out import HeldOut, check_held_out, naming_frames, pick_held_out, run_frames
 from .label_mapping import majority_overlap_mapping
 from .metrics import SegmentationMetrics
 from .plots import side_by_side, write_png
-from .protocols import label_lookup, rendered_view_metrics
+from .protocols import (
+    EXTRAPOLATED_VIEW_PROTOCOL,
+    HELD_OUT_VIEW_PROTOCOL,
+    RENDERED_VIEW_PROTOCOL,
+    label_lookup,
+    rendered_view_metrics,
+)
 from .readers import GroundTruth, run_data_path
 
 log = logging.getLogger(__name__)
@@ -170,6 +179,9 @@ class ViewSet:
     frames: list[int]  # scored
     mapping_frames: list[int]  # for a 2D overlap naming
     passed_over: int = 0  # frames without a valid pose the even spread of ``num_views`` left out
+    held_out: HeldOut | None = None  # the scored frames are held-out views (``prepare_views(held_out=True)``)
+    # without held_out: the scored frames the run mapped (None: unknown, e.g. no config.yaml in the run)
+    scored_mapped: list[int] | None = None
 
 
 def prepare_views(
@@ -180,9 +192,15 @@ def prepare_views(
     frames: Sequence[int] | None = None,
     mapping_frames: Sequence[int] | None = None,
     device: str = "cpu",
+    held_out: bool = False,
 ) -> tuple[ViewSet | None, str]:
     """Render the frames eval scores (``frames``, else ``num_views`` evenly spread) and those that may name
     the scene labels (``mapping_frames``, else the scored ones).
+
+    With ``held_out`` the scored frames are frames the run did not map: ``num_views`` spread evenly over
+    them (:func:`~ogscene3d.eval.held_out.pick_held_out`), or ``frames``, refused if the run mapped one;
+    without ``mapping_frames`` and without 3D ground truth the naming frames are as many mapped frames,
+    so that an oracle naming does not read the views it is scored on.
 
     The sequence is ``gt_path`` when it is a folder whose frames carry class maps, else the run's
     ``data.path`` when ``gt_path`` lies inside it (``SCENE/gt``, ``SCENE/*_vh_clean_2.labels.ply``): the
@@ -192,7 +210,8 @@ def prepare_views(
         (the renders, "") or (None, why no frame can be scored) when no such sequence is at hand.
 
     Raises:
-        DataError: a frame is out of range, or a chosen frame has no class map or no pose.
+        DataError: a frame is out of range, or a chosen frame has no class map or no pose; with
+            ``held_out``, the run mapped every frame or one of ``frames``.
     """
     from ..datasets import detect_kind
 
@@ -211,7 +230,15 @@ def prepare_views(
         ds = open_view_dataset(folder, run_dir)
         if not ds.has_class_maps:
             continue
-        idx, passed_over = (list(frames), 0) if frames else spread_frames(ds, num_views)
+        held: HeldOut | None = None
+        scored_mapped: list[int] | None = None
+        if held_out:
+            run = run_frames(run_dir, ds)
+            held = check_held_out(ds, run, frames) if frames else pick_held_out(ds, run, num_views)
+            idx, passed_over = held.frames, held.passed_over
+        else:
+            idx, passed_over = (list(frames), 0) if frames else spread_frames(ds, num_views)
+            scored_mapped = _scored_mapped(run_dir, ds, idx)
         if not idx:
             why = (
                 f"no frame of {ds.root} has a valid pose"
@@ -220,10 +247,31 @@ def prepare_views(
             )
             return None, why
         naming = list(mapping_frames) if mapping_frames else idx
+        if held is not None and not mapping_frames and not gt.has_3d:
+            naming = naming_frames(ds, held.run, len(idx))
+            if not naming:
+                raise DataError(
+                    f"{ds.root}: none of the frames the run mapped has a valid pose to name the scene labels "
+                    "from; give --mapping-frames"
+                )
         views = render_views(run_dir, ds, gt, [*idx, *naming], device)
-        return ViewSet(str(ds.root), ds.kind, views, idx, naming, passed_over), ""
+        return ViewSet(str(ds.root), ds.kind, views, idx, naming, passed_over, held, scored_mapped), ""
     where = " or ".join(str(c) for c in candidates) or str(gt_path)
     return None, f"{where} is no RGB-D sequence whose frames carry ground-truth class maps"
+
+
+def _scored_mapped(run_dir: str | Path, ds: Any, frames: Sequence[int]) -> list[int] | None:
+    """Which of ``frames`` the run mapped, when its config.yaml tells and names this sequence (None
+    otherwise): the report of an ordinary 2D eval says how many of its views the mapper saw."""
+    recorded = run_data_path(run_dir)
+    if recorded is None or recorded.resolve() != Path(ds.root).resolve():
+        return None
+    try:
+        mapped = set(run_frames(run_dir, ds).mapped)
+    except DataError as e:
+        log.debug("which scored frames the run mapped is unknown: %s", e)
+        return None
+    return [i for i in frames if i in mapped]
 
 
 def score_views(
@@ -233,9 +281,11 @@ def score_views(
     label_to_class: Mapping[int, int],
     out_dir: str | Path | None = None,
     ignore: Sequence[str] | None = None,
+    held_out: HeldOut | None = None,
 ) -> ViewsResult:
     """2D metrics of the rendered ``frames`` (keys of ``views``) and, with ``out_dir``, one
-    ``view_<frame name>.png`` (RGB | rendered | GT | confidence) per frame."""
+    ``view_<frame name>.png`` (RGB | rendered | GT | confidence) per frame. ``held_out``: the frames are
+    held-out views (the protocol string says so)."""
     if not frames:
         raise ValueError("no frames to score")
     pictures = []
@@ -247,9 +297,12 @@ def score_views(
             pic = side_by_side(v.rgb, pred_cls, v.gt, weights,
                                titles=("RGB", "rendered labels", "ground truth", "confidence"))  # fmt: skip
             pictures.append(write_png(Path(out_dir) / f"view_{v.name}.png", pic))
+    kind = RENDERED_VIEW_PROTOCOL
+    if held_out is not None:
+        kind = EXTRAPOLATED_VIEW_PROTOCOL if held_out.extrapolated else HELD_OUT_VIEW_PROTOCOL
     metrics = rendered_view_metrics(
         [views[i].labels for i in frames], [views[i].gt for i in frames], label_to_class, gt.class_names,
-        ignore=ignore,
+        ignore=ignore, views=kind,
     )  # fmt: skip
     metrics = dataclasses.replace(metrics, protocol=f"{metrics.protocol}; frames {list(frames)}")
     return ViewsResult(metrics=metrics, frames=list(frames), pictures=pictures)

@@ -1,0 +1,158 @@
+"""``eval --held-out``: 2D views among the frames a run did not map (its config.yaml's frame selection, and
+how far map.npz says it got), the error when it mapped every frame, refused --view-frames, the report's
+fields, and naming frames kept apart from the held-out views."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_datasets import _png, _rgb
+from test_eval_cli import _main
+from test_eval_frames_2d import H, K, W, Z, _left_right, _pose, write_wall_run
+
+from ogscene3d.datasets import open_dataset
+from ogscene3d.errors import DataError
+from ogscene3d.eval.held_out import pick_held_out, run_frames
+from ogscene3d.eval.views import open_view_dataset
+
+N = 8  # frames of the sequence
+# camera x per frame: small (the wall run covers every view) and no pixel centre on the class boundary
+SHIFTS = [0.0005 + 0.0025 * i for i in range(N)]
+
+
+def make_sequence(root: Path) -> Path:
+    """A label-fusion sequence of N frames of the wall of ``write_wall_run``: class 8 left, 22 right."""
+    root.mkdir(parents=True)
+    np.savetxt(root / "camera-intrinsics.color.txt", K)
+    for i, tx in enumerate(SHIFTS):
+        _png(root / f"frame-{i:06d}.color.png", _rgb(H, W, i))
+        _png(root / f"frame-{i:06d}.depth.png", np.full((H, W), int(Z * 1e4) << 3, np.uint16))
+        np.savetxt(root / f"frame-{i:06d}.pose.txt", _pose(tx))
+        _png(root / f"frame-{i:06d}.segm.png", (_left_right(tx, 8, 22) * 6).astype(np.uint8))
+    (root / "classes.json").write_text(json.dumps({"0": "background", "8": "mug", "22": "box"}))
+    return root
+
+
+def make_run(tmp_path: Path, data: str = "", next_index: int | None = None) -> tuple[Path, Path]:
+    """The wall run, recorded as mapped from the sequence with the data settings ``data`` (YAML lines);
+    ``next_index``: a map.npz saying the run stopped after that many frames of its selection."""
+    seq = make_sequence(tmp_path / "seq")
+    run = write_wall_run(tmp_path / "run")
+    (run / "config.yaml").write_text(f"data:\n  path: {seq}\n{data}")
+    if next_index is not None:
+        first = open_dataset(seq).records[0].name
+        source = json.dumps({"path": str(seq), "frames": N, "first": first})
+        np.savez(run / "map.npz", mapper_next_index=np.array(next_index), mapper_source=np.array(source))
+    return seq, run
+
+
+@pytest.mark.parametrize(
+    ("data", "next_index", "mapped", "held_out", "extrapolated"),
+    [
+        # every odd frame; 7 lies after the last mapped frame (6): extrapolation, left out
+        ("  stride: 2\n", None, [0, 2, 4, 6], [1, 3, 5], False),
+        # frame 0 lies before the first mapped frame: left out too
+        ("  start: 1\n  stride: 2\n", None, [1, 3, 5, 7], [2, 4, 6], False),
+        ("  stride: 3\n  max_frames: 2\n", None, [0, 3], [1, 2], False),
+        # the run stopped after 2 of its 4 frames (map.npz): 5 is no longer between mapped frames
+        ("  stride: 2\n", 2, [0, 2], [1], False),
+        # nothing unmapped between mapped frames: the frames after them, flagged as extrapolation
+        ("  max_frames: 5\n", None, [0, 1, 2, 3, 4], [5, 6, 7], True),
+    ],
+)
+def test_held_out_frames_are_the_frames_the_run_did_not_map(
+    tmp_path, data, next_index, mapped, held_out, extrapolated
+):
+    seq, run = make_run(tmp_path, data, next_index)
+    ds = open_view_dataset(seq, run)
+    frames = run_frames(run, ds)
+    assert frames.mapped == mapped
+    held = pick_held_out(ds, frames, num_views=10)
+    assert held.frames == held_out and held.extrapolated == extrapolated
+    # fewer views: spread evenly over the same frames
+    assert set(pick_held_out(ds, frames, num_views=2).frames) <= set(held_out)
+
+
+def test_a_run_that_mapped_every_frame_has_no_held_out_view(tmp_path, monkeypatch, capsys):
+    seq, run = make_run(tmp_path)
+    argv = ["eval", str(run), "--gt", str(seq), "--views", "3", "--held-out", "--no-plots"]
+    assert _main(argv, monkeypatch) == 2
+    err = capsys.readouterr().err
+    assert "no held-out frame" in err and "mapped every frame" in err and "--set data.stride=2" in err
+
+
+def test_held_out_needs_the_run_config_and_views(tmp_path, monkeypatch, capsys):
+    seq, run = make_run(tmp_path, "  stride: 2\n")
+    argv = ["eval", str(run), "--gt", str(seq), "--held-out", "--no-plots"]
+    assert _main([*argv, "--views", "0"], monkeypatch) == 2
+    assert "--held-out needs views to score" in capsys.readouterr().err
+    (run / "config.yaml").unlink()
+    with pytest.raises(DataError, match="config.yaml"):
+        run_frames(run, open_view_dataset(seq))
+
+
+def test_held_out_eval_reports_novel_views_and_names_labels_from_mapped_frames(tmp_path, monkeypatch, capsys):
+    seq, run = make_run(tmp_path, "  stride: 2\n")
+    argv = ["eval", str(run), "--gt", str(seq), "--views", "2", "--held-out", "--no-plots"]
+    assert _main(argv, monkeypatch) == 0
+    out = capsys.readouterr().out
+    assert "held-out views [1, 5]: frames the run did not map (novel views between mapped frames" in out
+    report = json.loads((run / "metrics.json").read_text())
+    v = report["semantic_2d"]
+    assert v["held_out"] is True and v["extrapolated"] is False and v["frames"] == [1, 5]
+    assert v["protocol"].startswith("rendered-view-2d (held-out novel views")
+    assert "not held-out" not in v["protocol"] and "frames [1, 5]" in v["protocol"]
+    assert v["run_frames"]["num_mapped"] == 4 and v["run_frames"]["last"] == 6
+    # the oracle 2D naming reads as many mapped frames, not the held-out views it is scored on
+    assert v["mapping_frames"] == [0, 6] and report["label_mapping"]["frames"] == [0, 6]
+    assert any("reads frames [0, 6], none of the held-out views" in n for n in report["notes"])
+    assert v["miou"] > 0.9
+
+
+def test_held_out_view_frames_refuse_frames_the_run_mapped(tmp_path, monkeypatch, capsys):
+    seq, run = make_run(tmp_path, "  stride: 2\n")
+    argv = ["eval", str(run), "--gt", str(seq), "--held-out", "--no-plots", "--view-frames"]
+    assert _main([*argv, "1,2,4"], monkeypatch) == 2
+    err = capsys.readouterr().err
+    assert "the run mapped view frames 2, 4" in err and "did not map include 1, 3, 5, 7" in err
+    # a frame after the last mapped one may be asked for: it is flagged as extrapolation
+    assert _main([*argv, "3,7"], monkeypatch) == 0
+    v = json.loads((run / "metrics.json").read_text())["semantic_2d"]
+    assert v["frames"] == [3, 7] and v["held_out"] and v["extrapolated"]
+    assert "extrapolated views" in v["protocol"]
+
+
+def test_held_out_naming_frames_given_among_the_scored_ones_are_noted(tmp_path, monkeypatch):
+    seq, run = make_run(tmp_path, "  stride: 2\n")
+    argv = ["eval", str(run), "--gt", str(seq), "--held-out", "--view-frames", "3", "--no-plots"]
+    assert _main([*argv, "--mapping-frames", "2,3"], monkeypatch) == 0
+    report = json.loads((run / "metrics.json").read_text())
+    assert report["semantic_2d"]["mapping_frames"] == [2, 3]
+    assert any("reads held-out frames [3] that are scored" in n for n in report["notes"])
+
+
+def test_ordinary_views_say_which_of_them_the_run_mapped(tmp_path, monkeypatch, capsys):
+    seq, run = make_run(tmp_path, "  stride: 2\n")
+    assert _main(["eval", str(run), "--gt", str(seq), "--views", "3", "--no-plots"], monkeypatch) == 0
+    assert "views [0, 4, 7]: frames of the mapped sequence, 2 of the 3 mapped by the run" in (
+        capsys.readouterr().out
+    )
+    v = json.loads((run / "metrics.json").read_text())["semantic_2d"]
+    assert v["held_out"] is False and v["run_frames"] is None and v["scored_frames_mapped"] == [0, 4]
+    assert "not held-out novel views" in v["protocol"]
+
+
+def test_eval_batch_scores_held_out_views(tmp_path, capsys):
+    from ogscene3d.cli import main
+
+    seq = make_sequence(tmp_path / "seq")
+    run = write_wall_run(tmp_path / "out" / "wall")
+    (run / "config.yaml").write_text(f"data:\n  path: {seq}\n  stride: 2\n")
+    assert main(["eval-batch", str(tmp_path / "out"), "--no-plots", "--views", "2", "--held-out"]) == 0
+    assert "2D mIoU held-out" in capsys.readouterr().out
+    rec = json.loads((tmp_path / "out" / "eval_batch.json").read_text())["scenes"][0]
+    assert rec["semantic_2d"]["held_out"] is True and "held-out novel views" in rec["semantic_2d"]["protocol"]
+    assert json.loads((run / "metrics.json").read_text())["semantic_2d"]["frames"] == [1, 5]
