@@ -21,7 +21,8 @@ from .errors import ConfigError
 
 @dataclass
 class DataConfig:
-    kind: str = "auto"  # auto | replica | scannet | tum | sevenscenes | labelfusion | synthetic
+    # auto | replica | semantic_nerf | scannet | tum | sevenscenes | labelfusion | synthetic
+    kind: str = "auto"
     path: str | None = None
     segments_dir: str | None = None
     stride: int = 1

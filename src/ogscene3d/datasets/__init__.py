@@ -1,4 +1,5 @@
-"""RGB-D datasets: lazy readers for Replica, ScanNet, TUM RGB-D, 7-Scenes, label-fusion and synthetic scenes.
+"""RGB-D datasets: lazy readers for Replica (NICE-SLAM's and Semantic-NeRF's layouts), ScanNet, TUM RGB-D,
+7-Scenes, label-fusion and synthetic scenes.
 
 ``open_dataset(path)`` detects the layout and returns an :class:`RGBDDataset` (``len``, ``ds[i]``,
 iteration yielding :class:`~ogscene3d.frame.Frame`). Synthetic scenes (``make_synthetic_scene``)
@@ -12,6 +13,7 @@ from .base import FrameRecord, RGBDDataset, decode_depth, read_depth_raw, read_r
 from .loader import READERS, detect_kind, open_dataset
 from .replica import ReplicaDataset
 from .scannet import ScanNetDataset
+from .semantic_nerf import SemanticNeRFDataset
 from .sevenscenes import LabelFusionDataset, SevenScenesDataset
 from .synthetic import SyntheticDataset, load_instances, make_synthetic_scene
 from .tum import TUMDataset
@@ -23,6 +25,7 @@ __all__ = [
     "RGBDDataset",
     "ReplicaDataset",
     "ScanNetDataset",
+    "SemanticNeRFDataset",
     "SevenScenesDataset",
     "SyntheticDataset",
     "TUMDataset",

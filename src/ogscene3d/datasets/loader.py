@@ -10,6 +10,7 @@ from ..errors import DataError
 from .base import RGBDDataset
 from .replica import ReplicaDataset
 from .scannet import ScanNetDataset
+from .semantic_nerf import SemanticNeRFDataset
 from .sevenscenes import LabelFusionDataset, SevenScenesDataset
 from .synthetic import SyntheticDataset
 from .tum import TUMDataset
@@ -18,6 +19,7 @@ from .tum import TUMDataset
 READERS: dict[str, type[RGBDDataset]] = {
     "synthetic": SyntheticDataset,
     "replica": ReplicaDataset,
+    "semantic_nerf": SemanticNeRFDataset,
     "scannet": ScanNetDataset,
     "tum": TUMDataset,
     "labelfusion": LabelFusionDataset,
@@ -26,6 +28,7 @@ READERS: dict[str, type[RGBDDataset]] = {
 
 _LAYOUTS = (
     "synthetic (results/ + traj.txt + gt/instances.json), replica (results/frame*.jpg + traj.txt), "
+    "semantic_nerf (rgb/rgb_N.png + depth/depth_N.png + traj_w_c.txt, or a scene's Sequence_N/ of them), "
     "scannet (color/ + depth/ + pose/), tum (rgb.txt + depth.txt), labelfusion/sevenscenes (frame-*.color.*)"
 )
 
@@ -74,8 +77,9 @@ def open_dataset(
     Arguments left at None fall back to ``config`` (a :class:`DataConfig`; its ``path``, ``kind``,
     ``segments_dir``, ``stride``, ``max_frames``, and also ``start``, ``depth_scale``,
     ``depth_format``, ``intrinsics``, ``min_depth``/``max_depth``, ``on_bad_frame``), then to the
-    defaults (stride 1, all frames). ``kind``: auto | replica | scannet | tum | sevenscenes |
-    labelfusion | synthetic. Raises :class:`DataError` for a missing folder or an unknown layout.
+    defaults (stride 1, all frames). ``kind``: auto | replica | semantic_nerf | scannet | tum |
+    sevenscenes | labelfusion | synthetic. Raises :class:`DataError` for a missing folder or an unknown
+    layout.
     """
     cfg = dataclasses.replace(config) if config is not None else DataConfig()
     if path is None:

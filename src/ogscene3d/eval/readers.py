@@ -23,9 +23,10 @@ Ground truth, any of:
   folder or ``habitat/mesh_semantic.ply`` itself, with ``info_semantic.json`` beside the PLY; one point
   per face corner with the class of the face's object, as HOV-SG builds it (:mod:`.replica_gt`);
 * an RGB-D sequence folder whose frames carry class maps but that holds no 3D ground truth (label-fusion's
-  ``frame-N.segm.png``, ScanNet's ``label-filt/`` without a labels PLY): a ground truth with no points
-  (``has_3d`` False) that only rendered views can be scored against. Its class table: ``--classes``, else
-  ``classes.json`` in the folder, else the layout's own (ScanNet: NYU40).
+  ``frame-N.segm.png``, ScanNet's ``label-filt/`` without a labels PLY, Semantic-NeRF's Replica
+  ``semantic_class/``): a ground truth with no points (``has_3d`` False) that only rendered views can be
+  scored against. Its class table: ``--classes``, else ``classes.json`` in the folder, else the layout's
+  own (ScanNet: NYU40; Semantic-NeRF: the release's ``info_semantic.json``).
 
 Class ids are re-indexed to 0..C-1 in table order; points whose id is not in the table are void (-1).
 """
@@ -241,7 +242,8 @@ def _load_json(path: Path) -> Any:
 
 
 def read_class_table(path: str | Path) -> dict[int, str]:
-    """Class id -> name from a JSON list, ``{"<id>": name}`` object, or either under ``"classes"``; or a
+    """Class id -> name from a JSON list of names or of ``{"id", "name"}`` objects (Replica's
+    ``info_semantic.json``), an ``{"<id>": name}`` object, or any of these under ``"classes"``; or a
     built-in table by name (``nyu40``, ``scannet20``: ScanNet's NYU40 ids) when no such file exists."""
     from ..datasets.scannet import BUILTIN_CLASS_TABLES
 
@@ -252,9 +254,11 @@ def read_class_table(path: str | Path) -> dict[int, str]:
     data = _load_json(path)
     if isinstance(data, dict) and "classes" in data:
         data = data["classes"]
+    if isinstance(data, list) and data and all(isinstance(n, dict) for n in data):
+        return _id_name_entries(data, path)
     if isinstance(data, list):
         if not all(isinstance(n, str) for n in data):
-            raise DataError(f"{path}: a class list must hold names (strings)")
+            raise DataError(f"{path}: a class list must hold names (strings) or {{'id', 'name'}} objects")
         return dict(enumerate(data))
     if isinstance(data, dict):
         out: dict[int, str] = {}
@@ -265,6 +269,18 @@ def read_class_table(path: str | Path) -> dict[int, str]:
                 raise DataError(f"{path}: class table entry {k!r}: {n!r} is not 'id': name") from None
         return out
     raise DataError(f"{path}: expected a list of class names or an {{id: name}} object")
+
+
+def _id_name_entries(entries: list[dict], path: Path) -> dict[int, str]:
+    """Class id -> name from ``[{"id", "name"}, ...]``: Replica's ``info_semantic.json`` ``classes`` (the
+    names of Semantic-NeRF's class maps), COCO-style category lists."""
+    out: dict[int, str] = {}
+    for n in entries:
+        try:
+            out[int(n["id"])] = str(n["name"])
+        except (KeyError, TypeError, ValueError):
+            raise DataError(f"{path}: class entry {n!r:.80} needs an integer 'id' and a 'name'") from None
+    return out
 
 
 def _reindex(raw: np.ndarray, table: dict[int, str]) -> tuple[np.ndarray, list[str]]:
