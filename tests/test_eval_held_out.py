@@ -156,3 +156,22 @@ def test_eval_batch_scores_held_out_views(tmp_path, capsys):
     rec = json.loads((tmp_path / "out" / "eval_batch.json").read_text())["scenes"][0]
     assert rec["semantic_2d"]["held_out"] is True and "held-out novel views" in rec["semantic_2d"]["protocol"]
     assert json.loads((run / "metrics.json").read_text())["semantic_2d"]["frames"] == [1, 5]
+
+
+def test_held_out_views_of_a_synthetic_run_with_3d_ground_truth(tmp_path, monkeypatch):
+    """With 3D ground truth (and graph tags) nothing is named from renders: only held-out views render."""
+    synthetic = pytest.importorskip("ogscene3d.datasets.synthetic")
+    from test_eval_cli import _run_from_ground_truth
+
+    from ogscene3d.eval import load_ground_truth
+
+    scene_dir = synthetic.make_synthetic_scene(tmp_path / "scene", seed=1, frames=3, width=48, height=36)
+    run = tmp_path / "run"
+    _run_from_ground_truth(load_ground_truth(scene_dir), run)
+    (run / "config.yaml").write_text(f"data:\n  path: {scene_dir}\n  stride: 2\n")
+    assert _main(["eval", str(run), "--views", "3", "--held-out", "--no-plots"], monkeypatch) == 0
+    report = json.loads((run / "metrics.json").read_text())
+    v = report["semantic_2d"]
+    assert v["frames"] == [1] and v["held_out"] and not v["extrapolated"] and v["mapping_frames"] is None
+    assert report["label_mapping"]["method"] == "text" and v["run_frames"]["num_mapped"] == 2
+    assert report["semantic_3d"]["hovsg"]["miou"] > 0.7 and v["overall_acc"] > 0.65
