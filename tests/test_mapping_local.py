@@ -104,7 +104,16 @@ def test_new_object_matched_only_at_its_border_gets_a_label(device):
     for k in (default, 5):
         conf = torch.full((6,), 0.6, device=device)
         out[k] = associate_segments(
-            probes, seg, torch.ones(18, device=device), 1, means, labels, conf, _Labels(7), k=k, radius=0.02,
+            probes,
+            seg,
+            torch.ones(18, device=device),
+            1,
+            means,
+            labels,
+            conf,
+            _Labels(7),
+            k=k,
+            radius=0.02,
             novel_before_ambiguous=False,  # the paper's order, where k decides
         )
     assert out[default].seg_case.tolist() == [CASE_NOVEL] and out[default].seg_labels.tolist() == [7]
@@ -127,7 +136,16 @@ def test_small_new_object_between_two_surfaces(device, novel_first):
     seg = torch.zeros(20, dtype=torch.long, device=device)
     conf = torch.full((3,), 0.6, device=device)
     res = associate_segments(
-        probes, seg, torch.ones(20, device=device), 1, means, labels, conf, _Labels(9), k=1, radius=0.02,
+        probes,
+        seg,
+        torch.ones(20, device=device),
+        1,
+        means,
+        labels,
+        conf,
+        _Labels(9),
+        k=1,
+        radius=0.02,
         novel_before_ambiguous=novel_first,
     )
     torch.testing.assert_close(res.r.cpu(), torch.tensor([0.5]))
@@ -156,7 +174,6 @@ def test_eq5_inconsistent_matches_lose_confidence(device):
     torch.testing.assert_close(res.r.cpu(), torch.tensor([0.1]))
     torch.testing.assert_close(conf[:10].cpu(), torch.full((10,), 0.4 + 0.75 * p * 0.6))
     torch.testing.assert_close(conf[10:].cpu(), torch.tensor([0.8 - 0.75 * p * 0.8]))
-
 
 
 def test_eq5_deferred_runs_once_for_the_cases_as_they_stand(device):
@@ -283,7 +300,16 @@ def test_probe_updates_limit_eq5_to_inner_probes(device):
     for name, mask in (("all", None), ("inner", inner)):
         conf = torch.full((17,), 0.6, device=device)
         res = associate_segments(
-            probes, seg, torch.ones(17, device=device), 1, means, labels, conf, _Labels(9), k=1, radius=0.02,
+            probes,
+            seg,
+            torch.ones(17, device=device),
+            1,
+            means,
+            labels,
+            conf,
+            _Labels(9),
+            k=1,
+            radius=0.02,
             probe_updates=mask,
         )
         assert res.seg_labels.tolist() == [3]
