@@ -410,7 +410,7 @@ def test_shared_labelfusion_sample_end_to_end(shared_data, tmp_path, monkeypatch
     table.write_text(json.dumps({"0": "background", "8": "object 8", "22": "object 22"}))
     assert cli.main(["eval", str(run), "--classes", str(table), "--views", "3", "--no-plots"]) == 0
     report = json.loads((run / "metrics.json").read_text())
-    assert report["ground_truth"].startswith(str(seq)) and not report["has_3d_ground_truth"]
+    assert report["ground_truth"].startswith(str(seq.resolve())) and not report["has_3d_ground_truth"]
     v = report["semantic_2d"]
     assert v["frames"] == [0, 7, 14] and report["label_mapping"]["frames"] == [0, 7, 14]
     assert 0.0 < v["miou"] <= 1.0 and 0.0 < v["overall_acc"] <= 1.0
