@@ -52,7 +52,8 @@ def test_limits_scale_with_the_data_stride():
     """A run at data.stride=3 compares frames three folder frames apart: the per-step limits triple
     (7-Scenes every 20th frame at stride 3 steps 0.58 m / 32 deg, under 0.5 m / 30 deg x 3)."""
     cfg = load_config(None, ["data.stride=3"])
-    assert Mapper(cfg, "cpu").pose_check.stride == 3
+    mapper = Mapper(cfg, "cpu")
+    assert mapper.pose_check.stride == 3 and mapper._get_tracker().frame_step == 3  # odometry's limits too
     c = PoseJumpCheck(0.5, 30.0, "warn", stride=3)
     c.accept(0, _pose())
     assert c.check(1, _pose(0.58, 32.0)) is None

@@ -261,6 +261,13 @@ def test_large_jump_is_rejected_unless_allowed() -> None:
     assert strict.step(frames[1]) is None
     assert strict.last is not None and "implausible jump" in strict.last.reason
 
+    # at data.stride 2 the same two frames are two folder frames apart: the limit doubles to 0.6 m
+    strided = Tracker(TrackingConfig(max_translation=0.3), frame_step=2)
+    strided.step(frames[0])
+    assert strided.step(frames[1]) is not None
+    with pytest.raises(ValueError, match="frame_step"):
+        Tracker(TrackingConfig(), frame_step=0)
+
 
 def test_restart_after_max_lost_frames() -> None:
     poses = synthetic_poses(8)

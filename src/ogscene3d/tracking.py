@@ -33,7 +33,8 @@ Algorithm (``Tracker.step``):
   (e.g. a singular system), when the fitness is below ``min_fitness`` (too few correspondences, e.g. a frame
   far outside the keyframe's view), when the residual exceeds ``max_inlier_rmse``, when the result is not a
   finite rigid transform, or when the motion since the last good frame exceeds ``max_translation`` /
-  ``max_rotation_deg`` per elapsed frame (checked on the selected alignment: a better-aligned but
+  ``max_rotation_deg`` per elapsed frame of the folder (``frame_step``: a run at ``data.stride`` n steps n
+  folder frames per call; checked on the selected alignment: a better-aligned but
   implausible result is not swapped for a worse one that happens to move less), or, for the first frame
   after skipped ones, when its residual exceeds ``max_residual_ratio`` x the median of the last accepted
   residuals (a wrong re-acquisition). The keyframe is kept, so the next good frame re-anchors to it.
@@ -53,7 +54,7 @@ Use by the mapper (``config.tracking.poses == "odometry"``)::
 
     from ogscene3d.tracking import Tracker
 
-    tracker = Tracker(config.tracking, device=None)  # None: CUDA when Open3D has it, else CPU
+    tracker = Tracker(config.tracking, device=None, frame_step=config.data.stride)  # None: CUDA if Open3D can
     for frame in dataset:
         pose = tracker.step(frame)  # c2w float64 [4, 4], or None when the frame could not be tracked
         if pose is None:
@@ -359,12 +360,18 @@ class Tracker:
     image size and intrinsics.
     """
 
-    def __init__(self, config: TrackingConfig | None = None, device: Any = "cpu") -> None:
+    def __init__(
+        self, config: TrackingConfig | None = None, device: Any = "cpu", frame_step: int = 1
+    ) -> None:
         import open3d as o3d
         from open3d.t.pipelines import odometry as o3d_odometry
 
         self.config = config if config is not None else TrackingConfig()
         validate_tracking_config(self.config)
+        if int(frame_step) < 1:
+            raise ValueError(f"frame_step must be >= 1 (the data stride), got {frame_step}")
+        # The jump limits are per folder frame: strided frames may move proportionally further.
+        self.frame_step = int(frame_step)
         self.device = open3d_device(device)
         self._o3d = o3d
         self._od = o3d_odometry
@@ -595,12 +602,12 @@ class Tracker:
         cfg = self.config
         assert self._last_pose is not None
         rel = np.linalg.inv(self._last_pose) @ pose
-        gap = max(1, self._since_good)
+        gap = max(1, self._since_good) * self.frame_step
         dt, dr = float(np.linalg.norm(rel[:3, 3])), rotation_angle_deg(rel[:3, :3])
         if dt > cfg.max_translation * gap or dr > cfg.max_rotation_deg * gap:
             return (
                 f"implausible jump of {dt:.3f} m / {dr:.1f} deg over {gap} frame(s) "
-                f"(limits {cfg.max_translation} m / {cfg.max_rotation_deg} deg per frame)"
+                f"(limits {cfg.max_translation} m / {cfg.max_rotation_deg} deg per folder frame)"
             )
         return None
 
@@ -786,13 +793,13 @@ class Tracker:
 
 
 def track_sequence(
-    frames: Iterable[Frame], config: TrackingConfig | None = None, device: Any = "cpu"
+    frames: Iterable[Frame], config: TrackingConfig | None = None, device: Any = "cpu", frame_step: int = 1
 ) -> TrackResult:
     """Track a whole sequence; see ``TrackResult`` for what skipped frames hold.
 
     Raises OGSceneError when ``frames`` is empty or no frame could be anchored (no usable depth anywhere).
     """
-    tracker = Tracker(config, device)
+    tracker = Tracker(config, device, frame_step=frame_step)
     raw: list[np.ndarray | None] = []
     infos: list[StepInfo] = []
     for frame in frames:
@@ -823,7 +830,7 @@ def hold_last_good(poses: Sequence[np.ndarray | None]) -> list[np.ndarray]:
 
 
 def track(
-    frames: Iterable[Frame], config: TrackingConfig | None = None, device: Any = "cpu"
+    frames: Iterable[Frame], config: TrackingConfig | None = None, device: Any = "cpu", frame_step: int = 1
 ) -> list[np.ndarray]:
     """c2w float64 [4, 4] poses (OpenCV axes) for every frame, estimated by RGB-D odometry.
 
@@ -831,7 +838,7 @@ def track(
     A frame that could not be tracked holds the last good pose before it (see ``TrackResult``); use
     ``track_sequence`` to get the validity flags.
     """
-    return track_sequence(frames, config, device).poses
+    return track_sequence(frames, config, device, frame_step).poses
 
 
 # ---------------------------------------------------------------------------------------------- CLI
@@ -889,7 +896,7 @@ def run(args: Any) -> int:
     validate_tracking_config(cfg.tracking)
     ds = open_dataset(args.data, max_frames=args.max_frames, config=cfg.data)
     try:
-        tracker = Tracker(cfg.tracking, device=args.device or cfg.device)
+        tracker = Tracker(cfg.tracking, device=args.device or cfg.device, frame_step=cfg.data.stride)
     except ValueError as e:  # a device Open3D cannot use
         raise ConfigError(f"track: {e}") from e
     out = Path(args.out)

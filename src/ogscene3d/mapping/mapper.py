@@ -323,7 +323,8 @@ class Mapper:
         if self._tracker is None:
             from ..tracking import Tracker
 
-            self._tracker = Tracker(self.config.tracking, device=None)  # Open3D's CUDA when it has it
+            # device None: Open3D's CUDA when it has it
+            self._tracker = Tracker(self.config.tracking, device=None, frame_step=self.config.data.stride)
         return self._tracker
 
     def _render_check(self, frame: Frame) -> tuple[torch.Tensor | None, torch.Tensor | None]:
