@@ -76,6 +76,20 @@ def test_held_out_frames_are_the_frames_the_run_did_not_map(
     assert set(pick_held_out(ds, frames, num_views=2).frames) <= set(held_out)
 
 
+def test_a_checkpoint_of_another_frame_selection_is_refused(tmp_path):
+    """map.npz's next frame counts positions in the selection it was mapped with: a config.yaml of another
+    stride cannot say which frames those were."""
+    seq, run = make_run(tmp_path, "  stride: 2\n")
+    first = open_dataset(seq).records[0].name
+    source = {"path": str(seq), "frames": N, "first": first, "start": 0, "stride": 1}
+    np.savez(run / "map.npz", mapper_next_index=np.array(3), mapper_source=np.array(json.dumps(source)))
+    with pytest.raises(DataError, match="mapped with data.stride 1, but the run's config.yaml says 2"):
+        run_frames(run, open_view_dataset(seq, run))
+    source["stride"] = 2
+    np.savez(run / "map.npz", mapper_next_index=np.array(3), mapper_source=np.array(json.dumps(source)))
+    assert run_frames(run, open_view_dataset(seq, run)).mapped == [0, 2, 4]
+
+
 def test_a_run_that_mapped_every_frame_has_no_held_out_view(tmp_path, monkeypatch, capsys):
     seq, run = make_run(tmp_path)
     argv = ["eval", str(run), "--gt", str(seq), "--views", "3", "--held-out", "--no-plots"]

@@ -162,6 +162,21 @@ def test_resume_refuses_another_sequence(tmp_path, capsys):
     assert main(["run", *_common(moved, out), "--resume"]) == 0
 
 
+def test_resume_refuses_another_frame_selection(tmp_path, capsys):
+    """The checkpoint's next frame is a position in the run's selection: a resume at another stride would map
+    frames that position does not count (frames 0, 1 at stride 1, then frame 4 at stride 2)."""
+    scene = _replica_scene(tmp_path / "scene", frames=5)
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out), "--max-frames", "2"]) == 0
+    capsys.readouterr()
+    for change in ("data.stride=2", "data.start=1"):
+        assert main(["run", *_common(scene, out), "--resume", "--set", change]) == 2
+        err = capsys.readouterr().err
+        assert "mapped with data.start 0, data.stride 1" in err
+        assert "a resume needs the run's frame selection" in err
+    assert main(["run", *_common(scene, out), "--resume"]) == 0
+
+
 def test_a_bad_frame_keeps_the_map_built_so_far(tmp_path, capsys):
     scene = _replica_scene(tmp_path / "scene", frames=4)
     depth = scene / "results" / "depth000002.png"

@@ -67,7 +67,7 @@ class RunFrames:
         }
 
 
-def _mapped_count(run_dir: Path, num_selected: int, first_name: str) -> tuple[int, str]:
+def _mapped_count(run_dir: Path, num_selected: int, first_name: str, data: Any) -> tuple[int, str]:
     """How many frames of the selection the run read, from ``map.npz``; the whole selection without one."""
     ckpt = run_dir / "map.npz"
     if not ckpt.is_file():
@@ -85,6 +85,13 @@ def _mapped_count(run_dir: Path, num_selected: int, first_name: str) -> tuple[in
             f"{ckpt} was mapped from frames starting at {first!r}, but the run's config.yaml selects frames "
             f"starting at {first_name!r}: cannot tell which frames the run mapped"
         )
+    # its next frame is a position in the selection it was mapped with (recorded since checkpoints say so)
+    for key in ("start", "stride"):
+        if key in source and source[key] != getattr(data, key):
+            raise DataError(
+                f"{ckpt} was mapped with data.{key} {source[key]}, but the run's config.yaml says "
+                f"{getattr(data, key)}: cannot tell which frames the run mapped"
+            )
     if nxt is None:
         return num_selected, "map.npz records no frame position (an older run): the whole selection is taken"
     if not 0 < nxt <= num_selected:
@@ -121,7 +128,7 @@ def run_frames(run_dir: str | Path, ds: Any) -> RunFrames:
     # the run's selection of the same folder, read by the same code the mapper used
     sel_cfg = dataclasses.replace(data, path=str(ds.root), segments_dir=None)
     selection = open_dataset(config=sel_cfg)
-    n_mapped, how = _mapped_count(run, len(selection), selection.records[0].name)
+    n_mapped, how = _mapped_count(run, len(selection), selection.records[0].name, data)
     position = {rec.rgb_path: i for i, rec in enumerate(ds.records)}
     mapped = sorted(position[r.rgb_path] for r in selection.records[:n_mapped] if r.rgb_path in position)
     if len(mapped) < n_mapped:

@@ -27,7 +27,15 @@ def record_data(cfg: Config, data: str | Path, segments_dir: str | Path | None =
 def dataset_source(cfg: Config, ds) -> dict:
     """The identity of the frames of ``ds`` (an opened dataset of ``cfg.data``), for ``Mapper.source``."""
     K = [round(float(v), 4) for v in np.asarray(ds.K).reshape(-1)]
-    return {"path": cfg.data.path, "frames": len(ds), "first": ds.records[0].name, "K": K}
+    # start and stride: a checkpoint's next frame is a position in this selection, which a resume must share
+    return {
+        "path": cfg.data.path,
+        "frames": len(ds),
+        "first": ds.records[0].name,
+        "K": K,
+        "start": cfg.data.start,
+        "stride": cfg.data.stride,
+    }
 
 
 RUN_FILES = ("map.npz", "gaussians.ply", "graph.json", "timings.json", "config.yaml", "traj.txt")
@@ -57,6 +65,16 @@ def check_same_source(ckpt: Path, recorded: dict, current: dict) -> None:
         raise DataError(
             f"{ckpt} was mapped with intrinsics {recorded['K']}, these frames have {current['K']} (another "
             "camera or image size): map them into a new --out"
+        )
+    changed = [k for k in ("start", "stride") if k in recorded and recorded[k] != current.get(k)]
+    if changed:
+        # the checkpoint's next frame is a position in the run's selection: another selection would map other
+        # frames than the ones that position counts (and eval --held-out would count the wrong ones mapped)
+        was = f"data.start {recorded.get('start')}, data.stride {recorded.get('stride')}"
+        now = f"start {current.get('start')}, stride {current.get('stride')}"
+        raise DataError(
+            f"{ckpt} was mapped with {was}; this run selects {now}: a resume needs the run's frame selection "
+            "(drop the --set, or map into a new --out)"
         )
     if not recorded or recorded.get("path") == current["path"]:
         return
