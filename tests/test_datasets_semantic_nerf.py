@@ -268,3 +268,20 @@ def test_run_then_2d_only_eval(tmp_path, monkeypatch):
     assert v["frame_names"] == ["rgb_0", "rgb_3"]
     assert {c["name"] for c in v["per_class"]} == {"chair", "table"}
     assert v["miou"] > 0.8  # the two colours segment the wall where its classes split
+
+
+def test_eval_reads_a_run_recorded_as_its_scene_folder_from_either_path(tmp_path):
+    """``run --data room_0`` records the scene folder but maps room_0/Sequence_1: eval given either path
+    renders with the run's camera and knows which scored frames the run mapped."""
+    from ogscene3d.datasets.base import K_from_values
+    from ogscene3d.eval.views import _scored_mapped, open_view_dataset
+
+    scene = make_release(tmp_path / "Replica_Dataset", n=4)
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "config.yaml").write_text(f"data:\n  path: {scene}\n  stride: 2\n  intrinsics: [10, 10, 16, 12]\n")
+    for folder in (scene, scene / "Sequence_1"):
+        ds = open_view_dataset(folder, run)
+        assert ds.root == scene / "Sequence_1" and len(ds) == 4  # every frame, not the run's selection
+        np.testing.assert_allclose(ds.K, K_from_values(10, 10, 16, 12))
+        assert _scored_mapped(run, ds, [0, 1, 2, 3]) == [0, 2]

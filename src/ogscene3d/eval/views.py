@@ -91,7 +91,7 @@ def open_view_dataset(scene_dir: str | Path, run_dir: str | Path | None = None) 
     cfg = DataConfig()
     if run_dir is not None:
         recorded = run_data_path(run_dir)
-        if recorded is not None and recorded.resolve() == Path(scene_dir).resolve():
+        if recorded is not None and same_sequence(recorded, scene_dir):
             from ..config import load_config
             from ..errors import ConfigError
 
@@ -102,6 +102,29 @@ def open_view_dataset(scene_dir: str | Path, run_dir: str | Path | None = None) 
                 log.warning("%s; rendering with %s's own camera settings", e, scene_dir)
     cfg.path = str(scene_dir)
     return open_dataset(config=cfg)
+
+
+def _sequence_folder(path: str | Path) -> Path:
+    """The folder whose frames ``open_dataset(path)`` reads: ``path``, the one scene a parent folder holds, or
+    a Semantic-NeRF scene folder's first ``Sequence_N/``."""
+    from ..datasets import detect_kind
+    from ..datasets.semantic_nerf import is_sequence, sequence_dirs
+
+    try:
+        kind, root = detect_kind(path)
+    except DataError:
+        return Path(path).resolve()
+    if kind == "semantic_nerf" and not is_sequence(root) and (seqs := sequence_dirs(root)):
+        root = seqs[0]
+    return Path(root).resolve()
+
+
+def same_sequence(recorded: str | Path, folder: str | Path) -> bool:
+    """Whether a run's ``data.path`` and ``folder`` name the same frames: a run of ``Replica_Dataset/room_0``
+    mapped ``room_0/Sequence_1``, which eval opens from either path."""
+    if Path(recorded).resolve() == Path(folder).resolve():
+        return True
+    return _sequence_folder(recorded) == _sequence_folder(folder)
 
 
 def render_views(
@@ -264,7 +287,7 @@ def _scored_mapped(run_dir: str | Path, ds: Any, frames: Sequence[int]) -> list[
     """Which of ``frames`` the run mapped, when its config.yaml tells and names this sequence (None
     otherwise): the report of an ordinary 2D eval says how many of its views the mapper saw."""
     recorded = run_data_path(run_dir)
-    if recorded is None or recorded.resolve() != Path(ds.root).resolve():
+    if recorded is None or not same_sequence(recorded, ds.root):
         return None
     try:
         mapped = set(run_frames(run_dir, ds).mapped)
