@@ -180,6 +180,9 @@ def test_classes_option_takes_replica_info_semantic_json(tmp_path):
     path = tmp_path / "info_semantic.json"
     path.write_text(json.dumps(INFO))
     assert read_class_table(path) == {0: "undefined", 3: "chair", 7: "table"}
+    # given for a Semantic-NeRF sequence, id 0 stays void there, as with the release's own table
+    gt = load_ground_truth(make_sequence(tmp_path / "Sequence_1"), classes=path)
+    assert gt.class_names == ["chair", "table"] and gt.class_ids == [3, 7]
     path.write_text(json.dumps({"classes": [{"id": 3}]}))
     with pytest.raises(DataError, match="needs an integer 'id' and a 'name'"):
         read_class_table(path)

@@ -455,6 +455,10 @@ def _frames_only_gt(folder: Path, ds: Any, classes: str | Path | None) -> Ground
     if table_path is not None:
         table = read_class_table(table_path)
         source = f"{folder} (per-frame class maps, names from {table_path.name})"
+        if ds.kind == "semantic_nerf" and 0 in table:
+            # Semantic-NeRF's renderer writes 0 where no class is (and Semantic-NeRF scores 0 as void), as the
+            # dataset's own table has it: Replica's info_semantic.json given by --classes must not score 0
+            log.info("%s: class id 0 (%r) is void in Semantic-NeRF's class maps", table_path, table.pop(0))
     elif ds.class_names is not None:
         table = ds.class_names
         source = f"{folder} (per-frame class maps, {ds.kind} class names)"
