@@ -352,17 +352,7 @@ class RGBDDataset:
                     f"{depth.shape[1]}x{depth.shape[0]}"
                 )
             rgb = cv2.resize(rgb, (depth.shape[1], depth.shape[0]), interpolation=cv2.INTER_AREA)
-        pose = None
-        raw_pose = rec.pose
-        if rec.pose_path is not None:
-            raw_pose = read_matrix(rec.pose_path, (4, 4), "pose")
-        if raw_pose is not None:
-            try:
-                pose = check_pose(
-                    raw_pose, rec.pose_source or str(rec.pose_path or f"pose of frame {rec.name}")
-                )
-            except ValueError as e:
-                raise DataError(str(e)) from e
+        pose = _read_pose(rec)
         segments, scores, names = None, {}, {}
         if self.segments_dir is not None:
             seg = self._read_segments(rec, depth.shape)
@@ -388,17 +378,10 @@ class RGBDDataset:
         """Whether frame ``i`` has a finite rigid camera pose, reading its pose only (no pixels): real
         sequences mark lost tracking with a non-finite pose (ScanNet writes -inf), and a caller choosing
         frames to render must pass over those without reading every image."""
-        rec = self.records[i]
-        raw = rec.pose
         try:
-            if rec.pose_path is not None:
-                raw = read_matrix(rec.pose_path, (4, 4), "pose")
-            if raw is None:
-                return False
-            check_pose(raw, rec.pose_source or str(rec.pose_path or f"pose of frame {rec.name}"))
-        except (DataError, ValueError):
+            return _read_pose(self.records[i]) is not None
+        except DataError:
             return False
-        return True
 
     def _read_segments(self, rec: FrameRecord, shape: tuple[int, int]) -> Segmentation | None:
         """The frame's precomputed segments, or None when it has no segments file: the mapper's
@@ -453,6 +436,36 @@ class RGBDDataset:
         """Whether frames come with ground-truth class maps (``Frame.gt_classes``), as far as the files
         say (nothing is read): what eval's rendered-view scores need."""
         return False
+
+
+def numbered_files(folder: Path, suffixes: tuple[str, ...] = (".png",), prefix: str = "") -> dict[int, Path]:
+    """{frame number: file} for the files ``<prefix><digits><suffix>`` in ``folder``, whatever the
+    zero-padding (``0.png`` and ``000000.png`` are both frame 0; ``rgb_`` matches ``rgb_12.png``, not
+    ``vis_rgb_12.png``); two files with one number are an error."""
+    out: dict[int, Path] = {}
+    if not folder.is_dir():
+        return out
+    for p in sorted(folder.iterdir()):
+        digits = p.stem[len(prefix) :]
+        if p.suffix.lower() not in suffixes or not p.stem.startswith(prefix) or not digits.isdigit():
+            continue
+        n = int(digits)
+        if n in out:
+            raise DataError(f"{folder}: {out[n].name} and {p.name} are both frame {n}; remove one")
+        out[n] = p
+    return out
+
+
+def _read_pose(rec: FrameRecord) -> np.ndarray | None:
+    """The frame's c2w pose, checked (a finite rigid 4x4; DataError naming its source otherwise), or None
+    when the layout gives the frame none."""
+    raw = read_matrix(rec.pose_path, (4, 4), "pose") if rec.pose_path is not None else rec.pose
+    if raw is None:
+        return None
+    try:
+        return check_pose(raw, rec.pose_source or str(rec.pose_path or f"pose of frame {rec.name}"))
+    except ValueError as e:
+        raise DataError(str(e)) from e
 
 
 def _missing_files(rec: FrameRecord) -> list[Path]:

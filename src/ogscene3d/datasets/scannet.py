@@ -27,7 +27,15 @@ import numpy as np
 
 from ..config import DataConfig
 from ..errors import DataError
-from .base import FrameRecord, RGBDDataset, read_depth_raw, read_label_png, read_matrix, read_rgb
+from .base import (
+    FrameRecord,
+    RGBDDataset,
+    numbered_files,
+    read_depth_raw,
+    read_label_png,
+    read_matrix,
+    read_rgb,
+)
 
 log = logging.getLogger(__name__)
 
@@ -102,21 +110,6 @@ def read_label_map(path: str | Path, src: str = "id", dst: str = "nyu40id") -> n
     return lut
 
 
-def _numeric_stems(folder: Path, suffixes: tuple[str, ...]) -> dict[int, Path]:
-    """{frame number: file} for the files ``<digits><suffix>`` in ``folder``, whatever the zero-padding
-    (``0.png`` and ``000000.png`` are both frame 0); two files with one number are an error."""
-    out: dict[int, Path] = {}
-    if not folder.is_dir():
-        return out
-    for p in sorted(folder.iterdir()):
-        if p.suffix.lower() in suffixes and p.stem.isdigit():
-            n = int(p.stem)
-            if n in out:
-                raise DataError(f"{folder}: {out[n].name} and {p.name} are both frame {n}; remove one")
-            out[n] = p
-    return out
-
-
 class ScanNetDataset(RGBDDataset):
     kind = "scannet"
     depth_scale_default = 1000.0
@@ -127,15 +120,15 @@ class ScanNetDataset(RGBDDataset):
 
     def __init__(self, root: Path, config: DataConfig, segments_dir: Path | None = None) -> None:
         root = Path(root)
-        color = _numeric_stems(root / "color", _RGB_SUFFIXES)
+        color = numbered_files(root / "color", _RGB_SUFFIXES)
         if not color:
             raise DataError(f"{root / 'color'}: no numbered colour images (N.jpg or 000000.png)")
         # Depth and pose files are matched to colour by number: SensReader writes 0.png, other
         # exporters (bring-your-own-camera) 000000.png. A frame without one gets the name it would
         # most likely have (the colour file's stem), which the base class reports as missing.
-        depth = _numeric_stems(root / "depth", (".png",))
+        depth = numbered_files(root / "depth", (".png",))
         pose_dir = root / "pose"
-        poses = _numeric_stems(pose_dir, (".txt",))
+        poses = numbered_files(pose_dir, (".txt",))
         has_poses = bool(poses)  # without pose files (no pose/ or an empty one) the frames need tracking
         labels = self._label_files(root)
         records = [
@@ -158,7 +151,7 @@ class ScanNetDataset(RGBDDataset):
         """The frames' label-filt images, with ``self._label_lut`` set to translate them; none (with a
         warning) when there is no label map to translate them with."""
         self._label_lut: np.ndarray | None = None
-        labels = _numeric_stems(root / LABEL_DIR, (".png",))
+        labels = numbered_files(root / LABEL_DIR, (".png",))
         if not labels:
             return {}
         tsv = find_label_map(root)

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..config import DataConfig
 from ..errors import DataError
-from .base import FrameRecord, K_from_values, RGBDDataset, read_depth_raw, read_label_png
+from .base import FrameRecord, K_from_values, RGBDDataset, numbered_files, read_depth_raw, read_label_png
 from .replica import read_traj
 
 log = logging.getLogger(__name__)
@@ -62,23 +62,6 @@ def sequence_dirs(scene: Path) -> list[Path]:
         if m and d.is_dir() and is_sequence(d):
             found.append((int(m.group(1)), d))
     return [d for _, d in sorted(found)]
-
-
-def numbered_files(folder: Path, prefix: str) -> dict[int, Path]:
-    """{i: file} for the files ``<prefix><i>.png`` in ``folder`` (``rgb_`` matches ``rgb_12.png``, not
-    ``vis_rgb_12.png``); two files with one number (``rgb_7.png``, ``rgb_07.png``) are an error."""
-    out: dict[int, Path] = {}
-    if not folder.is_dir():
-        return out
-    for p in sorted(folder.glob(f"{prefix}*.png")):
-        digits = p.stem[len(prefix) :]
-        if not digits.isdigit():
-            continue
-        n = int(digits)
-        if n in out:
-            raise DataError(f"{folder}: {out[n].name} and {p.name} are both frame {n}; remove one")
-        out[n] = p
-    return out
 
 
 def hfov_intrinsics(width: int, height: int, hfov_deg: float = HFOV_DEG) -> np.ndarray:
@@ -140,11 +123,11 @@ class SemanticNeRFDataset(RGBDDataset):
                     seqs[1],
                 )
             root = seqs[0]
-        rgbs = numbered_files(root / "rgb", "rgb_")
+        rgbs = numbered_files(root / "rgb", prefix="rgb_")
         if not rgbs:
             raise DataError(f"{root / 'rgb'}: no rgb_<i>.png images")
-        depths = numbered_files(root / "depth", "depth_")
-        labels = numbered_files(root / CLASS_DIR, "semantic_class_")
+        depths = numbered_files(root / "depth", prefix="depth_")
+        labels = numbered_files(root / CLASS_DIR, prefix="semantic_class_")
         traj = root / TRAJ_NAME
         poses = read_traj(traj)
         last = max(rgbs)
