@@ -195,6 +195,8 @@ class RGBDDataset:
     """
 
     kind = "base"
+    # the class id a layout's class maps use for "no class", which no class table names (None: every id may)
+    void_class_id: int | None = None
     depth_scale_default = 1000.0
     depth_format_default = "linear"
     min_depth_default = 0.0

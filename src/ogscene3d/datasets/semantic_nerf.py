@@ -99,6 +99,7 @@ def read_class_names(path: Path) -> dict[int, str]:
 
 class SemanticNeRFDataset(RGBDDataset):
     kind = "semantic_nerf"
+    void_class_id = VOID_ID
     depth_scale_default = 1000.0
 
     @staticmethod

@@ -42,9 +42,11 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
-from .replica_gt import load_replica_ground_truth, replica_semantic_files
+from .replica_gt import class_entries, load_replica_ground_truth, replica_semantic_files
 
 log = logging.getLogger(__name__)
+
+SCANNET_LABELS_SUFFIX = "_vh_clean_2.labels.ply"  # ScanNet's 3D semantic ground truth, NYU40 ids
 
 _CLASS_FIELDS = ("class", "label", "semantic", "class_id", "category_id", "semantic_id")
 _INSTANCE_FIELDS = ("instance", "instance_id", "object_id", "objectId")
@@ -124,7 +126,7 @@ def find_ground_truth(run_dir: str | Path) -> Path | None:
 
 def _scannet_label_ply(folder: Path) -> Path | None:
     """ScanNet's 3D semantic ground truth in ``folder`` (``*_vh_clean_2.labels.ply``, NYU40 ids), if one."""
-    found = sorted(folder.glob("*_vh_clean_2.labels.ply"))
+    found = sorted(folder.glob(f"*{SCANNET_LABELS_SUFFIX}"))
     return found[0] if len(found) == 1 else None
 
 
@@ -255,7 +257,7 @@ def read_class_table(path: str | Path) -> dict[int, str]:
     if isinstance(data, dict) and "classes" in data:
         data = data["classes"]
     if isinstance(data, list) and data and all(isinstance(n, dict) for n in data):
-        return _id_name_entries(data, path)
+        return class_entries(data, path)
     if isinstance(data, list):
         if not all(isinstance(n, str) for n in data):
             raise DataError(f"{path}: a class list must hold names (strings) or {{'id', 'name'}} objects")
@@ -269,18 +271,6 @@ def read_class_table(path: str | Path) -> dict[int, str]:
                 raise DataError(f"{path}: class table entry {k!r}: {n!r} is not 'id': name") from None
         return out
     raise DataError(f"{path}: expected a list of class names or an {{id: name}} object")
-
-
-def _id_name_entries(entries: list[dict], path: Path) -> dict[int, str]:
-    """Class id -> name from ``[{"id", "name"}, ...]``: Replica's ``info_semantic.json`` ``classes`` (the
-    names of Semantic-NeRF's class maps), COCO-style category lists."""
-    out: dict[int, str] = {}
-    for n in entries:
-        try:
-            out[int(n["id"])] = str(n["name"])
-        except (KeyError, TypeError, ValueError):
-            raise DataError(f"{path}: class entry {n!r:.80} needs an integer 'id' and a 'name'") from None
-    return out
 
 
 def _reindex(raw: np.ndarray, table: dict[int, str]) -> tuple[np.ndarray, list[str]]:
@@ -455,10 +445,13 @@ def _frames_only_gt(folder: Path, ds: Any, classes: str | Path | None) -> Ground
     if table_path is not None:
         table = read_class_table(table_path)
         source = f"{folder} (per-frame class maps, names from {table_path.name})"
-        if ds.kind == "semantic_nerf" and 0 in table:
-            # Semantic-NeRF's renderer writes 0 where no class is (and Semantic-NeRF scores 0 as void), as the
-            # dataset's own table has it: Replica's info_semantic.json given by --classes must not score 0
-            log.info("%s: class id 0 (%r) is void in Semantic-NeRF's class maps", table_path, table.pop(0))
+        void = ds.void_class_id
+        if void is not None and void in table:
+            # a layout's no-class value stays void as in its own table (Semantic-NeRF writes 0 where no
+            # class is): a table given by --classes (Replica's info_semantic.json) must not score it
+            log.info(
+                "%s: class id %d (%r) is void in %s class maps", table_path, void, table.pop(void), ds.kind
+            )
     elif ds.class_names is not None:
         table = ds.class_names
         source = f"{folder} (per-frame class maps, {ds.kind} class names)"
@@ -491,9 +484,10 @@ def _load_labelled_ply(ply: Path, classes: str | Path | None) -> GroundTruth:
             if cand.is_file():
                 table_path = cand
                 break
-    if table_path is None and ply.name.endswith("_vh_clean_2.labels.ply"):
-        from ..datasets.scannet import NYU40_CLASSES
+    from ..datasets.scannet import BUILTIN_CLASS_TABLES, NYU40_CLASSES
 
+    scannet = ply.name.endswith(SCANNET_LABELS_SUFFIX)
+    if table_path is None and scannet:
         table = dict(NYU40_CLASSES)  # ScanNet's labels PLY holds NYU40 ids
         table_path = Path("NYU40 (built in)")
     elif table_path is None:
@@ -504,13 +498,11 @@ def _load_labelled_ply(ply: Path, classes: str | Path | None) -> GroundTruth:
         table = read_class_table(table_path)
     cls, class_names = _reindex(raw, table)
     unexpected = (raw >= 0) & (cls < 0)
-    if ply.name.endswith("_vh_clean_2.labels.ply"):
-        from ..datasets.scannet import NYU40_CLASSES
-
+    if scannet:
         # ScanNet's id 0 is "unannotated", and a built-in subset (scannet20) voids the other NYU40 ids on
         # purpose: warning about either on every scene would bury a real mismatch.
         expected = raw == 0
-        if str(table_path).lower() in ("nyu40", "scannet20"):
+        if str(table_path).lower() in BUILTIN_CLASS_TABLES:
             expected |= np.isin(raw, list(NYU40_CLASSES))
         unexpected &= ~expected
     void = int(unexpected.sum())

@@ -275,6 +275,18 @@ def read_face_mesh(path: str | Path) -> FaceMesh:
 # ---------------------------------------------------------------------------------- info_semantic.json
 
 
+def class_entries(entries: list, path: Path) -> dict[int, str]:
+    """Class id -> name from ``[{"id", "name"}, ...]``: Replica's ``info_semantic.json`` ``classes`` (also
+    the names of Semantic-NeRF's class maps), COCO-style category lists."""
+    out: dict[int, str] = {}
+    for n in entries:
+        try:
+            out[int(n["id"])] = str(n["name"])
+        except (KeyError, TypeError, ValueError):
+            raise DataError(f"{path}: class entry {n!r:.80} needs an integer 'id' and a 'name'") from None
+    return out
+
+
 def read_info_semantic(path: str | Path) -> tuple[dict[int, str], dict[int, int]]:
     """(class id -> name, object id -> class id) from Replica's ``info_semantic.json``."""
     path = Path(path)
@@ -291,12 +303,7 @@ def read_info_semantic(path: str | Path) -> tuple[dict[int, str], dict[int, int]
         raise DataError(f"{path}: expected an object with a 'classes' list of {{'id', 'name'}}")
     if not isinstance(data.get("objects"), list):
         raise DataError(f"{path}: expected an 'objects' list of {{'id', 'class_id'}}")
-    classes: dict[int, str] = {}
-    for c in data["classes"]:
-        try:
-            classes[int(c["id"])] = str(c["name"])
-        except (KeyError, TypeError, ValueError):
-            raise DataError(f"{path}: class entry {c!r:.80} needs an integer 'id' and a 'name'") from None
+    classes = class_entries(data["classes"], path)
     objects: dict[int, int] = {}
     for o in data["objects"]:
         try:
