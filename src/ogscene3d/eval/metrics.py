@@ -64,6 +64,17 @@ def _as_int_array(x: Any, name: str) -> np.ndarray:
     return a.astype(np.int64, copy=False).reshape(-1)
 
 
+def _class_pair(gt: Any, pred: Any, num_classes: int) -> tuple[np.ndarray, np.ndarray]:
+    """``gt`` and ``pred`` as int arrays of one size, every prediction < ``num_classes``."""
+    g = _as_int_array(gt, "gt")
+    p = _as_int_array(pred, "pred")
+    if g.shape != p.shape:
+        raise ValueError(f"gt and pred differ in size: {np.asarray(gt).shape} vs {np.asarray(pred).shape}")
+    if p.size and p.max() >= num_classes:
+        raise ValueError(f"pred has class {int(p.max())} >= num_classes={num_classes}")
+    return g, p
+
+
 def confusion_matrix(gt: Any, pred: Any, num_classes: int) -> np.ndarray:
     """Count (ground truth, prediction) pairs.
 
@@ -78,14 +89,9 @@ def confusion_matrix(gt: Any, pred: Any, num_classes: int) -> np.ndarray:
     """
     if num_classes <= 0:
         raise ValueError(f"num_classes must be positive, got {num_classes}")
-    g = _as_int_array(gt, "gt")
-    p = _as_int_array(pred, "pred")
-    if g.shape != p.shape:
-        raise ValueError(f"gt and pred differ in size: {np.asarray(gt).shape} vs {np.asarray(pred).shape}")
+    g, p = _class_pair(gt, pred, num_classes)
     if g.size and g.max() >= num_classes:
         raise ValueError(f"gt has class {int(g.max())} >= num_classes={num_classes}")
-    if p.size and p.max() >= num_classes:
-        raise ValueError(f"pred has class {int(p.max())} >= num_classes={num_classes}")
     keep = g >= 0
     g = g[keep]
     p = p[keep]
@@ -101,12 +107,7 @@ def void_predictions(gt: Any, pred: Any, num_classes: int) -> np.ndarray:
     The confusion matrix leaves void points out; protocols that count these predictions as false
     positives (HOV-SG) pass this to :func:`segmentation_metrics` as ``void_predicted``.
     """
-    g = _as_int_array(gt, "gt")
-    p = _as_int_array(pred, "pred")
-    if g.shape != p.shape:
-        raise ValueError(f"gt and pred differ in size: {np.asarray(gt).shape} vs {np.asarray(pred).shape}")
-    if p.size and p.max() >= num_classes:
-        raise ValueError(f"pred has class {int(p.max())} >= num_classes={num_classes}")
+    g, p = _class_pair(gt, pred, num_classes)
     hit = p[(g < 0) & (p >= 0)]
     return np.bincount(hit, minlength=num_classes).astype(np.int64)
 
