@@ -52,6 +52,10 @@ PLY_PROPERTIES: list[tuple[str, str]] = (
 )
 
 
+#: What np.load raises on a damaged or truncated npz file (a checkpoint cut short by a full disk or a kill).
+NPZ_READ_ERRORS: tuple[type[Exception], ...] = (OSError, ValueError, EOFError, zipfile.BadZipFile)
+
+
 def corrupt_npz_message(path: Path, error: Exception) -> str:
     """The error for an npz file np.load cannot read (truncated by a full disk, damaged in a copy)."""
     # np.load calls any non-zip file "pickled (object) data" and suggests unpickling it: never for a map
@@ -314,7 +318,7 @@ class GaussianMap:
             with np.load(p, allow_pickle=False) as z:
                 # only the map's arrays: a mapper checkpoint also holds its memory views (hundreds of MB)
                 state = {k: z[k] for k in z.files if k in FIELDS or k == "next_label"}
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+        except NPZ_READ_ERRORS as e:
             raise DataError(corrupt_npz_message(p, e)) from e
         return cls.from_state_dict(state, device, what=str(p))
 

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError, DataError
+from ..gaussians import NPZ_READ_ERRORS
 
 log = logging.getLogger(__name__)
 
@@ -76,7 +77,7 @@ def _mapped_count(run_dir: Path, num_selected: int, first_name: str, data: Any) 
         with np.load(ckpt, allow_pickle=False) as z:
             nxt = int(z["mapper_next_index"]) if "mapper_next_index" in z.files else None
             source = json.loads(str(z["mapper_source"])) if "mapper_source" in z.files else {}
-    except (OSError, ValueError, KeyError) as e:
+    except (KeyError, *NPZ_READ_ERRORS) as e:
         raise DataError(f"{ckpt}: cannot read how far the run got ({e})") from None
     # the checkpoint names the selection's first frame: another one means config.yaml is not this map's
     first = source.get("first")

@@ -34,7 +34,6 @@ import json
 import logging
 import math
 import time
-import zipfile
 from collections import deque
 from contextlib import contextmanager
 from dataclasses import replace
@@ -48,7 +47,7 @@ from ..config import Config, save_config
 from ..device import resolve_device
 from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame, implausible_median_depth
-from ..gaussians import GaussianMap, corrupt_npz_message
+from ..gaussians import NPZ_READ_ERRORS, GaussianMap, corrupt_npz_message
 from .init import make_probes
 from .keyframes import KeyframeSelector
 from .local import (
@@ -816,7 +815,7 @@ class Mapper:
             raise
         except KeyError as e:
             raise DataError(f"{p}: not a mapper checkpoint (missing {e})") from e
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:  # a damaged array, read late
+        except NPZ_READ_ERRORS as e:  # a damaged array, read late
             raise DataError(corrupt_npz_message(p, e)) from e
         # a smaller memory_max keeps the newest views: the older ones are not even read
         for record in views[max(0, len(views) - self.memory.max_size) :]:

@@ -23,7 +23,6 @@ import io
 import json
 import logging
 import re
-import zipfile
 import zlib
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
@@ -32,6 +31,7 @@ import numpy as np
 
 from ..atomic import atomic_write_bytes
 from ..errors import DataError
+from ..gaussians import NPZ_READ_ERRORS
 from .longterm import MemoryEntry
 
 log = logging.getLogger(__name__)
@@ -174,7 +174,7 @@ def load_view(checkpoint: Path, record: ViewRecord) -> MemoryEntry:
     try:
         with np.load(io.BytesIO(data), allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+    except NPZ_READ_ERRORS as e:
         raise DataError(f"{what} is not a readable npz ({type(e).__name__}); {advice}") from e
     segments = arrays.get("segments")
     ok = (
@@ -225,7 +225,7 @@ def remove_leftovers(checkpoint: Path) -> list[Path]:
         try:
             with np.load(checkpoint, allow_pickle=False) as z:
                 keep = [r.file for prefix in VIEW_LISTS for r in read_manifest(z, checkpoint, prefix)]
-        except (KeyError, OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+        except (KeyError, *NPZ_READ_ERRORS) as e:
             log.warning("%s: unreadable (%s), its memory views are left alone", checkpoint, type(e).__name__)
             return _remove(views_dir(checkpoint), lambda name: bool(VIEW_TEMP.fullmatch(name)))
     return remove_unreferenced(checkpoint, keep)
