@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -39,11 +40,12 @@ def _left_right(tx: float, left: int, right: int, w: int = W, h: int = H) -> np.
     return np.repeat(row[None], h, axis=0)
 
 
-def make_labelfusion(root: Path) -> Path:
-    """Three frames of a wall whose left half is class 8 and right half class 22 (segm value = id * 6)."""
+def make_labelfusion(root: Path, shifts: Sequence[float] = SHIFTS) -> Path:
+    """Frames (camera x ``shifts``) of a wall whose left half is class 8 and right half class 22 (segm
+    value = id * 6)."""
     root.mkdir(parents=True)
     np.savetxt(root / "camera-intrinsics.color.txt", K)
-    for i, tx in enumerate(SHIFTS):
+    for i, tx in enumerate(shifts):
         _png(root / f"frame-{i:06d}.color.png", _rgb(H, W, i))
         _png(root / f"frame-{i:06d}.depth.png", np.full((H, W), int(Z * 1e4) << 3, np.uint16))
         np.savetxt(root / f"frame-{i:06d}.pose.txt", _pose(tx))

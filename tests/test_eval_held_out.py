@@ -9,9 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_datasets import _png, _rgb
 from test_eval_cli import _main
-from test_eval_frames_2d import H, K, W, Z, _left_right, _pose, write_wall_run
+from test_eval_frames_2d import make_labelfusion, write_wall_run
 
 from ogscene3d.datasets import open_dataset
 from ogscene3d.errors import DataError
@@ -25,13 +24,7 @@ SHIFTS = [0.0005 + 0.0025 * i for i in range(N)]
 
 def make_sequence(root: Path) -> Path:
     """A label-fusion sequence of N frames of the wall of ``write_wall_run``: class 8 left, 22 right."""
-    root.mkdir(parents=True)
-    np.savetxt(root / "camera-intrinsics.color.txt", K)
-    for i, tx in enumerate(SHIFTS):
-        _png(root / f"frame-{i:06d}.color.png", _rgb(H, W, i))
-        _png(root / f"frame-{i:06d}.depth.png", np.full((H, W), int(Z * 1e4) << 3, np.uint16))
-        np.savetxt(root / f"frame-{i:06d}.pose.txt", _pose(tx))
-        _png(root / f"frame-{i:06d}.segm.png", (_left_right(tx, 8, 22) * 6).astype(np.uint8))
+    make_labelfusion(root, SHIFTS)
     (root / "classes.json").write_text(json.dumps({"0": "background", "8": "mug", "22": "box"}))
     return root
 

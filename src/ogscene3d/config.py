@@ -95,7 +95,7 @@ class MappingConfig:
     keyframe_translation: float = 0.0  # metres; 0 = unused
     keyframe_rotation_deg: float = 0.0  # 0 = unused
     # Pose-jump check (mapping/pose_jump.py): the most a camera may move between two consecutive frames of
-    # the selection (after data.stride), times the steps since the last accepted frame; 0 = no limit. About
+    # the folder, times data.stride and the selected frames since the last accepted one; 0 = no limit. About
     # twice the largest steps of the samples here (7-Scenes every 20th frame: 0.26 m, 13.6 deg).
     max_pose_step: float = 0.5  # metres
     max_pose_step_deg: float = 30.0
