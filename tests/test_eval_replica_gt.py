@@ -153,6 +153,73 @@ def test_missing_info_json_or_object_ids_are_errors_naming_the_file(tmp_path, tw
     assert gt.classes.tolist() == [-1, -1, -1] and "class_id (77)" in caplog.text
 
 
+def _with_comments(src, dst, n):
+    """``src`` with ``n`` comment lines after its first comment (one of them naming end_header, which only
+    the end_header line itself may end the header on)."""
+    data = src.read_bytes()
+    at = data.index(b"comment Replica-like\n") + len(b"comment Replica-like\n")
+    extra = b"comment this line mentions end_header but does not end it\n"
+    extra += b"".join(b"comment padding line %06d of a long header\n" % i for i in range(n))
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    dst.write_bytes(data[:at] + extra + data[at:])
+    (dst.parent / "info_semantic.json").write_bytes((src.parent / "info_semantic.json").read_bytes())
+    return len(data[:at] + extra) + data[at:].index(b"end_header\n") + len(b"end_header\n")
+
+
+@pytest.mark.parametrize("text", [False, True])
+def test_a_header_longer_than_64_kib_reads_as_without_its_comments(tmp_path, text):
+    from ogscene3d.eval.replica_gt import read_face_mesh
+
+    verts = [[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [1, 1, 0], [2, 1, 0], [3, 0, 0], [3, 1, 0]]
+    short = tmp_path / "short" / "habitat" / "mesh_semantic.ply"
+    short.parent.mkdir(parents=True)
+    write_semantic_ply(short, verts, [[0, 1, 4, 3], [1, 2, 5, 4], [2, 6, 7, 5]], [11, 12, 99], text=text)
+    write_info(short.parent / "info_semantic.json", [(11, 1), (12, 3)])
+    long = tmp_path / "long" / "habitat" / "mesh_semantic.ply"
+    header_bytes = _with_comments(short, long, 3000)
+    assert header_bytes > 1 << 17  # past the 64 KiB the header parser used to read
+    a, b = read_face_mesh(short), read_face_mesh(long)
+    assert a.fast_path == b.fast_path == (not text)
+    for field in ("vertices", "face_sizes", "indices", "object_ids"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+    ga, gb = load_ground_truth(short.parent.parent), load_ground_truth(long.parent.parent)
+    np.testing.assert_array_equal(ga.points, gb.points)
+    np.testing.assert_array_equal(ga.classes, gb.classes)
+    np.testing.assert_array_equal(ga.instances, gb.instances)
+    assert ga.class_names == gb.class_names
+    assert [gb.class_names[c] for c in gb.classes] == ["chair"] * 4 + ["wall"] * 4 + ["background"] * 4
+
+
+def test_truncated_or_missing_ply_header_is_an_error_naming_the_file(tmp_path, two_quads, monkeypatch):
+    from ogscene3d.eval import replica_gt
+
+    ply = two_quads / "habitat" / "mesh_semantic.ply"
+    data = ply.read_bytes()
+    cut = tmp_path / "cut" / "mesh_semantic.ply"
+    cut.parent.mkdir()
+    cut.write_bytes(data[: data.index(b"end_header")])  # ends inside the header
+    with pytest.raises(DataError, match=r"cut/mesh_semantic\.ply: truncated PLY header: the file ends after"):
+        replica_gt.read_face_mesh(cut)
+    cut.write_bytes(data[: data.index(b"end_header") + 7])  # "end_hea": not the end_header line
+    with pytest.raises(DataError, match=r"cut/mesh_semantic\.ply: truncated PLY header"):
+        replica_gt.read_face_mesh(cut)
+    cut.write_bytes(b"\x00\x01binary" * 100)
+    with pytest.raises(DataError, match=r"cut/mesh_semantic\.ply: not a PLY file"):
+        replica_gt.read_face_mesh(cut)
+    # a header past the bound is refused without reading on to the end of the file
+    long = tmp_path / "long" / "habitat" / "mesh_semantic.ply"
+    header_bytes = _with_comments(ply, long, 200)
+    monkeypatch.setattr(replica_gt, "MAX_HEADER_BYTES", header_bytes - 1)
+    with pytest.raises(
+        DataError,
+        match=rf"long/habitat/mesh_semantic\.ply: no 'end_header' line in the first "
+        rf"{header_bytes - 1} bytes",
+    ):
+        replica_gt.read_face_mesh(long)
+    monkeypatch.setattr(replica_gt, "MAX_HEADER_BYTES", header_bytes)
+    assert replica_gt.read_face_mesh(long).object_ids.tolist() == [11, 12, 99]
+
+
 def test_hovsg_replica_preset_ignores_hovsgs_classes(two_quads):
     gt = load_ground_truth(two_quads)
     idx, unknown = resolve_ignore(["preset:hovsg-replica"], gt.class_names)

@@ -27,7 +27,7 @@ import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 
@@ -107,15 +107,42 @@ class _Element:
     props: list[_Prop]
 
 
+# Real PLY headers are a few hundred bytes; the bound only stops a file that starts "ply" but never ends
+# its header (or is no PLY at all) from being read to the end, which for Replica's meshes is gigabytes.
+MAX_HEADER_BYTES = 1 << 24
+
+
+def _read_header(fh: BinaryIO, path: Path) -> bytes:
+    """The header of an open PLY file, ``ply`` through the ``end_header`` line, read line by line so that a
+    header of any length up to :data:`MAX_HEADER_BYTES` is whole and the body is never read."""
+    buf = bytearray()
+    while True:
+        # readline's limit: a binary file with no newline for gigabytes is cut off at the bound
+        line = fh.readline(MAX_HEADER_BYTES + 1 - len(buf))
+        if not buf and line.rstrip(b"\r\n") != b"ply":
+            raise DataError(f"{path}: not a PLY file (does not start with a 'ply' line)")
+        if not line:
+            raise DataError(
+                f"{path}: truncated PLY header: the file ends after {len(buf)} bytes, "
+                "before an 'end_header' line"
+            )
+        buf += line
+        if len(buf) > MAX_HEADER_BYTES:
+            raise DataError(
+                f"{path}: no 'end_header' line in the first {MAX_HEADER_BYTES} bytes: not a PLY file, "
+                "or its header is damaged"
+            )
+        if line.rstrip(b"\r\n") == b"end_header":
+            return bytes(buf)
+
+
 def _parse_header(data: bytes, path: Path) -> tuple[str, list[_Element], int]:
-    """(format, elements, byte offset of the body) of a PLY file whose first bytes are ``data``."""
-    end = data.find(b"end_header")
-    if not data.startswith(b"ply") or end < 0:
-        raise DataError(f"{path}: not a PLY file (no 'ply' ... 'end_header' header)")
-    body = data.index(b"\n", end) + 1
+    """(format, elements, byte offset of the body) of a PLY file whose whole header is ``data``
+    (as :func:`_read_header` returns it)."""
     fmt = ""
     elements: list[_Element] = []
-    for raw in data[:end].decode("ascii", "replace").splitlines()[1:]:
+    # Lines end at "\n" only (the body offset counts on it): the lines between "ply" and "end_header".
+    for raw in data.decode("ascii", "replace").rstrip("\r\n").split("\n")[1:-1]:
         words = raw.split()
         if not words or words[0] in ("comment", "obj_info"):
             continue
@@ -132,7 +159,7 @@ def _parse_header(data: bytes, path: Path) -> tuple[str, list[_Element], int]:
             raise DataError(f"{path}: malformed PLY header line {raw.strip()!r}") from None
     if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
         raise DataError(f"{path}: unknown PLY format {fmt!r}")
-    return fmt, elements, body
+    return fmt, elements, len(data)
 
 
 def _fixed_dtype(el: _Element, order: str, list_len: int | None = None) -> np.dtype | None:
@@ -255,7 +282,7 @@ def read_face_mesh(path: str | Path) -> FaceMesh:
     path = Path(path)
     try:
         with path.open("rb") as fh:
-            head = fh.read(1 << 16)
+            head = _read_header(fh, path)
     except FileNotFoundError:
         raise DataError(f"{path}: file not found") from None
     fmt, elements, body = _parse_header(head, path)
