@@ -1,6 +1,7 @@
 """Replica as Semantic-NeRF rendered it: Sequence_N/ with rgb/rgb_i.png, depth/depth_i.png (mm),
 semantic_class/semantic_class_i.png and traj_w_c.txt; intrinsics from a 90-degree horizontal field of view;
-class names from the release's semantic_info/<scene>/info_semantic.json."""
+class names from the release's semantic_info/<scene>/info_semantic.json. SNI-SLAM's 1200x680 renders: the
+same frame folders with traj.txt, in the scene folder."""
 
 from __future__ import annotations
 
@@ -245,6 +246,100 @@ def test_class_map_of_another_size_is_an_error_naming_it(tmp_path):
     _png(seq / "semantic_class" / "semantic_class_0.png", np.zeros((H // 2, W // 2), np.uint8))
     with pytest.raises(DataError, match=r"semantic_class_0.png: Semantic-NeRF class is 16x12"):
         open_dataset(seq)[0]
+
+
+# --------------------------------------------------------------------------------------- SNI-SLAM's renders
+
+
+def _turned_pose(i: int) -> np.ndarray:
+    """_pose(i) turned about the camera's y axis: a pose read transposed or with SNI-SLAM's y/z column flip
+    (its own OpenGL convention, not the file's) would differ."""
+    a = 0.1 * (i + 1)
+    p = _pose(i)
+    p[:3, :3] = [[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]]
+    p[:3, 3] += [0.25, -0.5, 1.5]
+    return p
+
+
+def make_sni_scene(scene: Path, n: int = 3, w: int = W, h: int = H, turned: bool = False) -> Path:
+    """SNI-SLAM's ``data/replica/<scene>``: the Semantic-NeRF frame folders with NICE-SLAM's ``traj.txt``
+    (no traj_w_c.txt), in the scene folder itself."""
+    make_sequence(scene, n, w, h)
+    (scene / "traj_w_c.txt").unlink()
+    pose = _turned_pose if turned else _pose
+    (scene / "traj.txt").write_text(
+        "".join(" ".join(repr(float(x)) for x in pose(i).ravel()) + "\n" for i in range(n))
+    )
+    return scene
+
+
+def test_sni_slam_scene_with_traj_txt_is_detected_and_posed_by_line(tmp_path):
+    root = tmp_path / "data" / "replica"
+    scene = make_sni_scene(root / "room_0", n=12, turned=True)
+    assert detect_kind(scene) == ("semantic_nerf", scene)
+    assert detect_kind(root) == ("semantic_nerf", scene)  # the data folder holding one scene is entered
+    ds = open_dataset(root)
+    assert ds.kind == "semantic_nerf" and ds.root == scene and len(ds) == 12
+    assert [ds[i].name for i in (0, 2, 10)] == ["rgb_0", "rgb_2", "rgb_10"]
+    for i in (0, 2, 10, 11):
+        np.testing.assert_allclose(ds[i].pose, _turned_pose(i), atol=1e-12)
+    np.testing.assert_allclose(ds[1].depth, Z)  # millimetres, not NICE-SLAM's 6553.5 per metre
+    assert ds.has_class_maps and np.array_equal(ds[1].gt_classes, _classes(1))
+
+
+def test_sni_slam_1200x680_intrinsics_cast_its_loaders_rays(tmp_path):
+    """SNI-SLAM's replica.yaml: 1200x680, fx = fy = 600, cx = 599.5, cy = 339.5 with pixel centres at
+    integers; our K (centres at +0.5) must back-project every pixel along the same ray."""
+    ds = open_dataset(make_sni_scene(tmp_path / "room_0", n=1, w=1200, h=680))
+    np.testing.assert_allclose(ds.K, [[600, 0, 600], [0, 600, 340], [0, 0, 1]])
+    assert (ds.camera.width, ds.camera.height) == (1200, 680)
+    pts = ds.camera.backproject(ds[0].depth)
+    for v, u in ((0, 0), (679, 1199), (339, 600), (17, 911)):
+        sni_ray = np.array([(u - 599.5) / 600.0, (v - 339.5) / 600.0, 1.0])
+        np.testing.assert_allclose(pts[v, u], sni_ray * Z, atol=1e-5)
+
+
+def test_sni_slam_back_projected_pixels_land_on_their_classes(tmp_path):
+    ds = open_dataset(make_sni_scene(tmp_path / "room_0", n=2, w=64, h=48))
+    for i in range(2):
+        f = ds[i]
+        pts = f.camera.backproject(f.depth).reshape(-1, 3) @ f.pose[:3, :3].T + f.pose[:3, 3]
+        assert np.array_equal(np.where(pts[:, 0] < BOUNDARY, LEFT, RIGHT).reshape(48, 64), f.gt_classes)
+
+
+def test_traj_txt_alone_is_no_sign_of_the_layout(tmp_path):
+    """Only rgb/rgb_<i>.png frames make a folder with traj.txt this layout; NICE-SLAM's stays replica."""
+    other = tmp_path / "other"
+    _png(other / "rgb" / "000000.png", np.zeros((H, W, 3), np.uint8))
+    _png(other / "depth" / "000000.png", np.zeros((H, W), np.uint16))
+    (other / "traj.txt").write_text(" ".join(map(str, np.eye(4).ravel())) + "\n")
+    with pytest.raises(DataError, match=r"other: no known dataset layout.*or SNI-SLAM's traj.txt"):
+        open_dataset(other)
+    nice = make_sni_scene(tmp_path / "room0", n=1)
+    _png(nice / "results" / "frame000000.jpg", np.zeros((H, W, 3), np.uint8))
+    assert detect_kind(nice) == ("replica", nice)
+
+
+def test_traj_w_c_is_read_where_both_pose_files_are(tmp_path):
+    scene = make_sni_scene(tmp_path / "room_0", n=3, turned=True)
+    (scene / "traj_w_c.txt").write_text(
+        "".join(" ".join(map(str, _pose(i).ravel())) + "\n" for i in range(3))
+    )
+    np.testing.assert_allclose(open_dataset(scene)[2].pose, _pose(2))
+
+
+def test_sni_slam_scene_class_names_and_pose_errors_name_traj_txt(tmp_path):
+    scene = make_sni_scene(tmp_path / "room_0", n=3)
+    assert open_dataset(scene).class_names is None
+    (scene / "habitat").mkdir()
+    (scene / "habitat" / "info_semantic.json").write_text(json.dumps(INFO))  # as in Replica's scene folder
+    ds = open_dataset(scene)
+    assert ds.class_info == scene / "habitat" / "info_semantic.json"
+    assert ds.class_names == {3: "chair", 7: "table"}
+    lines = (scene / "traj.txt").read_text().splitlines()
+    (scene / "traj.txt").write_text("\n".join(lines[:2]) + "\n")
+    with pytest.raises(DataError, match=r"room_0/traj.txt: 2 poses .* rgb/ holds frame 2 \(rgb_2.png\)"):
+        open_dataset(scene)
 
 
 # --------------------------------------------------------------------------------------- end to end

@@ -28,7 +28,8 @@ READERS: dict[str, type[RGBDDataset]] = {
 
 _LAYOUTS = (
     "synthetic (results/ + traj.txt + gt/instances.json), replica (results/frame*.jpg + traj.txt), "
-    "semantic_nerf (rgb/rgb_N.png + depth/depth_N.png + traj_w_c.txt, or a scene's Sequence_N/ of them), "
+    "semantic_nerf (rgb/rgb_N.png + depth/depth_N.png + traj_w_c.txt or SNI-SLAM's traj.txt, or a scene's "
+    "Sequence_N/ of them), "
     "scannet (color/ + depth/ + pose/), tum (rgb.txt + depth.txt), labelfusion/sevenscenes (frame-*.color.*)"
 )
 

@@ -1,4 +1,5 @@
-"""Replica as Semantic-NeRF rendered it (the sequences SNI-SLAM, SGS-SLAM & co. score 2D semantics on).
+"""Replica as Semantic-NeRF rendered it (the sequences SNI-SLAM, SGS-SLAM & co. score 2D semantics on),
+and SNI-SLAM's own renders in the same layout.
 
 One sequence folder (``Replica_Dataset/room_0/Sequence_1``) holds, for frames ``i = 0, 1, ...`` (no
 zero-padding):
@@ -11,16 +12,25 @@ zero-padding):
 * ``traj_w_c.txt``: line ``i`` is frame ``i``'s camera-to-world pose, a row-major 4x4 matrix, OpenCV
   camera axes (x right, y down, z forward), world z-up.
 
+SNI-SLAM (``IRMVLab/SNI-SLAM``) renders Replica along NICE-SLAM's trajectories at 1200x680 with vMAP's
+habitat-sim script, which writes this same layout, and keeps the poses as ``traj.txt`` (NICE-SLAM's file:
+the same row-major OpenCV camera-to-world lines): its scene folder (``data/replica/room_0``) is such a
+sequence with ``traj.txt`` for ``traj_w_c.txt``. Its loader reads it as above (depth ``png_depth_scale``
+1000, the class maps' raw Replica ids) with fx = fy = 600, cx = 599.5, cy = 339.5: the 90-degree camera
+below. A folder is taken as this layout by ``traj.txt`` only when ``rgb/`` holds ``rgb_<i>.png`` frames
+(other layouts keep a ``traj.txt`` too); with both files, ``traj_w_c.txt`` is read.
+
 There is no intrinsics file: the renders are habitat-sim pinhole images with a 90-degree horizontal field
 of view, and Semantic-NeRF's trainer derives fx = fy = W / 2 / tan(45 deg) = W / 2, cx = (W - 1) / 2,
 cy = (H - 1) / 2 from the image size (640x480 -> 320, 320, 319.5, 239.5), casting pixel i's ray through
 (i - cx) / fx: its pixel centres lie at integers. ogscene3d's K puts them at +0.5 (:mod:`ogscene3d.camera`),
-so the same camera is fx = fy = W / 2, cx = W / 2, cy = H / 2 here (640x480 -> 320, 320, 320, 240).
+so the same camera is fx = fy = W / 2, cx = W / 2, cy = H / 2 here (640x480 -> 320, 320, 320, 240; SNI-SLAM's
+1200x680 -> 600, 600, 600, 340).
 
 Class names come from the release's ``semantic_info/<scene>/info_semantic.json`` (Replica's own file:
 ``{"classes": [{"id", "name"}, ...]}``), found beside the scene folders; ``info_semantic.json`` in the
-sequence folder, its scene folder or the scene's ``habitat/`` is taken too. Without one the class maps are
-still read, and ``eval`` needs ``--classes``.
+sequence folder, its scene folder or the ``habitat/`` of either is taken too (a folder with ``traj.txt``
+is its own scene folder). Without one the class maps are still read, and ``eval`` needs ``--classes``.
 
 A scene folder holding ``Sequence_1/``, ``Sequence_2/`` (the release has two trajectories per scene) is
 read as its first sequence, with a log line naming the others.
@@ -29,6 +39,7 @@ read as its first sequence, with a log line naming the others.
 from __future__ import annotations
 
 import logging
+import os
 import re
 from pathlib import Path
 
@@ -42,6 +53,7 @@ from .replica import read_traj
 log = logging.getLogger(__name__)
 
 TRAJ_NAME = "traj_w_c.txt"
+SNI_TRAJ_NAME = "traj.txt"  # SNI-SLAM's renders: NICE-SLAM's trajectory file, kept under its name
 CLASS_DIR = "semantic_class"
 INFO_NAME = "info_semantic.json"
 HFOV_DEG = 90.0  # habitat-sim's default camera, which Semantic-NeRF rendered with and assumes in training
@@ -50,8 +62,32 @@ VOID_ID = 0
 _SEQUENCE_DIR = re.compile(r"sequence_(\d+)$", re.IGNORECASE)
 
 
+def _has_rgb_frame(rgb: Path) -> bool:
+    """Whether ``rgb`` holds an ``rgb_<i>.png``; stops at the first one, so a folder of thousands costs
+    little."""
+    with os.scandir(rgb) as it:
+        for e in it:
+            n = e.name
+            if n.startswith("rgb_") and n[-4:].lower() == ".png" and n[4:-4].isdigit():
+                return True
+    return False
+
+
+def trajectory_file(folder: Path) -> Path | None:
+    """The pose file of sequence folder ``folder`` (``traj_w_c.txt``, else SNI-SLAM's ``traj.txt``); None
+    when ``folder`` is not a sequence."""
+    if not ((folder / "rgb").is_dir() and (folder / "depth").is_dir()):
+        return None
+    if (folder / TRAJ_NAME).is_file():
+        return folder / TRAJ_NAME
+    # NICE-SLAM's and other layouts keep a traj.txt too: only rgb_<i>.png frames beside it make it this one
+    if (folder / SNI_TRAJ_NAME).is_file() and _has_rgb_frame(folder / "rgb"):
+        return folder / SNI_TRAJ_NAME
+    return None
+
+
 def is_sequence(folder: Path) -> bool:
-    return (folder / "rgb").is_dir() and (folder / "depth").is_dir() and (folder / TRAJ_NAME).is_file()
+    return trajectory_file(folder) is not None
 
 
 def sequence_dirs(scene: Path) -> list[Path]:
@@ -74,13 +110,15 @@ def hfov_intrinsics(width: int, height: int, hfov_deg: float = HFOV_DEG) -> np.n
 
 def find_class_info(seq: Path) -> Path | None:
     """Replica's ``info_semantic.json`` for sequence ``seq``: ``semantic_info/<scene>/`` beside the scene
-    folder (the release's place), else in the sequence folder, the scene folder or its ``habitat/``."""
+    folder (the release's place), else in the sequence folder, the scene folder or the ``habitat/`` of
+    either."""
     scene = seq.parent
     candidates = [
         scene.parent / "semantic_info" / scene.name / INFO_NAME,
         seq / INFO_NAME,
         scene / INFO_NAME,
         scene / "habitat" / INFO_NAME,
+        seq / "habitat" / INFO_NAME,  # a folder with traj.txt is its scene's own folder
     ]
     return next((p for p in candidates if p.is_file()), None)
 
@@ -112,8 +150,8 @@ class SemanticNeRFDataset(RGBDDataset):
             seqs = sequence_dirs(root)
             if not seqs:
                 raise DataError(
-                    f"{root}: not a Semantic-NeRF sequence (rgb/, depth/ and {TRAJ_NAME}) nor a scene folder "
-                    "holding Sequence_<n>/ ones"
+                    f"{root}: not a Semantic-NeRF sequence (rgb/, depth/ and {TRAJ_NAME}, or SNI-SLAM's "
+                    f"{SNI_TRAJ_NAME} beside rgb/rgb_<i>.png) nor a scene folder holding Sequence_<n>/ ones"
                 )
             if len(seqs) > 1:
                 log.info(
@@ -129,7 +167,8 @@ class SemanticNeRFDataset(RGBDDataset):
             raise DataError(f"{root / 'rgb'}: no rgb_<i>.png images")
         depths = numbered_files(root / "depth", prefix="depth_")
         labels = numbered_files(root / CLASS_DIR, prefix="semantic_class_")
-        traj = root / TRAJ_NAME
+        traj = trajectory_file(root)
+        assert traj is not None  # root is a sequence
         poses = read_traj(traj)
         last = max(rgbs)
         if last >= len(poses):
