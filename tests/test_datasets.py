@@ -84,6 +84,7 @@ def test_replica_sample_scale_and_poses(shared_data):
     assert len(ds) == 20
     f0, f19 = ds[0], ds[19]
     assert f0.name == "frame000000" and f0.rgb.shape == (680, 1200, 3)
+    # as cam_params.json says: the renders agree with it read with pixel centres at +0.5
     np.testing.assert_allclose(f0.K, [[600, 0, 599.5], [0, 600, 339.5], [0, 0, 1]])
     assert 0.5 < np.median(f0.depth[f0.depth > 0]) < 6.0  # metres: the 6553.5 scale is applied
     med, frac, n = reprojection_error(f0, f19)
@@ -98,7 +99,7 @@ def test_sevenscenes_sample_scale_and_poses(shared_data):
     ds = open_dataset(shared_data / "7scenes_redkitchen_stride20")
     assert ds.kind == "sevenscenes" and len(ds) == 50
     f0, f1 = ds[0], ds[1]
-    np.testing.assert_allclose(f0.K, [[585, 0, 320], [0, 585, 240], [0, 0, 1]])
+    np.testing.assert_allclose(f0.K, [[585, 0, 320.5], [0, 585, 240.5], [0, 0, 1]])
     assert f0.depth.max() < 10.0
     med, frac, n = reprojection_error(f0, f1)
     assert n > 1000 and med < 0.03 and frac > 0.8
@@ -145,7 +146,13 @@ def test_config_overrides(tmp_path):
     d = open_dataset(scene, config=DataConfig(depth_scale=6553.5 / 2))[0].depth
     assert np.allclose(d, 4.0, atol=1e-3)
     f = open_dataset(scene, config=DataConfig(intrinsics=[30.0, 31.0, 15.0, 11.0]))[0]
-    np.testing.assert_allclose(f.K, [[30, 0, 15], [0, 31, 11], [0, 0, 1]])
+    np.testing.assert_allclose(f.K, [[30, 0, 15], [0, 31, 11], [0, 0, 1]])  # as Replica's files are read
+    given = DataConfig(intrinsics=[30.0, 31.0, 15.0, 11.0], pixel_centers="integer")  # an OpenCV calibration
+    np.testing.assert_allclose(
+        open_dataset(scene, config=given)[0].K, [[30, 0, 15.5], [0, 31, 11.5], [0, 0, 1]]
+    )
+    with pytest.raises(DataError, match="data.pixel_centers must be 'auto' or one of"):
+        open_dataset(scene, config=DataConfig(pixel_centers="centre"))
     assert not open_dataset(scene, config=DataConfig(max_depth=1.5))[0].depth.any()
     assert not open_dataset(scene, config=DataConfig(min_depth=2.5))[0].depth.any()
     assert open_dataset(scene, config=DataConfig(path=str(scene)), kind="auto").root == scene
@@ -160,14 +167,20 @@ def test_scannet_layout_resizes_colour_to_depth(tmp_path):
         np.savetxt(root / "pose" / f"{i}.txt", _pose(i * 0.2))
     (root / "intrinsic").mkdir()
     K4 = np.eye(4)
-    K4[:3, :3] = [[100.0, 0, 32], [0, 100, 24], [0, 0, 1]]
+    K4[:3, :3] = [[100.0, 0, 31.5], [0, 100, 23.5], [0, 0, 1]]  # the image centre, pixel centres from 0
     np.savetxt(root / "intrinsic" / "intrinsic_color.txt", K4)
     ds = open_dataset(root)
     assert ds.kind == "scannet"
     f = ds[1]
     assert f.rgb.shape == (24, 32, 3) and np.allclose(f.depth, 1.5)
-    np.testing.assert_allclose(f.K, [[50, 0, 16], [0, 50, 12], [0, 0, 1]])  # colour K rescaled to depth
+    # colour K rescaled to depth: the principal point stays at the image centre
+    np.testing.assert_allclose(f.K, [[50, 0, 16], [0, 50, 12], [0, 0, 1]])
     assert f.pose[0, 3] == pytest.approx(0.2)
+    # the same camera written with pixel centres from 0.5: the centre is then (32, 24), and scales as it is
+    K4[:2, 2] = [32, 24]
+    np.savetxt(root / "intrinsic" / "intrinsic_color.txt", K4)
+    K = open_dataset(root, config=DataConfig(pixel_centers="half")).K
+    np.testing.assert_allclose(K, [[50, 0, 16], [0, 50, 12], [0, 0, 1]])
     # ScanNet marks lost tracking with -inf poses: an error naming the pose file, or a skipped frame
     np.savetxt(root / "pose" / "1.txt", np.full((4, 4), -np.inf))
     with pytest.raises(DataError, match=r"1\.txt.*NaN or inf"):

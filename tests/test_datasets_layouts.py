@@ -18,6 +18,7 @@ from ogscene3d.errors import DataError
 from ogscene3d.segmentation.precomputed import write_segments
 
 K3 = np.array([[100.0, 0, 16], [0, 100.0, 12], [0, 0, 1]])
+HALF = np.array([[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]])  # what reading adds to a file K (OpenCV centres)
 
 
 def make_byo(root: Path, n: int = 3, pad: str = "{:06d}", ext: str = ".png", poses: bool = False) -> Path:
@@ -44,7 +45,7 @@ def test_scannet_layout_any_zero_padding(tmp_path, pad, ext):
     f = ds[2]
     assert f.name == pad.format(2) and np.allclose(f.depth, 1.2)
     assert f.pose[0, 3] == pytest.approx(1.0)
-    np.testing.assert_allclose(f.K, K3)
+    np.testing.assert_allclose(f.K, K3 + HALF)  # intrinsics.txt counts pixel centres from 0
 
 
 def test_scannet_layout_matches_files_by_number(tmp_path):
@@ -145,7 +146,7 @@ def test_sevenscenes_default_intrinsics_warn(tmp_path, caplog):
         list(ds)
     (msg,) = _k_warnings(caplog)
     assert "camera-intrinsics.txt" in msg and "data.intrinsics" in msg and "585" in msg
-    np.testing.assert_allclose(ds.K[0], [585, 0, 320])
+    np.testing.assert_allclose(ds.K[0], [585, 0, 320.5])
     caplog.clear()
     with caplog.at_level(logging.WARNING, logger="ogscene3d.datasets.sevenscenes"):
         ds = open_dataset(root, config=DataConfig(intrinsics=[100.0, 100.0, 16.0, 12.0]))

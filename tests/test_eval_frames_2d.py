@@ -21,7 +21,9 @@ from ogscene3d.eval import load_ground_truth
 from ogscene3d.eval.views import open_view_dataset, overlap_mapping_2d, render_views
 
 W, H = 32, 24
-K = np.array([[30.0, 0, 16], [0, 30.0, 12], [0, 0, 1]])
+K = np.array([[30.0, 0, 16], [0, 30.0, 12], [0, 0, 1]])  # ogscene3d's (pixel centres at +0.5)
+# as the datasets' files write it (pixel centres counted from 0)
+K_FILE = K - np.array([[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]])
 Z = 0.6  # metres: label-fusion's bit-shifted uint16 depth reaches 0.82 m at most
 SHIFTS = (0.0, 0.025, 0.06)  # camera x per frame (no pixel centre on the wall's class boundary)
 
@@ -44,7 +46,7 @@ def make_labelfusion(root: Path, shifts: Sequence[float] = SHIFTS) -> Path:
     """Frames (camera x ``shifts``) of a wall whose left half is class 8 and right half class 22 (segm
     value = id * 6)."""
     root.mkdir(parents=True)
-    np.savetxt(root / "camera-intrinsics.color.txt", K)
+    np.savetxt(root / "camera-intrinsics.color.txt", K_FILE)
     for i, tx in enumerate(shifts):
         _png(root / f"frame-{i:06d}.color.png", _rgb(H, W, i))
         _png(root / f"frame-{i:06d}.depth.png", np.full((H, W), int(Z * 1e4) << 3, np.uint16))
@@ -76,7 +78,7 @@ def make_scannet(root: Path, tsv: bool = True, label_scale: int = 2) -> Path:
         _png(root / "label-filt" / f"{i}.png", raw)
     (root / "intrinsic").mkdir()
     np.savetxt(
-        root / "intrinsic" / "intrinsic_depth.txt", np.pad(K, ((0, 1), (0, 1))) + np.diag([0, 0, 0, 1])
+        root / "intrinsic" / "intrinsic_depth.txt", np.pad(K_FILE, ((0, 1), (0, 1))) + np.diag([0, 0, 0, 1])
     )
     if tsv:
         (root.parent / "scannetv2-labels.combined.tsv").write_text(

@@ -32,6 +32,11 @@ class DataConfig:
     # auto (the layout's) | linear (raw / scale) | shift3 (APC: (raw >> 3) / scale)
     depth_format: str = "auto"
     intrinsics: list[float] | None = None  # [fx, fy, cx, cy] overriding the dataset's
+    # Where the intrinsics read (files, data.intrinsics) put the centre of pixel (0, 0): auto (the layout's:
+    # integer for ScanNet, TUM, 7-Scenes, label-fusion; half for Replica, synthetic, Semantic-NeRF) |
+    # integer (OpenCV, ROS calibrations: (0, 0)) | half (COLMAP, gsplat: (0.5, 0.5), ogscene3d's own K).
+    # Integer values are shifted by +0.5 on reading.
+    pixel_centers: str = "auto"
     min_depth: float = 0.0
     max_depth: float = 0.0  # 0 = no limit
     on_bad_frame: str = "error"  # error | skip

@@ -133,6 +133,20 @@ def K_from_values(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]], dtype=np.float32)
 
 
+PIXEL_CENTERS = ("integer", "half")
+
+
+def to_half_pixel_K(K: np.ndarray, pixel_centers: str) -> np.ndarray:
+    """``K`` in ogscene3d's convention (pixel (0, 0)'s centre at (0.5, 0.5), :mod:`ogscene3d.camera`) from
+    one whose ``pixel_centers`` are ``"integer"`` (OpenCV: (0, 0)) or already ``"half"``."""
+    if pixel_centers == "half":
+        return K
+    K = K.copy()
+    K[0, 2] += 0.5
+    K[1, 2] += 0.5
+    return K
+
+
 def check_K(K: np.ndarray, source: str) -> np.ndarray:
     K = np.asarray(K, dtype=np.float64)
     if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
@@ -198,6 +212,9 @@ class RGBDDataset:
     # the class id a layout's class maps use for "no class", which no class table names (None: every id may)
     void_class_id: int | None = None
     depth_scale_default = 1000.0
+    # the convention of the intrinsics a layout reads (see DataConfig.pixel_centers); every supported
+    # layout's files count pixel centres from 0, as OpenCV calibrations do
+    pixel_centers_default = "integer"
     depth_format_default = "linear"
     min_depth_default = 0.0
     invalid_raw: int | None = None  # a raw depth value that means "no measurement" (7-Scenes: 65535)
@@ -240,7 +257,8 @@ class RGBDDataset:
             raise DataError(
                 f"{self.root}: no camera intrinsics found; give data.intrinsics = [fx, fy, cx, cy]"
             )
-        self.K = check_K(K, str(self.root))
+        self.pixel_centers = self.read_pixel_centers(config)
+        self.K = to_half_pixel_K(check_K(K, str(self.root)), self.pixel_centers)
         self.depth_scale = float(
             config.depth_scale if config.depth_scale is not None else self.depth_scale_default
         )
@@ -261,6 +279,15 @@ class RGBDDataset:
         self.resize_rgb_to_depth = resize_rgb_to_depth
         self._depth_checked = False
         self._warned_no_segments = False
+
+    def read_pixel_centers(self, config: DataConfig) -> str:
+        """The convention of the intrinsics this dataset reads: ``data.pixel_centers`` or the layout's."""
+        conv = self.pixel_centers_default if config.pixel_centers == "auto" else config.pixel_centers
+        if conv not in PIXEL_CENTERS:
+            raise DataError(
+                f"data.pixel_centers must be 'auto' or one of {PIXEL_CENTERS}, got {config.pixel_centers!r}"
+            )
+        return conv
 
     def _drop_incomplete(self, selected: list[FrameRecord]) -> list[FrameRecord]:
         """``selected`` less the frames whose rgb, depth or pose file is missing, found now rather than
@@ -374,6 +401,7 @@ class RGBDDataset:
             segment_names=names,
             gt_instances=gt_instances,
             gt_classes=gt_classes,
+            depth_scale_checked=True,  # _check_depth_range warns: the mapper need not warn again
         )
 
     def has_valid_pose(self, i: int) -> bool:

@@ -144,7 +144,7 @@ class ScanNetDataset(RGBDDataset):
         ]
         K = None
         if config.intrinsics is None:
-            K = self._intrinsics(root, records)
+            K = self._intrinsics(root, records, self.read_pixel_centers(config))
         super().__init__(root, records, K, config, segments_dir, resize_rgb_to_depth=True)
 
     def _label_files(self, root: Path) -> dict[int, Path]:
@@ -187,7 +187,7 @@ class ScanNetDataset(RGBDDataset):
         return None, np.where(raw < lut.size, lut[np.minimum(raw, lut.size - 1)], 0).astype(np.int32)
 
     @staticmethod
-    def _intrinsics(root: Path, records: list[FrameRecord]) -> np.ndarray:
+    def _intrinsics(root: Path, records: list[FrameRecord], pixel_centers: str) -> np.ndarray:
         intr = root / "intrinsic"
         if (intr / "intrinsic_depth.txt").is_file():
             return read_matrix(intr / "intrinsic_depth.txt", (3, 3), "intrinsics")
@@ -200,8 +200,11 @@ class ScanNetDataset(RGBDDataset):
             first = next((r for r in records if r.depth_path.is_file()), records[0])
             h_c, w_c = read_rgb(first.rgb_path).shape[:2]
             h_d, w_d = read_depth_raw(first.depth_path).shape
+            # a resize maps pixel edges onto pixel edges: the centre offset is scaled with the image
+            off = 0.5 if pixel_centers == "integer" else 0.0
             K[0] *= w_d / w_c
             K[1] *= h_d / h_c
+            K[:2, 2] += off * (np.array([w_d / w_c, h_d / h_c]) - 1.0)
             return K
         raise DataError(
             f"{root}: no intrinsics (intrinsic/intrinsic_depth.txt, intrinsic/intrinsic_color.txt or "

@@ -139,6 +139,8 @@ class SemanticNeRFDataset(RGBDDataset):
     kind = "semantic_nerf"
     void_class_id = VOID_ID
     depth_scale_default = 1000.0
+    # the K derived from the field of view (hfov_intrinsics) is already ogscene3d's
+    pixel_centers_default = "half"
 
     @staticmethod
     def detect(root: Path) -> bool:
