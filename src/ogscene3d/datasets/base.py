@@ -205,7 +205,9 @@ class RGBDDataset:
     ``len(ds)`` is the number of selected frames, ``ds[i]`` reads frame ``i`` (raising
     :class:`DataError` if it is bad, whatever ``on_bad_frame`` says), and iterating yields the
     frames in order, skipping bad ones with a warning when ``on_bad_frame == "skip"``.
-    ``Frame.index`` is the position in this selection; ``Frame.name`` the rgb file stem.
+    ``Frame.index`` is the position in this selection; ``Frame.name`` the rgb file stem. ``K`` is in
+    ogscene3d's convention (pixel (0, 0)'s centre at (0.5, 0.5)): intrinsics the layout reads in the
+    OpenCV one (``pixel_centers`` "integer") are shifted by half a pixel.
     """
 
     kind = "base"
