@@ -45,6 +45,8 @@ class Frame:
     ``segments`` is an int id map (0 or negative = no segment) with ``segment_scores`` {id: SAM predicted
     IoU}; ``gt_instances`` / ``gt_classes`` are ground-truth maps when the dataset has them (synthetic
     scenes; class maps also for label-fusion's segm images and ScanNet's label-filt, in NYU40 ids).
+    ``depth_scale_checked``: the frame's reader checks its sequence's depth scale and warns about an
+    implausible one (datasets do, naming their ``data.depth_scale``), so the mapper does not warn again.
     """
 
     index: int
@@ -59,6 +61,7 @@ class Frame:
     segment_names: dict[int, str] = field(default_factory=dict)  # detector class of a segment, where known
     gt_instances: np.ndarray | None = None
     gt_classes: np.ndarray | None = None
+    depth_scale_checked: bool = False
 
     def __post_init__(self) -> None:
         if self.rgb.ndim != 3 or self.rgb.shape[2] != 3 or self.rgb.dtype != np.uint8:

@@ -372,7 +372,8 @@ class Mapper:
         self._camera_up_sum -= np.asarray(frame.pose, dtype=np.float64)[:3, 1]
         if not self._checked_depth_range and np.any(frame.depth > 0):
             self._checked_depth_range = True
-            median = implausible_median_depth(frame.depth)
+            # a dataset's frame: the dataset has warned already, naming the setting to fix
+            median = None if frame.depth_scale_checked else implausible_median_depth(frame.depth)
             if median is not None:
                 log.warning(
                     "frame %d (%s): median depth %.3g m is implausible for an RGB-D camera; Frame.depth "
