@@ -182,3 +182,62 @@ def test_held_out_views_of_a_synthetic_run_with_3d_ground_truth(tmp_path, monkey
     assert v["frames"] == [1] and v["held_out"] and not v["extrapolated"] and v["mapping_frames"] is None
     assert report["label_mapping"]["method"] == "text" and v["run_frames"]["num_mapped"] == 2
     assert report["semantic_3d"]["hovsg"]["miou"] > 0.7 and v["overall_acc"] > 0.65
+
+
+def record_map(run: Path, next_index: int) -> None:
+    """map.npz as ``ogscene3d run`` writes it for the run's config.yaml: how far it got, and the frames of
+    its selection by name."""
+    from ogscene3d.config import load_config
+    from ogscene3d.mapping.source import dataset_source
+
+    cfg = load_config(run / "config.yaml")
+    source = dataset_source(cfg, open_dataset(config=cfg.data))
+    np.savez(
+        run / "map.npz", mapper_next_index=np.array(next_index), mapper_source=np.array(json.dumps(source))
+    )
+
+
+def test_held_out_refuses_a_sequence_that_changed_since_it_was_mapped(tmp_path, monkeypatch, capsys):
+    """Frame 1, held out, removed: the stride-2 selection becomes frames 0, 3, 5, 7, and without the names
+    the run recorded, 3 and 5 would count as mapped and 2 and 4, which the run mapped, as held out."""
+    seq, run = make_run(tmp_path, "  stride: 2\n")
+    record_map(run, next_index=3)
+    assert run_frames(run, open_view_dataset(seq, run)).mapped == [0, 2, 4]
+    removed = {p: p.read_bytes() for p in seq.glob("frame-000001.*")}
+    for p in removed:
+        p.unlink()
+    with pytest.raises(DataError, match="the sequence changed since the run mapped it") as e:
+        run_frames(run, open_view_dataset(seq, run))
+    was, now = "'frame-000002.color.png'", "'frame-000003.color.png'"
+    assert f"frame 1 of the run's selection was {was} and is now {now}" in str(e.value)
+    argv = ["eval", str(run), "--gt", str(seq), "--views", "2", "--held-out", "--no-plots"]
+    assert _main(argv, monkeypatch) == 2
+    assert "the sequence changed since the run mapped it" in capsys.readouterr().err
+    # frames 4 to 7 removed instead: the selection is frames 0 and 2, fewer than the run read
+    for p, data in removed.items():
+        p.write_bytes(data)
+    for i in range(4, N):
+        for p in seq.glob(f"frame-{i:06d}.*"):
+            p.unlink()
+    with pytest.raises(DataError, match="the run read 3 frames of its selection, which now holds 2"):
+        run_frames(run, open_view_dataset(seq, run))
+
+
+def test_held_out_takes_frames_added_after_the_mapped_ones(tmp_path):
+    seq, run = make_run(tmp_path, "  stride: 2\n")
+    later = {p: p.read_bytes() for p in [*seq.glob("frame-000006.*"), *seq.glob("frame-000007.*")]}
+    for p in later:
+        p.unlink()
+    record_map(run, next_index=3)  # frames 0, 2, 4 of 0..5
+    for p, data in later.items():
+        p.write_bytes(data)
+    ds = open_view_dataset(seq, run)
+    frames = run_frames(run, ds)
+    assert frames.mapped == [0, 2, 4] and pick_held_out(ds, frames, num_views=10).frames == [1, 3]
+
+
+def test_held_out_with_a_map_that_records_no_frame_names_notes_it(tmp_path, caplog):
+    seq, run = make_run(tmp_path, "  stride: 2\n", next_index=2)  # an older version's map.npz
+    with caplog.at_level("INFO", logger="ogscene3d.eval.held_out"):
+        assert run_frames(run, open_view_dataset(seq, run)).mapped == [0, 2]
+    assert "records no frame names (an older version)" in caplog.text

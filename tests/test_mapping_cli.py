@@ -285,3 +285,149 @@ def test_resume_names_a_missing_memory_view_file(tmp_path, capsys):
     err = capsys.readouterr().err
     assert f"{view}: memory view of keyframe 0 that map.npz needs does not exist" in err
     assert "Traceback" not in err
+
+
+class _Killed(Exception):
+    """A run killed while mapping (SIGKILL, out of memory): nothing after it runs, so nothing is saved."""
+
+
+def _killed_run(argv):
+    """``main(argv)``, killed at its first frame."""
+    from ogscene3d.mapping.mapper import Mapper
+
+    def killed(self, frame):
+        raise _Killed
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(Mapper, "process", killed)
+        with pytest.raises(_Killed):
+            main(argv)
+
+
+def test_resume_refuses_a_map_beside_a_later_runs_config(tmp_path, capsys):
+    """A new run into an old --out rewrites config.yaml at once but replaces map.npz only at its first save:
+    killed before that, --resume would go on with the old map and the new settings."""
+    scene = _replica_scene(tmp_path / "scene", frames=3)
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out), "--max-frames", "2"]) == 0
+    old_map, old_config = (out / "map.npz").read_bytes(), (out / "config.yaml").read_text()
+    _killed_run(["run", *_common(scene, out), "--set", "mapping.opt_iters=2"])
+    assert (out / "map.npz").read_bytes() == old_map and (out / "config.yaml").read_text() != old_config
+    capsys.readouterr()
+    assert main(["run", "--out", str(out), "--resume", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert f"{out / 'map.npz'} was not written by the run whose {out / 'config.yaml'} is there" in err
+    assert "stopped before saving a map" in err and "without --resume" in err
+    assert (out / "map.npz").read_bytes() == old_map  # refused before anything was written
+    # the earlier run's config.yaml put back: the map goes on with its own settings
+    (out / "config.yaml").write_text(old_config)
+    assert main(["run", "--out", str(out), "--resume", "--no-progress"]) == 0
+    assert "read 1 frames: 1 mapped (3 keyframes in all)" in capsys.readouterr().out
+
+
+def test_resume_takes_an_earlier_map_made_with_the_same_settings(tmp_path, capsys):
+    scene = _replica_scene(tmp_path / "scene", frames=3)
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out), "--max-frames", "2"]) == 0
+    _killed_run(["run", *_common(scene, out)])  # the same settings (--max-frames is not one)
+    capsys.readouterr()
+    assert main(["run", "--out", str(out), "--resume", "--no-progress"]) == 0
+    assert "read 1 frames: 1 mapped (3 keyframes in all)" in capsys.readouterr().out
+
+
+def test_a_resume_with_other_settings_killed_early_can_be_resumed_again(tmp_path, capsys):
+    """The run id, not the settings, says whose map it is: a resume may change settings (--set)."""
+    scene = _replica_scene(tmp_path / "scene", frames=3)
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out), "--max-frames", "2"]) == 0
+    run_id = (out / "run_id").read_text()
+    _killed_run(["run", *_common(scene, out), "--resume", "--set", "mapping.opt_iters=2"])
+    assert (out / "run_id").read_text() == run_id
+    capsys.readouterr()
+    assert main(["run", "--out", str(out), "--resume", "--no-progress"]) == 0
+    assert "read 1 frames: 1 mapped (3 keyframes in all)" in capsys.readouterr().out
+
+
+def test_the_run_id_check(tmp_path, caplog):
+    """resumed_run_id: a map of an older version (no record) is resumed as it always was; a run killed
+    between writing its id and its config.yaml leaves the earlier config.yaml, which the map matches."""
+    from ogscene3d.config import load_config
+    from ogscene3d.errors import DataError
+    from ogscene3d.mapping.source import resumed_run_id, start_run_dir
+
+    out = tmp_path / "run"
+    record = start_run_dir(out, load_config(None))
+    assert resumed_run_id(out, record) == record["run_id"]
+    assert resumed_run_id(out, {"path": "/x", "frames": 3}) is None
+    (out / "run_id").write_text("another run\n")
+    with caplog.at_level("INFO", logger="ogscene3d.mapping.source"):
+        assert resumed_run_id(out, record) == record["run_id"]
+    assert "mapped by an earlier run with the settings of" in caplog.text
+    start_run_dir(out, load_config(None, ["seed=1"]))
+    with pytest.raises(DataError, match="was not written by the run whose"):
+        resumed_run_id(out, record)
+    assert resumed_run_id(out, {"path": "/x", "frames": 3}) is None
+
+
+def test_resume_refuses_a_sequence_whose_mapped_frames_changed(tmp_path, capsys):
+    scene = _replica_scene(tmp_path / "scene", frames=4)
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out), "--max-frames", "2"]) == 0
+    removed = {p: p.read_bytes() for p in (scene / "results").glob("*00001.*")}
+    for p in removed:
+        p.unlink()  # frame 1, mapped: frame 3 is now at position 2, where the resume would read frame 2
+    capsys.readouterr()
+    assert main(["run", *_common(scene, out), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert f"{out / 'map.npz'}: the sequence changed since it was mapped" in err
+    assert "frame 1 of the run's selection was 'results/frame000001.jpg' and is now " in err
+    for p, data in removed.items():
+        p.write_bytes(data)
+    assert main(["run", *_common(scene, out), "--resume"]) == 0
+    assert "read 2 frames: 2 mapped (4 keyframes in all)" in capsys.readouterr().out
+
+
+def test_resume_maps_frames_added_after_the_mapped_ones(tmp_path, capsys):
+    scene = _replica_scene(tmp_path / "scene", frames=2)
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out)]) == 0
+    longer = _replica_scene(tmp_path / "longer", frames=3)
+    for name in ("results/frame000002.jpg", "results/depth000002.png", "traj.txt"):
+        (scene / name).write_bytes((longer / name).read_bytes())
+    for p in (longer / "segs").iterdir():
+        (scene / "segs" / p.name).write_bytes(p.read_bytes())
+    capsys.readouterr()
+    assert main(["run", *_common(scene, out), "--resume"]) == 0
+    assert "read 1 frames: 1 mapped (3 keyframes in all)" in capsys.readouterr().out
+
+
+def test_a_wrong_depth_scale_is_warned_about_once(tmp_path, caplog):
+    """Frames from a dataset: its warning, naming data.depth_scale, and not the mapper's as well (which
+    Frames given to the Mapper directly still get: test_mapping_mapper)."""
+    from ogscene3d.config import load_config
+    from ogscene3d.datasets import open_dataset
+    from ogscene3d.mapping.mapper import Mapper
+
+    scene = _replica_scene(tmp_path / "scene", frames=2)
+    cfg = load_config(None, ["graph.enabled=false", "mapping.opt_iters=1", "data.depth_scale=6.5535"])
+    mapper = Mapper(cfg, "cpu")
+    with caplog.at_level("WARNING"):
+        for frame in open_dataset(scene, config=cfg.data):  # the wall 2 km away
+            mapper.process(frame)
+    warned = [r.getMessage() for r in caplog.records if "implausible" in r.getMessage()]
+    assert len(warned) == 1 and "depth000000.png" in warned[0] and "data.depth_scale" in warned[0]
+
+
+def test_a_resume_bounded_short_of_the_map_keeps_the_names_of_the_frames_it_read(tmp_path, capsys):
+    scene = _replica_scene(tmp_path / "scene", frames=4)
+    depth = scene / "results" / "depth000002.png"
+    good = depth.read_bytes()
+    depth.write_bytes(b"not a png")
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out)]) == 2  # frames 0 and 1 saved on the way out
+    # reads no frame, but finishes and saves the map: still naming both frames it has read
+    assert main(["run", *_common(scene, out), "--resume", "--max-frames", "1"]) == 0
+    depth.write_bytes(good)
+    capsys.readouterr()
+    assert main(["run", *_common(scene, out), "--resume"]) == 0
+    assert "read 2 frames: 2 mapped (4 keyframes in all)" in capsys.readouterr().out

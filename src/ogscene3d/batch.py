@@ -280,9 +280,10 @@ def map_scene(
 
     mapper = Mapper(cfg, cfg.device)
     remove_run_temps(run_dir)
-    start_run_dir(run_dir, cfg)  # a scene stopped by a bad frame resumes with `run --resume --out`
+    # a scene stopped by a bad frame resumes with `run --resume --out`
+    run_record = start_run_dir(run_dir, cfg)
     mapper.set_checkpoint_dir(run_dir)
-    mapper.source = dataset_source(cfg, ds)
+    mapper.source = {**dataset_source(cfg, ds), **run_record}
     dev = mapper.device
     if dev.type == "cuda":
         torch.cuda.reset_peak_memory_stats(dev)

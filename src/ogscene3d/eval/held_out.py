@@ -2,7 +2,9 @@
 
 A run maps the frames its ``config.yaml`` selects (``data.start``, ``data.stride``, ``data.max_frames``) up to
 where it stopped: ``map.npz`` records that position (``mapper_next_index``, a position in the selection),
-which also covers a run bounded by ``run --max-frames`` (not in ``config.yaml``) or stopped early. Every
+which also covers a run bounded by ``run --max-frames`` (not in ``config.yaml``) or stopped early, and the
+selection's frames by name (``mapper_source``), so that frames added to or removed from the sequence since
+it was mapped, which would shift those positions, are refused rather than scored as held out. Every
 selected frame before that position counts as mapped, also one the mapper left out (a bad frame skipped
 under ``data.on_bad_frame: skip``, an untracked frame, a pose jump): held-out views are frames the mapper
 was never given.
@@ -68,8 +70,12 @@ class RunFrames:
         }
 
 
-def _mapped_count(run_dir: Path, num_selected: int, first_name: str, data: Any) -> tuple[int, str]:
-    """How many frames of the selection the run read, from ``map.npz``; the whole selection without one."""
+def _mapped_count(run_dir: Path, selection: Any, data: Any) -> tuple[int, str]:
+    """How many frames of ``selection`` (the run's, opened now) the run read, from ``map.npz``; the whole
+    selection without one."""
+    from ..mapping.source import frame_names, sequence_change
+
+    num_selected = len(selection)
     ckpt = run_dir / "map.npz"
     if not ckpt.is_file():
         return num_selected, "no map.npz: the whole selection is taken as mapped"
@@ -79,19 +85,41 @@ def _mapped_count(run_dir: Path, num_selected: int, first_name: str, data: Any) 
             source = json.loads(str(z["mapper_source"])) if "mapper_source" in z.files else {}
     except (KeyError, *NPZ_READ_ERRORS) as e:
         raise DataError(f"{ckpt}: cannot read how far the run got ({e})") from None
-    # the checkpoint names the selection's first frame: another one means config.yaml is not this map's
-    first = source.get("first")
-    if first is not None and first != first_name:
-        raise DataError(
-            f"{ckpt} was mapped from frames starting at {first!r}, but the run's config.yaml selects frames "
-            f"starting at {first_name!r}: cannot tell which frames the run mapped"
-        )
     # its next frame is a position in the selection it was mapped with (recorded since checkpoints say so)
     for key in ("start", "stride"):
         if key in source and source[key] != getattr(data, key):
             raise DataError(
                 f"{ckpt} was mapped with data.{key} {source[key]}, but the run's config.yaml says "
                 f"{getattr(data, key)}: cannot tell which frames the run mapped"
+            )
+    recorded = source.get("names")
+    if recorded is not None and nxt is not None:
+        # frames added to or removed from the sequence since would shift the positions nxt counts, and a
+        # frame the run mapped would be scored as a held-out view
+        current = frame_names(selection)
+        why = sequence_change(recorded, current, nxt)
+        if why is None and len(current) < nxt:
+            why = f"the run read {nxt} frames of its selection, which now holds {len(current)}"
+        if why is not None:
+            raise DataError(
+                f"{ckpt}: the sequence changed since the run mapped it ({why}): with frames added or "
+                f"removed, which frames of {selection.root} it mapped cannot be told; restore the sequence, "
+                "or map it again to hold frames out"
+            )
+    else:
+        # the checkpoint names the selection's first frame: another one means config.yaml is not this map's
+        first = source.get("first")
+        first_name = selection.records[0].name
+        if first is not None and first != first_name:
+            raise DataError(
+                f"{ckpt} was mapped from frames starting at {first!r}, but the run's config.yaml selects "
+                f"frames starting at {first_name!r}: cannot tell which frames the run mapped"
+            )
+        if recorded is None:
+            log.info(
+                "%s records no frame names (an older version): frames added to or removed from the sequence "
+                "since it was mapped cannot be told",
+                ckpt,
             )
     if nxt is None:
         return num_selected, "map.npz records no frame position (an older run): the whole selection is taken"
@@ -129,7 +157,7 @@ def run_frames(run_dir: str | Path, ds: Any) -> RunFrames:
     # the run's selection of the same folder, read by the same code the mapper used
     sel_cfg = dataclasses.replace(data, path=str(ds.root), segments_dir=None)
     selection = open_dataset(config=sel_cfg)
-    n_mapped, how = _mapped_count(run, len(selection), selection.records[0].name, data)
+    n_mapped, how = _mapped_count(run, selection, data)
     position = {rec.rgb_path: i for i, rec in enumerate(ds.records)}
     mapped = sorted(position[r.rgb_path] for r in selection.records[:n_mapped] if r.rgb_path in position)
     if len(mapped) < n_mapped:

@@ -16,7 +16,14 @@ from ..device import resolve_device
 from ..errors import DataError
 from ..tracking import add_poses_argument
 from .pose_jump import PoseJumpError
-from .source import check_same_source, dataset_source, record_data, remove_run_temps, start_run_dir
+from .source import (
+    check_same_source,
+    dataset_source,
+    record_data,
+    remove_run_temps,
+    resumed_run_id,
+    start_run_dir,
+)
 
 log = logging.getLogger(__name__)
 
@@ -26,7 +33,8 @@ def add_parser(subparsers) -> None:
         "run",
         help="map an RGB-D sequence into semantic Gaussians and a scene graph",
         description="Incremental semantic mapping (paper Sec. III). Writes gaussians.ply, map.npz (and "
-        "its memory views in map_memory/), graph.json, timings.json and config.yaml to --out. Without "
+        "its memory views in map_memory/), graph.json, timings.json, config.yaml and run_id (the run's id, "
+        "which --resume checks map.npz against) to --out. Without "
         "--data a synthetic scene is generated (in OUT/scene) from the config's `synthetic` section and "
         "mapped.",
     )
@@ -110,13 +118,21 @@ def run(args: argparse.Namespace) -> int:
     mapper = Mapper(cfg, cfg.device)
     mapper.set_checkpoint_dir(out)
     start = 0
+    run_id = None
     if args.resume:
         ckpt = out / "map.npz"
         if not ckpt.is_file():
             raise DataError(f"{ckpt}: --resume needs a checkpoint from an earlier run in --out")
         mapper.load_checkpoint(ckpt)
-        check_same_source(ckpt, mapper.source, source)
+        # first: with another run's config.yaml, the checks below would compare the map with the wrong data
+        run_id = resumed_run_id(out, mapper.source)
         start = mapper.next_index
+        check_same_source(ckpt, mapper.source, source, start)
+        recorded_names = mapper.source.get("names")
+        if recorded_names is not None and len(source["names"]) < start:
+            # a resume bounded short of where the map got (--max-frames): its checkpoint must still name every
+            # frame the map has read, for a later resume and eval --held-out
+            source["names"] = recorded_names[:start]
         log.info(
             "resuming at frame %d (%d frames mapped, %d keyframes, %d Gaussians)",
             start,
@@ -125,15 +141,15 @@ def run(args: argparse.Namespace) -> int:
             len(mapper.map),
         )
     elif (out / "map.npz").is_file():
-        # config.yaml is rewritten now, so a --resume after this run dies early would pair the old map
-        # with the new settings: say so while the old map can still be kept.
+        # config.yaml is rewritten now: should this run die before its first save, --resume refuses the old
+        # map beside the new settings (resumed_run_id), so say so while the old map can still be kept
         log.warning(
             "%s holds a map from an earlier run: this run replaces it at its first save (--resume continues "
             "that map instead; a new --out keeps it)",
             out,
         )
     mapper.source = source
-    start_run_dir(out, cfg)
+    source.update(start_run_dir(out, cfg, run_id))
 
     # bad frames raise, or are skipped with a warning under data.on_bad_frame: skip
     frames = ds.frames(start)

@@ -1,16 +1,20 @@
 """What a run's frames come from, recorded the same way by ``run``, ``run-batch`` and the live viewer: in
 ``config.yaml`` (``eval`` finds the ground truth there, ``run --resume`` the frames) and in the checkpoint
-(a resume refuses another sequence's frames)."""
+(a resume refuses another sequence's frames, or a map that another run's ``config.yaml`` now sits beside)."""
 
 from __future__ import annotations
 
+import hashlib
+import json
 import logging
+import uuid
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from ..atomic import remove_stale_temps
-from ..config import Config, save_config
+from ..atomic import atomic_write_text, remove_stale_temps
+from ..config import Config, config_to_dict, load_config, save_config
 from ..errors import DataError
 from .memory_files import remove_leftovers
 
@@ -24,10 +28,23 @@ def record_data(cfg: Config, data: str | Path, segments_dir: str | Path | None =
         cfg.data.segments_dir = str(Path(segments_dir).resolve())
 
 
-def dataset_source(cfg: Config, ds) -> dict:
+def frame_names(ds: Any) -> list[str]:
+    """The selected frames of ``ds`` in order, each as its rgb file below the dataset folder (a moved
+    dataset keeps them; a stem alone can repeat across the sequences of one folder)."""
+    root = Path(ds.root)
+    names = []
+    for rec in ds.records:
+        path = Path(rec.rgb_path)
+        names.append(path.relative_to(root).as_posix() if path.is_relative_to(root) else path.name)
+    return names
+
+
+def dataset_source(cfg: Config, ds: Any) -> dict:
     """The identity of the frames of ``ds`` (an opened dataset of ``cfg.data``), for ``Mapper.source``."""
     K = [round(float(v), 4) for v in np.asarray(ds.K).reshape(-1)]
-    # start and stride: a checkpoint's next frame is a position in this selection, which a resume must share
+    # start and stride: a checkpoint's next frame is a position in this selection, which a resume must share;
+    # names: which frames those positions were, so that frames added to or removed from the sequence since
+    # are found (by a resume and by eval --held-out) instead of shifting what counts as mapped
     return {
         "path": cfg.data.path,
         "frames": len(ds),
@@ -35,10 +52,25 @@ def dataset_source(cfg: Config, ds) -> dict:
         "K": K,
         "start": cfg.data.start,
         "stride": cfg.data.stride,
+        "names": frame_names(ds),
     }
 
 
-RUN_FILES = ("map.npz", "gaussians.ply", "graph.json", "timings.json", "config.yaml", "traj.txt")
+def sequence_change(recorded: list[str], current: list[str], count: int) -> str | None:
+    """How the frames at the first ``count`` positions of a selection (``current``, by
+    :func:`frame_names`) differ from those a map recorded reading there (``recorded``), in words; None
+    when they are the same frames, as far as ``current`` goes (a shorter selection is the caller's to
+    judge)."""
+    for i, (was, now) in enumerate(zip(recorded[:count], current[:count], strict=False)):
+        if was != now:
+            return f"frame {i} of the run's selection was {was!r} and is now {now!r}"
+    if len(recorded) < min(count, len(current)):
+        return f"the map names {len(recorded)} frames, but has read {count}"
+    return None
+
+
+RUN_ID_FILE = "run_id"
+RUN_FILES = ("map.npz", "gaussians.ply", "graph.json", "timings.json", "config.yaml", "traj.txt", RUN_ID_FILE)
 
 
 def remove_run_temps(out: Path) -> None:
@@ -51,16 +83,73 @@ def remove_run_temps(out: Path) -> None:
         log.info("removed %s, a killed checkpoint's leftover", f)
 
 
-def start_run_dir(out: Path, cfg: Config) -> None:
+def config_digest(cfg: Config) -> str:
+    """A digest of the settings ``cfg`` holds: the same for ``cfg`` and for its ``config.yaml`` read back
+    (YAML layout, comments and key order do not count)."""
+    return hashlib.sha256(json.dumps(config_to_dict(cfg), sort_keys=True).encode()).hexdigest()
+
+
+def _read_run_id(out: Path) -> str | None:
+    try:
+        return (out / RUN_ID_FILE).read_text().strip() or None
+    except OSError:
+        return None
+
+
+def start_run_dir(out: Path, cfg: Config, run_id: str | None = None) -> dict[str, str]:
     """Before the first frame (after a resume was accepted): write the config with the data it records, so
-    that a run stopped before its end can be resumed with its settings."""
+    that a run stopped before its end can be resumed with its settings, and beside it the run's id (new
+    unless given: a resume goes on with its map's). -> ``{"run_id", "config"}`` (the id and the settings'
+    digest) for ``Mapper.source``: each checkpoint then names the run it belongs to (see
+    :func:`resumed_run_id`).
+    """
     out.mkdir(parents=True, exist_ok=True)
+    run_id = run_id or uuid.uuid4().hex
+    # the id first: killed between the two writes, the old config.yaml is left with the new id, and an old map
+    # is then refused (ids differ) unless it was made with that very config.yaml, instead of the other way
+    # round, where the old id would vouch for an old map beside a new config.yaml
+    atomic_write_text(out / RUN_ID_FILE, run_id + "\n")
     save_config(cfg, out / "config.yaml")
+    return {"run_id": run_id, "config": config_digest(cfg)}
 
 
-def check_same_source(ckpt: Path, recorded: dict, current: dict) -> None:
-    """Refuse to resume a map with frames of another sequence or camera; a moved dataset (same frames) is
-    fine."""
+def resumed_run_id(out: Path, recorded: dict) -> str | None:
+    """The run id a resume of ``out`` goes on with: that of the run that wrote ``out/map.npz`` (whose
+    ``Mapper.source`` is ``recorded``); None for a map that records none (an older version's: it is
+    resumed unchecked, as it always was).
+
+    Raises:
+        DataError: the map was written by another run than the one whose ``config.yaml`` is in ``out``
+            (a run started there after the map was saved, then stopped before saving its own), and with
+            other settings: resuming would continue the earlier map with the later run's settings.
+    """
+    map_id, map_config = recorded.get("run_id"), recorded.get("config")
+    if map_id is None and map_config is None:
+        return None
+    if map_id is not None and map_id == _read_run_id(out):
+        return map_id
+    saved = out / "config.yaml"
+    if not saved.is_file():  # no other run's settings to pair the map with
+        return map_id
+    if map_config == config_digest(load_config(saved)):
+        # another run wrote config.yaml, but with this map's very settings: resuming the map is harmless
+        log.info(
+            "%s was mapped by an earlier run with the settings of %s: resuming it", out / "map.npz", saved
+        )
+        return map_id
+    raise DataError(
+        f"{out / 'map.npz'} was not written by the run whose {saved} is there (run ids and settings "
+        f"differ): a later run started in {out} and stopped before saving a map, so the map is an earlier "
+        "run's, made with other settings, and resuming would go on with the later run's. Run again without "
+        "--resume to map with the settings in config.yaml (this replaces the earlier map), or, to go on with "
+        "the earlier map, put its run's config.yaml back first"
+    )
+
+
+def check_same_source(ckpt: Path, recorded: dict, current: dict, mapped: int = 0) -> None:
+    """Refuse to resume a map with frames of another sequence or camera, or of a sequence whose first
+    ``mapped`` frames (those the map has read) changed; a moved dataset (same frames) is fine, and so are
+    frames added after the mapped ones."""
     if recorded.get("K") is not None and not np.allclose(recorded["K"], current["K"], atol=1e-3):
         raise DataError(
             f"{ckpt} was mapped with intrinsics {recorded['K']}, these frames have {current['K']} (another "
@@ -76,19 +165,30 @@ def check_same_source(ckpt: Path, recorded: dict, current: dict) -> None:
             f"{ckpt} was mapped with {was}; this run selects {now}: a resume needs the run's frame selection "
             "(drop the --set, or map into a new --out)"
         )
-    if not recorded or recorded.get("path") == current["path"]:
-        return
-    same = recorded.get("frames") == current["frames"] and recorded.get("first") == current["first"]
-    if same:
+    if recorded and recorded.get("path") != current["path"]:
+        same = recorded.get("frames") == current["frames"] and recorded.get("first") == current["first"]
+        if not same:
+            raise DataError(
+                f"{ckpt} was mapped from {recorded['path']} ({recorded.get('frames')} frames, first "
+                f"{recorded.get('first')!r}), not from {current['path']} ({current['frames']} frames, first "
+                f"{current['first']!r}): resume with the same --data, or map the other sequence into a new "
+                "--out"
+            )
         log.warning(
             "%s was mapped from %s; resuming with the same frames from %s",
             ckpt,
             recorded["path"],
             current["path"],
         )
+    names = recorded.get("names")
+    if names is None:  # an older checkpoint: which frames it read is not recorded
         return
-    raise DataError(
-        f"{ckpt} was mapped from {recorded['path']} ({recorded.get('frames')} frames, first "
-        f"{recorded.get('first')!r}), not from {current['path']} ({current['frames']} frames, first "
-        f"{current['first']!r}): resume with the same --data, or map the other sequence into a new --out"
-    )
+    # the resume reads on from position `mapped`: a frame added or removed before it would shift the frames
+    # read next (one mapped twice, or never) without anything failing
+    why = sequence_change(names, current["names"], mapped)
+    if why is not None:
+        raise DataError(
+            f"{ckpt}: the sequence changed since it was mapped ({why}): with frames added or removed among "
+            f"the {mapped} the map has read, its position no longer names the next frame; map the sequence "
+            "into a new --out, or restore its frames"
+        )
