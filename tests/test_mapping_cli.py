@@ -431,3 +431,16 @@ def test_a_resume_bounded_short_of_the_map_keeps_the_names_of_the_frames_it_read
     capsys.readouterr()
     assert main(["run", *_common(scene, out), "--resume"]) == 0
     assert "read 2 frames: 2 mapped (4 keyframes in all)" in capsys.readouterr().out
+
+
+def test_resume_of_a_map_read_with_the_other_pixel_centres_names_the_setting(tmp_path, capsys):
+    """A map made before data.pixel_centers shifted this layout's intrinsics (here: forced with --set) is
+    refused with the setting that resumes it, and resumes with that setting."""
+    scene = _replica_scene(tmp_path / "scene", frames=2)
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out), "--max-frames", "1"]) == 0
+    capsys.readouterr()
+    assert main(["run", *_common(scene, out), "--resume", "--set", "data.pixel_centers=integer"]) == 2
+    err = capsys.readouterr().err
+    assert "shifts this layout's by half a pixel" in err and "data.pixel_centers=half" in err
+    assert main(["run", *_common(scene, out), "--resume", "--set", "data.pixel_centers=half"]) == 0

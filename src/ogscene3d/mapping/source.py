@@ -151,6 +151,14 @@ def check_same_source(ckpt: Path, recorded: dict, current: dict, mapped: int = 0
     ``mapped`` frames (those the map has read) changed; a moved dataset (same frames) is fine, and so are
     frames added after the mapped ones."""
     if recorded.get("K") is not None and not np.allclose(recorded["K"], current["K"], atol=1e-3):
+        diff = np.asarray(current["K"], np.float64) - np.asarray(recorded["K"], np.float64)
+        if np.allclose(diff, [0, 0, 0.5, 0, 0, 0.5, 0, 0, 0], atol=1e-3):
+            # ogscene3d before data.pixel_centers read these layouts' intrinsics unshifted
+            raise DataError(
+                f"{ckpt} was mapped with intrinsics {recorded['K']}, read as they are; this version shifts "
+                "this layout's by half a pixel (data.pixel_centers, see the README): resume with --set "
+                "data.pixel_centers=half, or map into a new --out"
+            )
         raise DataError(
             f"{ckpt} was mapped with intrinsics {recorded['K']}, these frames have {current['K']} (another "
             "camera or image size): map them into a new --out"
