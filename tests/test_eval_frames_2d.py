@@ -420,3 +420,21 @@ def test_shared_labelfusion_sample_end_to_end(shared_data, tmp_path, monkeypatch
     assert 0.0 < v["miou"] <= 1.0 and 0.0 < v["overall_acc"] <= 1.0
     print(json.dumps({k: v[k] for k in ("miou", "fmiou", "macc", "overall_acc")}))
     print({c["name"]: c["iou"] for c in v["per_class"]})
+
+
+def test_views_of_a_run_mapped_before_pixel_centres_use_the_camera_it_was_mapped_with(tmp_path):
+    """A label-fusion run whose map.npz records the colour intrinsics unshifted (mapped before
+    data.pixel_centers) is rendered with them; one mapped with today's K, or without a map, with today's."""
+    from ogscene3d.config import Config, save_config
+
+    seq = make_labelfusion(tmp_path / "shelf")
+    run = tmp_path / "run"
+    run.mkdir()
+    cfg = Config()
+    cfg.data.path = str(seq)
+    save_config(cfg, run / "config.yaml")
+    np.testing.assert_allclose(open_view_dataset(seq, run).K, K)
+    np.savez(run / "map.npz", mapper_source=json.dumps({"K": K_FILE.ravel().tolist()}))
+    np.testing.assert_allclose(open_view_dataset(seq, run).K, K_FILE)
+    np.savez(run / "map.npz", mapper_source=json.dumps({"K": K.ravel().tolist()}))
+    np.testing.assert_allclose(open_view_dataset(seq, run).K, K)

@@ -101,7 +101,17 @@ def open_view_dataset(scene_dir: str | Path, run_dir: str | Path | None = None) 
             except ConfigError as e:  # e.g. written by another version: the files' own settings then
                 log.warning("%s; rendering with %s's own camera settings", e, scene_dir)
     cfg.path = str(scene_dir)
-    return open_dataset(config=cfg)
+    ds = open_dataset(config=cfg)
+    if run_dir is not None and cfg.pixel_centers == "auto" and ds.pixel_centers == "integer":
+        from ..mapping.source import is_half_pixel_shift, mapped_intrinsics
+
+        mapped_K = mapped_intrinsics(Path(run_dir) / "map.npz")
+        if mapped_K is not None and is_half_pixel_shift(mapped_K, ds.K):
+            # mapped before data.pixel_centers shifted this layout's intrinsics: render with the run's camera
+            log.info("%s was mapped with %s's intrinsics unshifted (data.pixel_centers=half): rendering so",
+                     run_dir, scene_dir)  # fmt: skip
+            ds = open_dataset(config=dataclasses.replace(cfg, pixel_centers="half"))
+    return ds
 
 
 def _sequence_folder(path: str | Path) -> Path:

@@ -16,6 +16,7 @@ import numpy as np
 from ..atomic import atomic_write_text, remove_stale_temps
 from ..config import Config, config_to_dict, load_config, save_config
 from ..errors import DataError
+from ..gaussians import NPZ_READ_ERRORS
 from .memory_files import remove_leftovers
 
 log = logging.getLogger(__name__)
@@ -146,14 +147,31 @@ def resumed_run_id(out: Path, recorded: dict) -> str | None:
     )
 
 
+def is_half_pixel_shift(mapped_K: Any, K: Any) -> bool:
+    """Whether ``K`` is ``mapped_K`` (3x3 or 9 values each) shifted by +0.5 pixel: a calibrated-sensor
+    layout's intrinsics, which ogscene3d read unshifted before ``data.pixel_centers``."""
+    diff = np.asarray(K, np.float64).reshape(-1) - np.asarray(mapped_K, np.float64).reshape(-1)
+    return bool(np.allclose(diff, [0, 0, 0.5, 0, 0, 0.5, 0, 0, 0], atol=1e-3))
+
+
+def mapped_intrinsics(ckpt: Path) -> list[float] | None:
+    """The 9 values of the K a checkpoint's frames were mapped with (None: not recorded or unreadable)."""
+    try:
+        with np.load(ckpt, allow_pickle=False) as z:
+            if "mapper_source" not in z.files:
+                return None
+            K = json.loads(str(z["mapper_source"])).get("K")
+    except (KeyError, AttributeError, *NPZ_READ_ERRORS):
+        return None
+    return K if isinstance(K, list) and len(K) == 9 else None
+
+
 def check_same_source(ckpt: Path, recorded: dict, current: dict, mapped: int = 0) -> None:
     """Refuse to resume a map with frames of another sequence or camera, or of a sequence whose first
     ``mapped`` frames (those the map has read) changed; a moved dataset (same frames) is fine, and so are
     frames added after the mapped ones."""
     if recorded.get("K") is not None and not np.allclose(recorded["K"], current["K"], atol=1e-3):
-        diff = np.asarray(current["K"], np.float64) - np.asarray(recorded["K"], np.float64)
-        if np.allclose(diff, [0, 0, 0.5, 0, 0, 0.5, 0, 0, 0], atol=1e-3):
-            # ogscene3d before data.pixel_centers read these layouts' intrinsics unshifted
+        if is_half_pixel_shift(recorded["K"], current["K"]):
             raise DataError(
                 f"{ckpt} was mapped with intrinsics {recorded['K']}, read as they are; this version shifts "
                 "this layout's by half a pixel (data.pixel_centers, see the README): resume with --set "
