@@ -438,3 +438,45 @@ def test_views_of_a_run_mapped_before_pixel_centres_use_the_camera_it_was_mapped
     np.testing.assert_allclose(open_view_dataset(seq, run).K, K_FILE)
     np.savez(run / "map.npz", mapper_source=json.dumps({"K": K.ravel().tolist()}))
     np.testing.assert_allclose(open_view_dataset(seq, run).K, K)
+
+
+def test_a_scannet_map_of_colour_intrinsics_made_before_pixel_centres_is_recognised(tmp_path):
+    """ScanNet's colour K rescaled to the depth size: today's differs from the one read before
+    data.pixel_centers by half a pixel times the scale (here 0.25 px), not by 0.5; eval still renders such a
+    map with the camera it was mapped with, and --resume still names the setting that resumes it."""
+    from ogscene3d.config import Config, DataConfig, save_config
+    from ogscene3d.mapping.source import check_same_source, unshifted_intrinsics
+
+    seq = make_scannet(tmp_path / "scans" / "scene0000_00")
+    (seq / "intrinsic" / "intrinsic_depth.txt").unlink()
+    half = np.array([[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]])
+    K_colour = np.diag([2.0, 2.0, 1.0]) @ K - half  # the camera at the colour size, pixel centres from 0
+    np.savetxt(
+        seq / "intrinsic" / "intrinsic_color.txt", np.pad(K_colour, ((0, 1), (0, 1))) + np.diag([0, 0, 0, 1])
+    )
+    ds = open_dataset(seq)
+    np.testing.assert_allclose(ds.K, K)
+    before = K - half / 2  # the colour K scaled as it is
+    np.testing.assert_allclose(unshifted_intrinsics(ds), before.ravel())
+    run = tmp_path / "run"
+    run.mkdir()
+    cfg = Config()
+    cfg.data.path = str(seq)
+    save_config(cfg, run / "config.yaml")
+    np.savez(run / "map.npz", mapper_source=json.dumps({"K": before.ravel().tolist()}))
+    np.testing.assert_allclose(open_view_dataset(seq, run).K, before)
+    current = {"K": ds.K.ravel().tolist()}
+    with pytest.raises(DataError, match="resume with --set data.pixel_centers=half"):
+        check_same_source(
+            run / "map.npz", {"K": before.ravel().tolist()}, current, 0, lambda: unshifted_intrinsics(ds)
+        )
+    other = (before + half / 5).ravel().tolist()  # another camera: not taken for the old reading
+    np.savez(run / "map.npz", mapper_source=json.dumps({"K": other}))
+    np.testing.assert_allclose(open_view_dataset(seq, run).K, K)
+    with pytest.raises(DataError, match="another camera or image size"):
+        check_same_source(run / "map.npz", {"K": other}, current, 0, lambda: unshifted_intrinsics(ds))
+    # an explicit data.pixel_centers has nothing to undo; label-fusion's files are shifted by 0.5
+    assert unshifted_intrinsics(open_dataset(seq, config=DataConfig(pixel_centers="integer"))) is None
+    np.testing.assert_allclose(
+        unshifted_intrinsics(open_dataset(make_labelfusion(tmp_path / "lf"))), K_FILE.ravel()
+    )

@@ -103,14 +103,19 @@ def open_view_dataset(scene_dir: str | Path, run_dir: str | Path | None = None) 
     cfg.path = str(scene_dir)
     ds = open_dataset(config=cfg)
     if run_dir is not None and cfg.pixel_centers == "auto" and ds.pixel_centers == "integer":
-        from ..mapping.source import is_half_pixel_shift, mapped_intrinsics
+        from ..mapping.source import mapped_intrinsics
 
         mapped_K = mapped_intrinsics(Path(run_dir) / "map.npz")
-        if mapped_K is not None and is_half_pixel_shift(mapped_K, ds.K):
-            # mapped before data.pixel_centers shifted this layout's intrinsics: render with the run's camera
-            log.info("%s was mapped with %s's intrinsics unshifted (data.pixel_centers=half): rendering so",
-                     run_dir, scene_dir)  # fmt: skip
-            ds = open_dataset(config=dataclasses.replace(cfg, pixel_centers="half"))
+        if mapped_K is not None and not np.allclose(mapped_K, np.asarray(ds.K).reshape(-1), atol=1e-3):
+            unshifted = open_dataset(config=dataclasses.replace(cfg, pixel_centers="half"))
+            if np.allclose(mapped_K, np.asarray(unshifted.K).reshape(-1), atol=1e-3):
+                # mapped before data.pixel_centers shifted this layout's intrinsics: render with its camera
+                log.info(
+                    "%s was mapped with %s's intrinsics unshifted (data.pixel_centers=half): rendering so",
+                    run_dir,
+                    scene_dir,
+                )
+                ds = unshifted
     return ds
 
 

@@ -23,6 +23,7 @@ from .source import (
     remove_run_temps,
     resumed_run_id,
     start_run_dir,
+    unshifted_intrinsics,
 )
 
 log = logging.getLogger(__name__)
@@ -127,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
         # first: with another run's config.yaml, the checks below would compare the map with the wrong data
         run_id = resumed_run_id(out, mapper.source)
         start = mapper.next_index
-        check_same_source(ckpt, mapper.source, source, start)
+        check_same_source(ckpt, mapper.source, source, start, unshifted=lambda: unshifted_intrinsics(ds))
         recorded_names = mapper.source.get("names")
         if recorded_names is not None and len(source["names"]) < start:
             # a resume bounded short of where the map got (--max-frames): its checkpoint must still name every

@@ -4,10 +4,12 @@
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import logging
 import uuid
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -154,6 +156,24 @@ def is_half_pixel_shift(mapped_K: Any, K: Any) -> bool:
     return bool(np.allclose(diff, [0, 0, 0.5, 0, 0, 0.5, 0, 0, 0], atol=1e-3))
 
 
+def unshifted_intrinsics(ds: Any) -> list[float] | None:
+    """The 9 values of the K that ogscene3d read for the frames of ``ds`` (an opened dataset) before
+    ``data.pixel_centers``: its layout's intrinsics as they are (``pixel_centers=half``; ScanNet's colour K
+    rescaled to the depth size then differs from today's by less than half a pixel). None when ``ds`` was
+    read so already (a layout read as it is, or an explicit ``data.pixel_centers``)."""
+    config = getattr(ds, "config", None)
+    if config is None or config.pixel_centers != "auto" or getattr(ds, "pixel_centers", None) != "integer":
+        return None
+    from ..datasets import open_dataset
+
+    half = dataclasses.replace(config, pixel_centers="half", segments_dir=None)
+    try:
+        K = open_dataset(ds.root, kind=ds.kind, max_frames=1, config=half).K
+    except DataError:
+        return None
+    return [round(float(v), 4) for v in np.asarray(K).reshape(-1)]
+
+
 def mapped_intrinsics(ckpt: Path) -> list[float] | None:
     """The 9 values of the K a checkpoint's frames were mapped with (None: not recorded or unreadable)."""
     try:
@@ -166,12 +186,18 @@ def mapped_intrinsics(ckpt: Path) -> list[float] | None:
     return K if isinstance(K, list) and len(K) == 9 else None
 
 
-def check_same_source(ckpt: Path, recorded: dict, current: dict, mapped: int = 0) -> None:
+def check_same_source(
+    ckpt: Path, recorded: dict, current: dict, mapped: int = 0, unshifted: Callable[[], Any] | None = None
+) -> None:
     """Refuse to resume a map with frames of another sequence or camera, or of a sequence whose first
     ``mapped`` frames (those the map has read) changed; a moved dataset (same frames) is fine, and so are
-    frames added after the mapped ones."""
+    frames added after the mapped ones. ``unshifted``: the frames' K as read before ``data.pixel_centers``
+    (:func:`unshifted_intrinsics`), asked for only when the map's K is not today's."""
     if recorded.get("K") is not None and not np.allclose(recorded["K"], current["K"], atol=1e-3):
-        if is_half_pixel_shift(recorded["K"], current["K"]):
+        was = unshifted() if unshifted is not None else None
+        if is_half_pixel_shift(recorded["K"], current["K"]) or (
+            was is not None and np.allclose(recorded["K"], was, atol=1e-3)
+        ):
             raise DataError(
                 f"{ckpt} was mapped with intrinsics {recorded['K']}, read as they are; this version shifts "
                 "this layout's by half a pixel (data.pixel_centers, see the README): resume with --set "
