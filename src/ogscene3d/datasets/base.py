@@ -214,8 +214,9 @@ class RGBDDataset:
     # the class id a layout's class maps use for "no class", which no class table names (None: every id may)
     void_class_id: int | None = None
     depth_scale_default = 1000.0
-    # the convention of the intrinsics a layout reads (see DataConfig.pixel_centers); every supported
-    # layout's files count pixel centres from 0, as OpenCV calibrations do
+    # the convention of the intrinsics a layout reads (see DataConfig.pixel_centers): the calibrated-sensor
+    # layouts' files count pixel centres from 0, as OpenCV calibrations do; Replica, synthetic and
+    # Semantic-NeRF read theirs as they are ("half")
     pixel_centers_default = "integer"
     depth_format_default = "linear"
     min_depth_default = 0.0
