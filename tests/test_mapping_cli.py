@@ -444,3 +444,40 @@ def test_resume_of_a_map_read_with_the_other_pixel_centres_names_the_setting(tmp
     err = capsys.readouterr().err
     assert "shifts this layout's by half a pixel" in err and "data.pixel_centers=half" in err
     assert main(["run", *_common(scene, out), "--resume", "--set", "data.pixel_centers=half"]) == 0
+
+
+def test_a_save_outside_a_run_leaves_no_earlier_runs_id_to_vouch_for_its_config(tmp_path, capsys):
+    """The live viewer saves with Mapper.save, whose map names no run: stopped between its config.yaml and
+    its map.npz in a run's folder, the run's id left there would pair the run's map with the viewer's
+    settings on --resume."""
+    from ogscene3d.config import load_config
+    from ogscene3d.datasets import open_dataset
+    from ogscene3d.mapping.mapper import Mapper
+    from ogscene3d.mapping.source import dataset_source, record_data
+
+    scene = _replica_scene(tmp_path / "scene", frames=3)
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out), "--max-frames", "2"]) == 0
+    cfg = load_config(None, ["graph.enabled=false", "mapping.opt_iters=2", "mapping.knn_radius=0.1"])
+    record_data(cfg, scene, scene / "segs")
+    ds = open_dataset(config=cfg.data)
+    mapper = Mapper(cfg, "cpu")
+    mapper.source = dataset_source(cfg, ds)  # as ogscene3d-live sets it
+    for frame in ds:
+        mapper.process(frame)
+    mapper.finalize()
+
+    def full(self, path):
+        raise OSError("no space left on device")
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(Mapper, "save_checkpoint", full)
+        with pytest.raises(OSError):
+            mapper.save(out)
+    assert "opt_iters: 2" in (out / "config.yaml").read_text() and not (out / "run_id").exists()
+    capsys.readouterr()
+    assert main(["run", "--out", str(out), "--resume", "--no-progress"]) == 2
+    assert "was not written by the run whose" in capsys.readouterr().err
+    # saved in full, the viewer's map (no run recorded) resumes, as before
+    mapper.save(out)
+    assert main(["run", "--out", str(out), "--resume", "--no-progress"]) == 0

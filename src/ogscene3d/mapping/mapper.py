@@ -867,9 +867,17 @@ class Mapper:
     def save(self, out_dir: str | Path) -> Path:
         """Write the run directory: gaussians.ply, map.npz (with its memory views in map_memory/),
         graph.json, timings.json, config.yaml, and under odometry traj.txt (the tracked poses, one row-major
-        c2w 4x4 per frame read)."""
+        c2w 4x4 per frame read). Saved outside a run that records its id (``source["run_id"]``), an earlier
+        run's ``run_id`` file there is removed."""
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
+        if "run_id" not in self.source:
+            from .source import RUN_ID_FILE
+
+            # saved outside a run that names itself (the live viewer, the ablation runner): an earlier run's
+            # id left here would vouch for this config.yaml beside that run's map.npz should this save stop
+            # before its map.npz, and --resume would go on with the old map and these settings
+            (out / RUN_ID_FILE).unlink(missing_ok=True)
         self.map.export_ply(out / "gaussians.ply")
         save_config(self.config, out / "config.yaml")
         timings = self.timings.as_dict()
