@@ -481,3 +481,26 @@ def test_a_save_outside_a_run_leaves_no_earlier_runs_id_to_vouch_for_its_config(
     # saved in full, the viewer's map (no run recorded) resumes, as before
     mapper.save(out)
     assert main(["run", "--out", str(out), "--resume", "--no-progress"]) == 0
+
+
+def test_an_older_map_resumed_short_of_where_it_got_is_resumed_again(tmp_path, capsys):
+    """A map.npz of an older version names no frames: a resume bounded by --max-frames before its next frame
+    names only those it selected, fewer than the map has read, which read as frames removed since."""
+    scene = _replica_scene(tmp_path / "scene", frames=4)
+    depth = scene / "results" / "depth000002.png"
+    good = depth.read_bytes()
+    depth.write_bytes(b"not a png")
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out)]) == 2  # frames 0 and 1 saved on the way out
+    with np.load(out / "map.npz", allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    source = json.loads(str(arrays["mapper_source"]))
+    for key in ("names", "run_id", "config"):  # what an older version recorded
+        del source[key]
+    arrays["mapper_source"] = np.array(json.dumps(source))
+    np.savez(out / "map.npz", **arrays)
+    assert main(["run", *_common(scene, out), "--resume", "--max-frames", "1"]) == 0
+    depth.write_bytes(good)
+    capsys.readouterr()
+    assert main(["run", *_common(scene, out), "--resume"]) == 0
+    assert "read 2 frames: 2 mapped (4 keyframes in all)" in capsys.readouterr().out

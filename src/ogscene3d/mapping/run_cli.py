@@ -130,10 +130,14 @@ def run(args: argparse.Namespace) -> int:
         start = mapper.next_index
         check_same_source(ckpt, mapper.source, source, start, unshifted=lambda: unshifted_intrinsics(ds))
         recorded_names = mapper.source.get("names")
-        if recorded_names is not None and len(source["names"]) < start:
+        if len(source["names"]) < start:
             # a resume bounded short of where the map got (--max-frames): its checkpoint must still name every
-            # frame the map has read, for a later resume and eval --held-out
-            source["names"] = recorded_names[:start]
+            # frame the map has read, for a later resume and eval --held-out; a map of an older version names
+            # none, and then neither does this one (a shorter list would read as frames removed since)
+            if recorded_names is not None:
+                source["names"] = recorded_names[:start]
+            else:
+                del source["names"]
         log.info(
             "resuming at frame %d (%d frames mapped, %d keyframes, %d Gaussians)",
             start,
