@@ -136,6 +136,10 @@ def test_intrinsics_from_a_90_degree_field_of_view(tmp_path):
     # Semantic-NeRF's 320, 320, 319.5, 239.5 with pixel centres at integers = ours at +0.5
     np.testing.assert_allclose(ds.K, [[320, 0, 320], [0, 320, 240], [0, 0, 1]])
     assert (ds.camera.width, ds.camera.height) == (640, 480)
+    # a convention asked for changes how given intrinsics are read, not the camera the field of view fixes
+    for conv in ("integer", "half"):
+        same = open_dataset(tmp_path / "big", config=DataConfig(pixel_centers=conv))
+        np.testing.assert_allclose(same.K, ds.K)
     over = open_dataset(tmp_path / "big", config=DataConfig(intrinsics=[300.0, 301.0, 310.0, 230.0]))
     np.testing.assert_allclose(over.K[:2], [[300, 0, 310], [0, 301, 230]])
 

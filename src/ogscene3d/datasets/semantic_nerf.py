@@ -197,6 +197,9 @@ class SemanticNeRFDataset(RGBDDataset):
             if first is not None:  # none at all: the base class reports the missing files
                 h, w = read_depth_raw(first.depth_path).shape
                 K = hfov_intrinsics(w, h)
+                if self.read_pixel_centers(config) == "integer":
+                    # the field of view fixes the camera: a convention asked for only says how to write it
+                    K[:2, 2] -= 0.5
         info = find_class_info(root)
         self._class_names = read_class_names(info) if info is not None and labels else None
         self.class_info = info
