@@ -150,6 +150,9 @@ def test_resume_goes_on_with_the_runs_own_data_and_settings(tmp_path, capsys):
 def test_resume_refuses_another_sequence(tmp_path, capsys):
     scene = _replica_scene(tmp_path / "scene", frames=2)
     other = _replica_scene(tmp_path / "other", frames=3)
+    # another recording of the same layout: the same frame names, other images
+    first = other / "results" / "frame000000.jpg"
+    cv2.imwrite(str(first), 255 - cv2.imread(str(first)))
     out = tmp_path / "run"
     assert main(["run", *_common(scene, out)]) == 0
     capsys.readouterr()
@@ -160,6 +163,19 @@ def test_resume_refuses_another_sequence(tmp_path, capsys):
     moved = tmp_path / "moved"
     scene.rename(moved)
     assert main(["run", *_common(moved, out), "--resume"]) == 0
+
+
+def test_resume_of_a_bounded_run_from_a_moved_sequence(tmp_path, capsys):
+    """A run stopped by --max-frames resumes from its sequence moved elsewhere: the frame count it recorded
+    was the bounded selection's, so the first frame's bytes tell that the sequence is the same."""
+    scene = _replica_scene(tmp_path / "scene", frames=3)
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out), "--max-frames", "1"]) == 0
+    moved = tmp_path / "moved"
+    scene.rename(moved)
+    capsys.readouterr()
+    assert main(["run", *_common(moved, out), "--resume"]) == 0
+    assert json.loads((out / "timings.json").read_text())["counts"]["frames"] == 3
 
 
 def test_resume_refuses_another_frame_selection(tmp_path, capsys):

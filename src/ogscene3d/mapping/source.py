@@ -56,7 +56,17 @@ def dataset_source(cfg: Config, ds: Any) -> dict:
         "start": cfg.data.start,
         "stride": cfg.data.stride,
         "names": frame_names(ds),
+        "first_digest": file_digest(ds.records[0].rgb_path),
     }
+
+
+def file_digest(path: Path) -> str | None:
+    """SHA-256 of a file's bytes (None when it cannot be read): what a moved sequence is recognised by, as
+    the frame names are relative to the dataset folder and the same in every sequence of a layout."""
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError:
+        return None
 
 
 def sequence_change(recorded: list[str], current: list[str], count: int) -> str | None:
@@ -218,7 +228,12 @@ def check_same_source(
             "(drop the --set, or map into a new --out)"
         )
     if recorded and recorded.get("path") != current["path"]:
-        same = recorded.get("frames") == current["frames"] and recorded.get("first") == current["first"]
+        same = recorded.get("first") == current["first"]
+        if recorded.get("first_digest") and current.get("first_digest"):
+            # the first frame's bytes tell a moved sequence from another one, whatever --max-frames bounded
+            same = same and recorded["first_digest"] == current["first_digest"]
+        else:  # an older checkpoint: the frame count has to tell
+            same = same and recorded.get("frames") == current["frames"]
         if not same:
             raise DataError(
                 f"{ckpt} was mapped from {recorded['path']} ({recorded.get('frames')} frames, first "
