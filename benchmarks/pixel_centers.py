@@ -25,6 +25,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import run_main  # noqa: E402
 
+from ogscene3d.camera import Camera  # noqa: E402
 from ogscene3d.datasets import open_dataset  # noqa: E402
 from ogscene3d.frame import Frame  # noqa: E402
 
@@ -32,12 +33,9 @@ from ogscene3d.frame import Frame  # noqa: E402
 def depth_errors(fi: Frame, fj: Frame, K: np.ndarray, max_error: float) -> np.ndarray:
     """|depth of frame i's points in frame j - frame j's depth there| (metres), over the points j sees."""
     h, w = fi.depth.shape
-    u, v = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
-    d = fi.depth.astype(np.float64)
-    m = d > 0
-    cam = np.stack([(u - K[0, 2]) / K[0, 0] * d, (v - K[1, 2]) / K[1, 1] * d, d, np.ones_like(d)], -1)[m]
+    pts = Camera.from_K(K, w, h).backproject(fi.depth)[fi.depth > 0].astype(np.float64)
     to_j = np.linalg.inv(fj.pose.astype(np.float64)) @ fi.pose.astype(np.float64)
-    q = cam @ to_j.T
+    q = pts @ to_j[:3, :3].T + to_j[:3, 3]
     z = q[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
         # image coordinates with pixel centres at integers, for the bilinear lookup
