@@ -341,6 +341,23 @@ def test_resume_refuses_a_map_beside_a_later_runs_config(tmp_path, capsys):
     assert "read 1 frames: 1 mapped (3 keyframes in all)" in capsys.readouterr().out
 
 
+def test_resume_of_a_map_beside_a_later_runs_config_takes_its_settings_by_config(tmp_path, capsys):
+    """The earlier run's settings passed with --config instead of put back into --out."""
+    scene = _replica_scene(tmp_path / "scene", frames=3)
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out), "--max-frames", "2"]) == 0
+    old = tmp_path / "old.yaml"
+    old.write_text((out / "config.yaml").read_text())
+    _killed_run(["run", *_common(scene, out), "--set", "mapping.opt_iters=2"])
+    capsys.readouterr()
+    assert main(["run", "--out", str(out), "--resume", "--no-progress", "--config", str(old),
+                 "--set", "mapping.opt_iters=2"]) == 2  # fmt: skip
+    assert "pass it with --config" in capsys.readouterr().err
+    assert main(["run", "--out", str(out), "--resume", "--no-progress", "--config", str(old)]) == 0
+    assert "read 1 frames: 1 mapped (3 keyframes in all)" in capsys.readouterr().out
+    assert (out / "config.yaml").read_text() == old.read_text()
+
+
 def test_resume_takes_an_earlier_map_made_with_the_same_settings(tmp_path, capsys):
     scene = _replica_scene(tmp_path / "scene", frames=3)
     out = tmp_path / "run"
@@ -382,6 +399,9 @@ def test_the_run_id_check(tmp_path, caplog):
     start_run_dir(out, load_config(None, ["seed=1"]))
     with pytest.raises(DataError, match="was not written by the run whose"):
         resumed_run_id(out, record)
+    with pytest.raises(DataError, match="was not written by the run whose"):
+        resumed_run_id(out, record, load_config(None, ["seed=2"]))
+    assert resumed_run_id(out, record, load_config(None)) == record["run_id"]  # the map's own settings
     assert resumed_run_id(out, {"path": "/x", "frames": 3}) is None
 
 

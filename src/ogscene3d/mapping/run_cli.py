@@ -126,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
             raise DataError(f"{ckpt}: --resume needs a checkpoint from an earlier run in --out")
         mapper.load_checkpoint(ckpt)
         # first: with another run's config.yaml, the checks below would compare the map with the wrong data
-        run_id = resumed_run_id(out, mapper.source)
+        run_id = resumed_run_id(out, mapper.source, cfg)
         start = mapper.next_index
         check_same_source(ckpt, mapper.source, source, start, unshifted=lambda: unshifted_intrinsics(ds))
         recorded_names = mapper.source.get("names")

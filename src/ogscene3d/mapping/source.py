@@ -126,20 +126,26 @@ def start_run_dir(out: Path, cfg: Config, run_id: str | None = None) -> dict[str
     return {"run_id": run_id, "config": config_digest(cfg)}
 
 
-def resumed_run_id(out: Path, recorded: dict) -> str | None:
+def resumed_run_id(out: Path, recorded: dict, cfg: Config | None = None) -> str | None:
     """The run id a resume of ``out`` goes on with: that of the run that wrote ``out/map.npz`` (whose
     ``Mapper.source`` is ``recorded``); None for a map that records none (an older version's: it is
-    resumed unchecked, as it always was).
+    resumed unchecked, as it always was). ``cfg``: the settings the resume would map with (``--config``
+    and ``--set`` applied), when known.
 
     Raises:
         DataError: the map was written by another run than the one whose ``config.yaml`` is in ``out``
             (a run started there after the map was saved, then stopped before saving its own), and with
-            other settings: resuming would continue the earlier map with the later run's settings.
+            other settings, and ``cfg`` is not the map's either: resuming would continue the earlier map
+            with a later run's settings.
     """
     map_id, map_config = recorded.get("run_id"), recorded.get("config")
     if map_id is None and map_config is None:
         return None
     if map_id is not None and map_id == _read_run_id(out):
+        return map_id
+    if cfg is not None and map_config == config_digest(cfg):
+        # the map's own settings given back (--config): whatever config.yaml holds, they replace it
+        log.info("%s goes on with the settings it was mapped with", out / "map.npz")
         return map_id
     saved = out / "config.yaml"
     if not saved.is_file():  # no other run's settings to pair the map with
@@ -155,7 +161,7 @@ def resumed_run_id(out: Path, recorded: dict) -> str | None:
         f"differ): a later run started in {out} and stopped before saving a map, so the map is an earlier "
         "run's, made with other settings, and resuming would go on with the later run's. Run again without "
         "--resume to map with the settings in config.yaml (this replaces the earlier map), or, to go on with "
-        "the earlier map, put its run's config.yaml back first"
+        "the earlier map, resume with its run's settings (put its config.yaml back, or pass it with --config)"
     )
 
 
