@@ -445,7 +445,7 @@ def test_a_scannet_map_of_colour_intrinsics_made_before_pixel_centres_is_recogni
     data.pixel_centers by half a pixel times the scale (here 0.25 px), not by 0.5; eval still renders such a
     map with the camera it was mapped with, and --resume still names the setting that resumes it."""
     from ogscene3d.config import Config, DataConfig, save_config
-    from ogscene3d.mapping.source import check_same_source, unshifted_intrinsics
+    from ogscene3d.mapping.source import check_same_source, matching_pixel_centers
 
     seq = make_scannet(tmp_path / "scans" / "scene0000_00")
     (seq / "intrinsic" / "intrinsic_depth.txt").unlink()
@@ -457,7 +457,8 @@ def test_a_scannet_map_of_colour_intrinsics_made_before_pixel_centres_is_recogni
     ds = open_dataset(seq)
     np.testing.assert_allclose(ds.K, K)
     before = K - half / 2  # the colour K scaled as it is
-    np.testing.assert_allclose(unshifted_intrinsics(ds), before.ravel())
+    assert matching_pixel_centers(ds, before.ravel()) == "half"
+    assert matching_pixel_centers(ds, (before + half / 5).ravel()) is None
     run = tmp_path / "run"
     run.mkdir()
     cfg = Config()
@@ -466,17 +467,19 @@ def test_a_scannet_map_of_colour_intrinsics_made_before_pixel_centres_is_recogni
     np.savez(run / "map.npz", mapper_source=json.dumps({"K": before.ravel().tolist()}))
     np.testing.assert_allclose(open_view_dataset(seq, run).K, before)
     current = {"K": ds.K.ravel().tolist()}
+
+    def matching(K):
+        return matching_pixel_centers(ds, K)
+
     with pytest.raises(DataError, match="resume with --set data.pixel_centers=half"):
-        check_same_source(
-            run / "map.npz", {"K": before.ravel().tolist()}, current, 0, lambda: unshifted_intrinsics(ds)
-        )
+        check_same_source(run / "map.npz", {"K": before.ravel().tolist()}, current, 0, matching)
     other = (before + half / 5).ravel().tolist()  # another camera: not taken for the old reading
     np.savez(run / "map.npz", mapper_source=json.dumps({"K": other}))
     np.testing.assert_allclose(open_view_dataset(seq, run).K, K)
     with pytest.raises(DataError, match="another camera or image size"):
-        check_same_source(run / "map.npz", {"K": other}, current, 0, lambda: unshifted_intrinsics(ds))
-    # an explicit data.pixel_centers has nothing to undo; label-fusion's files are shifted by 0.5
-    assert unshifted_intrinsics(open_dataset(seq, config=DataConfig(pixel_centers="integer"))) is None
-    np.testing.assert_allclose(
-        unshifted_intrinsics(open_dataset(make_labelfusion(tmp_path / "lf"))), K_FILE.ravel()
+        check_same_source(run / "map.npz", {"K": other}, current, 0, matching)
+    # read with either setting, the other one is named; label-fusion's files are shifted by 0.5
+    assert matching_pixel_centers(open_dataset(seq, config=DataConfig(pixel_centers="half")), K.ravel()) == (
+        "integer"
     )
+    assert matching_pixel_centers(open_dataset(make_labelfusion(tmp_path / "lf")), K_FILE.ravel()) == "half"

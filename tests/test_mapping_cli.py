@@ -478,8 +478,17 @@ def test_resume_of_a_map_read_with_the_other_pixel_centres_names_the_setting(tmp
     capsys.readouterr()
     assert main(["run", *_common(scene, out), "--resume", "--set", "data.pixel_centers=integer"]) == 2
     err = capsys.readouterr().err
-    assert "shifts this layout's by half a pixel" in err and "data.pixel_centers=half" in err
+    assert "the same camera, read with data.pixel_centers=half" in err
+    assert "resume with --set data.pixel_centers=half" in err
     assert main(["run", *_common(scene, out), "--resume", "--set", "data.pixel_centers=half"]) == 0
+    # the other way round: its config.yaml keeps the setting a map was made with, unless --set again
+    out = tmp_path / "run2"
+    integer = ["--set", "data.pixel_centers=integer"]
+    assert main(["run", *_common(scene, out), "--max-frames", "1", *integer]) == 0
+    capsys.readouterr()
+    assert main(["run", *_common(scene, out), "--resume", "--set", "data.pixel_centers=half"]) == 2
+    assert "resume with --set data.pixel_centers=integer" in capsys.readouterr().err
+    assert main(["run", *_common(scene, out), "--resume"]) == 0
 
 
 def test_a_save_outside_a_run_leaves_no_earlier_runs_id_to_vouch_for_its_config(tmp_path, capsys):

@@ -102,20 +102,22 @@ def open_view_dataset(scene_dir: str | Path, run_dir: str | Path | None = None) 
                 log.warning("%s; rendering with %s's own camera settings", e, scene_dir)
     cfg.path = str(scene_dir)
     ds = open_dataset(config=cfg)
-    if run_dir is not None and cfg.pixel_centers == "auto" and ds.pixel_centers == "integer":
-        from ..mapping.source import mapped_intrinsics
+    if run_dir is not None:
+        from ..mapping.source import mapped_intrinsics, matching_pixel_centers
 
         mapped_K = mapped_intrinsics(Path(run_dir) / "map.npz")
         if mapped_K is not None and not np.allclose(mapped_K, np.asarray(ds.K).reshape(-1), atol=1e-3):
-            unshifted = open_dataset(config=dataclasses.replace(cfg, pixel_centers="half"))
-            if np.allclose(mapped_K, np.asarray(unshifted.K).reshape(-1), atol=1e-3):
-                # mapped before data.pixel_centers shifted this layout's intrinsics: render with its camera
+            setting = matching_pixel_centers(ds, mapped_K)
+            if setting is not None:
+                # mapped before data.pixel_centers shifted this layout's intrinsics, or under the other
+                # setting: render with the camera it was mapped with
                 log.info(
-                    "%s was mapped with %s's intrinsics unshifted (data.pixel_centers=half): rendering so",
+                    "%s was mapped with %s read with data.pixel_centers=%s: rendering so",
                     run_dir,
                     scene_dir,
+                    setting,
                 )
-                ds = unshifted
+                ds = open_dataset(config=dataclasses.replace(cfg, pixel_centers=setting))
     return ds
 
 

@@ -19,11 +19,11 @@ from .pose_jump import PoseJumpError
 from .source import (
     check_same_source,
     dataset_source,
+    matching_pixel_centers,
     record_data,
     remove_run_temps,
     resumed_run_id,
     start_run_dir,
-    unshifted_intrinsics,
 )
 
 log = logging.getLogger(__name__)
@@ -128,7 +128,9 @@ def run(args: argparse.Namespace) -> int:
         # first: with another run's config.yaml, the checks below would compare the map with the wrong data
         run_id = resumed_run_id(out, mapper.source, cfg)
         start = mapper.next_index
-        check_same_source(ckpt, mapper.source, source, start, unshifted=lambda: unshifted_intrinsics(ds))
+        check_same_source(
+            ckpt, mapper.source, source, start, pixel_centers=lambda K: matching_pixel_centers(ds, K)
+        )
         recorded_names = mapper.source.get("names")
         if len(source["names"]) < start:
             # a resume bounded short of where the map got (--max-frames): its checkpoint must still name every

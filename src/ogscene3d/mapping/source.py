@@ -165,29 +165,31 @@ def resumed_run_id(out: Path, recorded: dict, cfg: Config | None = None) -> str 
     )
 
 
-def is_half_pixel_shift(mapped_K: Any, K: Any) -> bool:
-    """Whether ``K`` is ``mapped_K`` (3x3 or 9 values each) shifted by +0.5 pixel: a calibrated-sensor
-    layout's intrinsics, which ogscene3d read unshifted before ``data.pixel_centers``."""
-    diff = np.asarray(K, np.float64).reshape(-1) - np.asarray(mapped_K, np.float64).reshape(-1)
-    return bool(np.allclose(diff, [0, 0, 0.5, 0, 0, 0.5, 0, 0, 0], atol=1e-3))
-
-
-def unshifted_intrinsics(ds: Any) -> list[float] | None:
-    """The 9 values of the K that ogscene3d read for the frames of ``ds`` (an opened dataset) before
-    ``data.pixel_centers``: its layout's intrinsics as they are (``pixel_centers=half``; ScanNet's colour K
-    rescaled to the depth size then differs from today's by less than half a pixel). None when ``ds`` was
-    read so already (a layout read as it is, or an explicit ``data.pixel_centers``)."""
-    config = getattr(ds, "config", None)
-    if config is None or config.pixel_centers != "auto" or getattr(ds, "pixel_centers", None) != "integer":
+def matching_pixel_centers(ds: Any, K: Any) -> str | None:
+    """The ``data.pixel_centers`` setting (``"integer"`` or ``"half"``) under which the frames of ``ds`` (an
+    opened dataset, read under the other) have the intrinsics ``K`` (9 values): a map made before
+    ``data.pixel_centers`` (``"half"``: every layout's K was read as it is; ScanNet's colour K rescaled to
+    the depth size then differs from today's by less than half a pixel), or under the other setting. None
+    when neither reading gives ``K`` (another camera or image size), or the layout's K ignores the setting
+    (Semantic-NeRF's field of view)."""
+    config, read = getattr(ds, "config", None), getattr(ds, "pixel_centers", None)
+    if config is None or read not in ("integer", "half"):
         return None
     from ..datasets import open_dataset
 
-    half = dataclasses.replace(config, pixel_centers="half", segments_dir=None)
+    other = "half" if read == "integer" else "integer"
     try:
-        K = open_dataset(ds.root, kind=ds.kind, max_frames=1, config=half).K
+        ds_other = open_dataset(
+            ds.root, kind=ds.kind, max_frames=1,
+            config=dataclasses.replace(config, pixel_centers=other, segments_dir=None),
+        )  # fmt: skip
     except DataError:
         return None
-    return [round(float(v), 4) for v in np.asarray(K).reshape(-1)]
+    return (
+        other
+        if np.allclose(np.asarray(ds_other.K).reshape(-1), np.asarray(K).reshape(-1), atol=1e-3)
+        else None
+    )
 
 
 def mapped_intrinsics(ckpt: Path) -> list[float] | None:
@@ -203,21 +205,25 @@ def mapped_intrinsics(ckpt: Path) -> list[float] | None:
 
 
 def check_same_source(
-    ckpt: Path, recorded: dict, current: dict, mapped: int = 0, unshifted: Callable[[], Any] | None = None
+    ckpt: Path,
+    recorded: dict,
+    current: dict,
+    mapped: int = 0,
+    pixel_centers: Callable[[Any], str | None] | None = None,
 ) -> None:
     """Refuse to resume a map with frames of another sequence or camera, or of a sequence whose first
     ``mapped`` frames (those the map has read) changed; a moved dataset (same frames) is fine, and so are
-    frames added after the mapped ones. ``unshifted``: the frames' K as read before ``data.pixel_centers``
-    (:func:`unshifted_intrinsics`), asked for only when the map's K is not today's."""
+    frames added after the mapped ones. ``pixel_centers``: given the map's K, the ``data.pixel_centers``
+    that reads the frames so (:func:`matching_pixel_centers`), asked for only when the map's K is not
+    today's."""
     if recorded.get("K") is not None and not np.allclose(recorded["K"], current["K"], atol=1e-3):
-        was = unshifted() if unshifted is not None else None
-        if is_half_pixel_shift(recorded["K"], current["K"]) or (
-            was is not None and np.allclose(recorded["K"], was, atol=1e-3)
-        ):
+        setting = pixel_centers(recorded["K"]) if pixel_centers is not None else None
+        if setting is not None:
             raise DataError(
-                f"{ckpt} was mapped with intrinsics {recorded['K']}, read as they are; this version shifts "
-                "this layout's by half a pixel (data.pixel_centers, see the README): resume with --set "
-                "data.pixel_centers=half, or map into a new --out"
+                f"{ckpt} was mapped with intrinsics {recorded['K']}, these frames have {current['K']}: the "
+                f"same camera, read with data.pixel_centers={setting} (a map made before that setting "
+                "existed read every layout's intrinsics as they are, which is 'half'; see the README): "
+                f"resume with --set data.pixel_centers={setting}, or map into a new --out"
             )
         raise DataError(
             f"{ckpt} was mapped with intrinsics {recorded['K']}, these frames have {current['K']} (another "
