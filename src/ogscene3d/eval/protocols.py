@@ -51,7 +51,11 @@ numbers are not interchangeable and every result names the protocol that produce
   is one grid anchored at the whole cloud's (a sub-voxel phase); and ConceptGraphs'
   ``eval_replica_semseg.py`` (commit 231e638) then moves the object classes onto its SLAM
   reconstruction (``rgb_cloud``: each reconstructed point takes its nearest object point's class)
-  and counts on those points, a cloud we do not have: the voxel grid stands in for it.
+  and counts on those points, a cloud we do not have: the voxel grid stands in for it. ConceptGraphs
+  also names its objects only with kept classes (``object_class_sim[:, ignore_index] = -1e10``) and
+  then slices its confusion matrix to them; our label mapping may name a label with an ignored or
+  absent class, and its points then count as misses of their reference class, where a copy of the
+  slicing would drop those predictions unseen (and so reward predicting an ignored class).
 
 Nearest neighbours come from a KD-tree (``scipy.spatial.cKDTree``), queried in chunks, so memory is
 O(N + M), never O(N * M).
