@@ -7,8 +7,11 @@ fusion code against models whose answers are known in closed form:
 - SAM decoder: for a point prompt, output c is a disc of radius ``radii[c]`` around the first prompt point
   (logit = slopes[c] * (radii[c] - distance)); for a box prompt (first label 2) every output is the box
   (logit = 10 * signed distance to the nearest box edge). Predicted IoUs are constants per output
-  (``ious`` for points, ``box_iou`` for boxes). Geometry is computed in original pixels from
-  ``orig_im_size`` exactly as the real decoder maps its masks back, so the prompt transform is exercised.
+  (``ious`` for points, ``box_iou`` for boxes). The geometry is evaluated in original pixels (scale from
+  ``orig_im_size``, so the prompt transform is exercised) at the centres of the 256 x 256 low-resolution
+  mask grid (``low_res_masks``); ``masks`` is made from those as segment-anything's ``SamOnnxModel``
+  makes it (bilinear to 1024 x 1024, crop the padding, bilinear to ``orig_im_size``), optionally with
+  the crop frozen at the export's dummy aspect ratio as segment-anything 1.0 (PyPI) exports it.
 - Detector: returns fixed detections (in the letterboxed input frame) in one of the common layouts.
 """
 
@@ -101,12 +104,18 @@ def make_sam_decoder(
     batch: int | None = None,
     input_size: int = 1024,
     drop_input: str | None = None,
+    baked_crop: tuple[int, int] | None = None,
+    low_res_output: bool = True,
 ) -> Path:
     """Decoder with segment-anything's interface; ``batch`` None = dynamic prompt batch, else fixed.
 
-    ``drop_input`` leaves one input out (to test the error for a wrong model).
+    ``drop_input`` leaves one input out (to test the error for a wrong model). ``baked_crop`` (h', w'):
+    ``masks`` crops the upscaled logits to this fixed size instead of the one ``orig_im_size`` gives, as
+    segment-anything 1.0's export does ((683, 1024), from its 1500 x 2250 dummy ``orig_im_size``).
+    ``low_res_output`` False: no ``low_res_masks`` output (exports that give only masks and IoUs).
     """
     c = len(radii)
+    low = input_size // 4  # the low-resolution mask grid (256 for SAM's 1024)
     b: int | str = "B" if batch is None else batch
     f = TensorProto.FLOAT
     ins = {
@@ -127,21 +136,30 @@ def make_sam_decoder(
         _const("i1", np.array(1, dtype=np.int64)),
         _const("half", np.array(0.5, dtype=np.float32)),
         _const("zero_f", np.array(0.0, dtype=np.float32)),
-        _const("one_f", np.array(1.0, dtype=np.float32)),
         _const("ten", np.array(10.0, dtype=np.float32)),
         _const("two", np.array(2.0, dtype=np.float32)),
         _const("inv_size", np.array(1.0 / input_size, dtype=np.float32)),
         _const("shape_b1", np.array([-1, 1], dtype=np.int64)),
         _const("shape_b111", np.array([-1, 1, 1, 1], dtype=np.int64)),
-        _const("shape_11h1", np.array([1, 1, -1, 1], dtype=np.int64)),
-        _const("shape_111w", np.array([1, 1, 1, -1], dtype=np.int64)),
         _const("radii", np.asarray(radii, dtype=np.float32).reshape(1, c, 1, 1)),
         _const("slopes", np.asarray(slopes, dtype=np.float32).reshape(1, c, 1, 1)),
         _const("ious_pt", np.asarray(ious, dtype=np.float32).reshape(1, c)),
         _const("ious_box", np.full((1, c), box_iou, dtype=np.float32)),
         _const("zeros_c", np.zeros((1, c, 1, 1), dtype=np.float32)),
-        _const("lowres_tail", np.array([256, 256], dtype=np.int64)),
+        _const("full_hw", np.array([input_size, input_size], dtype=np.int64)),
+        _const("axes23", np.array([2, 3], dtype=np.int64)),
+        _const("zeros2", np.zeros(2, dtype=np.int64)),
+        _const("s0", np.array([0], dtype=np.int64)),
+        _const("s2", np.array([2], dtype=np.int64)),
+        _const("size_f", np.array(float(input_size), dtype=np.float32)),
+        # centres of the low-resolution grid's cells in the model frame (one cell = 4 model pixels)
+        _const("low_y", (4.0 * np.arange(low, dtype=np.float32) + 2.0).reshape(1, 1, low, 1)),
+        _const("low_x", (4.0 * np.arange(low, dtype=np.float32) + 2.0).reshape(1, 1, 1, low)),
     ]
+    ends = "prepadded"
+    if baked_crop is not None:
+        inits.append(_const("crop_ends", np.asarray(baked_crop, dtype=np.int64)))
+        ends = "crop_ends"
     n = helper.make_node
     nodes = [
         # original-pixel scale of the model frame: longest side / encoder size
@@ -158,15 +176,9 @@ def make_sam_decoder(
         n("Reshape", ["y0v", "shape_b111"], ["y0"]),
         n("Reshape", ["x1v", "shape_b111"], ["x1"]),
         n("Reshape", ["y1v", "shape_b111"], ["y1"]),
-        # pixel-centre coordinate grids from orig_im_size
-        n("Gather", ["orig_im_size", "i0"], ["hf"], axis=0),
-        n("Gather", ["orig_im_size", "i1"], ["wf"], axis=0),
-        n("Range", ["zero_f", "hf", "one_f"], ["yr"]),
-        n("Range", ["zero_f", "wf", "one_f"], ["xr"]),
-        n("Add", ["yr", "half"], ["yc"]),
-        n("Add", ["xr", "half"], ["xc"]),
-        n("Reshape", ["yc", "shape_11h1"], ["Y"]),
-        n("Reshape", ["xc", "shape_111w"], ["X"]),
+        # the low-resolution grid's cell centres in original pixels
+        n("Mul", ["low_y", "scale"], ["Y"]),
+        n("Mul", ["low_x", "scale"], ["X"]),
         # discs around the first point
         n("Sub", ["X", "x0"], ["dx"]),
         n("Sub", ["Y", "y0"], ["dy"]),
@@ -188,22 +200,33 @@ def make_sam_decoder(
         n("Gather", ["point_labels", "i0"], ["lab0"], axis=1),  # [B]
         n("Equal", ["lab0", "two"], ["is_box_v"]),
         n("Reshape", ["is_box_v", "shape_b111"], ["is_box"]),
-        n("Where", ["is_box", "box_logits", "disc_logits"], ["masks"]),
+        n("Where", ["is_box", "box_logits", "disc_logits"], ["low_res_masks"]),
         n("Reshape", ["is_box_v", "shape_b1"], ["is_box2"]),
         n("Mul", ["x0v", "zero_f"], ["zb"]),
         n("Reshape", ["zb", "shape_b1"], ["zb2"]),  # [B, 1] zeros: gives the IoUs their batch size
         n("Add", ["ious_pt", "zb2"], ["ious_pt_b"]),
         n("Add", ["ious_box", "zb2"], ["ious_box_b"]),
         n("Where", ["is_box2", "ious_box_b", "ious_pt_b"], ["iou_predictions"]),
-        n("Shape", ["iou_predictions"], ["bc"]),
-        n("Concat", ["bc", "lowres_tail"], ["lr_shape"], axis=0),
-        n("ConstantOfShape", ["lr_shape"], ["low_res_masks"], value=helper.make_tensor("v", f, [1], [0.0])),
+        # SamOnnxModel.mask_postprocessing: bilinear to S x S, crop to the resized image, bilinear to H x W
+        n("Shape", ["low_res_masks"], ["lr_shape"]),
+        n("Slice", ["lr_shape", "s0", "s2"], ["bc"]),
+        n("Concat", ["bc", "full_hw"], ["up_sizes"], axis=0),
+        n("Resize", ["low_res_masks", "", "", "up_sizes"], ["up"], mode="linear"),
+        n("Div", ["size_f", "long_side"], ["pre_scale"]),
+        n("Mul", ["orig_im_size", "pre_scale"], ["pre_f"]),
+        n("Add", ["pre_f", "half"], ["pre_h"]),
+        n("Floor", ["pre_h"], ["pre_fl"]),
+        n("Cast", ["pre_fl"], ["prepadded"], to=TensorProto.INT64),
+        n("Slice", ["up", "zeros2", ends, "axes23"], ["crop"]),
+        n("Cast", ["orig_im_size"], ["hw_int"], to=TensorProto.INT64),
+        n("Concat", ["bc", "hw_int"], ["out_sizes"], axis=0),
+        n("Resize", ["crop", "", "", "out_sizes"], ["masks"], mode="linear"),
     ]
     outs = [
         helper.make_tensor_value_info("masks", f, [b, c, "H", "W"]),
         helper.make_tensor_value_info("iou_predictions", f, [b, c]),
-        helper.make_tensor_value_info("low_res_masks", f, [b, c, 256, 256]),
-    ]
+        helper.make_tensor_value_info("low_res_masks", f, [b, c, low, low]),
+    ][: 3 if low_res_output else 2]
     graph = helper.make_graph(nodes, "sam_decoder", list(ins.values()), outs, initializer=inits)
     return _save(graph, path)
 

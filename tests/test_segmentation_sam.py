@@ -24,6 +24,9 @@ def models(tmp_path_factory):
         "dec_b1": make_sam_decoder(d / "dec_b1.onnx", batch=1),
         "dec_single": make_sam_decoder(d / "dec_single.onnx", radii=(16.0,), slopes=(10.0,), ious=(0.95,)),
         "dec_nolabels": make_sam_decoder(d / "dec_bad.onnx", drop_input="point_labels"),
+        # segment-anything 1.0 (PyPI) export: masks cropped at its dummy 1500 x 2250 aspect ratio
+        "dec_baked": make_sam_decoder(d / "dec_baked.onnx", baked_crop=(683, 1024)),
+        "dec_no_low_res": make_sam_decoder(d / "dec_no_low_res.onnx", low_res_output=False),
         "dir": d,
     }
 
@@ -94,6 +97,25 @@ def test_thresholds_select_outputs(models):
 def test_single_output_decoder(models):
     sam = SamOnnx(models["enc"], models["dec_single"], points_per_side=2, min_region_area=10)
     assert_segments_are(sam(np.zeros((H, W, 3), np.uint8)), expected_discs(16.0), 0.95)
+
+
+def test_decoder_with_baked_aspect_ratio(models):
+    # segment-anything 1.0's export freezes the crop of its masks output at the dummy orig_im_size's aspect
+    # ratio (fixed in segment-anything PR #58, after the PyPI release; samexporter's inference works around
+    # it the same way): masks come from low_res_masks, postprocessed here, so a 3:4 frame still fits
+    sam = SamOnnx(models["enc"], models["dec_baked"], points_per_side=2, min_region_area=10)
+    assert_segments_are(sam(np.full((H, W, 3), 90, np.uint8)), expected_discs(16.0), 0.95)
+    image = sam.embed(np.zeros((H, W, 3), np.uint8))
+    recs = sam.segment_boxes(image, np.array([[20, 10, 60, 40]]), ["chair"])
+    assert [r.box for r in recs] == [(20, 10, 60, 40)] and recs[0].crop.all()
+    logits, ious = sam.predict(image, np.array([[[32.0, 24.0], [0.0, 0.0]]]), np.array([[1.0, -1.0]]))
+    assert logits.shape == (1, 4, H, W) and ious.shape == (1, 4)
+    np.testing.assert_array_equal(logits[0, 2] > 0, disc(32, 24, 16.0))
+
+
+def test_decoder_without_low_res_output_uses_masks(models):
+    sam = SamOnnx(models["enc"], models["dec_no_low_res"], points_per_side=2, min_region_area=10)
+    assert_segments_are(sam(np.full((H, W, 3), 90, np.uint8)), expected_discs(16.0), 0.95)
 
 
 def test_box_prompts_give_box_masks_with_names(models):

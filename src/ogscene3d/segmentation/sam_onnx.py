@@ -11,6 +11,12 @@ MobileSAM / EfficientSAM-style exports of the same interface, samexporter and An
 is the encoder size (1024), i.e. original pixel coordinates times the resize factor. Point labels:
 1 foreground, 0 background, -1 padding, 2/3 the top-left/bottom-right corners of a box prompt.
 
+The masks are made here from ``low_res_masks`` (when the decoder has it, as every export of that script
+does) with the decoder's own post-processing (bilinear to the encoder size, crop the padding, bilinear to
+the original size), not taken from ``masks``: segment-anything 1.0 as released on PyPI traces that crop
+as a constant, so its exports cut every frame's masks at the aspect ratio of the export's dummy
+``orig_im_size`` (1500 x 2250; fixed in segment-anything PR #58), which misplaces them on a 4:3 frame.
+
 The encoder comes in two flavours, told apart from its input signature:
 - ``[1, 3, S, S]`` float: the bare image encoder; we resize the longest side to S, normalise with SAM's
   pixel mean/std and zero-pad bottom/right (segment-anything's ``preprocess``).
@@ -217,6 +223,10 @@ class SamOnnx:
             int(d) if d is not None else 4 * (int(e) if e is not None else 64)
             for d, e in zip(mi[2:4], enc_out[2:4])
         )
+        # low_res_masks [B, C, h, w] (the mask_input grid); with --return-extra-metrics that name is given
+        # to the stability scores [B, C], so only a rank-4 output is taken for the low-resolution logits
+        lr = dec.outputs.get("low_res_masks")
+        self._low_res = lr is not None and len(lr.shape) == 4
 
     # ------------------------------------------------------------------ encoder
     def preprocess(self, rgb: np.ndarray) -> tuple[np.ndarray, tuple[int, int]]:
@@ -250,6 +260,20 @@ class SamOnnx:
         return SamImage(np.asarray(emb, dtype=np.float32), (int(rgb.shape[0]), int(rgb.shape[1])), resized)
 
     # ------------------------------------------------------------------ decoder
+    def postprocess_masks(self, image: SamImage, low_res: np.ndarray) -> np.ndarray:
+        """Low-resolution mask logits [..., h, w] -> [..., H, W] at the original size, as the decoder's
+        ``SamOnnxModel.mask_postprocessing`` does: bilinear to the encoder's input size, crop to the
+        resized image (the padding off), bilinear to the original size."""
+        th, tw = self._enc_hw
+        nh, nw = image.resized_size
+        h, w = image.orig_size
+        flat = np.asarray(low_res, dtype=np.float32).reshape(-1, *low_res.shape[-2:])
+        out = np.empty((flat.shape[0], h, w), dtype=np.float32)
+        for i, m in enumerate(flat):
+            up = cv2.resize(m, (tw, th), interpolation=cv2.INTER_LINEAR)[:nh, :nw]
+            out[i] = cv2.resize(up, (w, h), interpolation=cv2.INTER_LINEAR)
+        return out.reshape(*low_res.shape[:-2], h, w)
+
     def predict(
         self, image: SamImage, coords: np.ndarray, labels: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -258,6 +282,15 @@ class SamOnnx:
         ``coords`` [B, N, 2] in original pixels (x, y), ``labels`` [B, N]. Returns mask logits
         [B, C, H, W] at the original size and predicted IoUs [B, C].
         """
+        logits, ious = self._decode(image, coords, labels)
+        return (self.postprocess_masks(image, logits) if self._low_res else logits), ious
+
+    def _decode(
+        self, image: SamImage, coords: np.ndarray, labels: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``predict`` without the post-processing: the logits are low-resolution [B, C, h, w] when the
+        decoder has ``low_res_masks`` (``postprocess_masks`` brings them to the original size), else the
+        decoder's ``masks`` [B, C, H, W]."""
         coords = np.asarray(coords, dtype=np.float32)
         labels = np.asarray(labels, dtype=np.float32)
         if coords.ndim != 3 or coords.shape[2] != 2 or labels.shape != coords.shape[:2]:
@@ -286,12 +319,21 @@ class SamOnnx:
                 "has_mask_input": np.zeros(self._dim_or(self.decoder.inputs["has_mask_input"].shape, 1)),
                 "orig_im_size": np.array([h, w], dtype=np.float32),
             }
-            masks, ious = self.decoder.run(feeds, DECODER_OUTPUTS)
-            if masks.ndim != 4 or masks.shape[0] != pc.shape[0] or masks.shape[2:] != (h, w):
-                raise self.decoder.error(
-                    f"masks output of shape {list(masks.shape)} for {pc.shape[0]} prompts on a {h}x{w} image",
-                    f"masks[{pc.shape[0]}, C, {h}, {w}] ({_DECODER_EXPECTED})",
-                )
+            if self._low_res:
+                masks, ious = self.decoder.run(feeds, ("low_res_masks", "iou_predictions"))
+                if masks.ndim != 4 or masks.shape[0] != pc.shape[0]:
+                    raise self.decoder.error(
+                        f"low_res_masks output of shape {list(masks.shape)} for {pc.shape[0]} prompts",
+                        f"low_res_masks[{pc.shape[0]}, C, {mh}, {mw}] ({_DECODER_EXPECTED})",
+                    )
+            else:
+                masks, ious = self.decoder.run(feeds, DECODER_OUTPUTS)
+                if masks.ndim != 4 or masks.shape[0] != pc.shape[0] or masks.shape[2:] != (h, w):
+                    raise self.decoder.error(
+                        f"masks output of shape {list(masks.shape)} for {pc.shape[0]} prompts on a {h}x{w} "
+                        "image",
+                        f"masks[{pc.shape[0]}, C, {h}, {w}] ({_DECODER_EXPECTED})",
+                    )
             ious = ious.reshape(masks.shape[0], -1)
             if ious.shape[1] != masks.shape[1]:
                 raise self.decoder.error(
@@ -301,7 +343,8 @@ class SamOnnx:
             masks_out.append(masks[:b].astype(np.float32, copy=False))
             ious_out.append(ious[:b].astype(np.float32, copy=False))
         if not masks_out:
-            return np.zeros((0, 1, h, w), np.float32), np.zeros((0, 1), np.float32)
+            hw = (mh, mw) if self._low_res else (h, w)
+            return np.zeros((0, 1, *hw), np.float32), np.zeros((0, 1), np.float32)
         if len(masks_out) == 1:  # the usual case in ``generate``: no copy of the (large) mask logits
             return masks_out[0], ious_out[0]
         return np.concatenate(masks_out), np.concatenate(ious_out)
@@ -323,7 +366,7 @@ class SamOnnx:
             # a single point prompt plus segment-anything's padding point (0, 0) with label -1
             coords = np.stack([pts, np.zeros_like(pts)], axis=1)
             labels = np.tile(np.array([[1.0, -1.0]], dtype=np.float32), (b, 1))
-            logits, ious = self.predict(image, coords, labels)
+            logits, ious = self._decode(image, coords, labels)
             c = logits.shape[1]
             # 4 outputs = [single-mask token, 3 multimask tokens]; the generator uses the multimask ones
             chans = np.arange(1, 4) if c == 4 else np.arange(c)
@@ -332,6 +375,8 @@ class SamOnnx:
             if bi.size == 0:
                 continue
             sel = logits[bi, chans[ci]]  # copies only the masks that passed: [K, H, W]
+            if self._low_res:  # upscaled only for the masks that passed
+                sel = self.postprocess_masks(image, sel)
             sel_iou = sub[bi, ci]
             stab = stability_score(sel, self.mask_threshold, self.stability_score_offset)
             ok = stab >= self.stability_score_thresh
@@ -362,10 +407,12 @@ class SamOnnx:
         h, w = image.orig_size
         coords = boxes.reshape(-1, 2, 2)
         labels = np.tile(np.array([[2.0, 3.0]], dtype=np.float32), (boxes.shape[0], 1))
-        logits, ious = self.predict(image, coords, labels)
+        logits, ious = self._decode(image, coords, labels)
         idx = np.zeros(len(boxes), dtype=np.int64) if logits.shape[1] == 4 else ious.argmax(axis=1)
         ar = np.arange(len(boxes))
         sel_logits, sel_ious = logits[ar, idx], ious[ar, idx]
+        if self._low_res:
+            sel_logits = self.postprocess_masks(image, sel_logits)
         stab = stability_score(sel_logits, self.mask_threshold, self.stability_score_offset)
         recs = masks_to_records(sel_logits > self.mask_threshold, sel_ious, stab, names)
         cleaned = [remove_small_regions(r, self.min_region_area)[0] for r in recs]
