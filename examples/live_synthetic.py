@@ -26,12 +26,17 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--device", default=None)
     ap.add_argument("--port", type=int, default=8080)
-    ap.add_argument("--scene", default="outputs/example-live-synthetic")
+    ap.add_argument("--scene", default=None, help="scene folder (default outputs/example-live-synthetic-Nf)")
+    ap.add_argument("--force", action="store_true", help="regenerate a --scene made with other arguments")
     args = ap.parse_args()
 
     cfg = load_config(None, [f"synthetic.frames={args.frames}"])
     s = cfg.synthetic
-    scene = make_synthetic_scene(args.scene, s.seed, s.frames, s.width, s.height, progress=True)
+    # one folder per frame count: make_synthetic_scene refuses a folder holding a scene made with others
+    scene_dir = args.scene or f"outputs/example-live-synthetic-{s.frames}f"
+    scene = make_synthetic_scene(
+        scene_dir, s.seed, s.frames, s.width, s.height, overwrite=args.force, progress=True
+    )
     ds = open_dataset(scene, config=cfg.data)
     mapper = Mapper(cfg, args.device)
     viewer = LiveViewer(port=args.port, up=tuple(cfg.graph.up_axis))
