@@ -46,3 +46,10 @@ def test_batch_footer_names_each_protocol_once():
     assert protocol_line("hovsg", hovsg) == f"protocol {hovsg}"
     assert protocol_line("hovsg", "hovsg") == "protocol hovsg"
     assert protocol_line("custom", "something else") == "protocol custom: something else"
+
+
+def test_track_without_data_names_the_option(tmp_path, capsys):
+    # before: "no dataset path given (argument path or data.path)", an argument `track` does not have
+    assert main(["track", "--out", str(tmp_path / "t")]) == 2
+    err = capsys.readouterr().err
+    assert "pass --data DIR" in err and "argument path" not in err

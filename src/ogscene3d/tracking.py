@@ -894,6 +894,9 @@ def run(args: Any) -> int:
 
     cfg = load_config(args.config, args.overrides)
     validate_tracking_config(cfg.tracking)
+    if args.data is None and cfg.data.path is None:
+        # open_dataset's own message names its `path` argument, which this command does not have
+        raise ConfigError("no dataset to track: pass --data DIR (or set data.path in --config)")
     ds = open_dataset(args.data, max_frames=args.max_frames, config=cfg.data)
     try:
         tracker = Tracker(cfg.tracking, device=args.device or cfg.device, frame_step=cfg.data.stride)
