@@ -27,9 +27,11 @@ from onnx import TensorProto, helper, numpy_helper
 OPSET = 17
 
 
-def _save(graph: onnx.GraphProto, path: str | Path) -> Path:
+def _save(graph: onnx.GraphProto, path: str | Path, metadata: dict[str, str] | None = None) -> Path:
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)])
     model.ir_version = 8
+    if metadata:
+        helper.set_model_props(model, metadata)
     onnx.checker.check_model(model)
     path = Path(path)
     onnx.save(model, str(path))
@@ -238,12 +240,16 @@ def make_detector(
     layout: str = "yolo_head",
     size: int = 640,
     head_transposed: bool = False,
+    metadata: dict[str, str] | None = None,
 ) -> Path:
     """Detector returning fixed detections given in the letterboxed input frame.
 
     ``boxes_xyxy`` [A, 4], ``class_scores`` [A, K]. Layouts: "yolo_head" one output [1, 4+K, A]
     (``head_transposed``: [1, A, 4+K]), "dense" boxes [1, A, 4] + scores [1, A, K], "nms" num_dets +
-    boxes [1, A, 4] + scores [1, A] + labels [1, A] (argmax of class_scores).
+    boxes [1, A, 4] + scores [1, A] + labels [1, A] (argmax of class_scores), "ultralytics_nms" one
+    output0 [1, 300, 6] of rows x0, y0, x1, y1, score, class (zero rows after the detections) with the
+    metadata Ultralytics writes for ``export(format="onnx", nms=True)``. ``metadata``: extra model
+    metadata (ONNX metadata_props).
     """
     boxes_xyxy = np.asarray(boxes_xyxy, dtype=np.float32)
     class_scores = np.asarray(class_scores, dtype=np.float32)
@@ -274,6 +280,19 @@ def make_detector(
     elif layout == "dense":
         emit("boxes", boxes_xyxy[None])
         emit("scores", class_scores[None])
+    elif layout == "ultralytics_nms":
+        rows = np.zeros((300, 6), np.float32)
+        rows[:a, :4] = boxes_xyxy
+        rows[:a, 4] = class_scores.max(axis=1)
+        rows[:a, 5] = class_scores.argmax(axis=1)
+        emit("output0", rows[None])
+        metadata = {
+            "author": "Ultralytics",
+            "task": "detect",
+            "names": str(dict(enumerate(f"class{i}" for i in range(k)))),
+            "args": "{'batch': 1, 'half': False, 'dynamic': False, 'simplify': True, 'nms': True}",
+            **(metadata or {}),
+        }
     elif layout == "nms":
         labels = class_scores.argmax(axis=1).astype(np.int64)
         scores = class_scores.max(axis=1).astype(np.float32)
@@ -284,4 +303,4 @@ def make_detector(
     else:
         raise ValueError(layout)
     graph = helper.make_graph(nodes, "detector", [inp], outs, initializer=inits)
-    return _save(graph, path)
+    return _save(graph, path, metadata)

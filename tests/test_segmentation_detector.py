@@ -68,6 +68,18 @@ def test_nms_layout_is_taken_as_is(tmp):
     check(dets, "ABCEF", [0.9, 0.8, 0.7, 0.6, 0.5], ["chair", "chair", "table", "table", "chair"])
 
 
+def test_ultralytics_nms_export(tmp):
+    # export(format="onnx", nms=True): output0 [1, 300, 6] of x0, y0, x1, y1, score, class rows, told from a
+    # transposed head [1, A, 4 + K] (same shape with K = 2) by the metadata Ultralytics writes
+    nms_boxes, nms_scores = BOXES[[0, 2, 4, 5, 3]], SCORES[[0, 2, 4, 5, 3]]  # NMS done, best first
+    path = make_detector(tmp / "ultra_nms.onnx", nms_boxes, nms_scores, "ultralytics_nms")
+    dets = DetectorOnnx(path, CLASSES)(np.zeros((H, W, 3), np.uint8))
+    check(dets, "ACEF", [0.9, 0.7, 0.6, 0.5], ["chair", "table", "table", "chair"])
+    # no axis tells K here: the class names Ultralytics writes into the metadata do
+    with pytest.raises(ModelError, match="2 classes .*class0.*class1.* but 3 class names"):
+        DetectorOnnx(path, CLASSES + ["lamp"])
+
+
 def test_letterbox_preprocessing(tmp):
     path = make_detector(tmp / "pre.onnx", BOXES, SCORES)
     det = DetectorOnnx(path, CLASSES)

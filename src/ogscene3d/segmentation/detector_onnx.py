@@ -11,11 +11,19 @@ Output layouts understood (batch 1):
   K class scores; we threshold, run class-wise NMS and keep the best ``max_detections``;
 - separate ``boxes [1, A, 4]`` and ``scores [1, A, K]`` (YOLO-World's export without NMS): the same;
 - separate ``boxes [1, N, 4]``, ``scores [1, N]``, ``labels [1, N]`` and optionally ``num_dets`` (exports
-  with NMS inside): only thresholded. Box format ``xyxy`` unless ``box_format="cxcywh"``.
+  with NMS inside): only thresholded. Box format ``xyxy`` unless ``box_format="cxcywh"``;
+- Ultralytics' ``export(format="onnx", nms=True)`` (or an end-to-end model): one output ``[1, N, 6]`` of
+  rows x0, y0, x1, y1, score, class in input pixels, NMS done: only thresholded. It has the shape of a
+  transposed head with K = 2, so it is recognised by the metadata Ultralytics writes into the file
+  (``args`` with ``nms: True``, or ``end2end: True``), whose ``names`` must then count the configured
+  class names.
 """
 
 from __future__ import annotations
 
+import ast
+import logging
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,13 +36,16 @@ from .masks import nms
 from .onnx_session import OnnxModel
 from .sam_onnx import check_rgb
 
+log = logging.getLogger(__name__)
+
 BOX_NAMES = ("boxes", "bboxes", "det_boxes", "box", "pred_boxes")
 SCORE_NAMES = ("scores", "det_scores", "confidences", "pred_scores")
 LABEL_NAMES = ("labels", "det_classes", "classes", "class_ids", "label", "pred_labels")
 NUM_NAMES = ("num_dets", "num_detections", "num")
 _EXPECTED = (
     "one image input [1,3,S,S] float and either one output [1,4+K,A] (YOLO head, K = number of class names) "
-    "or outputs boxes[1,A,4] + scores[1,A,K], or boxes[1,N,4] + scores[1,N] + labels[1,N] (+ num_dets)"
+    "or outputs boxes[1,A,4] + scores[1,A,K], or boxes[1,N,4] + scores[1,N] + labels[1,N] (+ num_dets), "
+    "or Ultralytics' nms=True output [1,N,6] (x0,y0,x1,y1,score,class) with its metadata"
 )
 
 
@@ -101,6 +112,37 @@ class DetectorOnnx:
             raise m.error(f"input {info.describe()}", _EXPECTED)
         self._input = info.name
         self._hw = tuple(int(d) if d is not None else int(input_size) for d in info.shape[2:4])
+        self._nms_rows = self._ultralytics_nms_rows()
+
+    def _ultralytics_nms_rows(self) -> bool:
+        """Whether the file is an Ultralytics export with NMS inside (output [1, N, 6] of x0, y0, x1, y1,
+        score, class), told by its metadata; checks the metadata's class names against the configured."""
+        meta = self.model.session.get_modelmeta().custom_metadata_map or {}
+        nms = re.search(r"['\"]nms['\"]\s*:\s*True", meta.get("args", "")) is not None
+        if not (nms or meta.get("end2end") == "True"):
+            return False
+        try:
+            names = ast.literal_eval(meta.get("names", ""))
+        except (ValueError, SyntaxError):
+            names = None
+        if isinstance(names, dict) and names:
+            exported = [str(names[i]) for i in sorted(names)]
+            if len(exported) != len(self.class_names):
+                raise self.model.error(
+                    f"the export's metadata names {len(exported)} classes {exported[:8]}"
+                    f"{'...' if len(exported) > 8 else ''} but {len(self.class_names)} class names are "
+                    "configured",
+                    "segmentation.detector_classes listing the export's classes in its order",
+                )
+            if exported != self.class_names:
+                log.warning(
+                    "%s: the configured detector classes %s differ from those in the export's metadata %s; "
+                    "class k of the model is named by the k-th configured name",
+                    self.model.path,
+                    self.class_names,
+                    exported,
+                )
+        return True
 
     def preprocess(self, rgb: np.ndarray) -> tuple[np.ndarray, float, tuple[int, int]]:
         """Letterboxed input [1, 3, S, S] in [0, 1], the resize ratio and the (left, top) padding."""
@@ -141,6 +183,14 @@ class DetectorOnnx:
             if len(heads) != 1:
                 raise self.model.error("no recognisable detection outputs", _EXPECTED)
             head = heads[0][0]
+            if self._nms_rows:  # Ultralytics nms=True: [N, 6] rows x0, y0, x1, y1, score, class
+                if head.shape[1] != 6:
+                    raise self.model.error(
+                        f"output {list(heads[0].shape)} in an export with NMS inside (its metadata says so)",
+                        "[1,N,6] rows of x0,y0,x1,y1,score,class",
+                    )
+                rows = head.astype(np.float32)
+                return rows[:, :4], rows[:, 4], np.rint(rows[:, 5]).astype(np.int64), False
             if head.shape[0] == 4 + k:
                 head = head.T
             elif head.shape[1] != 4 + k:
