@@ -1,7 +1,9 @@
 """Segment Anything through onnxruntime: the common split export (image encoder + prompt decoder).
 
-The decoder is the interface of segment-anything's ``scripts/export_onnx_model.py`` (also used by the
-MobileSAM / EfficientSAM-style exports of the same interface, samexporter and AnyLabeling):
+The decoder is the interface of segment-anything's ``scripts/export_onnx_model.py`` (also MobileSAM's copy
+of that script, and samexporter's decoder export, as AnyLabeling uses). Other interfaces are refused with an
+error naming the inputs expected: EfficientSAM's official export (``batched_point_coords``,
+``batched_point_labels``, int64 ``orig_im_size``), SAM-HQ's (an extra ``interm_embeddings`` input), SAM 2's.
 
     inputs   image_embeddings [1, 256, 64, 64], point_coords [B, N, 2], point_labels [B, N],
              mask_input [1, 1, 256, 256], has_mask_input [1], orig_im_size [2] (= H, W)
