@@ -24,13 +24,13 @@ def _write_bpe(tmp_path):
     return path
 
 
-def _models(tmp_path, tok: ClipTokenizer, static_batch: bool = False):
+def _models(tmp_path, tok: ClipTokenizer, static_batch: bool = False, size: int | str = S):
     batch = 1 if static_batch else "N"
     # image: mean over pixels of the normalised channels -> a 3-D "embedding"
     img = helper.make_graph(
         [helper.make_node("ReduceMean", ["pixel_values"], ["image_embeds"], axes=[2, 3], keepdims=0)],
         "img",
-        [helper.make_tensor_value_info("pixel_values", TensorProto.FLOAT, [batch, 3, S, S])],
+        [helper.make_tensor_value_info("pixel_values", TensorProto.FLOAT, [batch, 3, size, size])],
         [helper.make_tensor_value_info("image_embeds", TensorProto.FLOAT, [batch, 3])],
     )
     # text: sum of per-token embeddings; colour words point along their channel
@@ -165,6 +165,24 @@ def test_clip_from_config_and_errors(tmp_path):
                 kind="clip", clip_image=image_path, clip_text=image_path, clip_vocab=str(bpe)
             )
         )
+
+
+def test_clip_image_size_of_a_dynamic_export(tmp_path):
+    """A dynamic image input does not say the model's size: 224 unless graph.confidence.clip_image_size says
+    (a 336-pixel model); a static export's own size wins, and a setting that disagrees is an error."""
+    bpe = _write_bpe(tmp_path)
+    tok = ClipTokenizer.from_files(bpe)
+    image_path, text_path = _models(tmp_path, tok, size="S")
+    assert ClipConfidence(image_path, text_path, tok, execution_provider="cpu").image_size == 224
+    paths = {"clip_image": image_path, "clip_text": text_path, "clip_vocab": str(bpe)}
+    cfg = NodeConfidenceConfig(kind="clip", execution_provider="cpu", clip_image_size=336, **paths)
+    clip = build_confidence(cfg)
+    assert clip.image_size == 336
+    assert clip.score([_request(0, "a red mug", (255, 0, 0))])[0] > 0.5  # the model runs at 336
+    static_image, _ = _models(tmp_path, tok)
+    with pytest.raises(ModelError, match=f"takes {S}x{S} images, but graph.confidence.clip_image_size"):
+        ClipConfidence(static_image, text_path, tok, "cpu", image_size=336)
+    assert ClipConfidence(static_image, text_path, tok, "cpu", image_size=S).image_size == S
 
 
 def test_clip_query_embedding(tmp_path):

@@ -207,6 +207,9 @@ class NodeConfidenceConfig:
     clip_text: str | None = None
     clip_vocab: str | None = None  # OpenAI bpe_simple_vocab_16e6.txt(.gz), or HF vocab.json (+ clip_merges)
     clip_merges: str | None = None  # HF merges.txt, only with a vocab.json
+    # the image encoder's input size when its export leaves it dynamic (e.g. 336 for ViT-L/14-336); a static
+    # export's own size is used, and must agree if this is set; None: 224 for a dynamic one
+    clip_image_size: int | None = None
     execution_provider: str = "auto"  # auto | cpu | cuda
 
 

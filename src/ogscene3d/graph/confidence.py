@@ -10,7 +10,8 @@
 Model expectations (ONNX, exported e.g. from ``openai/clip-vit-base-patch32`` with optimum or
 ``torch.onnx.export``):
 
-* image model: one float32 input ``[N, 3, S, S]`` (S read from the model, 224 when dynamic), CLIP
+* image model: one float32 input ``[N, 3, S, S]`` (S read from the model; when dynamic,
+  ``graph.confidence.clip_image_size``, else 224), CLIP
   preprocessing (shorter side resized to S, centre crop, mean/std normalisation) is done here;
   output: the projected image embedding ``[N, D]`` (an output whose name contains "embed" is preferred).
 * text model: an integer token-id input ``[N, L]`` (L read from the model, 77 when dynamic) and
@@ -36,6 +37,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from .._validate import check_int
 from ..config import NodeConfidenceConfig
 from ..errors import ConfigError, ModelError
 from .types import CaptionRequest
@@ -257,6 +259,7 @@ class ClipConfidence:
         tokenizer: ClipTokenizer,
         execution_provider: str = "auto",
         fallback: NodeConfidence | None = None,
+        image_size: int | None = None,
     ) -> None:
         providers = _providers(execution_provider)
         self.image_sess = _session(image_model, providers, "image")
@@ -267,7 +270,16 @@ class ClipConfidence:
         if len(img_in) != 1 or "float" not in img_in[0].type:
             raise ModelError(f"CLIP image model {image_model!r}: expected one float input [N,3,S,S]")
         self._img_input = img_in[0].name
-        self.image_size = _static_dim(img_in[0].shape, 2, 224)
+        static = _static_dim(img_in[0].shape, 2, 0)
+        if image_size is not None:
+            image_size = check_int("graph.confidence.clip_image_size", image_size, 1)
+        if static and image_size is not None and image_size != static:
+            raise ModelError(
+                f"CLIP image model {image_model!r} takes {static}x{static} images, but "
+                f"graph.confidence.clip_image_size is {image_size}: drop the setting or export another size"
+            )
+        # a dynamic export does not say which size it was trained at: 224 (ViT-B/32, B/16, L/14) unless told
+        self.image_size = static or image_size or 224
         self._img_output = _embedding_output(self.image_sess, "image")
         txt_in = self.text_sess.get_inputs()
         ids = [i for i in txt_in if "mask" not in i.name.lower()]
@@ -289,7 +301,13 @@ class ClipConfidence:
                 f"graph.confidence.kind=clip needs {', '.join('graph.confidence.' + m for m in missing)}"
             )
         tok = ClipTokenizer.from_files(config.clip_vocab, config.clip_merges)  # type: ignore[arg-type]
-        return cls(config.clip_image, config.clip_text, tok, config.execution_provider)  # type: ignore[arg-type]
+        return cls(
+            config.clip_image,  # type: ignore[arg-type]
+            config.clip_text,  # type: ignore[arg-type]
+            tok,
+            config.execution_provider,
+            image_size=config.clip_image_size,
+        )
 
     def _run(self, sess, feeds: dict, output: str, what: str) -> np.ndarray:
         out = np.asarray(sess.run([output], feeds)[0], dtype=np.float32)
