@@ -53,3 +53,19 @@ def test_track_without_data_names_the_option(tmp_path, capsys):
     assert main(["track", "--out", str(tmp_path / "t")]) == 2
     err = capsys.readouterr().err
     assert "pass --data DIR" in err and "argument path" not in err
+
+
+def test_run_and_live_name_their_own_options_for_a_scene_folder_in_the_way(tmp_path, capsys):
+    # a run directory's scene/ (or live's scene folder) holding something else, e.g. an earlier run's scene
+    # made with other `synthetic` settings; before: "pass overwrite=True (--force)", which neither command has
+    from ogscene3d.viewer.cli import main as live_main
+
+    (tmp_path / "run" / "scene").mkdir(parents=True)
+    (tmp_path / "run" / "scene" / "old.txt").write_text("x")
+    assert main(["run", "--out", str(tmp_path / "run"), "--no-progress", "--device", "cpu"]) == 2
+    err = capsys.readouterr().err
+    assert "give a new --out, or remove that folder" in err and "--force" not in err
+    scene = str(tmp_path / "run" / "scene")
+    assert live_main(["--synthetic", "--synthetic-dir", scene, "--device", "cpu"]) == 2
+    err = capsys.readouterr().err
+    assert "give another --synthetic-dir, or remove that folder" in err and "--force" not in err

@@ -269,17 +269,23 @@ def _start_live(args: argparse.Namespace):
             f"in {scene_dir}",
             flush=True,
         )
-        data = make_synthetic_scene(
-            scene_dir,
-            s.seed,
-            s.frames,
-            s.width,
-            s.height,
-            s.noise,
-            s.depth_noise,
-            s.pose_noise,
-            progress=True,
-        )
+        try:
+            data = make_synthetic_scene(
+                scene_dir,
+                s.seed,
+                s.frames,
+                s.width,
+                s.height,
+                s.noise,
+                s.depth_noise,
+                s.pose_noise,
+                progress=True,
+            )
+        except DataError as e:  # a folder holding something else; its message names a --force live lacks
+            raise DataError(
+                f"{scene_dir}: holds no synthetic scene made with these `synthetic` settings (an earlier "
+                "one?): give another --synthetic-dir, or remove that folder to generate the scene there again"
+            ) from e
     if data is not None or cfg.data.path is not None:  # a saved run records its data, as `run` does
         record_data(cfg, data if data is not None else cfg.data.path, args.segments)
     ds = open_dataset(max_frames=args.max_frames, config=cfg.data)
