@@ -407,6 +407,14 @@ class RGBDDataset:
             depth_scale_checked=True,  # _check_depth_range warns: the mapper need not warn again
         )
 
+    def pose(self, i: int) -> np.ndarray | None:
+        """Frame ``i``'s camera-to-world pose, read without its pixels; None where the layout gives none.
+
+        Raises:
+            DataError: the pose is unreadable, non-finite or not rigid (naming its file).
+        """
+        return _read_pose(self.records[i])
+
     def has_valid_pose(self, i: int) -> bool:
         """Whether frame ``i`` has a finite rigid camera pose, reading its pose only (no pixels): real
         sequences mark lost tracking with a non-finite pose (ScanNet writes -inf), and a caller choosing
