@@ -400,3 +400,95 @@ def test_unknown_ignore_names_are_warned_and_reported(scene, monkeypatch, capsys
     with caplog.at_level("WARNING", logger="ogscene3d.eval.metrics"):
         res = evaluate_run(run, scene_dir, protocols=["hovsg"])
     assert not caplog.text and res.report["semantic_3d"]["hovsg"]["ignore_unknown"] == ["floor", "ceiling"]
+
+
+def test_eval_of_a_missing_run_directory_says_so(monkeypatch, capsys, tmp_path):
+    assert _main(["eval", str(tmp_path / "nope")], monkeypatch) == 2
+    assert f"{tmp_path / 'nope'}: no such run directory" in capsys.readouterr().err
+
+
+def _posed_sequence(root, frames):
+    """A Replica-layout sequence (no semantic ground truth) whose camera moves along a curve."""
+    import cv2
+
+    res = root / "results"
+    res.mkdir(parents=True)
+    cam = {"camera": {"w": 16, "h": 12, "fx": 10.0, "fy": 10.0, "cx": 8.0, "cy": 6.0, "scale": 6553.5}}
+    (root / "cam_params.json").write_text(json.dumps(cam))
+    poses = []
+    for i in range(frames):
+        pose = np.eye(4)
+        pose[:3, 3] = [0.2 * i, 0.05 * i * i, 0.1 * np.sin(i)]
+        poses.append(pose)
+        cv2.imwrite(str(res / f"frame{i:06d}.jpg"), np.full((12, 16, 3), 100, np.uint8))
+        cv2.imwrite(str(res / f"depth{i:06d}.png"), np.full((12, 16), 13107, np.uint16))
+    (root / "traj.txt").write_text("\n".join(" ".join(f"{v:.6f}" for v in p.ravel()) for p in poses) + "\n")
+    return np.stack(poses)
+
+
+def test_traj_against_the_dataset_folder_without_semantic_ground_truth(monkeypatch, capsys, tmp_path):
+    """--traj RUN/traj.txt DATA: the dataset's poses of the frames the run read (its selection), the ATE
+    alone when there is no semantic ground truth; a count that does not pair is refused."""
+    from ogscene3d.config import Config, save_config
+
+    poses = _posed_sequence(tmp_path / "seq", frames=8)
+    run = tmp_path / "run"
+    run.mkdir()
+    cfg = Config()
+    cfg.data.path = str(tmp_path / "seq")
+    cfg.data.stride = 2  # frames 0, 2, 4, 6
+    save_config(cfg, run / "config.yaml")
+    est = poses[::2].copy()
+    est[:, :3, 3] += [0.5, -0.25, 1.0]  # a rigid offset: aligned away
+    est[1, 0, 3] += 0.03  # and one error
+    lines = "\n".join(" ".join(f"{v:.6f}" for v in p.ravel()) for p in est) + "\n"
+    (run / "traj.txt").write_text(lines)
+    argv = ["eval", str(run), "--traj", str(run / "traj.txt"), str(tmp_path / "seq")]
+    assert _main(argv, monkeypatch) == 0
+    out = capsys.readouterr().out
+    assert "ground truth: none (trajectory only)" in out and "(4 poses)" in out
+    report = json.loads((run / "metrics.json").read_text())
+    assert report["ground_truth"] is None
+    assert 0.005 < report["trajectory"]["ate_rmse_m"] < 0.03
+    # aligned without the error: zero
+    (run / "traj.txt").write_text(lines.replace(f"{est[1, 0, 3]:.6f}", f"{est[1, 0, 3] - 0.03:.6f}", 1))
+    assert _main(argv, monkeypatch) == 0
+    assert json.loads((run / "metrics.json").read_text())["trajectory"]["ate_rmse_m"] < 1e-5
+    capsys.readouterr()
+    (run / "traj.txt").write_text("\n".join(lines.splitlines()[:3]) + "\n")
+    assert _main(argv, monkeypatch) == 2
+    assert "has 3 poses, but the run read 4 frames of" in capsys.readouterr().err
+    # no --traj and no ground truth: the error it always was
+    assert _main(["eval", str(run)], monkeypatch) == 2
+    assert "no ground truth found" in capsys.readouterr().err
+
+
+def test_traj_leaves_out_frames_whose_dataset_pose_is_invalid(monkeypatch, capsys, tmp_path):
+    """A 7-Scenes-style frame with a non-finite pose (lost tracking) is left out of both trajectories."""
+    import cv2
+
+    from ogscene3d.config import Config, save_config
+
+    seq = tmp_path / "seq"
+    seq.mkdir()
+    poses = []
+    for i in range(5):
+        pose = np.eye(4)
+        pose[:3, 3] = [0.2 * i, 0.05 * i * i, 0.1 * np.sin(i)]
+        poses.append(pose)
+        cv2.imwrite(str(seq / f"frame-{i:06d}.color.png"), np.full((12, 16, 3), 100, np.uint8))
+        cv2.imwrite(str(seq / f"frame-{i:06d}.depth.png"), np.full((12, 16), 2000, np.uint16))
+        written = np.full((4, 4), -np.inf) if i == 2 else pose
+        np.savetxt(seq / f"frame-{i:06d}.pose.txt", written)
+    run = tmp_path / "run"
+    run.mkdir()
+    cfg = Config()
+    cfg.data.path = str(seq)
+    save_config(cfg, run / "config.yaml")
+    est = np.stack(poses)
+    est[2, :3, 3] += 5.0  # the frame left out: its error does not count
+    (run / "traj.txt").write_text("\n".join(" ".join(f"{v:.6f}" for v in p.ravel()) for p in est) + "\n")
+    assert _main(["eval", str(run), "--traj", str(run / "traj.txt"), str(seq)], monkeypatch) == 0
+    assert "(4 poses; 1 frames without a valid dataset pose left out)" in capsys.readouterr().out
+    t = json.loads((run / "metrics.json").read_text())["trajectory"]
+    assert t["num_left_out"] == 1 and t["ate_rmse_m"] < 1e-5

@@ -483,3 +483,22 @@ def test_a_scannet_map_of_colour_intrinsics_made_before_pixel_centres_is_recogni
         "integer"
     )
     assert matching_pixel_centers(open_dataset(make_labelfusion(tmp_path / "lf")), K_FILE.ravel()) == "half"
+
+
+def test_views_read_no_segments_of_the_run(tmp_path, caplog):
+    """eval renders the map: the run's data.segments_dir is not read (no warning about frames without
+    segments, which held-out frames often are)."""
+    from ogscene3d.config import Config, save_config
+
+    seq = make_labelfusion(tmp_path / "shelf")
+    run = tmp_path / "run"
+    run.mkdir()
+    (tmp_path / "segs").mkdir()
+    cfg = Config()
+    cfg.data.path = str(seq)
+    cfg.data.segments_dir = str(tmp_path / "segs")
+    save_config(cfg, run / "config.yaml")
+    ds = open_view_dataset(seq, run)
+    with caplog.at_level("WARNING"):
+        frame = ds[0]
+    assert frame.segments is None and "segments" not in caplog.text

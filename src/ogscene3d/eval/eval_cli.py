@@ -8,6 +8,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from ..atomic import atomic_write_text
 from ..errors import ConfigError, DataError, OGSceneError
 from .metrics import format_metrics_table
@@ -15,7 +17,7 @@ from .plots import iou_bar_chart, write_png
 from .protocols import CONCEPTGRAPHS_VOXEL_SIZE, PROTOCOLS
 from .readers import find_ground_truth
 from .run_eval import evaluate_run
-from .trajectory import ate, read_trajectory
+from .trajectory import ate, dataset_trajectory, read_trajectory
 
 
 def add_parser(subparsers: Any) -> None:
@@ -70,7 +72,8 @@ def add_parser(subparsers: Any) -> None:
         default=None,
         help="class-name JSON (list or {id: name}) for a bare labelled PLY or a sequence's per-frame class "
         "ids (label-fusion; default classes.json beside them; ScanNet's NYU40 names are built in); "
-        "'scannet20': ScanNet's 20 benchmark classes (the other NYU40 ids void), as HOV-SG scores ScanNet",
+        "'scannet20': ScanNet's 20 benchmark classes (the other NYU40 ids void), as HOV-SG scores ScanNet; "
+        "'nyu40': all 40",
     )
     p.add_argument("--k", type=int, default=5, help="neighbours of the HOV-SG majority vote (default 5)")
     p.add_argument(
@@ -103,7 +106,10 @@ def add_parser(subparsers: Any) -> None:
         metavar=("EST", "GT"),
         type=Path,
         default=None,
-        help="also report ATE RMSE between two trajectory files (4x4/3x4 rows or TUM), same poses in order",
+        help="also report ATE RMSE between two trajectories, same poses in order: files (4x4/3x4 rows or "
+        "TUM), or for GT the dataset folder the run read (its poses of the run's frames; e.g. --traj "
+        "RUN_DIR/traj.txt DATA after a run with --poses odometry); without semantic ground truth, the ATE "
+        "alone is reported",
     )
     p.add_argument(
         "--views",
@@ -231,17 +237,21 @@ def _run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--cg-voxel-size must be >= 0 metres (0 = none), got {args.cg_voxel_size}")
     if args.held_out and args.views <= 0 and not args.view_frames:
         raise ConfigError("--held-out needs views to score: --views N (N > 0) or --view-frames")
+    if not args.run_dir.is_dir():
+        raise DataError(f"{args.run_dir}: no such run directory (RUN_DIR is the --out of ogscene3d run)")
+    # Read the trajectories first so that a bad file fails before the (longer) map evaluation.
+    traj = None if args.traj is None else _trajectories(args.traj, args.run_dir)
     gt_path = args.gt
     if gt_path is None:
         gt_path = find_ground_truth(args.run_dir)
+        if gt_path is None and traj is not None:
+            return _trajectory_only(args, traj)
         if gt_path is None:
             raise DataError(
                 f"{args.run_dir}: no --gt given and no ground truth found (a synthetic scene with gt/ in "
                 "RUN_DIR/scene or config.yaml data.path, or a data.path holding a ScanNet labels PLY or "
                 "frames with class maps)"
             )
-    # Read the trajectories first so that a bad file fails before the (longer) map evaluation.
-    traj = None if args.traj is None else [read_trajectory(p) for p in args.traj]
     result = evaluate_run(
         args.run_dir,
         gt_path,
@@ -264,7 +274,7 @@ def _run(args: argparse.Namespace) -> int:
     )
     report = result.report
     if traj is not None:
-        report["trajectory"] = ate(traj[0], traj[1], args.align).to_dict()
+        report["trajectory"] = _ate(traj, args.align)
 
     out = args.out or args.run_dir
     print(f"run: {args.run_dir}   ground truth: {report['ground_truth']}")
@@ -306,16 +316,63 @@ def _run(args: argparse.Namespace) -> int:
             f"{g['num_no_edge']} no edge, {g['num_wrong_relation']} wrong relation; "
             f"{g['num_matched_nodes']} nodes matched)"
         )
+    _finish(report, out)
+    return 0
+
+
+def _finish(report: dict[str, Any], out: Path) -> None:
+    """Print the trajectory line and the notes, and write metrics.json."""
     t = report.get("trajectory")
     if t:
         print()
         print(
             f"trajectory: ATE RMSE {t['ate_rmse_m']:.4f} m after {t['alignment']} alignment "
-            f"({t['num_poses']} poses)"
+            f"({t['num_poses']} poses{t.get('left_out', '')})"
         )
     for note in report.get("notes", []):
         print(f"note: {note}")
     path = Path(out) / "metrics.json"
     atomic_write_text(path, json.dumps(_json_safe(report), indent=2, allow_nan=False) + "\n")
     print(f"\nwrote {path}")
+
+
+def _trajectories(paths: list[Path], run_dir: Path) -> tuple[np.ndarray, np.ndarray, int]:
+    """(estimated, ground truth, poses left out) for ``--traj EST GT``: GT a file, or the dataset folder
+    the run read, whose frames without a valid pose are left out of both."""
+    est = read_trajectory(paths[0])
+    if not paths[1].is_dir():
+        return est, read_trajectory(paths[1]), 0
+    gt = dataset_trajectory(paths[1], run_dir)
+    if len(gt) != len(est):
+        raise DataError(
+            f"{paths[0]} has {len(est)} poses, but the run read {len(gt)} frames of {paths[1]}: --traj with "
+            "a dataset folder pairs the run's traj.txt with the frames the run read (give a GT trajectory "
+            "file to pair another one)"
+        )
+    keep = [i for i, g in enumerate(gt) if g is not None]
+    if len(keep) < 3:
+        raise DataError(
+            f"{paths[1]}: {len(keep)} of the run's {len(gt)} frames have a valid pose; ATE needs 3"
+        )
+    return est[keep], np.stack([gt[i] for i in keep]), len(gt) - len(keep)
+
+
+def _ate(traj: tuple[np.ndarray, np.ndarray, int], align: str) -> dict[str, Any]:
+    t = ate(traj[0], traj[1], align).to_dict()  # type: ignore[arg-type]
+    if traj[2]:
+        t["num_left_out"] = traj[2]
+        t["left_out"] = f"; {traj[2]} frames without a valid dataset pose left out"
+    return t
+
+
+def _trajectory_only(args: argparse.Namespace, traj: tuple[np.ndarray, np.ndarray, int]) -> int:
+    """``--traj`` for a run with no semantic ground truth (e.g. a 7-Scenes run under odometry)."""
+    report: dict[str, Any] = {
+        "run_dir": str(args.run_dir),
+        "ground_truth": None,
+        "trajectory": _ate(traj, args.align),
+        "notes": ["no semantic ground truth found (--gt): trajectory only"],
+    }
+    print(f"run: {args.run_dir}   ground truth: none (trajectory only)")
+    _finish(report, args.out or args.run_dir)
     return 0

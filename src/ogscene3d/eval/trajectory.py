@@ -171,3 +171,20 @@ def read_trajectory(path: str | Path) -> np.ndarray:
     if a.shape[1] == 12:
         a = np.concatenate([a, np.tile([0.0, 0.0, 0.0, 1.0], (a.shape[0], 1))], axis=1)
     return a.reshape(-1, 4, 4)
+
+
+def dataset_trajectory(folder: str | Path, run_dir: str | Path) -> list[np.ndarray | None]:
+    """The dataset's own c2w poses of the frames the run in ``run_dir`` read from ``folder``, in order (the
+    rows of its ``traj.txt`` under odometry); None for a frame whose pose is missing or invalid (lost
+    tracking: ScanNet writes -inf)."""
+    from .held_out import run_frames
+    from .views import open_view_dataset
+
+    ds = open_view_dataset(folder, run_dir)
+    poses: list[np.ndarray | None] = []
+    for i in run_frames(run_dir, ds).mapped:
+        try:
+            poses.append(ds.pose(i))
+        except DataError:
+            poses.append(None)
+    return poses

@@ -97,7 +97,8 @@ def open_view_dataset(scene_dir: str | Path, run_dir: str | Path | None = None) 
 
             try:
                 data = load_config(Path(run_dir) / "config.yaml").data
-                cfg = dataclasses.replace(data, start=0, stride=1, max_frames=None)
+                # eval renders the map and reads no segments (a frame the run did not map may have none)
+                cfg = dataclasses.replace(data, start=0, stride=1, max_frames=None, segments_dir=None)
             except ConfigError as e:  # e.g. written by another version: the files' own settings then
                 log.warning("%s; rendering with %s's own camera settings", e, scene_dir)
     cfg.path = str(scene_dir)
