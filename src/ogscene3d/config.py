@@ -7,8 +7,11 @@ Unknown keys are errors, so a typo in a YAML file never silently falls back to a
 from __future__ import annotations
 
 import dataclasses
+import math
+import numbers
 import types
 import typing
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -287,6 +290,309 @@ class Config:
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
 
 
+# --------------------------------------------------------------------------------------------------- ranges
+@dataclass(frozen=True)
+class Range:
+    """The allowed values of one numeric setting: ``lo``/``hi`` (None: unbounded), open or closed. Floats must
+    also be finite (NaN and inf fail every float setting); ``optional`` settings also take None."""
+
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    hi_open: bool = False
+    integer: bool = False
+    optional: bool = False
+    note: str = ""  # what a special value means, e.g. "0 = no limit"
+
+    def contains(self, value: Any) -> bool:
+        if value is None:
+            return self.optional
+        if isinstance(value, bool):
+            return False
+        if self.integer:
+            if not isinstance(value, numbers.Integral):
+                return False
+        elif not isinstance(value, numbers.Real) or not math.isfinite(value):
+            return False
+        # written so that NaN fails every comparison
+        if self.lo is not None and not (value > self.lo if self.lo_open else value >= self.lo):
+            return False
+        if self.hi is not None and not (value < self.hi if self.hi_open else value <= self.hi):
+            return False
+        return True
+
+    def describe(self) -> str:
+        what = "an integer" if self.integer else "a finite number"
+        lo, hi = (None if b is None else f"{b:g}" for b in (self.lo, self.hi))
+        if lo is not None and hi is not None:  # a float in bounds is finite: no need to say so
+            text = f"{'(' if self.lo_open else '['}{lo}, {hi}{')' if self.hi_open else ']'}"
+            text = f"{what} in {text}" if self.integer else f"in {text}"
+        elif lo is not None:
+            text = f"{what} {'>' if self.lo_open else '>='} {lo}"
+        elif hi is not None:
+            text = f"{what} {'<' if self.hi_open else '<='} {hi}"
+        else:
+            text = what
+        if self.optional:
+            text += " or null"
+        return f"{text} ({self.note})" if self.note else text
+
+
+def _int(lo: int, hi: int | None = None, note: str = "", optional: bool = False) -> Range:
+    return Range(lo, hi, integer=True, optional=optional, note=note)
+
+
+def _float(
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    note: str = "",
+    optional: bool = False,
+) -> Range:
+    return Range(lo, hi, lo_open, hi_open, optional=optional, note=note)
+
+
+_UNIT = _float(0.0, 1.0)  # probabilities, ratios, thresholds on scores
+_NONNEG = _float(0.0)
+_POS = _float(0.0, lo_open=True)
+_LLM = {  # graph.captioner and graph.relations: the OpenAI-compatible client's settings
+    "timeout_s": _POS,
+    "max_retries": _int(0),
+    "backoff_s": _NONNEG,
+    "max_tokens": _int(0, note="0 = no max_tokens in the request"),
+}
+
+# Every int / float setting of Config, by dotted key. Each range follows what the setting's consumer does
+# with it: where 0 means "off" or "no limit" it stays allowed. tests/test_config_ranges.py checks that every
+# numeric field has an entry.
+RANGES: dict[str, Range] = {
+    "seed": _int(0),
+    "data.stride": _int(1),
+    "data.start": _int(0),
+    "data.max_frames": _int(1, optional=True, note="null = all frames"),
+    "data.depth_scale": _float(0.0, lo_open=True, optional=True, note="null = the dataset's own"),
+    "data.min_depth": _float(0.0, note="0 = the dataset's own"),
+    "data.max_depth": _float(0.0, note="0 = no limit"),
+    "synthetic.seed": _int(0),
+    "synthetic.frames": _int(1),
+    "synthetic.width": _int(8),
+    "synthetic.height": _int(8),
+    "synthetic.depth_noise": _NONNEG,
+    "synthetic.pose_noise": _NONNEG,
+    "segmentation.points_per_side": _int(1),
+    "segmentation.pred_iou_thresh": _UNIT,
+    "segmentation.stability_score_thresh": _UNIT,
+    "segmentation.box_nms_thresh": _UNIT,
+    "segmentation.min_region_area": _int(0, note="0 = no clean-up"),
+    "segmentation.tau_m": _UNIT,
+    "segmentation.sam_input_size": _int(1),
+    "segmentation.points_per_batch": _int(1),
+    "segmentation.stability_score_offset": _NONNEG,
+    "segmentation.mask_threshold": _float(),
+    "segmentation.detector_input_size": _int(1),
+    "segmentation.detector_score_thresh": _UNIT,
+    "segmentation.detector_nms_thresh": _UNIT,
+    "segmentation.detector_max_detections": _int(1),
+    "segmentation.classical_k": _POS,
+    "segmentation.classical_min_size": _int(0),
+    "segmentation.classical_max_side": _int(8),
+    "segmentation.classical_depth_weight": _NONNEG,
+    "segmentation.classical_normal_weight": _NONNEG,
+    "segmentation.simulated_seed": _int(0),
+    "mapping.keyframe_every": _int(0, note="0 = by camera motion only"),
+    "mapping.keyframe_translation": _float(0.0, note="0 = unused"),
+    "mapping.keyframe_rotation_deg": _float(0.0, note="0 = unused"),
+    "mapping.max_pose_step": _float(0.0, note="0 = no limit"),
+    "mapping.max_pose_step_deg": _float(0.0, note="0 = no limit"),
+    "mapping.pixels_per_gaussian": _int(1),
+    "mapping.knn_k": _int(1),
+    "mapping.knn_radius": _POS,
+    "mapping.knn_radius_spacing": _float(0.0, note="0 = off"),
+    "mapping.tau_valid": _UNIT,
+    "mapping.tau_p": _UNIT,
+    "mapping.tau_high": _UNIT,
+    "mapping.tau_low": _UNIT,
+    "mapping.r_search": _POS,
+    "mapping.tau_long": _UNIT,
+    "mapping.refine_every": _int(0, note="0 = off"),
+    "mapping.longterm_every": _int(0, note="0 = off"),
+    "mapping.longterm_views": _int(1),
+    "mapping.opt_iters": _int(0, note="0 = no optimisation"),
+    "mapping.opt_memory_frames": _int(0),
+    "mapping.lr_means": _NONNEG,
+    "mapping.lr_scales": _NONNEG,
+    "mapping.lr_quats": _NONNEG,
+    "mapping.lr_opacities": _NONNEG,
+    "mapping.lr_colors": _NONNEG,
+    "mapping.lambda_c": _NONNEG,
+    "mapping.lambda_d": _NONNEG,
+    "mapping.ssim_lambda": _UNIT,
+    "mapping.prune_opacity": _float(0.0, 1.0, hi_open=True, note="1 would prune every Gaussian"),
+    "mapping.prune_scale": _float(0.0, note="0 = off"),
+    "mapping.checkpoint_every": _int(0, note="0 = only at the end"),
+    "mapping.init_opacity": _float(0.0, 1.0, lo_open=True, hi_open=True),
+    "mapping.init_alpha_thresh": _UNIT,
+    "mapping.init_depth_margin": _NONNEG,
+    "mapping.refine_cluster_radius": _POS,
+    "mapping.refine_graph_k": _int(1),
+    "mapping.memory_max": _int(1),
+    "mapping.memory_point_step": _int(1),
+    "mapping.longterm_pixel_step": _int(1),
+    "mapping.longterm_knn_k": _int(1),
+    "mapping.merge_contain": _UNIT,
+    "mapping.merge_min_score": _UNIT,
+    "graph.init_keyframes": _int(1),
+    "graph.update_every": _int(1),
+    "graph.tau_update": _UNIT,
+    "graph.theta_e": _POS,
+    "graph.tau_e": _float(0.0, 1.0, hi_open=True),
+    "graph.min_gaussians": _int(1),
+    "graph.edge_voxel": _float(0.0, note="0 = theta_e / 2"),
+    "graph.max_points_per_node": _int(1),
+    "graph.support_band": _POS,
+    "graph.support_ratio": _float(0.0, 1.0, lo_open=True),
+    "graph.max_masked_views": _int(1),
+    "graph.crop_max_side": _int(1),
+    "graph.context_pad": _NONNEG,
+    "graph.min_obs_pixels": _int(0),
+    "graph.query_min_similarity": _float(-1.0, 1.0),  # a cosine similarity
+    **{f"graph.captioner.{k}": r for k, r in _LLM.items()},
+    "graph.captioner.concurrency": _int(1),
+    **{f"graph.relations.{k}": r for k, r in _LLM.items()},
+    "graph.relations.contact_tol": _POS,
+    "graph.relations.cell_size": _POS,
+    "graph.relations.overlap_ratio": _float(0.0, 1.0, lo_open=True),
+    "graph.relations.inside_ratio": _float(0.0, 1.0, lo_open=True),
+    "graph.relations.under_gap": _POS,
+    "graph.relations.attach_elevation": _NONNEG,
+    "graph.confidence.clip_image_size": _int(1, optional=True, note="null = the export's own, or 224"),
+    "tracking.max_translation": _POS,
+    "tracking.max_rotation_deg": _POS,
+    "tracking.keyframe_every": _int(1, note="1 = frame-to-frame"),
+    "tracking.min_conditioning": _float(0.0, 1.0, hi_open=True),
+    "tracking.max_width": _int(0, note="0 = full resolution"),
+    "tracking.depth_min": _NONNEG,
+    "tracking.depth_max": _POS,
+    "tracking.depth_outlier_trunc": _POS,
+    "tracking.depth_huber_delta": _POS,
+    "tracking.intensity_huber_delta": _POS,
+    "tracking.min_fitness": _UNIT,
+    "tracking.max_inlier_rmse": _POS,
+    "tracking.keyframe_fitness": _UNIT,
+    "tracking.keyframe_translation": _POS,
+    "tracking.keyframe_rotation_deg": _POS,
+    "tracking.max_lost_frames": _int(0, note="0 = never restart"),
+    "tracking.max_residual_ratio": _float(0.0, note="0 = off"),
+    "tracking.orb_features": _int(10),
+    "tracking.ransac_threshold": _POS,
+    "tracking.min_feature_inliers": _int(3),
+}
+
+
+def _numbers(value: Any, count: int | None = None, integer: bool = False) -> list | None:
+    """``value`` as a list of finite numbers (integers), or None when it is not one (of ``count`` items)."""
+    if not isinstance(value, list | tuple) or (count is not None and len(value) != count):
+        return None
+    kind = numbers.Integral if integer else numbers.Real
+    if not all(isinstance(v, kind) and not isinstance(v, bool) for v in value):
+        return None
+    if not all(math.isfinite(v) for v in value):
+        return None
+    return list(value)
+
+
+def _check_intrinsics(v: Any) -> str | None:
+    if v is None:
+        return None
+    vals = _numbers(v, 4)
+    if vals is None or not (vals[0] > 0 and vals[1] > 0):
+        return "must be null or [fx, fy, cx, cy]: 4 finite numbers with fx, fy > 0"
+    return None
+
+
+def _check_score_range(v: Any) -> str | None:
+    vals = _numbers(v, 2)
+    if vals is None or not vals[0] < vals[1]:
+        return "must be [low, high]: 2 finite numbers with low < high"
+    return None
+
+
+def _check_conf_range(v: Any) -> str | None:
+    vals = _numbers(v, 2)
+    if vals is None or not all(0 <= c <= 1 for c in vals):
+        return "must be [low, high]: 2 confidences in [0, 1]"
+    return None
+
+
+def _check_up_axis(v: Any) -> str | None:
+    vals = _numbers(v, 3)
+    if vals is None or not math.hypot(*vals) > 1e-9:
+        return "must be a finite non-zero 3-vector"
+    return None
+
+
+def _check_iterations(v: Any) -> str | None:
+    vals = _numbers(v, integer=True)
+    if not vals or not all(n >= 1 for n in vals):
+        return "must be a non-empty list of integers >= 1 (one per pyramid level)"
+    return None
+
+
+# the numeric list settings: a check returns what is wrong (None: fine)
+LIST_CHECKS: dict[str, Callable[[Any], str | None]] = {
+    "data.intrinsics": _check_intrinsics,
+    "segmentation.sam_score_range": _check_score_range,
+    "segmentation.conf_range": _check_conf_range,
+    "graph.up_axis": _check_up_axis,
+    "tracking.iterations": _check_iterations,
+}
+
+
+def _get(cfg: Any, key: str) -> Any:
+    for part in key.split("."):
+        cfg = getattr(cfg, part)
+    return cfg
+
+
+def _cross_checks(cfg: Config) -> str | None:
+    m, d, t = cfg.mapping, cfg.data, cfg.tracking
+    if not m.tau_low <= m.tau_high:
+        return f"mapping.tau_low must be <= mapping.tau_high, got {m.tau_low!r} > {m.tau_high!r}"
+    if m.keyframe_every == 0 and m.keyframe_translation == 0 and m.keyframe_rotation_deg == 0:
+        return (
+            "mapping.keyframe_every is 0 and so are mapping.keyframe_translation and "
+            "mapping.keyframe_rotation_deg: no frame would become a keyframe; set one of them > 0"
+        )
+    if d.max_depth > 0 and not d.min_depth < d.max_depth:
+        return (
+            f"data.min_depth must be < data.max_depth when data.max_depth > 0 (0 = no limit), got "
+            f"{d.min_depth!r} >= {d.max_depth!r}"
+        )
+    if not t.depth_min < t.depth_max:
+        return f"tracking.depth_min must be < tracking.depth_max, got {t.depth_min!r} >= {t.depth_max!r}"
+    return None
+
+
+def check_config(cfg: Config) -> None:
+    """Raise :class:`ConfigError` naming the key, the value and the allowed range of the first numeric
+    setting of ``cfg`` out of its range (:data:`RANGES`, :data:`LIST_CHECKS`, then the cross-field rules).
+
+    ``load_config`` calls it, and so does ``Mapper`` (a ``Config()`` built and changed in Python)."""
+    for key, rng in RANGES.items():
+        value = _get(cfg, key)
+        if not rng.contains(value):
+            raise ConfigError(f"{key} must be {rng.describe()}, got {value!r}")
+    for key, check in LIST_CHECKS.items():
+        value = _get(cfg, key)
+        problem = check(value)
+        if problem is not None:
+            raise ConfigError(f"{key} {problem}, got {value!r}")
+    problem = _cross_checks(cfg)
+    if problem is not None:
+        raise ConfigError(problem)
+
+
 def _is_dataclass_type(tp: Any) -> bool:
     return isinstance(tp, type) and dataclasses.is_dataclass(tp)
 
@@ -396,7 +702,9 @@ def load_config(path: str | Path | None = None, overrides: list[str] | None = No
         values = loaded
     for ov in overrides or []:
         values = _merge(values, parse_override(ov))
-    return config_from_dict(values)
+    cfg = config_from_dict(values)
+    check_config(cfg)
+    return cfg
 
 
 def add_override_argument(parser: Any, example: str = "mapping.opt_iters=5") -> None:

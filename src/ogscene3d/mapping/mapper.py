@@ -43,7 +43,7 @@ import numpy as np
 import torch
 
 from ..atomic import atomic_write_text
-from ..config import Config, save_config
+from ..config import Config, check_config, save_config
 from ..device import resolve_device
 from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame, implausible_median_depth
@@ -158,14 +158,11 @@ class Mapper:
     """Incremental semantic Gaussian mapper: ``process(frame)`` per frame, ``finalize()``, ``save(dir)``."""
 
     def __init__(self, config: Config, device: str | torch.device | None = None, segmenter=None) -> None:
+        check_config(config)  # the numeric ranges, also of a Config() built and changed in Python
         self.config = config
         self.cfg = cfg = config.mapping
         if cfg.ablation not in ABLATIONS:
             raise ConfigError(f"mapping.ablation must be one of {ABLATIONS}, got {cfg.ablation!r}")
-        if cfg.pixels_per_gaussian < 1 or cfg.knn_k < 1 or cfg.knn_radius <= 0 or cfg.r_search <= 0:
-            raise ConfigError(
-                "mapping: pixels_per_gaussian and knn_k must be >= 1, knn_radius and r_search > 0"
-            )
         self.device = resolve_device(device if device is not None else config.device)
         self.segmenter = segmenter
         self._tracker = None

@@ -127,12 +127,8 @@ def add_parser(subparsers) -> None:
 
 
 def _up_from_config(cfg) -> tuple[float, float, float]:
-    import numpy as np
-
-    up = np.asarray(cfg.graph.up_axis, dtype=np.float64)
-    if up.shape != (3,) or not np.isfinite(up).all() or not np.linalg.norm(up) > 0:
-        raise ConfigError(f"graph.up_axis must be a non-zero 3-vector, got {cfg.graph.up_axis!r}")
-    return tuple(float(v) for v in up)  # type: ignore[return-value]
+    # load_config's check_config has made sure it is a finite non-zero 3-vector
+    return tuple(float(v) for v in cfg.graph.up_axis)  # type: ignore[return-value]
 
 
 def _settings(args):

@@ -1,0 +1,214 @@
+"""The central range check of every numeric setting (config.RANGES, config.LIST_CHECKS, check_config)."""
+
+import copy
+import dataclasses
+import math
+import re
+import types
+import typing
+from pathlib import Path
+
+import pytest
+
+from ogscene3d.cli import main
+from ogscene3d.config import LIST_CHECKS, RANGES, Config, check_config, load_config
+from ogscene3d.errors import ConfigError
+
+CONFIGS = sorted((Path(__file__).resolve().parents[1] / "configs").glob("*.yaml"))
+
+
+def _fields(cls=Config, prefix=""):
+    """(dotted key, type) of every leaf field of the Config dataclasses."""
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        tp = hints[f.name]
+        if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+            yield from _fields(tp, f"{prefix}{f.name}.")
+        else:
+            yield prefix + f.name, tp
+
+
+def _split_optional(tp):
+    """(the type without None, whether None is allowed)."""
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        if len(args) == 1 and len(args) < len(typing.get_args(tp)):
+            return args[0], True
+    return tp, False
+
+
+def _with(key, value):
+    cfg = Config()
+    node = cfg
+    *path, name = key.split(".")
+    for part in path:
+        node = getattr(node, part)
+    setattr(node, name, value)
+    return cfg
+
+
+def _default(key):
+    node = Config()
+    for part in key.split("."):
+        node = getattr(node, part)
+    return node
+
+
+def _outside(key):
+    """Values just outside the range of ``key`` (one per finite bound)."""
+    rng = RANGES[key]
+    out = []
+    if rng.lo is not None:
+        if rng.lo_open:
+            out.append(int(rng.lo) if rng.integer else float(rng.lo))
+        else:
+            out.append(int(rng.lo) - 1 if rng.integer else math.nextafter(rng.lo, -math.inf))
+    if rng.hi is not None:
+        if rng.hi_open:
+            out.append(int(rng.hi) if rng.integer else float(rng.hi))
+        else:
+            out.append(int(rng.hi) + 1 if rng.integer else math.nextafter(rng.hi, math.inf))
+    return out
+
+
+def test_every_numeric_setting_has_a_range():
+    numeric, lists = {}, set()
+    for key, tp in _fields():
+        base, optional = _split_optional(tp)
+        if base in (int, float):
+            numeric[key] = (base, optional)
+        elif typing.get_origin(base) is list and typing.get_args(base)[0] in (int, float):
+            lists.add(key)
+    missing = sorted(set(numeric) - set(RANGES))
+    assert not missing, f"numeric settings without an entry in config.RANGES: {missing}"
+    stale = sorted(set(RANGES) - set(numeric))
+    assert not stale, f"config.RANGES entries for no numeric setting: {stale}"
+    for key, (base, optional) in numeric.items():
+        assert RANGES[key].integer == (base is int), key
+        assert RANGES[key].optional == optional, key
+    assert lists == set(LIST_CHECKS), "numeric list settings and config.LIST_CHECKS differ"
+    assert len(RANGES) >= 120
+
+
+def test_defaults_and_shipped_configs_pass():
+    check_config(Config())
+    for key in RANGES:
+        assert RANGES[key].contains(_default(key)), key
+    assert CONFIGS
+    for path in CONFIGS:
+        load_config(path)
+
+
+@pytest.mark.parametrize("key", sorted(RANGES))
+def test_each_bound_is_enforced(key):
+    rng = RANGES[key]
+    values = _outside(key)
+    assert values or not rng.integer, f"{key}: an integer setting without bounds"
+    for value in values:
+        with pytest.raises(ConfigError, match=rf"^{re.escape(key)} must be .*, got "):
+            check_config(_with(key, value))
+    # a closed bound itself is allowed
+    for bound, is_open in ((rng.lo, rng.lo_open), (rng.hi, rng.hi_open)):
+        if bound is not None and not is_open:
+            assert rng.contains(int(bound) if rng.integer else float(bound)), key
+    if rng.integer:
+        with pytest.raises(ConfigError, match=key):
+            check_config(_with(key, _default(key) + 0.5 if _default(key) is not None else 1.5))
+    else:
+        for bad in (math.nan, math.inf, -math.inf):
+            with pytest.raises(ConfigError, match=key):
+                check_config(_with(key, bad))
+    with pytest.raises(ConfigError, match=key):
+        check_config(_with(key, True))  # a bool is no number
+    if rng.optional:
+        check_config(_with(key, None))
+    else:
+        with pytest.raises(ConfigError, match=key):
+            check_config(_with(key, None))
+
+
+def test_messages_name_key_value_and_range():
+    with pytest.raises(ConfigError, match=r"^mapping\.tau_high must be in \[0, 1\], got 2\.0$"):
+        check_config(_with("mapping.tau_high", 2.0))
+    with pytest.raises(ConfigError, match=r"mapping\.tau_high must be in \[0, 1\], got nan"):
+        load_config(None, ["mapping.tau_high=.nan"])
+    with pytest.raises(ConfigError, match=r"mapping\.opt_iters must be an integer >= 0 .*got -3"):
+        load_config(None, ["mapping.opt_iters=-3"])
+    with pytest.raises(ConfigError, match=r"mapping\.init_opacity must be in \(0, 1\)"):
+        load_config(None, ["mapping.init_opacity=1"])
+    # 0 = off / no limit stays allowed
+    zeros = ["mapping.checkpoint_every", "data.max_depth", "tracking.max_width", "mapping.max_pose_step",
+             "mapping.opt_iters", "mapping.refine_every", "mapping.opt_memory_frames"]  # fmt: skip
+    load_config(None, [f"{key}=0" for key in zeros])
+
+
+@pytest.mark.parametrize(
+    "key, bad",
+    [
+        ("data.intrinsics", [500.0, 500.0, 320.0]),
+        ("data.intrinsics", [0.0, 500.0, 320.0, 240.0]),
+        ("data.intrinsics", [500.0, math.nan, 320.0, 240.0]),
+        ("data.intrinsics", [500.0, 500.0, math.inf, 240.0]),
+        ("segmentation.sam_score_range", [0.9, 0.8]),
+        ("segmentation.sam_score_range", [0.5, math.nan]),
+        ("segmentation.sam_score_range", [0.5]),
+        ("segmentation.conf_range", [0.5, 1.5]),
+        ("segmentation.conf_range", [math.nan, 1.0]),
+        ("graph.up_axis", [0.0, 0.0, 0.0]),
+        ("graph.up_axis", [0.0, math.inf, 0.0]),
+        ("graph.up_axis", [0.0, 1.0]),
+        ("tracking.iterations", []),
+        ("tracking.iterations", [20, 0, 5]),
+        ("tracking.iterations", [20, 2.5]),
+    ],
+)
+def test_list_settings(key, bad):
+    with pytest.raises(ConfigError, match=rf"^{re.escape(key)} .*got "):
+        check_config(_with(key, bad))
+
+
+def test_list_settings_pass_when_sensible():
+    check_config(_with("data.intrinsics", [500.0, 480.0, 320.0, 240.0]))
+    check_config(_with("data.intrinsics", None))
+    check_config(_with("segmentation.conf_range", [1.0, 0.5]))
+    check_config(_with("graph.up_axis", [0.0, 0.0, 2.0]))
+    check_config(_with("tracking.iterations", [7]))
+
+
+def test_cross_field_rules():
+    with pytest.raises(ConfigError, match=r"mapping\.tau_low must be <= mapping\.tau_high"):
+        load_config(None, ["mapping.tau_low=0.8"])
+    load_config(None, ["mapping.tau_low=0.7"])
+    with pytest.raises(ConfigError, match="no frame would become a keyframe"):
+        load_config(None, ["mapping.keyframe_every=0"])
+    load_config(None, ["mapping.keyframe_every=0", "mapping.keyframe_rotation_deg=5"])
+    with pytest.raises(ConfigError, match=r"data\.min_depth must be < data\.max_depth"):
+        load_config(None, ["data.min_depth=3", "data.max_depth=2"])
+    load_config(None, ["data.min_depth=3"])  # max_depth 0: no limit
+    with pytest.raises(ConfigError, match=r"tracking\.depth_min must be < tracking\.depth_max"):
+        load_config(None, ["tracking.depth_min=5"])
+
+
+def test_mapper_checks_a_config_built_in_python():
+    from ogscene3d.mapping.mapper import Mapper
+
+    cfg = Config()
+    cfg.graph.enabled = False
+    bad = copy.deepcopy(cfg)
+    bad.mapping.tau_high = 2.0
+    with pytest.raises(ConfigError, match=r"mapping\.tau_high must be in \[0, 1\], got 2\.0"):
+        Mapper(bad, "cpu")
+    bad = copy.deepcopy(cfg)
+    bad.mapping.knn_radius = 0.0
+    with pytest.raises(ConfigError, match=r"mapping\.knn_radius must be a finite number > 0, got 0\.0"):
+        Mapper(bad, "cpu")
+    Mapper(cfg, "cpu")
+
+
+def test_cli_refuses_an_out_of_range_override_before_any_work(tmp_path, capsys):
+    out = tmp_path / "o"
+    code = main(["run", "--out", str(out), "--no-progress", "--set", "mapping.opt_iters=-3"])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "mapping.opt_iters must be an integer >= 0" in err and "got -3" in err
+    assert not out.exists()
