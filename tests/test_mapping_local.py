@@ -319,3 +319,30 @@ def test_probe_updates_limit_eq5_to_inner_probes(device):
     assert upd_all == list(range(17)) and upd_inner == list(range(16))
     assert float(conf_all[16]) < 0.6 and float(conf_inner[16]) == pytest.approx(0.6)
     torch.testing.assert_close(conf_all[:16], conf_inner[:16])
+
+
+def test_make_probes_negative_segment_ids_are_no_segment(device):
+    # Frame.segments: 0 or negative = no segment. A negative id must not shift the other segments' indices
+    import numpy as np
+
+    from ogscene3d.frame import Frame
+    from ogscene3d.mapping.init import make_probes
+
+    h, w = 4, 6
+    ids = np.zeros((h, w), dtype=np.int32)
+    ids[:, :2] = -1
+    ids[:, 2:4] = 5
+    ids[:, 4:] = 7
+    K = np.array([[10.0, 0, w / 2], [0, 10.0, h / 2], [0, 0, 1]], dtype=np.float32)
+    frame = Frame(0, np.zeros((h, w, 3), np.uint8), np.ones((h, w), np.float32), K, np.eye(4), segments=ids)
+    probes = make_probes(frame, ids, {5: 0.88, 7: 1.0}, torch.device(device), step=1)
+    assert probes.seg_ids.tolist() == [5, 7]
+    col = (probes.pix % w).cpu()
+    seg = probes.seg.cpu()
+    assert (seg[col < 2] == -1).all()
+    assert (seg[(col >= 2) & (col < 4)] == 0).all()
+    assert (seg[col >= 4] == 1).all()
+    conf = probes.conf.cpu()
+    assert torch.allclose(conf[col < 2], torch.tensor(0.0))
+    assert torch.allclose(conf[(col >= 2) & (col < 4)], torch.tensor(0.5))
+    assert torch.allclose(conf[col >= 4], torch.tensor(1.0))

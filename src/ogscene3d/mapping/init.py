@@ -6,6 +6,14 @@ KNN association; only the probes whose pixel the current map does not already ex
 alpha below ``alpha_thresh``, or observed depth in front of the rendered depth by more than
 ``depth_margin``) become new Gaussians. Scale: isotropic, the footprint of one grid cell at that depth
 (depth * step / focal), so neighbouring Gaussians overlap; rotation identity; colour from the RGB.
+
+The paper initializes new Gaussians from every pixel of every segment of each keyframe; adding only the
+unexplained ones keeps a revisited surface from being duplicated at every keyframe (as in SplaTAM), and the
+explained probes still stand for G_m in Eq. 4 (``local.py``; ``fill_unlabeled`` there lets an existing
+unlabelled Gaussian under a labelled segment play the new Gaussian's part).
+A probe's confidence is its segment's SAM score rescaled from ``score_range`` to ``conf_range`` (paper:
+[0.88, 1] -> [0.5, 1], clamped); a segment without a score (a segmenter or a segments folder that gives
+none) counts as scored 1, i.e. confidence 1. Pixels outside every segment get confidence 0.
 """
 
 from __future__ import annotations
@@ -61,8 +69,8 @@ def make_probes(
     min_depth: float = 0.0,
     max_depth: float = 0.0,
 ) -> Probes:
-    """Back-project the grid pixels of ``frame`` (must have a pose). ``segments`` int [H,W] (0 = none)
-    or None; ``rendered_alpha``/``rendered_depth`` [H,W] from rendering the map at the frame's pose
+    """Back-project the grid pixels of ``frame`` (must have a pose). ``segments`` int [H,W] (0 or negative =
+    none) or None; ``rendered_alpha``/``rendered_depth`` [H,W] from rendering the map at the frame's pose
     (None when the map is empty: every probe is new)."""
     if frame.pose is None:
         raise ValueError(f"frame {frame.index}: no pose; mapping needs camera-to-world poses")
@@ -126,13 +134,12 @@ def _probe_segments(
     sid: torch.Tensor, scores: dict[int, float]
 ) -> tuple[torch.Tensor, torch.Tensor, np.ndarray]:
     """Per probe its segment index (-1 = none) from the segment ids ``sid`` [P] (0 = none); the frame's
-    segment ids [S] (on the device) and their raw SAM scores [S] (host: the scores are a dict)."""
-    seg_ids, inv = torch.unique(sid, return_inverse=True)
+    segment ids [S] (on the device) and their raw SAM scores [S] (host: the scores are a dict). Negative ids
+    are no segment, as 0 is (``Frame.segments``)."""
+    seg_ids, inv = torch.unique(sid.clamp(min=0), return_inverse=True)
     ids = seg_ids.cpu().numpy()  # one small copy: S ids
     # index 0 of the unique ids is "no segment" when present: shift so that it becomes -1
     if ids.size and ids[0] == 0:
         ids, seg_ids, inv = ids[1:], seg_ids[1:], inv - 1
-    keep = ids > 0
-    ids, seg_ids = ids[keep], seg_ids[torch.as_tensor(keep, device=sid.device)]
     raw = np.array([float(scores.get(int(i), 1.0)) for i in ids], dtype=np.float32)
     return inv.reshape(-1), seg_ids, raw
