@@ -25,6 +25,7 @@ Writes OUT/ablation.json and OUT/ablation.png (grouped bars of mIoU / F-mIoU / m
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -39,7 +40,7 @@ from _common import positive_int, run_main  # noqa: E402
 
 from ogscene3d.batch import json_safe  # noqa: E402
 from ogscene3d.config import load_config  # noqa: E402
-from ogscene3d.datasets import make_synthetic_scene  # noqa: E402
+from ogscene3d.datasets import configured_scene  # noqa: E402
 from ogscene3d.device import resolve_device  # noqa: E402
 from ogscene3d.eval.protocols import CONCEPTGRAPHS_DEFAULT_IGNORE, HOVSG_DEFAULT_IGNORE  # noqa: E402
 from ogscene3d.mapping.ablation import run_ablation  # noqa: E402
@@ -266,16 +267,7 @@ def main(argv: list[str] | None = None) -> int:
     per_seed: dict[int, dict[str, dict]] = {}
     t_all = time.perf_counter()
     for seed in seeds:
-        scene = make_synthetic_scene(
-            out / "scenes" / f"seed_{seed}",
-            seed,
-            s.frames,
-            s.width,
-            s.height,
-            s.noise,
-            s.depth_noise,
-            s.pose_noise,
-        )
+        scene = configured_scene(out / "scenes" / f"seed_{seed}", dataclasses.replace(s, seed=seed))
         print(f"seed {seed}: mapping {len(ablations)} ablations of {scene} ...", file=sys.stderr, flush=True)
         choices = [args.gt_points] + [g for g in ("observed", "all") if g != args.gt_points]
         res = run_ablation(

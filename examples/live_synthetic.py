@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from ogscene3d.config import load_config
-from ogscene3d.datasets import make_synthetic_scene, open_dataset
+from ogscene3d.datasets import configured_scene, open_dataset
 from ogscene3d.mapping.mapper import Mapper
 from ogscene3d.viewer.app import LiveViewer
 from ogscene3d.viewer.snapshot import snapshot_from_mapper
@@ -32,10 +32,10 @@ def main() -> None:
 
     cfg = load_config(None, [f"synthetic.frames={args.frames}"])
     s = cfg.synthetic
-    # one folder per frame count: make_synthetic_scene refuses a folder holding a scene made with others
+    # one folder per frame count: configured_scene refuses a folder holding a scene made with others
     scene_dir = args.scene or f"outputs/example-live-synthetic-{s.frames}f"
-    scene = make_synthetic_scene(
-        scene_dir, s.seed, s.frames, s.width, s.height, overwrite=args.force, progress=True
+    scene = configured_scene(
+        scene_dir, s, overwrite=args.force, progress=True, remedy="choose another --scene, or pass --force"
     )
     ds = open_dataset(scene, config=cfg.data)
     mapper = Mapper(cfg, args.device)

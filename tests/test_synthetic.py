@@ -288,7 +288,8 @@ def test_synth_cli(tmp_path, capsys, monkeypatch):
     params = json.loads((out / "scene.json").read_text())
     assert (params["width"], params["height"], params["noise"], params["seed"]) == (40, 30, "low", 2)
     assert cli.main(["synth", "--out", str(out), "--frames", "3"]) == 2
-    assert "not empty" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "not empty" in err and "choose another --out, or pass --force" in err
     assert cli.main(["synth", "--out", str(tmp_path / "y"), "--frames", "0"]) == 2
     overrides = ["--set", "synthetic.frames=2", "--set", "synthetic.width=32"]
     assert cli.main(["synth", "--out", str(tmp_path / "z"), *overrides]) == 0

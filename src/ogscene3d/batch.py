@@ -254,7 +254,7 @@ def map_scene(
     import torch
 
     from .config import load_config
-    from .datasets import make_synthetic_scene, open_dataset
+    from .datasets import configured_scene, open_dataset
     from .mapping.mapper import Mapper
     from .mapping.source import dataset_source, record_data, remove_run_temps, start_run_dir
 
@@ -267,9 +267,7 @@ def map_scene(
     if spec.synthetic_seed is not None:
         s = cfg.synthetic
         s.seed = spec.synthetic_seed
-        data = make_synthetic_scene(
-            run_dir / "scene", s.seed, s.frames, s.width, s.height, s.noise, s.depth_noise, s.pose_noise
-        )
+        data = configured_scene(run_dir / "scene", s, remedy="give a new --out, or remove that folder")
     else:
         data = Path(str(spec.data))
     # Recorded in config.yaml: where the frames came from (and where `eval` looks for ground truth).

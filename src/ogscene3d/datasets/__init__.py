@@ -15,7 +15,7 @@ from .replica import ReplicaDataset
 from .scannet import ScanNetDataset
 from .semantic_nerf import SemanticNeRFDataset
 from .sevenscenes import LabelFusionDataset, SevenScenesDataset
-from .synthetic import SyntheticDataset, load_instances, make_synthetic_scene
+from .synthetic import SyntheticDataset, configured_scene, load_instances, make_synthetic_scene
 from .tum import TUMDataset
 
 __all__ = [
@@ -33,6 +33,7 @@ __all__ = [
     "detect_kind",
     "load_instances",
     "make_synthetic_scene",
+    "configured_scene",
     "open_dataset",
     "read_depth_raw",
     "read_rgb",

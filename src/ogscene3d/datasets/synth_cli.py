@@ -69,8 +69,9 @@ def run(args: argparse.Namespace) -> int:
         reused = _reusable(args.out, params, args.force)
         t0 = time.perf_counter()
         out = make_synthetic_scene(
-            args.out, **params, overwrite=args.force, device=args.device, progress=True
-        )
+            args.out, **params, overwrite=args.force, device=args.device, progress=True,
+            remedy="choose another --out, or pass --force to regenerate it",
+        )  # fmt: skip
     except ValueError as e:
         if isinstance(e, OGSceneError):
             raise

@@ -66,12 +66,13 @@ import logging
 import shutil
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
 
 from ..atomic import atomic_write_bytes, atomic_write_text
-from ..config import DataConfig
+from ..config import DataConfig, SyntheticConfig
 from ..errors import DataError
 from .base import FrameRecord, read_label_png
 from .procedural import (
@@ -437,6 +438,7 @@ def make_synthetic_scene(
     overwrite: bool = False,
     device: str | None = "cpu",
     progress: Callable[[Iterator], Iterator] | bool = False,
+    remedy: str = "choose another folder or pass overwrite=True",
 ) -> Path:
     """Generate (or reuse) a synthetic scene in ``out_dir`` and return its path.
 
@@ -445,7 +447,8 @@ def make_synthetic_scene(
     poses written to traj.txt in metres (rotation noise: half that in radians; gt/traj.txt keeps
     the true poses). If ``out_dir`` already holds a complete scene made with the same arguments it
     is reused as is; a folder holding anything else is an error unless ``overwrite``.
-    ``progress``: True for a tqdm bar, or a wrapper ``iterable -> iterable``.
+    ``progress``: True for a tqdm bar, or a wrapper ``iterable -> iterable``. ``remedy``: what the error for
+    a folder holding something else tells the user to do (a command names its own options).
     """
     from ..segmentation.precomputed import write_segments
     from ..segmentation.simulated import NOISE_LEVELS, SimulatedSegmenter
@@ -471,8 +474,8 @@ def make_synthetic_scene(
             log.info("reusing synthetic scene %s", out)
             return out
     if out.exists() and any(out.iterdir()) and not overwrite:
-        raise DataError(f"{out}: folder is not empty and holds no synthetic scene made with these arguments; "
-                        "choose another folder or pass overwrite=True (--force)")  # fmt: skip
+        raise DataError(f"{out}: folder is not empty and holds no synthetic scene made with these arguments "
+                        f"(an earlier one?); {remedy}")  # fmt: skip
     if overwrite:
         marker.unlink(missing_ok=True)
         for sub in ("results", "segments", "gt"):
@@ -584,3 +587,11 @@ class SyntheticDataset(ReplicaDataset):
         if inst.max(initial=0) >= len(self._class_lut):
             raise DataError(f"{path}: instance id {inst.max()} is not in gt/instances.json")
         return inst, self._class_lut[inst]
+
+
+def configured_scene(out_dir: str | Path, s: SyntheticConfig, **kwargs: Any) -> Path:
+    """:func:`make_synthetic_scene` with the settings of a config's ``synthetic`` section (keyword arguments
+    as there: ``overwrite``, ``device``, ``progress``, ``remedy``)."""
+    return make_synthetic_scene(
+        out_dir, s.seed, s.frames, s.width, s.height, s.noise, s.depth_noise, s.pose_noise, **kwargs
+    )

@@ -63,7 +63,7 @@ def add_parser(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..datasets import make_synthetic_scene, open_dataset
+    from ..datasets import configured_scene, open_dataset
     from .mapper import Mapper
 
     overrides = list(args.overrides)
@@ -96,23 +96,12 @@ def run(args: argparse.Namespace) -> int:
             s.height,
             out / "scene",
         )
-        try:
-            data = make_synthetic_scene(
-                out / "scene",
-                s.seed,
-                s.frames,
-                s.width,
-                s.height,
-                s.noise,
-                s.depth_noise,
-                s.pose_noise,
-                progress=not args.no_progress,
-            )
-        except DataError as e:  # a folder holding something else; its message names a --force `run` lacks
-            raise DataError(
-                f"{out / 'scene'}: holds no synthetic scene made with these `synthetic` settings (an earlier "
-                "run's scene?): give a new --out, or remove that folder to generate the scene there again"
-            ) from e
+        data = configured_scene(
+            out / "scene",
+            s,
+            progress=not args.no_progress,
+            remedy="give a new --out, or remove that folder to generate the scene there again",
+        )
     # the run's config.yaml records what was mapped: eval finds the ground truth and --resume the frames
     record_data(cfg, data, args.segments)
     # --max-frames bounds this invocation only (a resume without it goes on to the end)

@@ -244,7 +244,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _start_live(args: argparse.Namespace):
     from ..config import load_config
-    from ..datasets import make_synthetic_scene, open_dataset
+    from ..datasets import configured_scene, open_dataset
     from ..mapping.mapper import Mapper
     from ..mapping.source import dataset_source, record_data
     from .app import LiveViewer
@@ -265,23 +265,12 @@ def _start_live(args: argparse.Namespace):
             f"in {scene_dir}",
             flush=True,
         )
-        try:
-            data = make_synthetic_scene(
-                scene_dir,
-                s.seed,
-                s.frames,
-                s.width,
-                s.height,
-                s.noise,
-                s.depth_noise,
-                s.pose_noise,
-                progress=True,
-            )
-        except DataError as e:  # a folder holding something else; its message names a --force live lacks
-            raise DataError(
-                f"{scene_dir}: holds no synthetic scene made with these `synthetic` settings (an earlier "
-                "one?): give another --synthetic-dir, or remove that folder to generate the scene there again"
-            ) from e
+        data = configured_scene(
+            scene_dir,
+            s,
+            progress=True,
+            remedy="give another --synthetic-dir, or remove that folder to generate the scene there again",
+        )
     if data is not None or cfg.data.path is not None:  # a saved run records its data, as `run` does
         record_data(cfg, data if data is not None else cfg.data.path, args.segments)
     ds = open_dataset(max_frames=args.max_frames, config=cfg.data)
