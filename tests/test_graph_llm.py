@@ -307,6 +307,11 @@ def test_openai_captioner_in_scene_graph(server_factory, tmp_path, monkeypatch):
         ("[1, 2]", None),
         ("   ", None),
         ("x" * 2000, None),
+        # JSON cut off (max_tokens) is malformed, not prose: no JSON debris stored as a caption
+        ('{"caption": "a red wooden ch', None),
+        ('```json\n{"caption": "a lamp', None),
+        ('Here it is: {"caption": "a lamp with', None),
+        ('[{"caption": "a mug"', None),
     ],
 )
 def test_parse_caption_reply(reply, expected):
@@ -479,6 +484,29 @@ def test_failed_captions_are_retried_at_the_next_update(server_factory):
     g.update(23, *arrays)
     assert [n.caption_source for n in g.nodes.values()] == ["vlm", "vlm"]
     assert g.nodes[0].tag == "red box"
+
+
+def test_truncated_json_caption_is_a_logged_skip_and_asked_again(server_factory, caplog):
+    truncated = {"on": True}
+
+    def respond(body, n):
+        content = body["messages"][-1]["content"]
+        if isinstance(content, list):
+            text = '{"caption": "a red box with a lid and' if truncated["on"] else '{"caption": "a red box"}'
+            return 200, text, 0
+        ids = [line.split(":")[0] for line in content.splitlines() if line[:1].isdigit()]
+        return 200, json.dumps({"tags": {i: "red box" for i in ids}}), 0
+
+    srv = server_factory(respond)
+    g, arrays = _observed_graph(2, OpenAICaptioner(_client(srv), concurrency=1))
+    with caplog.at_level(logging.WARNING):
+        g.update(11, *arrays)
+    assert [n.caption_source for n in g.nodes.values()] == ["heuristic", "heuristic"]
+    assert not any("{" in n.caption for n in g.nodes.values())
+    assert "malformed caption reply" in caplog.text and g.stats()["vlm_captioned"] == 0
+    truncated["on"] = False
+    g.update(23, *arrays)
+    assert [(n.caption, n.caption_source) for n in g.nodes.values()] == [("a red box", "vlm")] * 2
 
 
 # ------------------------------------------------------------------ prose caption replies

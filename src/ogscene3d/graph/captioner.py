@@ -18,6 +18,7 @@ the captioner again at its next update while a node's caption is a heuristic one
 from __future__ import annotations
 
 import logging
+import re
 import threading
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -62,7 +63,9 @@ TAG_PROMPT = (
 def read_caption_reply(text: str, max_chars: int = 1000) -> tuple[str | None, bool]:
     """``(caption, is_json)`` of a VLM reply: ``{"caption": ...}`` gives ``(caption, True)``, plain prose
     ``(prose, False)`` (local VLMs often ignore the requested format, so prose is kept); the caption is
-    None when the reply is malformed, empty or longer than ``max_chars``."""
+    None when the reply is malformed, empty or longer than ``max_chars``. A reply that attempts JSON but
+    does not parse (typically cut off at ``max_tokens``: ``{"caption": "a wooden ch``) is malformed, not
+    prose: keeping it would store JSON debris as a VLM caption that is never asked for again."""
     caption: object = None
     is_json = True
     try:
@@ -71,6 +74,9 @@ def read_caption_reply(text: str, max_chars: int = 1000) -> tuple[str | None, bo
             return None, True
         caption = data.get("caption")
     except ValueError:
+        t = text.strip()
+        if t[:1] in ("{", "[") or t.startswith("```") or re.search(r'"caption"\s*:', t):
+            return None, True
         caption, is_json = text, False
     if not isinstance(caption, str):
         return None, is_json
