@@ -10,6 +10,14 @@ Two predictors behind the :class:`RelationPredictor` protocol:
   geometric predictor for every pair it could not get a valid answer for.
 
 Edges are directed: ``Relation(source, target, "on")`` reads "source on target".
+
+Deviation from the paper (Sec. III-D, after Eq. 23): its edge prompt *prioritises* common spatial
+relations "while retaining moderate open-set flexibility for uncommon cases". Here the vocabulary is closed:
+the prompt asks for a relation from :data:`RELATIONS`, and an answer that :func:`normalize_relation` cannot
+map onto it is logged and that pair takes the geometric relation. Reason: the paper's own argument for a
+standard vocabulary (one spelling per relation for query matching) applied all the way, so that every edge,
+whichever predictor made it, uses the vocabulary the geometric fallback, the synthetic ground truth and the
+relation-recall metric share.
 """
 
 from __future__ import annotations
