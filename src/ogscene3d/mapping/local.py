@@ -47,6 +47,14 @@ and they must be updated like any other case-(ii) segment, in the same single pa
 once, from its nearest case-(ii) probe, whichever segment that probe belongs to). ``associate_segments``
 runs both steps unless told not to (``eq5=False``).
 
+``fill_unlabeled`` (``mapping.fill_unlabeled``, on by default) is beyond the paper, whose unlabelled
+Gaussians (case i, or pixels outside every segment) stay unlabelled for good: only new Gaussians take a
+segment's label there, and the association, Eq. 5, Eq. 16 and the refinement all skip them. Here an
+unlabelled scene Gaussian under a probe of a labelled segment takes that label and the probe's confidence,
+as the new Gaussian it stands in for would have (``init.py`` adds no Gaussian where the map already explains
+the pixel). On the synthetic demo (configs/synthetic.yaml, seed 0) turning it off gave 3D mIoU 65.97 /
+74.35 (HOV-SG / ConceptGraphs protocols) and 2D 67.21, against 68.80 / 80.14 / 70.62 with it.
+
 The naive baseline (ablation) takes l*_m when the segment has any match and a new label otherwise, with
 no ambiguity test and no confidence updates.
 """

@@ -3,19 +3,24 @@
 Memory buffer: a keyframe joins when (a) fewer than tau_long of its back-projected points fall in the
 viewing frustum of the most recent memory frame M_r (|x/z| <= W/2f, |y/z| <= H/2f, z > 0 in M_r's camera)
 and (b) fewer than tau_long of its points have a memory point within r_search (geometric overlap).
-The first keyframe always joins. The buffer holds at most ``max_size`` frames (oldest dropped).
+The first keyframe always joins (any keyframe needs ``MIN_MEMORY_POINTS`` valid-depth points on the grid).
+The buffer holds at most ``max_size`` frames (oldest dropped; the paper sets no bound).
 
-Per memory view v: the semantic map is rendered at v (``render_semantics``) giving S; every stored segment
-is remapped to the majority rendered label inside it (Seg'); P_2D-3D^k is the IoU of {Seg' = k} and
-{S = k}, and P_2D-3D(p) = P_2D-3D^{S_p}. Pixels are back-projected with the stored depth and associated
-with their k nearest Gaussians of class S_p (those that can have rendered them); a Gaussian's P_2D-3D(i)
-is the mean over its associated pixels, and it is *consistent* when most of its pixels' Seg' equals its
-label. P_conf comes from ``rendering_contribution``. Pixels on a boundary of the stored segments or of S
-are left out (``skip_edges``): on a synthetic room (seed 2, 60 frames) this cut the correctly labelled
-Gaussians judged inconsistent over the run from 573 to 186 (wrongly labelled ones: 97 to 37), and over 10
-seeds it took the long-term step's paired effect on mIoU from -0.07 to +0.08 points.
+Per memory view v: the semantic map is rendered at v (``render_semantics``) giving S; every stored segment is
+remapped to the majority rendered label inside it (Seg'; the paper does not say how segment ids are mapped to
+scene labels, only that the remapping keeps the segment boundaries); P_2D-3D^k is the IoU of {Seg' = k} and
+{S = k}, and P_2D-3D(p) = P_2D-3D^{S_p}. Pixels are back-projected with the stored depth and associated with
+their k nearest Gaussians of class S_p (those that can have rendered them); a Gaussian's P_2D-3D(i) is the
+mean over its associated pixels, and it is *consistent* when most of its pixels' Seg' equals its label. P_conf
+comes from ``rendering_contribution``. Pixels on a boundary of the stored segments or of S are left out
+(``skip_edges``): on a synthetic room (seed 2, 60 frames) this cut the correctly labelled Gaussians judged
+inconsistent over the run from 573 to 186 (wrongly labelled ones: 97 to 37), and over 10 seeds it took the
+long-term step's paired effect on mIoU from -0.07 to +0.08 points.
 Eq. 16: conf += P_2D-3D * P_conf * (1 - conf) if consistent, else conf -= P_2D-3D * (1 - P_conf) * conf.
 Labels are never changed here; only labeled Gaussians with at least one associated pixel are updated.
+Schedule (``mapper.py``): every ``mapping.longterm_every`` = 6 keyframes (Sec. IV-A.4), over
+``mapping.longterm_views`` memory views taken round-robin (the paper's N_view views; it gives no count), one
+view after the other, each with P_conf rendered from the confidences as the previous view left them.
 """
 
 from __future__ import annotations

@@ -10,12 +10,20 @@ needed a round over every edge per hop of a component's diameter, hundreds on de
 Cluster level: a cluster whose mean confidence A_k < tau_low takes the most frequent label among, for each
 of its Gaussians, the nearest Gaussian *outside the cluster* with conf > tau_high (searched within
 ``cluster_radius``: the paper's search is unbounded, a finite radius keeps it a hash-grid query).
-Only labels change; its Gaussians are then excluded from individual refinement.
+Only labels change; its Gaussians are then excluded from individual refinement. A low cluster that finds
+no such Gaussian keeps its label and is not recorded as processed: Algorithm 1 would add it to P with an
+undefined s_new (argmax over an empty L_k), while the text records only the Gaussians "that have been
+refined", which we follow, so its low-confidence members may still be refined individually.
 
 Individual level: every remaining labelled Gaussian with conf < tau_low (unlabeled ones too, whose
 confidence is 0, with ``include_unlabeled`` / ``mapping.refine_unlabeled``, off by default: the paper's
 unlabelled Gaussians do not exist at confidence 0) takes the label of the nearest Gaussian with
 conf > tau_high within r_search and conf := 0.5.
+
+Schedule (``mapper.py``): every ``mapping.refine_every`` = 6 keyframes, right after the long-term update,
+as Sec. IV-A.4 states ("performed every 6 keyframes"); Sec. III-B.3's "intervals determined by cumulative
+camera motion" is read as that, keyframes being selected by camera motion where ``keyframe_translation`` /
+``keyframe_rotation_deg`` are set. Both operate on the whole map.
 """
 
 from __future__ import annotations
