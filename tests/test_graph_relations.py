@@ -134,6 +134,44 @@ def test_proximity_ratios_rejects_bad_theta():
         proximity_ratios([np.zeros((3, 3)), np.ones((3, 3))], 0.0)
 
 
+def test_degenerate_nodes_give_relations_without_errors_or_nan():
+    """One point, two points, coincident points, a line, a flat sheet, a 1e-9 blob: every pair gets a
+    relation from the vocabulary (no exception, no numpy warning) and the graph's JSON has no NaN."""
+    import json
+    import warnings
+
+    from ogscene3d.config import GraphConfig
+    from ogscene3d.graph import RELATIONS, SceneGraph
+
+    rng = np.random.default_rng(0)
+    c = np.array([0.2, -0.3, 0.1])
+    clouds = [
+        c[None],
+        np.stack([c, c + [0.01, 0, 0]]),
+        np.repeat(c[None], 3, 0),
+        np.repeat(c[None], 40, 0),
+        c + np.outer(np.linspace(0, 1, 30), [0, -1, 0]),
+        c + np.c_[rng.uniform(0, 1, 200), np.zeros(200), rng.uniform(0, 1, 200)],
+        c + np.c_[rng.uniform(0, 1, 200), rng.uniform(-1, 0, 200), np.zeros(200)],
+        c + rng.normal(0, 1e-9, (30, 3)),
+    ]
+    rel = GeometricRelations(RelationsConfig(), (0.0, -1.0, 0.0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for i, a in enumerate(clouds):
+            for j, b in enumerate(clouds):
+                r = rel.predict_pair(SceneNode.from_points(i, a), SceneNode.from_points(100 + j, b))
+                assert r.relation in RELATIONS and {r.source, r.target} == {i, 100 + j}
+        ratios = proximity_ratios(clouds, 0.1)
+        assert ratios and all(np.isfinite(v) and 0 < v <= 1 for v in ratios.values())
+        g = SceneGraph(GraphConfig(min_gaussians=1, init_keyframes=1))
+        means = np.concatenate(clouds)
+        labels = np.repeat(np.arange(len(clouds)), [len(p) for p in clouds])
+        assert g.update(0, means, labels, np.full(len(means), 0.5), force=True)
+    assert len(g.nodes) == len(clouds) and g.edges
+    json.dumps(g.to_json(), allow_nan=False)
+
+
 @pytest.mark.parametrize(
     "phrase,expected",
     [
