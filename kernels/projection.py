@@ -8,6 +8,9 @@ import warp as wp
 
 mat23 = wp.types.matrix(shape=(2, 3), dtype=wp.float32)
 
+# gsplat's ALPHA_THRESHOLD; with opacities, the screen radius reaches where alpha falls below it
+ALPHA_THRESHOLD = wp.constant(1.0 / 255.0)
+
 
 @wp.func
 def quat_wxyz_to_mat(q: wp.vec4) -> wp.mat33:
@@ -49,6 +52,7 @@ def project_gaussians(
     means: wp.array(dtype=wp.vec3),
     quats: wp.array(dtype=wp.vec4),
     scales: wp.array(dtype=wp.vec3),
+    opacities: wp.array(dtype=float),
     viewmats: wp.array(dtype=wp.mat44),
     Ks: wp.array(dtype=wp.mat33),
     num_gaussians: int,
@@ -62,7 +66,12 @@ def project_gaussians(
     depths: wp.array(dtype=float),
     radii: wp.array(dtype=wp.int32),
 ):
-    """One thread per (camera, Gaussian); outputs are flattened as c * N + n. radius 0 means culled."""
+    """One thread per (camera, Gaussian); outputs are flattened as c * N + n. radius 0 means culled.
+
+    With ``opacities`` (not empty) the screen radius is gsplat's (1.5): per axis
+    ceil(e * sqrt(cov2d_ii)), e = min(3.33, sqrt(2 ln(255 o))), the bounding box of the alpha >= 1/255
+    ellipse; opacity < 1/255 is culled, and the box decides the outside-the-image culling. ``radii``
+    holds the larger of the two. Without (empty: the semantic voting), ceil(3 sqrt(lambda_max))."""
     tid = wp.tid()
     c = tid // num_gaussians
     n = tid - c * num_gaussians
@@ -110,20 +119,33 @@ def project_gaussians(
     inv_det = 1.0 / det
     mean2d = wp.vec2(fx * p[0] * rz + cx, fy * p[1] * rz + cy)
 
-    mid = 0.5 * (a + d)
-    lam = mid + wp.sqrt(wp.max(0.01, mid * mid - det))
-    # bounded so that the int32 radius cannot wrap around; far beyond any image either way
-    r = wp.min(wp.ceil(3.0 * wp.sqrt(lam)), 1.0e8)
+    # radii bounded so that the int32 radius cannot wrap around; far beyond any image either way
+    rx = float(0.0)
+    ry = float(0.0)
+    if opacities.shape[0] > 0:
+        o = opacities[n]
+        if not (o >= ALPHA_THRESHOLD):
+            cull(tid, means2d, conics, depths, radii)
+            return
+        extend = wp.min(3.33, wp.sqrt(2.0 * wp.log(o / ALPHA_THRESHOLD)))
+        rx = wp.min(wp.ceil(extend * wp.sqrt(a)), 1.0e8)
+        ry = wp.min(wp.ceil(extend * wp.sqrt(d)), 1.0e8)
+    else:
+        mid = 0.5 * (a + d)
+        lam = mid + wp.sqrt(wp.max(0.01, mid * mid - det))
+        rx = wp.min(wp.ceil(3.0 * wp.sqrt(lam)), 1.0e8)
+        ry = rx
     if (
-        mean2d[0] + r <= 0.0
-        or mean2d[0] - r >= float(width)
-        or mean2d[1] + r <= 0.0
-        or mean2d[1] - r >= float(height)
+        (rx <= 0.0 and ry <= 0.0)
+        or mean2d[0] + rx <= 0.0
+        or mean2d[0] - rx >= float(width)
+        or mean2d[1] + ry <= 0.0
+        or mean2d[1] - ry >= float(height)
     ):
         cull(tid, means2d, conics, depths, radii)
         return
 
-    radii[tid] = wp.int32(r)
+    radii[tid] = wp.int32(wp.max(rx, ry))
     means2d[tid] = mean2d
     conics[tid] = wp.vec3(d * inv_det, -b * inv_det, a * inv_det)
     depths[tid] = z

@@ -27,8 +27,12 @@ def quat_to_rotmat(q: torch.Tensor) -> torch.Tensor:
     ).reshape(*q.shape[:-1], 3, 3)
 
 
-def project(means, quats, scales, viewmat, K, width, height, near, far, eps2d):
-    """-> means2d [N,2], conics [N,3], depths [N], radii [N] (0 = culled)."""
+def project(means, quats, scales, viewmat, K, width, height, near, far, eps2d, opacities=None):
+    """-> means2d [N,2], conics [N,3], depths [N], radii [N] (0 = culled).
+
+    With ``opacities``, gsplat's (1.5) screen radius: per axis ceil(e * sqrt(cov2d_ii)) with
+    e = min(3.33, sqrt(2 ln(255 o))), opacity < 1/255 culled, radii the larger of the two; without (the
+    semantic voting), ceil(3 sqrt(lambda_max))."""
     R, t = viewmat[:3, :3], viewmat[:3, 3]
     p = means @ R.T + t
     x, y, z = p.unbind(-1)
@@ -54,12 +58,21 @@ def project(means, quats, scales, viewmat, K, width, height, near, far, eps2d):
     dets = torch.where(det > 0, det, torch.ones_like(det))
     conics = torch.stack([d / dets, -b / dets, a / dets], dim=-1)
     means2d = torch.stack([fx * x / zs + cx, fy * y / zs + cy], dim=-1)
-    mid = 0.5 * (a + d)
-    lam = mid + torch.sqrt(torch.clamp(mid * mid - det, min=0.01))
-    r = torch.ceil(3 * torch.sqrt(lam)).detach()
     visible = (z > near) & (z < far) & (det > 0)
+    if opacities is None:
+        mid = 0.5 * (a + d)
+        lam = mid + torch.sqrt(torch.clamp(mid * mid - det, min=0.01))
+        rx = ry = torch.ceil(3 * torch.sqrt(lam)).detach()
+    else:
+        o = opacities.detach()
+        visible &= o >= 1.0 / 255.0
+        extend = torch.clamp(torch.sqrt(2 * torch.log(torch.clamp(o * 255.0, min=1.0))), max=3.33)
+        rx = torch.ceil(extend * torch.sqrt(a.detach()))
+        ry = torch.ceil(extend * torch.sqrt(d.detach()))
+    visible &= (rx > 0) | (ry > 0)
     mx, my = means2d[:, 0].detach(), means2d[:, 1].detach()
-    visible &= ~((mx + r <= 0) | (mx - r >= width) | (my + r <= 0) | (my - r >= height))
+    visible &= ~((mx + rx <= 0) | (mx - rx >= width) | (my + ry <= 0) | (my - ry >= height))
+    r = torch.maximum(rx, ry)
     radii = torch.where(visible, r, torch.zeros_like(r))
     return means2d, conics, z, radii
 
@@ -101,7 +114,7 @@ def rasterize(
     outs, alphas = [], []
     for c in range(C):
         m2d, con, depth, radii = project(
-            means, quats, scales, viewmats[c], Ks[c], width, height, near_plane, far_plane, eps2d
+            means, quats, scales, viewmats[c], Ks[c], width, height, near_plane, far_plane, eps2d, opacities
         )
         if render_mode in ("D", "ED"):
             feat = depth[:, None]
@@ -114,12 +127,12 @@ def rasterize(
             bg = None if backgrounds is None else backgrounds[c].to(f)
         order = torch.argsort(depth.detach())
         m2d, con, radii, feat, op = m2d[order], con[order], radii[order], feat[order], opacities[order]
-        # tile rectangle of each Gaussian, as the binning kernel computes it (int() truncates toward 0)
+        # tile rectangle of each Gaussian's radius square, as gsplat's isect_tiles bounds it
         mx, my = m2d[:, 0].detach(), m2d[:, 1].detach()
-        x0 = torch.clamp(torch.trunc((mx - radii) / tile_size), 0, tiles_x)
-        y0 = torch.clamp(torch.trunc((my - radii) / tile_size), 0, tiles_y)
-        x1 = torch.clamp(torch.trunc((mx + radii + tile_size - 1) / tile_size), 0, tiles_x)
-        y1 = torch.clamp(torch.trunc((my + radii + tile_size - 1) / tile_size), 0, tiles_y)
+        x0 = torch.clamp(torch.floor((mx - radii) / tile_size), 0, tiles_x)
+        y0 = torch.clamp(torch.floor((my - radii) / tile_size), 0, tiles_y)
+        x1 = torch.clamp(torch.ceil((mx + radii) / tile_size), 0, tiles_x)
+        y1 = torch.clamp(torch.ceil((my + radii) / tile_size), 0, tiles_y)
         in_tile = (
             (tile_x[:, None] >= x0)
             & (tile_x[:, None] < x1)

@@ -105,7 +105,11 @@ def _on_torch_stream(fn):
 
 class _Project(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, means, quats, scales, viewmats, Ks, width, height, near_plane, far_plane, eps2d):
+    def forward(
+        ctx, means, quats, scales, viewmats, Ks, width, height, near_plane, far_plane, eps2d, opacities=None
+    ):
+        """``opacities`` (not differentiated here) give gsplat's opacity-aware screen radius (see
+        kernels/projection.py); without them the radius is ceil(3 sqrt(lambda_max))."""
         wp = _wp()
         projection, _, _ = _kernels()
         C, N = viewmats.shape[0], means.shape[0]
@@ -122,7 +126,8 @@ class _Project(torch.autograd.Function):
             viewmats.detach().contiguous(),
             Ks.detach().contiguous(),
         ]
-        inputs = _project_inputs(args, N, width, height, near_plane, far_plane, eps2d)
+        opac = (means.new_zeros(0) if opacities is None else opacities).detach().contiguous()
+        inputs = _project_inputs(args, opac, N, width, height, near_plane, far_plane, eps2d)
         if C * N > 0:
             with warp_stream(dev) as wdev:
                 wp.launch(
@@ -173,6 +178,7 @@ class _Project(torch.autograd.Function):
                         _as_wp(v_means, wp.vec3),
                         _as_wp(v_quats, wp.vec4),
                         _as_wp(v_scales, wp.vec3),
+                        None,
                         None if v_viewmats is None else _as_wp(v_viewmats, wp.mat44),
                         None,
                         0,
@@ -191,16 +197,17 @@ class _Project(torch.autograd.Function):
                     adjoint=True,
                     device=wdev,
                 )
-        return v_means, v_quats, v_scales, v_viewmats, None, None, None, None, None, None
+        return v_means, v_quats, v_scales, v_viewmats, None, None, None, None, None, None, None
 
 
-def _project_inputs(args, N, width, height, near_plane, far_plane, eps2d):
+def _project_inputs(args, opacities, N, width, height, near_plane, far_plane, eps2d):
     wp = _wp()
     means, quats, scales, viewmats, Ks = args
     return [
         _as_wp(means, wp.vec3),
         _as_wp(quats, wp.vec4),
         _as_wp(scales, wp.vec3),
+        _as_wp(opacities),
         _as_wp(viewmats, wp.mat44),
         _as_wp(Ks, wp.mat33),
         N,
@@ -272,6 +279,7 @@ def bin_gaussians(
     tile_size: int = 16,
     checks: ValueChecks | None = None,
     voters: tuple[torch.Tensor, torch.Tensor] | None = None,
+    gsplat_tiles: bool = False,
 ) -> TileBins:
     """Assign projected Gaussians [C, N] to tiles and sort every tile's list front to back.
 
@@ -280,7 +288,9 @@ def bin_gaussians(
 
     ``checks``: the caller's pending input checks, settled on the sync this function makes anyway.
     ``voters``: (labels [N] int32, confidences [N]) to bin only the Gaussians that vote (label >= 0,
-    confidence > 0), as the semantic kernels need (the others neither vote nor occlude)."""
+    confidence > 0), as the semantic kernels need (the others neither vote nor occlude).
+    ``gsplat_tiles``: the radius square's tiles bounded as gsplat's isect_tiles does (floor / ceil), as
+    ``rasterization`` asks; else as 3DGS does (the semantic voting, whose reference mirrors it)."""
     wp = _wp()
     _, binning, _ = _kernels()
     C, N = radii.shape
@@ -302,7 +312,7 @@ def bin_gaussians(
         voters = (torch.empty(0, dtype=torch.int32, device=dev), torch.empty(0, device=dev))
     footprint = [m2d, rad, _as_wp(conics.detach(), wp.vec3), _as_wp(opacities.detach())]
     votes = [_as_wp(voters[0].to(torch.int32)), _as_wp(voters[1].detach())]
-    grid = [N, tile_size, tiles_x, tiles_y]
+    grid = [N, tile_size, tiles_x, tiles_y, int(gsplat_tiles)]
     ext = _as_wp(extents, wp.vec2)
     # which tiles of its rectangle each Gaussian's ellipse meets, decided once for count and emission
     reached = _as_wp(torch.empty(C * N, dtype=torch.uint64, device=dev))
@@ -573,13 +583,32 @@ def rasterization(
         "RGB+D", "RGB+ED" (depth appended as the last channel).
     Returns:
         colors [C, H, W, D] (+1 channel with depth in the "+D"/"+ED" modes, D = 1 in "D"/"ED"),
-        alphas [C, H, W, 1], meta (projection and binning results under gsplat's names: radii, means2d
+        alphas [C, H, W, 1], meta (projection and binning results under gsplat's names: radii [C, N] (the
+        larger of gsplat's per-axis radii, see below), means2d
         (retain_grad() it for densification), depths, conics, opacities, tiles_per_gauss, flatten_ids (the
         sorted intersections' c * N + n), n_cameras, width, height, tile_size, tile_width, tile_height;
         and ours: tile_start / tile_end [C * tiles] (each tile's range of flatten_ids), n_intersections,
         last_ids).
     Differentiable w.r.t. means, quats, scales, opacities, colors and viewmats (camera poses, as in gsplat;
     not Ks).
+
+    As gsplat 1.5's ``rasterization`` with its defaults (pinhole, rasterize_mode="classic", radius_clip=0):
+    EWA projection with the Jacobian's x/z, y/z clamped to the view +- 0.3 tan(fov), eps2d on the 2D
+    covariance's diagonal, culled where det <= 0, z outside (near, far), opacity < 1/255 or the screen
+    radius box off the image; that box is gsplat's opacity-aware one, per axis
+    ceil(min(3.33, sqrt(2 ln(255 o))) * sqrt(cov2d_ii)), i.e. the alpha >= 1/255 ellipse's, and the tiles
+    are bounded as gsplat's isect_tiles does, so every pixel where alpha >= 1/255 is blended. Pixel
+    centres at +0.5; alpha = min(0.99, o exp(-sigma)), skipped where sigma < 0 or alpha < 1/255; a Gaussian
+    that would take the transmittance to <= 1e-4 is not blended and ends the pixel; background added as
+    T * bg (zeros for the depth channel); "ED" divides by alpha clamped at 1e-10. Deliberate differences:
+    alpha is clamped at 0.99 as in 3DGS and gsplat's main branch (its 1.5.3 release and earlier clamp at
+    0.999); radii are [C, N], the larger of gsplat's two per-axis radii (gsplat: [C, N, 2]), so
+    ``radii > 0`` marks the same Gaussians as gsplat's ``(radii > 0).all(-1)``; always unpacked (gsplat
+    defaults to packed=True, whose meta holds [nnz] entries and camera_ids / gaussian_ids: the images are
+    the same); no isect_ids / isect_offsets (tile_start / tile_end instead), no SH colours, batch
+    dimensions, absgrad, sparse_grad, antialiased mode or other camera models; a Gaussian whose 2D
+    determinant overflows float32 is culled; a Gaussian exactly at z = near_plane is culled (as gsplat's
+    torch reference does; its CUDA kernel keeps it).
     """
     width, height = _check_shapes(means, quats, scales, opacities, viewmats, Ks, width, height)
     if render_mode not in RENDER_MODES:
@@ -605,11 +634,13 @@ def rasterization(
         colors = colors.unsqueeze(0).expand(C, N, D)
 
     means2d, conics, depths, radii = _Project.apply(
-        means, quats, scales, viewmats, Ks, width, height, near_plane, far_plane, eps2d
+        means, quats, scales, viewmats, Ks, width, height, near_plane, far_plane, eps2d, opacities
     )
     with torch.no_grad():
         # settles checks
-        bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, tile_size, checks)
+        bins = bin_gaussians(
+            means2d, conics, opacities, radii, depths, width, height, tile_size, checks, gsplat_tiles=True
+        )
 
     if render_mode in ("D", "ED"):
         blend, bg = depths.unsqueeze(-1), None
