@@ -281,6 +281,7 @@ class RGBDDataset:
             raise DataError(f"{self.segments_dir}: segments folder does not exist")
         self.resize_rgb_to_depth = resize_rgb_to_depth
         self._depth_checked = False
+        self._size_checked = False
         self._warned_no_segments = False
 
     def read_pixel_centers(self, config: DataConfig) -> str:
@@ -372,6 +373,9 @@ class RGBDDataset:
             depth[raw == self.invalid_raw] = 0.0
         if not self._depth_checked:
             self._depth_checked = self._check_depth_range(depth, rec.depth_path)
+        if not self._size_checked:
+            self._size_checked = True
+            self._check_principal_point(depth.shape, rec.depth_path)
         if self.min_depth > 0:
             depth[depth < self.min_depth] = 0.0
         if self.max_depth > 0:
@@ -459,6 +463,24 @@ class RGBDDataset:
                 self.depth_format,
             )
         return True
+
+    def _check_principal_point(self, shape: tuple[int, int], path: Path) -> None:
+        """Warn once when K's principal point is far from the centre of the first frame's depth image: K is
+        then most likely another image size's (e.g. a colour camera's K with depth of a smaller size, which
+        nothing else would notice), and every back-projected point is off."""
+        h, w = shape
+        cx, cy = float(self.K[0, 2]), float(self.K[1, 2])
+        if abs(cx - w / 2) > 0.25 * w or abs(cy - h / 2) > 0.25 * h:
+            log.warning(
+                "%s: the intrinsics' principal point (%.1f, %.1f) is far from the centre of the %dx%d depth "
+                "image: are they another image size's (e.g. the colour camera's)? Frames are back-projected "
+                "with K of the depth image (colour is resampled to it); give data.intrinsics for that size",
+                path,
+                cx,
+                cy,
+                w,
+                h,
+            )
 
     def _load_gt(
         self, rec: FrameRecord, shape: tuple[int, int]

@@ -6,6 +6,15 @@ invalid), ``frame-%06d.pose.txt`` (4x4 camera-to-world, OpenCV axes), optional
 warning). The files may sit in the folder itself or in ``seq-XX/`` sub-folders (all sequences are
 concatenated in name order); the intrinsics file in the folder or in the first sequence.
 
+Known limitation: 7-Scenes' depth is NOT registered to its colour. Depth, poses and the 585 intrinsics are
+the Kinect's depth camera's; the colour comes from its other camera (focal length about 525-535 px, a few
+cm beside it), whose calibration the dataset does not publish. Read pixel by pixel, colour (and so the
+segments) lands up to about 30 px off toward the image borders: on the redkitchen sample the median
+distance from depth edges to colour edges is 4.5 px as read and 2.1 px once colour is scaled by 0.91 about
+the centre and shifted by (-6, -2) px. No correction is applied (relocalisation works register depth with
+an approximate calibration or use depth rendered from the 3D models instead); the reader warns when it
+reads the 585 depth camera.
+
 Label-fusion / APC (``camera-intrinsics.color.txt``, preferred over ``camera-intrinsics.txt``, or
 ``frame-*.segm.png`` present): the same names, depth in the bit-shifted format metres = (value >> 3) /
 1e4 with < 0.3 m invalid, and ``frame-%06d.segm.png`` uint8 class labels (class id = value / 6) returned
@@ -25,6 +34,7 @@ from .base import FrameRecord, K_from_values, RGBDDataset, read_label_png, read_
 log = logging.getLogger(__name__)
 
 SEVENSCENES_DEFAULT_K = (585.0, 585.0, 320.0, 240.0)
+SEVENSCENES_DEPTH_FOCAL = 585.0  # 7-Scenes' (and 3DMatch's copies of it) depth camera, not the colour one
 
 
 def _color_files(folder: Path) -> list[Path]:
@@ -78,6 +88,14 @@ class SevenScenesDataset(RGBDDataset):
         if config.intrinsics is None:  # data.intrinsics wins over the files (the base class applies it)
             K = self._intrinsics(root)
         super().__init__(root, records, K, config, segments_dir)
+        focals = self.K[[0, 1], [0, 1]]
+        if self.kind == "sevenscenes" and np.allclose(focals, SEVENSCENES_DEPTH_FOCAL, atol=1.0):
+            log.warning(
+                "%s: fx = fy = 585 is the 7-Scenes Kinect's depth camera; 7-Scenes colour images are not "
+                "registered to their depth (another camera, f ~ 530 px, a few cm aside), so colours and "
+                "segments land up to ~30 px off toward the image borders (not corrected)",
+                root,
+            )
 
     @classmethod
     def _intrinsics(cls, root: Path) -> np.ndarray:

@@ -4,8 +4,15 @@
 
 Frames are the rgb images that have a depth image (and, when ``groundtruth.txt`` exists, a pose)
 within ``MAX_DT`` seconds, as in TUM's ``associate.py``. Intrinsics: ``data.intrinsics`` if given,
-else the published calibration of the freiburg1/2/3 sensor named in the folder name, else the
+else the published calibration of the freiburg1/2/3 sensor named in the folder name (the innermost
+folder that names one: ``data/freiburg1_runs/rgbd_dataset_freiburg3_office`` is freiburg3), else the
 ROS default (525, 525, 319.5, 239.5) with a warning.
+
+Known limitation: TUM's calibration of the freiburg1 and freiburg2 colour cameras has lens distortion
+(k1 = 0.26 and 0.23 ...), which is not corrected: a colour pixel lands up to about 24 px (fr1) / 19 px
+(fr2) off in the image corners, 5-8 px half-way out, as SplaTAM reads them; NICE-SLAM and MonoGS undistort
+the colour image (not the depth, which OpenNI registered to it). freiburg3 images have no distortion. The
+reader warns when it uses the fr1/fr2 calibration.
 """
 
 from __future__ import annotations
@@ -28,7 +35,23 @@ TUM_INTRINSICS = {
     "freiburg2": (520.9, 521.0, 325.1, 249.7),
     "freiburg3": (535.4, 539.2, 320.1, 247.6),
 }
+# (k1, k2, p1, p2, k3) of TUM's colour camera calibration; freiburg3's are all 0
+TUM_DISTORTION = {
+    "freiburg1": (0.2624, -0.9531, -0.0054, 0.0026, 1.1633),
+    "freiburg2": (0.2312, -0.7849, -0.0033, -0.0001, 0.9172),
+}
 ROS_DEFAULT = (525.0, 525.0, 319.5, 239.5)
+
+
+def tum_sensor(root: Path) -> str | None:
+    """The freiburg1/2/3 sensor named by the innermost folder of ``root`` (as given, then resolved) that names
+    one, or None."""
+    for path in (Path(root), Path(root).resolve()):
+        for part in reversed(path.parts):
+            found = [key for key in TUM_INTRINSICS if key in part.lower()]
+            if found:
+                return found[0]
+    return None
 
 
 def read_tum_list(path: Path, columns: int) -> tuple[np.ndarray, list[list[str]]]:
@@ -116,11 +139,17 @@ class TUMDataset(RGBDDataset):
             raise DataError(f"{root}: no rgb frame has a depth image (and pose) within {MAX_DT} s")
         K = None
         if config.intrinsics is None:
-            name = str(root.resolve()).lower()
-            for key, vals in TUM_INTRINSICS.items():
-                if key in name:
-                    K = K_from_values(*vals)
-                    break
+            sensor = tum_sensor(root)
+            if sensor is not None:
+                K = K_from_values(*TUM_INTRINSICS[sensor])
+                if sensor in TUM_DISTORTION:
+                    log.warning(
+                        "%s: %s colour images have lens distortion %s (TUM's calibration) that is not "
+                        "corrected: colour lands up to ~20 px off in the image corners",
+                        root,
+                        sensor,
+                        TUM_DISTORTION[sensor],
+                    )
             else:
                 log.warning("%s: unknown TUM sensor; using the ROS default intrinsics %s", root, ROS_DEFAULT)
                 K = K_from_values(*ROS_DEFAULT)
