@@ -57,7 +57,7 @@ def count(scene: str, n: int, width: int, height: int, semantic: bool, max_tiles
     vm, K = camera(width, height, torch.device("cpu"))
     with torch.no_grad():
         m2d, conics, depths, radii = _Project.apply(
-            means, quats, scales, vm, K, width, height, 0.01, 1e10, 0.3
+            means, quats, scales, opac, vm, K, width, height, 0.01, 1e10, 0.3
         )
         voters = (labels, conf) if semantic else None
         bins = bin_gaussians(m2d, conics, opac, radii, depths, width, height, TILE, voters=voters)

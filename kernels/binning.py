@@ -19,25 +19,19 @@ MASK_TILES = wp.constant(64)
 
 @wp.func
 def tile_rect(
-    center: wp.vec2, radius: float, ext: wp.vec2, tile_size: int, tiles_x: int, tiles_y: int, gsplat: int
+    center: wp.vec2, radius: float, ext: wp.vec2, tile_size: int, tiles_x: int, tiles_y: int
 ) -> wp.vec4i:
-    """Tiles [x0, x1) x [y0, y1) of the screen radius's square, less those where the Gaussian's alpha stays
-    below ALPHA_MIN at every pixel centre (outside the ``alpha_extent`` box ``ext``): they would blend
-    nothing of it, so the image is the same and the tile lists are shorter.
-
-    ``gsplat`` 1: the square's tiles as gsplat's isect_tiles bounds them, floor((c - r) / ts) to
-    ceil((c + r) / ts), every tile with a pixel centre in [c - r, c + r]; 0 (the semantic voting): 3DGS's
-    int((c - r) / ts) to int((c + r + ts - 1) / ts), which leaves out the last tile when c + r lies
-    within 1 px past a tile boundary."""
+    """Tiles [x0, x1) x [y0, y1) of the screen radius's square, bounded as gsplat's isect_tiles does
+    (floor((c - r) / ts) to ceil((c + r) / ts): every tile with a pixel centre in [c - r, c + r]), less
+    those where the Gaussian's alpha stays below ALPHA_MIN at every pixel centre (outside the
+    ``alpha_extent`` box ``ext``): they would blend nothing of it, so the image is the same and the tile
+    lists are shorter."""
     ts = float(tile_size)
-    x0 = wp.min(wp.max(0, int((center[0] - radius) / ts)), tiles_x)
-    y0 = wp.min(wp.max(0, int((center[1] - radius) / ts)), tiles_y)
-    x1 = wp.min(wp.max(0, int((center[0] + radius + ts - 1.0) / ts)), tiles_x)
-    y1 = wp.min(wp.max(0, int((center[1] + radius + ts - 1.0) / ts)), tiles_y)
-    if gsplat != 0:
-        # clamped before the int conversion (a radius may reach 1e8 px); c - r < 0 clamps to 0 either way
-        x1 = int(wp.clamp(wp.ceil((center[0] + radius) / ts), 0.0, float(tiles_x)))
-        y1 = int(wp.clamp(wp.ceil((center[1] + radius) / ts), 0.0, float(tiles_y)))
+    # clamped before the int conversion (a radius may reach 1e8 px)
+    x0 = int(wp.clamp(wp.floor((center[0] - radius) / ts), 0.0, float(tiles_x)))
+    y0 = int(wp.clamp(wp.floor((center[1] - radius) / ts), 0.0, float(tiles_y)))
+    x1 = int(wp.clamp(wp.ceil((center[0] + radius) / ts), 0.0, float(tiles_x)))
+    y1 = int(wp.clamp(wp.ceil((center[1] + radius) / ts), 0.0, float(tiles_y)))
     if ext[0] < 0.0:
         return wp.vec4i(x0, y0, x0, y0)
     # a tile holds pixel centres in [tx * ts + 0.5, tx * ts + ts - 0.5]: these bounds keep every tile
@@ -73,7 +67,6 @@ def count_tiles(
     tile_size: int,
     tiles_x: int,
     tiles_y: int,
-    gsplat: int,
     counts: wp.array(dtype=wp.int32),
     extents: wp.array(dtype=wp.vec2),
     reached: wp.array(dtype=wp.uint64),
@@ -98,7 +91,7 @@ def count_tiles(
     ext = alpha_extent(conic, t)
     extents[tid] = ext
     center = means2d[tid]
-    rect = tile_rect(center, float(r), ext, tile_size, tiles_x, tiles_y, gsplat)
+    rect = tile_rect(center, float(r), ext, tile_size, tiles_x, tiles_y)
     in_rect = (rect[2] - rect[0]) * (rect[3] - rect[1])
     if in_rect > MASK_TILES:
         counts[tid] = in_rect
@@ -129,7 +122,6 @@ def emit_intersections(
     tile_size: int,
     tiles_x: int,
     tiles_y: int,
-    gsplat: int,
     keys: wp.array(dtype=wp.int64),
     values: wp.array(dtype=wp.int32),
 ):
@@ -139,7 +131,7 @@ def emit_intersections(
     n_tiles = counts[tid]
     if n_tiles == 0:  # culled, or its ellipse meets no tile (``reached`` is unwritten for the culled)
         return
-    rect = tile_rect(means2d[tid], float(radii[tid]), extents[tid], tile_size, tiles_x, tiles_y, gsplat)
+    rect = tile_rect(means2d[tid], float(radii[tid]), extents[tid], tile_size, tiles_x, tiles_y)
     every = (rect[2] - rect[0]) * (rect[3] - rect[1]) > MASK_TILES
     mask = reached[tid]
     cam = tid // num_gaussians

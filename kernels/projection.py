@@ -8,7 +8,7 @@ import warp as wp
 
 mat23 = wp.types.matrix(shape=(2, 3), dtype=wp.float32)
 
-# gsplat's ALPHA_THRESHOLD; with opacities, the screen radius reaches where alpha falls below it
+# gsplat's ALPHA_THRESHOLD: the screen radius reaches where alpha falls below it
 ALPHA_THRESHOLD = wp.constant(1.0 / 255.0)
 
 
@@ -68,10 +68,9 @@ def project_gaussians(
 ):
     """One thread per (camera, Gaussian); outputs are flattened as c * N + n. radius 0 means culled.
 
-    With ``opacities`` (not empty) the screen radius is gsplat's (1.5): per axis
-    ceil(e * sqrt(cov2d_ii)), e = min(3.33, sqrt(2 ln(255 o))), the bounding box of the alpha >= 1/255
-    ellipse; opacity < 1/255 is culled, and the box decides the outside-the-image culling. ``radii``
-    holds the larger of the two. Without (empty: the semantic voting), ceil(3 sqrt(lambda_max))."""
+    The screen radius is gsplat's (1.5): per axis ceil(e * sqrt(cov2d_ii)), e = min(3.33,
+    sqrt(2 ln(255 o))), the bounding box of the alpha >= 1/255 ellipse; opacity < 1/255 is culled, and the
+    box decides the outside-the-image culling. ``radii`` holds the larger of the two."""
     tid = wp.tid()
     c = tid // num_gaussians
     n = tid - c * num_gaussians
@@ -120,21 +119,13 @@ def project_gaussians(
     mean2d = wp.vec2(fx * p[0] * rz + cx, fy * p[1] * rz + cy)
 
     # radii bounded so that the int32 radius cannot wrap around; far beyond any image either way
-    rx = float(0.0)
-    ry = float(0.0)
-    if opacities.shape[0] > 0:
-        o = opacities[n]
-        if not (o >= ALPHA_THRESHOLD):
-            cull(tid, means2d, conics, depths, radii)
-            return
-        extend = wp.min(3.33, wp.sqrt(2.0 * wp.log(o / ALPHA_THRESHOLD)))
-        rx = wp.min(wp.ceil(extend * wp.sqrt(a)), 1.0e8)
-        ry = wp.min(wp.ceil(extend * wp.sqrt(d)), 1.0e8)
-    else:
-        mid = 0.5 * (a + d)
-        lam = mid + wp.sqrt(wp.max(0.01, mid * mid - det))
-        rx = wp.min(wp.ceil(3.0 * wp.sqrt(lam)), 1.0e8)
-        ry = rx
+    o = opacities[n]
+    if not (o >= ALPHA_THRESHOLD):
+        cull(tid, means2d, conics, depths, radii)
+        return
+    extend = wp.min(3.33, wp.sqrt(2.0 * wp.log(o / ALPHA_THRESHOLD)))
+    rx = wp.min(wp.ceil(extend * wp.sqrt(a)), 1.0e8)
+    ry = wp.min(wp.ceil(extend * wp.sqrt(d)), 1.0e8)
     if (
         (rx <= 0.0 and ry <= 0.0)
         or mean2d[0] + rx <= 0.0

@@ -27,12 +27,11 @@ def quat_to_rotmat(q: torch.Tensor) -> torch.Tensor:
     ).reshape(*q.shape[:-1], 3, 3)
 
 
-def project(means, quats, scales, viewmat, K, width, height, near, far, eps2d, opacities=None):
+def project(means, quats, scales, opacities, viewmat, K, width, height, near, far, eps2d):
     """-> means2d [N,2], conics [N,3], depths [N], radii [N] (0 = culled).
 
-    With ``opacities``, gsplat's (1.5) screen radius: per axis ceil(e * sqrt(cov2d_ii)) with
-    e = min(3.33, sqrt(2 ln(255 o))), opacity < 1/255 culled, radii the larger of the two; without (the
-    semantic voting), ceil(3 sqrt(lambda_max))."""
+    gsplat's (1.5) screen radius: per axis ceil(e * sqrt(cov2d_ii)) with e = min(3.33, sqrt(2 ln(255 o))),
+    opacity < 1/255 culled, radii the larger of the two."""
     R, t = viewmat[:3, :3], viewmat[:3, 3]
     p = means @ R.T + t
     x, y, z = p.unbind(-1)
@@ -59,16 +58,11 @@ def project(means, quats, scales, viewmat, K, width, height, near, far, eps2d, o
     conics = torch.stack([d / dets, -b / dets, a / dets], dim=-1)
     means2d = torch.stack([fx * x / zs + cx, fy * y / zs + cy], dim=-1)
     visible = (z > near) & (z < far) & (det > 0)
-    if opacities is None:
-        mid = 0.5 * (a + d)
-        lam = mid + torch.sqrt(torch.clamp(mid * mid - det, min=0.01))
-        rx = ry = torch.ceil(3 * torch.sqrt(lam)).detach()
-    else:
-        o = opacities.detach()
-        visible &= o >= 1.0 / 255.0
-        extend = torch.clamp(torch.sqrt(2 * torch.log(torch.clamp(o * 255.0, min=1.0))), max=3.33)
-        rx = torch.ceil(extend * torch.sqrt(a.detach()))
-        ry = torch.ceil(extend * torch.sqrt(d.detach()))
+    o = opacities.detach()
+    visible &= o >= 1.0 / 255.0
+    extend = torch.clamp(torch.sqrt(2 * torch.log(torch.clamp(o * 255.0, min=1.0))), max=3.33)
+    rx = torch.ceil(extend * torch.sqrt(a.detach()))
+    ry = torch.ceil(extend * torch.sqrt(d.detach()))
     visible &= (rx > 0) | (ry > 0)
     mx, my = means2d[:, 0].detach(), means2d[:, 1].detach()
     visible &= ~((mx + rx <= 0) | (mx - rx >= width) | (my + ry <= 0) | (my - ry >= height))
@@ -114,7 +108,7 @@ def rasterize(
     outs, alphas = [], []
     for c in range(C):
         m2d, con, depth, radii = project(
-            means, quats, scales, viewmats[c], Ks[c], width, height, near_plane, far_plane, eps2d, opacities
+            means, quats, scales, opacities, viewmats[c], Ks[c], width, height, near_plane, far_plane, eps2d
         )
         if render_mode in ("D", "ED"):
             feat = depth[:, None]

@@ -37,7 +37,7 @@ def semantic_reference(
     classes, inv = torch.unique(labels[keep], return_inverse=True)
     S = torch.nn.functional.one_hot(inv, max(len(classes), 1)).to(f).requires_grad_(True)
     m2d, con, depth, radii = project(
-        means[keep], quats[keep], scales[keep], viewmat, K, width, height, near, far, eps2d
+        means[keep], quats[keep], scales[keep], opacities[keep], viewmat, K, width, height, near, far, eps2d
     )
     order = torch.argsort(depth)
     ys, xs = torch.meshgrid(torch.arange(height, dtype=f), torch.arange(width, dtype=f), indexing="ij")
@@ -47,10 +47,10 @@ def semantic_reference(
     tiles_y = (height + tile_size - 1) // tile_size
     m2d, con, radii = m2d[order], con[order], radii[order]
     op, cf, So = opacities[keep][order], conf[keep][order], S[order]
-    x0 = torch.clamp(torch.trunc((m2d[:, 0] - radii) / tile_size), 0, tiles_x)
-    y0 = torch.clamp(torch.trunc((m2d[:, 1] - radii) / tile_size), 0, tiles_y)
-    x1 = torch.clamp(torch.trunc((m2d[:, 0] + radii + tile_size - 1) / tile_size), 0, tiles_x)
-    y1 = torch.clamp(torch.trunc((m2d[:, 1] + radii + tile_size - 1) / tile_size), 0, tiles_y)
+    x0 = torch.clamp(torch.floor((m2d[:, 0] - radii) / tile_size), 0, tiles_x)
+    y0 = torch.clamp(torch.floor((m2d[:, 1] - radii) / tile_size), 0, tiles_y)
+    x1 = torch.clamp(torch.ceil((m2d[:, 0] + radii) / tile_size), 0, tiles_x)
+    y1 = torch.clamp(torch.ceil((m2d[:, 1] + radii) / tile_size), 0, tiles_y)
     in_tile = (
         (tx[:, None] >= x0) & (tx[:, None] < x1) & (ty[:, None] >= y0) & (ty[:, None] < y1) & (radii > 0)
     )

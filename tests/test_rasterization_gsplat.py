@@ -71,6 +71,7 @@ def test_every_pixel_with_alpha_above_threshold_is_blended(device: str) -> None:
             means.double(),
             quats.double(),
             scales.double(),
+            opac.double(),
             vms[c].double(),
             Ks[c].double(),
             W,

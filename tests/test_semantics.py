@@ -174,7 +174,17 @@ def test_overflow_keeps_the_documented_entries(device, buffer_size):
     )
     f = torch.float64
     m2d, con, depth, _ = project(
-        means.to(f), quats.to(f), scales.to(f), vm[0].to(f), K[0].to(f), size, size, 0.01, 1e10, 0.3
+        means.to(f),
+        quats.to(f),
+        scales.to(f),
+        opac.to(f),
+        vm[0].to(f),
+        K[0].to(f),
+        size,
+        size,
+        0.01,
+        1e10,
+        0.3,
     )
     order = torch.argsort(depth).tolist()
     total_dropped = merged = overflowed = 0

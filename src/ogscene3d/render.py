@@ -106,10 +106,10 @@ def _on_torch_stream(fn):
 class _Project(torch.autograd.Function):
     @staticmethod
     def forward(
-        ctx, means, quats, scales, viewmats, Ks, width, height, near_plane, far_plane, eps2d, opacities=None
+        ctx, means, quats, scales, opacities, viewmats, Ks, width, height, near_plane, far_plane, eps2d
     ):
         """``opacities`` (not differentiated here) give gsplat's opacity-aware screen radius (see
-        kernels/projection.py); without them the radius is ceil(3 sqrt(lambda_max))."""
+        kernels/projection.py)."""
         wp = _wp()
         projection, _, _ = _kernels()
         C, N = viewmats.shape[0], means.shape[0]
@@ -126,7 +126,7 @@ class _Project(torch.autograd.Function):
             viewmats.detach().contiguous(),
             Ks.detach().contiguous(),
         ]
-        opac = (means.new_zeros(0) if opacities is None else opacities).detach().contiguous()
+        opac = opacities.detach().contiguous()
         inputs = _project_inputs(args, opac, N, width, height, near_plane, far_plane, eps2d)
         if C * N > 0:
             with warp_stream(dev) as wdev:
@@ -155,7 +155,7 @@ class _Project(torch.autograd.Function):
         v_scales = torch.zeros_like(scales)
         # camera-pose gradients (pose refinement), only when asked: every (camera, Gaussian) thread adds
         # into its camera's one matrix
-        v_viewmats = torch.zeros_like(viewmats) if ctx.needs_input_grad[3] else None
+        v_viewmats = torch.zeros_like(viewmats) if ctx.needs_input_grad[4] else None
         grads_out = [
             torch.zeros_like(means2d) if v_means2d is None else v_means2d.contiguous(),
             torch.zeros_like(conics) if v_conics is None else v_conics.contiguous(),
@@ -197,7 +197,7 @@ class _Project(torch.autograd.Function):
                     adjoint=True,
                     device=wdev,
                 )
-        return v_means, v_quats, v_scales, v_viewmats, None, None, None, None, None, None, None
+        return v_means, v_quats, v_scales, None, v_viewmats, None, None, None, None, None, None
 
 
 def _project_inputs(args, opacities, N, width, height, near_plane, far_plane, eps2d):
@@ -279,7 +279,6 @@ def bin_gaussians(
     tile_size: int = 16,
     checks: ValueChecks | None = None,
     voters: tuple[torch.Tensor, torch.Tensor] | None = None,
-    gsplat_tiles: bool = False,
 ) -> TileBins:
     """Assign projected Gaussians [C, N] to tiles and sort every tile's list front to back.
 
@@ -288,9 +287,7 @@ def bin_gaussians(
 
     ``checks``: the caller's pending input checks, settled on the sync this function makes anyway.
     ``voters``: (labels [N] int32, confidences [N]) to bin only the Gaussians that vote (label >= 0,
-    confidence > 0), as the semantic kernels need (the others neither vote nor occlude).
-    ``gsplat_tiles``: the radius square's tiles bounded as gsplat's isect_tiles does (floor / ceil), as
-    ``rasterization`` asks; else as 3DGS does (the semantic voting, whose reference mirrors it)."""
+    confidence > 0), as the semantic kernels need (the others neither vote nor occlude)."""
     wp = _wp()
     _, binning, _ = _kernels()
     C, N = radii.shape
@@ -312,7 +309,7 @@ def bin_gaussians(
         voters = (torch.empty(0, dtype=torch.int32, device=dev), torch.empty(0, device=dev))
     footprint = [m2d, rad, _as_wp(conics.detach(), wp.vec3), _as_wp(opacities.detach())]
     votes = [_as_wp(voters[0].to(torch.int32)), _as_wp(voters[1].detach())]
-    grid = [N, tile_size, tiles_x, tiles_y, int(gsplat_tiles)]
+    grid = [N, tile_size, tiles_x, tiles_y]
     ext = _as_wp(extents, wp.vec2)
     # which tiles of its rectangle each Gaussian's ellipse meets, decided once for count and emission
     reached = _as_wp(torch.empty(C * N, dtype=torch.uint64, device=dev))
@@ -634,13 +631,11 @@ def rasterization(
         colors = colors.unsqueeze(0).expand(C, N, D)
 
     means2d, conics, depths, radii = _Project.apply(
-        means, quats, scales, viewmats, Ks, width, height, near_plane, far_plane, eps2d, opacities
+        means, quats, scales, opacities, viewmats, Ks, width, height, near_plane, far_plane, eps2d
     )
     with torch.no_grad():
         # settles checks
-        bins = bin_gaussians(
-            means2d, conics, opacities, radii, depths, width, height, tile_size, checks, gsplat_tiles=True
-        )
+        bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, tile_size, checks)
 
     if render_mode in ("D", "ED"):
         blend, bg = depths.unsqueeze(-1), None

@@ -98,6 +98,7 @@ def _render(
             means.detach(),
             quats.detach(),
             scales.detach(),
+            opacities.detach(),
             viewmats.detach(),
             Ks.detach(),
             width,
