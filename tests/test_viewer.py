@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -527,6 +528,43 @@ def test_layers_camera_trajectory_and_frustum(server):
     assert layers._traj_handle is traj  # unchanged trajectory is not re-sent
 
 
+def test_layers_leave_no_scene_node_behind_for_removed_graph_nodes(server):
+    # Node ids are scene labels: a live graph keeps dropping ids (merged labels) and adding new ones.
+    # Each node's label and marker sit under /graph/nodes/<id>; that frame must go with the node, or the
+    # server keeps (and replays to every browser that connects) one frame per id ever shown.
+    layers = SceneLayers(server)
+    snap = make_scene(5, objects=3)
+    names = server.scene._handle_from_node_name
+    for shift in range(1000, 1020):
+        g = json.loads(json.dumps(snap.graph))
+        for n in g["nodes"]:
+            n["id"] += shift
+        for e in g["edges"]:
+            e["source"] += shift
+            e["target"] += shift
+        layers.update_graph(g, ViewerSettings(), set())
+    assert layers.shown_nodes == 3
+    ours = [k for k in names if k.startswith("/graph/nodes/") and int(k.split("/")[3]) >= 1000]
+    assert {k for k in ours if k.count("/") == 3} == {f"/graph/nodes/{i}" for i in (1019, 1020, 1021)}
+    layers.update_graph(None, ViewerSettings(), set())
+    assert not [k for k in names if k.startswith("/graph/nodes/") and int(k.split("/")[3]) >= 1000]
+
+
+def test_layers_resend_a_new_camera_image_even_at_a_freed_images_address(server):
+    # A new frame's image can be allocated where the last shown (and since freed) one was: the frustum
+    # must still show the new image (an id() comparison took it for the old one).
+    layers = SceneLayers(server)
+    base = make_scene(5)
+    img = np.zeros((360, 480, 3), np.uint8)  # wider than 240 px: the frustum gets a subsampled copy
+    layers.update_camera(dataclasses.replace(base, image=img), ViewerSettings())
+    assert layers._frustum.image.max() == 0
+    for value in (50, 100, 150, 200):
+        del img
+        img = np.full((360, 480, 3), value, np.uint8)
+        layers.update_camera(dataclasses.replace(base, image=img), ViewerSettings())
+        assert layers._frustum.image.min() == value
+
+
 # ------------------------------------------------------------------------------ viewer + session
 
 
@@ -570,8 +608,6 @@ def test_publish_never_waits_on_a_stuck_viewer(watched):
 
 
 def test_unchanged_layers_are_not_resent(watched):
-    import dataclasses
-
     from ogscene3d.viewer.app import LiveViewer
 
     with LiveViewer(port=0, max_rate_hz=50) as viewer:
@@ -590,6 +626,34 @@ def test_unchanged_layers_are_not_resent(watched):
         np.testing.assert_allclose(frustum.position, pose[:3, 3])
         viewer.publish(dataclasses.replace(snap, map_rev=snap.map_rev + 1))
         assert viewer.wait_until(lambda s: s["map_pushes"] == 2, timeout=20)
+
+
+def test_snapshots_without_map_rev_are_compared_by_identity_not_a_reusable_id(watched):
+    from ogscene3d.viewer.app import LiveViewer
+
+    with LiveViewer(port=0) as viewer:
+        # _push is called here directly, as the push thread does (nothing is published, so it idles)
+        snap = dataclasses.replace(make_scene(20), map_rev=None)
+        viewer._push(snap, set())
+        for seed in range(1, 5):
+            # a new map of the same size, built after the shown one was dropped: CPython may give it the
+            # shown snapshot's id(), which must not make the viewer take it for the map already shown
+            del snap
+            snap = dataclasses.replace(make_scene(20, seed=seed), map_rev=None)
+            viewer._push(snap, set())
+            assert viewer.stats["map_pushes"] == 1 + seed
+            np.testing.assert_allclose(viewer.layers._gauss_handle.centers, snap.means)
+        viewer._push(snap, set())  # the same snapshot again (e.g. a GUI change): the map is not re-sent
+        assert viewer.stats["map_pushes"] == 5
+        # Gaussians with NaN are dropped before drawing; the map is still the same snapshot, not re-sent
+        means = snap.means.copy()
+        means[0] = np.nan
+        bad = dataclasses.replace(snap, means=means)
+        viewer._push(bad, set())
+        assert viewer.stats["map_pushes"] == 6 and viewer.layers.shown_gaussians == 59
+        for _ in range(3):
+            viewer._push(bad, set())
+        assert viewer.stats["map_pushes"] == 6
 
 
 def test_gui_query_and_selection_update_the_panels(watched):

@@ -214,6 +214,9 @@ class LiveViewer:
         self._last_publish = -np.inf
         self._last_push = -np.inf
         self._shown_map_key: tuple | None = None
+        # the snapshot that key was taken from, held so that its id() (the key when map_rev is None) cannot
+        # be given to a new snapshot while the key is compared against
+        self._shown_map_snap: MapSnapshot | None = None
         self._shown_graph: dict | None = None
         self._shown_texts: dict[str, str] = {}
         self._camera_placed = False
@@ -470,16 +473,19 @@ class LiveViewer:
         return {int(n["id"]) for n in graph.get("nodes", []) if node_matches(n, self._query)}
 
     def _push(self, snap: MapSnapshot, dirty: set[str]) -> None:
+        # keyed on the published snapshot, not on finite()'s copy (a new object at every push)
+        map_key = (id(snap) if snap.map_rev is None else snap.map_rev, len(snap))
+        published = snap
         snap = snap.finite()
         st = self.settings
         graph = drawable_graph(snap.graph)
         matches = self._matches(graph)
-        map_key = (id(snap) if snap.map_rev is None else snap.map_rev, len(snap))
         with self.server.atomic():
             if map_key != self._shown_map_key or "map" in dirty:
                 self.layers.update_bounds(snap)
                 self.layers.update_map(snap, st, matches or None)
                 self._shown_map_key = map_key
+                self._shown_map_snap = published
                 self.stats["map_pushes"] += 1
                 if len(snap):
                     self._place_camera(snap.trajectory)

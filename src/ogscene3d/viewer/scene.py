@@ -144,10 +144,13 @@ class SceneLayers:
         self._traj_handle = None
         self._frustum = None
         self._frustum_key: tuple | None = None
-        self._image_id: int | None = None
+        self._image: np.ndarray | None = None  # the image shown (held: an id() can be reused once freed)
         self._pose_key: tuple | None = None
         self._nodes: dict[int, tuple] = {}  # id -> (text, center, highlighted, radius)
         self._node_handles: dict[int, tuple] = {}  # id -> (label handle, sphere handle)
+        # id -> the frame /graph/nodes/<id> holding them (removing it removes both; viser would otherwise
+        # keep an implicit frame per node id ever shown and replay it to every browser that connects)
+        self._node_frames: dict[int, object] = {}
         self._edges_key: tuple | None = None
         self._edge_handles: list = []
         self._highlight_handle = None
@@ -264,17 +267,17 @@ class SceneLayers:
                 visible=st.show_camera,
             )
             self._frustum_key = fkey
-            self._image_id = None
+            self._image = None
             self._pose_key = None
         pose_key = tuple(np.round(snap.pose[:3].ravel(), 6))
         if pose_key != self._pose_key:
             self._frustum.wxyz = rotmat_to_wxyz(snap.pose[:3, :3])
             self._frustum.position = snap.pose[:3, 3]
             self._pose_key = pose_key
-        if snap.image is not None and id(snap.image) != self._image_id:
+        if snap.image is not None and snap.image is not self._image:
             step = max(1, int(np.ceil(snap.image.shape[1] / 240)))
             self._frustum.image = np.ascontiguousarray(snap.image[::step, ::step])
-            self._image_id = id(snap.image)
+            self._image = snap.image
 
     # ------------------------------------------------------------------ graph
     def update_graph(self, graph: dict | None, st: ViewerSettings, matches: set[int]) -> None:
@@ -282,8 +285,8 @@ class SceneLayers:
         nodes = {int(n["id"]): n for n in (graph or {}).get("nodes", []) if _valid_node(n)}
         radius = float(np.clip(0.012 * self.extent, 0.015, 0.08))
         for nid in [i for i in self._node_handles if i not in nodes]:
-            for h in self._node_handles.pop(nid):
-                h.remove()
+            self._node_handles.pop(nid)
+            self._node_frames.pop(nid).remove()  # and the label and marker in it
             self._nodes.pop(nid, None)
         for nid, node in nodes.items():
             center = np.asarray(node["center"], dtype=np.float64)
@@ -302,6 +305,7 @@ class SceneLayers:
                 sphere.color = color
                 sphere.scale = (r / radius,) * 3
             else:
+                self._node_frames[nid] = self.scene.add_frame(f"/graph/nodes/{nid}", show_axes=False)
                 label = self.scene.add_label(
                     f"/graph/nodes/{nid}/label",
                     ("★ " + text) if hl else text,
