@@ -457,6 +457,18 @@ def test_ransac_rigid_recovers_transform_despite_outliers() -> None:
     np.testing.assert_allclose(est, T, atol=0.01)
 
 
+def test_ransac_rigid_transform_and_inlier_mask_agree_without_a_consensus() -> None:
+    """Unrelated matches: the best hypothesis has 1-2 inliers, too few to refit. The transform returned must
+    be that hypothesis (the one the mask describes), not an arbitrary first one."""
+    for seed, thr in [(0, 0.2), (0, 0.3), (1, 0.1)]:
+        rng = np.random.default_rng(seed)
+        src, dst = rng.uniform(-1, 1, (8, 3)), rng.uniform(-1, 1, (8, 3))
+        est, inliers = ransac_rigid(src, dst, thr, 16, np.random.default_rng(seed))
+        assert 0 < inliers.sum() < 3
+        residual = np.linalg.norm(src @ est[:3, :3].T + est[:3, 3] - dst, axis=1)
+        np.testing.assert_array_equal(inliers, residual < thr)
+
+
 # ----------------------------------------------------------------------------- real samples
 def test_replica_room0(shared_data: Path) -> None:
     frames = real_frames(shared_data / "replica_room0_nice_slam")

@@ -318,13 +318,14 @@ def ransac_rigid(
     diff = np.einsum("bij,nj->bni", R, src) + t[:, None] - dst[None]
     res2 = np.einsum("bni,bni->bn", diff, diff)
     thr2 = threshold * threshold
-    inliers = res2[int(np.argmax((res2 < thr2).sum(1)))] < thr2
+    best = int(np.argmax((res2 < thr2).sum(1)))
+    inliers = res2[best] < thr2
     if inliers.sum() >= 3:
         R1, t1 = _kabsch(src[inliers][None], dst[inliers][None])
         inliers = np.linalg.norm(src @ R1[0].T + t1[0] - dst, axis=-1) < threshold
         R, t = R1, t1
-    else:
-        R, t = R[:1], t[:1]
+    else:  # too few inliers to refit: the best hypothesis itself, which the mask describes
+        R, t = R[best : best + 1], t[best : best + 1]
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R[0], t[0]
     return T, inliers
