@@ -845,6 +845,29 @@ def test_check_bindable_follows_viser_port_search():
         check_bindable("192.0.2.1", 8080)  # TEST-NET address: not this machine's
 
 
+def _ipv6_loopback() -> bool:
+    import socket
+
+    try:
+        with socket.socket(socket.AF_INET6) as s:
+            s.bind(("::1", 0))
+        return True
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not _ipv6_loopback(), reason="no IPv6 loopback")
+def test_url_of_an_ipv6_host_is_bracketed():
+    import urllib.request
+
+    from ogscene3d.viewer.app import LiveViewer
+
+    with LiveViewer(host="::1", port=0) as viewer:
+        assert viewer.url == f"http://[::1]:{viewer.port}"  # was http://::1:PORT, which no browser opens
+        with urllib.request.urlopen(viewer.url, timeout=10) as r:
+            assert r.status == 200
+
+
 def test_cli_unbindable_host_is_a_clean_error_not_a_hang(tmp_path):
     """viser binds on its own thread; when that fails the main thread used to wait forever."""
     run = _write_run(tmp_path / "run", make_scene(10))

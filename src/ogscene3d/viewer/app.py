@@ -240,7 +240,9 @@ class LiveViewer:
     @property
     def url(self) -> str:
         host = self.server.get_host()
-        shown = "127.0.0.1" if host in ("0.0.0.0", "") else ("[::1]" if host == "::" else host)
+        shown = "127.0.0.1" if host in ("0.0.0.0", "") else ("::1" if host == "::" else host)
+        if ":" in shown and not shown.startswith("["):
+            shown = f"[{shown}]"  # an IPv6 address in a URL
         return f"http://{shown}:{self.port}"
 
     @property
