@@ -129,6 +129,32 @@ def test_box_prompts_give_box_masks_with_names(models):
     assert sam.segment_boxes(image, np.zeros((0, 4))) == []
 
 
+def test_non_finite_predicted_ious_are_dropped(models, caplog):
+    # a decoder that gives NaN / inf predicted IoUs (e.g. an fp16 export overflowing): such a mask must not
+    # carry its NaN into the segment's score (-> a NaN Gaussian confidence) nor win pixels with inf
+    d = models["dir"]
+    rgb = np.zeros((H, W, 3), np.uint8)
+    nan_box = make_sam_decoder(d / "dec_nan_box.onnx", box_iou=float("nan"))
+    sam = SamOnnx(models["enc"], nan_box, min_region_area=10)
+    image = sam.embed(rgb)
+    with caplog.at_level("WARNING"):
+        assert sam.segment_boxes(image, np.array([[20, 10, 60, 40]]), ["chair"]) == []
+    assert "non-finite predicted IoU" in caplog.text
+    # grid prompts: the inf output (r=10) and the NaN one (r=16) fail the predicted-IoU filter, so the
+    # r=20 output (IoU 0.97) is left, with a stability threshold that admits it
+    bad_pts = make_sam_decoder(d / "dec_inf_pts.onnx", ious=(0.99, float("inf"), float("nan"), 0.97))
+    sam = SamOnnx(
+        models["enc"], bad_pts, points_per_side=2, stability_score_thresh=0.4, min_region_area=10
+    )
+    assert_segments_are(sam(rgb), expected_discs(20.0), 0.97)
+    # a single-output-per-token decoder without the 4-token layout picks the best finite output
+    two = make_sam_decoder(
+        d / "dec_two.onnx", radii=(16.0, 20.0), slopes=(10.0, 10.0), ious=(0.9, 0.9), box_iou=float("nan")
+    )
+    sam = SamOnnx(models["enc"], two, min_region_area=10)
+    assert sam.segment_boxes(sam.embed(rgb), np.array([[20, 10, 60, 40]]), ["chair"]) == []
+
+
 def test_encoder_preprocessing_nchw(models):
     sam = SamOnnx(models["enc"], models["dec"])
     rgb = np.full((H, W, 3), [200, 100, 50], np.uint8)

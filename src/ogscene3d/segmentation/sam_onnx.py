@@ -29,7 +29,7 @@ The encoder comes in two flavours, told apart from its input signature:
 
 Automatic mask generation follows segment-anything's ``SamAutomaticMaskGenerator`` on a single crop
 (no ``crop_n_layers``): a ``points_per_side``² grid of single-point prompts, the three multimask outputs
-of each, filtering by predicted IoU and stability score, box NMS, removal of small islands and holes
+of each, filtering by predicted IoU (a NaN or inf one fails) and stability score, box NMS, removal of small islands and holes
 (``min_region_area``), then painting into one id map where the mask with the higher predicted IoU wins
 each pixel; segments left with fewer than ``min_region_area`` visible pixels are dropped.
 """
@@ -373,7 +373,9 @@ class SamOnnx:
             # 4 outputs = [single-mask token, 3 multimask tokens]; the generator uses the multimask ones
             chans = np.arange(1, 4) if c == 4 else np.arange(c)
             sub = ious[:, chans]
-            bi, ci = np.nonzero(sub > self.pred_iou_thresh)
+            # a NaN or inf predicted IoU is a failed prediction, never a confident one (inf would win
+            # every pixel when painting): such masks are dropped like those below the threshold
+            bi, ci = np.nonzero(np.isfinite(sub) & (sub > self.pred_iou_thresh))
             if bi.size == 0:
                 continue
             sel = logits[bi, chans[ci]]  # copies only the masks that passed: [K, H, W]
@@ -399,7 +401,8 @@ class SamOnnx:
 
         Box prompts are the two corners with labels 2 and 3; with a 4-output decoder the single-mask
         token (output 0) is used, as segment-anything's predictor does for ``multimask_output=False``,
-        otherwise the output with the highest predicted IoU. Score = that predicted IoU.
+        otherwise the output with the highest predicted IoU. Score = that predicted IoU; a mask whose
+        predicted IoU is NaN or inf is dropped (with a warning).
         """
         boxes = np.asarray(boxes, dtype=np.float32).reshape(-1, 4)
         if names is not None and len(names) != boxes.shape[0]:
@@ -410,9 +413,25 @@ class SamOnnx:
         coords = boxes.reshape(-1, 2, 2)
         labels = np.tile(np.array([[2.0, 3.0]], dtype=np.float32), (boxes.shape[0], 1))
         logits, ious = self._decode(image, coords, labels)
-        idx = np.zeros(len(boxes), dtype=np.int64) if logits.shape[1] == 4 else ious.argmax(axis=1)
+        best = np.where(np.isfinite(ious), ious, -np.inf).argmax(axis=1)  # argmax alone would pick a NaN
+        idx = np.zeros(len(boxes), dtype=np.int64) if logits.shape[1] == 4 else best
         ar = np.arange(len(boxes))
         sel_logits, sel_ious = logits[ar, idx], ious[ar, idx]
+        # a NaN/inf predicted IoU would become the segment's score, then a NaN Gaussian confidence
+        # (or an inf one that wins every pixel when painting): such masks are dropped
+        finite = np.isfinite(sel_ious)
+        if not finite.all():
+            log.warning(
+                "SAM decoder gave a non-finite predicted IoU for %d of %d box prompts: their masks are "
+                "dropped",
+                int((~finite).sum()),
+                len(boxes),
+            )
+            sel_logits, sel_ious = sel_logits[finite], sel_ious[finite]
+            if names is not None:
+                names = [n for n, f in zip(names, finite) if f]
+            if not finite.any():
+                return []
         if self._low_res:
             sel_logits = self.postprocess_masks(image, sel_logits)
         stab = stability_score(sel_logits, self.mask_threshold, self.stability_score_offset)
