@@ -143,9 +143,7 @@ def test_non_finite_predicted_ious_are_dropped(models, caplog):
     # grid prompts: the inf output (r=10) and the NaN one (r=16) fail the predicted-IoU filter, so the
     # r=20 output (IoU 0.97) is left, with a stability threshold that admits it
     bad_pts = make_sam_decoder(d / "dec_inf_pts.onnx", ious=(0.99, float("inf"), float("nan"), 0.97))
-    sam = SamOnnx(
-        models["enc"], bad_pts, points_per_side=2, stability_score_thresh=0.4, min_region_area=10
-    )
+    sam = SamOnnx(models["enc"], bad_pts, points_per_side=2, stability_score_thresh=0.4, min_region_area=10)
     assert_segments_are(sam(rgb), expected_discs(20.0), 0.97)
     # a single-output-per-token decoder without the 4-token layout picks the best finite output
     two = make_sam_decoder(

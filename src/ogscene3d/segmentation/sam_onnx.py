@@ -29,9 +29,10 @@ The encoder comes in two flavours, told apart from its input signature:
 
 Automatic mask generation follows segment-anything's ``SamAutomaticMaskGenerator`` on a single crop
 (no ``crop_n_layers``): a ``points_per_side``² grid of single-point prompts, the three multimask outputs
-of each, filtering by predicted IoU (a NaN or inf one fails) and stability score, box NMS, removal of small islands and holes
-(``min_region_area``), then painting into one id map where the mask with the higher predicted IoU wins
-each pixel; segments left with fewer than ``min_region_area`` visible pixels are dropped.
+of each, filtering by predicted IoU (a NaN or inf one fails) and stability score, box NMS, removal of
+small islands and holes (``min_region_area``), then painting into one id map where the mask with the
+higher predicted IoU wins each pixel; segments left with fewer than ``min_region_area`` visible pixels
+are dropped.
 """
 
 from __future__ import annotations
