@@ -116,6 +116,26 @@ def test_precomputed_names_round_trip(tmp_path):
         read_segmentation(tmp_path, "f")
 
 
+def test_precomputed_scores_must_be_finite_and_ids_fit_uint16(tmp_path):
+    ids = np.zeros((4, 5), np.int32)
+    ids[0, :2] = 1
+    write_segments(tmp_path, "f", ids, {1: 0.9})
+    # json.loads reads NaN and Infinity: such a score would become a NaN (or clamped) Gaussian confidence
+    for bad in ("NaN", "Infinity", "-Infinity"):
+        (tmp_path / "f.json").write_text('{"scores": {"1": ' + bad + "}}")
+        with pytest.raises(DataError, match=r"f.json: the scores of segment\(s\) \[1\] are not finite"):
+            read_segmentation(tmp_path, "f")
+    with pytest.raises(ValueError, match="not finite"):
+        write_segments(tmp_path, "g", ids, {1: float("nan")})
+    assert not (tmp_path / "g.png").exists() and not (tmp_path / "g.json").exists()
+    # more than 65535 segments: a DataError (printed by the CLI without a traceback) naming the file
+    big = np.zeros((300, 300), np.int32)
+    big.flat[:70000] = np.arange(1, 70001)
+    with pytest.raises(DataError, match=r"h.png: segment ids must lie in \[0, 65535\].*\[0, 70000\]"):
+        write_segments(tmp_path, "h", big)
+    assert not (tmp_path / "h.png").exists()
+
+
 def _classical(data, out) -> list[str]:
     return ["segment", "--data", str(data), "--out", str(out), "--backend", "classical", "--no-progress"]
 

@@ -2,7 +2,8 @@
 
 ``DIR/<rgb stem>.png``: uint16 segment ids, 0 = no segment, same size as the RGB image;
 ``DIR/<rgb stem>.json``: optional ``{"scores": {"<id>": float}, "names": {"<id>": str}}`` (SAM predicted
-IoU; ``names``, optional, the detector class of segments that came with a detector label).
+IoU, finite: a NaN or inf score is refused; ``names``, optional, the detector class of segments that
+came with a detector label).
 
 A frame without a PNG has no precomputed segments: datasets give it ``segments=None`` and the
 mapper's ``segmentation.backend`` segments it live. :func:`read_segments` itself reads one file that
@@ -12,6 +13,7 @@ must be there.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import cv2
@@ -47,11 +49,19 @@ def write_segments(
     ids = np.asarray(ids)
     if ids.ndim != 2:
         raise ValueError(f"segment ids must be a 2D map, got shape {ids.shape}")
-    if ids.min(initial=0) < 0 or ids.max(initial=0) > 65535:
-        raise ValueError("segment ids must lie in [0, 65535] to be stored as uint16 PNG")
     d = Path(directory)
-    d.mkdir(parents=True, exist_ok=True)
     png, js = segments_paths(d, stem)
+    if ids.min(initial=0) < 0 or ids.max(initial=0) > 65535:
+        # a DataError (the CLI prints it without a traceback): a frame with more than 65535 segments
+        raise DataError(
+            f"{png}: segment ids must lie in [0, 65535] to be stored as uint16 PNG, got "
+            f"[{int(ids.min(initial=0))}, {int(ids.max(initial=0))}] (fewer segments: raise "
+            "segmentation.min_region_area / classical_min_size)"
+        )
+    bad = sorted(int(k) for k, v in (scores or {}).items() if not math.isfinite(float(v)))
+    if bad:
+        raise ValueError(f"{png}: the scores of segment(s) {bad[:8]} are not finite (NaN or inf)")
+    d.mkdir(parents=True, exist_ok=True)
     if scores is not None or names:
         payload: dict = {"scores": {str(int(k)): float(v) for k, v in sorted((scores or {}).items())}}
         if names:
@@ -92,6 +102,10 @@ def _read_sidecar(js: Path) -> tuple[dict[int, float], dict[int, str]]:
             f'{js}: malformed segments JSON ({e}); expected {{"scores": {{"<id>": float}}}} and optionally '
             '"names": {"<id>": "class"}'
         ) from e
+    # json reads NaN / Infinity: a NaN score would become a NaN Gaussian confidence
+    bad = sorted(k for k, v in scores.items() if not math.isfinite(v))
+    if bad:
+        raise DataError(f"{js}: the scores of segment(s) {bad[:8]} are not finite (NaN or inf)")
     return scores, names
 
 
