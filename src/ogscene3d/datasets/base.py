@@ -381,6 +381,7 @@ class RGBDDataset:
         if self.max_depth > 0:
             depth[depth > self.max_depth] = 0.0
         rgb = read_rgb(rec.rgb_path)
+        rgb_shape = rgb.shape[:2]
         if rgb.shape[:2] != depth.shape:
             if not self.resize_rgb_to_depth:
                 raise DataError(
@@ -391,7 +392,7 @@ class RGBDDataset:
         pose = _read_pose(rec)
         segments, scores, names = None, {}, {}
         if self.segments_dir is not None:
-            seg = self._read_segments(rec, depth.shape)
+            seg = self._read_segments(rec, depth.shape, rgb_shape)
             if seg is not None:
                 segments, scores, names = seg.ids, seg.scores, seg.names
         gt_instances, gt_classes = self._load_gt(rec, depth.shape)
@@ -428,10 +429,17 @@ class RGBDDataset:
         except DataError:
             return False
 
-    def _read_segments(self, rec: FrameRecord, shape: tuple[int, int]) -> Segmentation | None:
+    def _read_segments(
+        self, rec: FrameRecord, shape: tuple[int, int], rgb_shape: tuple[int, int] | None = None
+    ) -> Segmentation | None:
         """The frame's precomputed segments, or None when it has no segments file: the mapper's
         segmentation.backend then segments it live (frames may be segmented in part, e.g. while
-        ``ogscene3d segment`` is still running). A corrupt or wrong-size file is an error."""
+        ``ogscene3d segment`` is still running). A corrupt or wrong-size file is an error.
+
+        ``shape`` is the frame's size; ``rgb_shape`` the RGB file's, where colour is resampled to the depth
+        size (ScanNet): segments of the RGB file's size (a SAM run on the colour images, as the design's
+        "same size as the RGB image" has them) are resampled with it by nearest neighbour, and segments of
+        the frame's size (what ``ogscene3d segment`` writes) are read as they are."""
         assert self.segments_dir is not None
         stem = rec.rgb_path.stem
         if not has_segments(self.segments_dir, stem):
@@ -445,7 +453,25 @@ class RGBDDataset:
                 )
                 self._warned_no_segments = True
             return None
-        return read_segmentation(self.segments_dir, stem, shape)
+        if rgb_shape is None or tuple(rgb_shape) == tuple(shape):
+            return read_segmentation(self.segments_dir, stem, shape)
+        seg = read_segmentation(self.segments_dir, stem)
+        if seg.ids.shape == tuple(shape):
+            return seg
+        if seg.ids.shape != tuple(rgb_shape):
+            raise DataError(
+                f"{self.segments_dir / (stem + '.png')}: segments are {seg.ids.shape[1]}x{seg.ids.shape[0]}, "
+                f"the RGB image is {rgb_shape[1]}x{rgb_shape[0]} and the frame (resampled to the depth "
+                f"size) {shape[1]}x{shape[0]}"
+            )
+        # nearest neighbour at pixel centres, as read_label_png resamples ScanNet's label images
+        ids = cv2.resize(seg.ids, (shape[1], shape[0]), interpolation=cv2.INTER_NEAREST_EXACT)
+        present = {int(i) for i in np.unique(ids) if i != 0}
+        return Segmentation(
+            ids=ids,
+            scores={i: v for i, v in seg.scores.items() if i in present},
+            names={i: v for i, v in seg.names.items() if i in present},
+        )
 
     def _check_depth_range(self, depth: np.ndarray, path: Path) -> bool:
         """Warn once when the first frame with depth has a median outside what an RGB-D camera sees (a wrong
