@@ -78,6 +78,39 @@ def test_fusion_edge_cases():
         fuse_segmentations(ms, md, tau_m=1.5)
 
 
+def test_sparse_large_ids_and_negative_ids():
+    # ids are per-frame labels, not counts: maps numbered up to 65535 (precomputed PNGs) must fuse without
+    # a histogram over max id x max id (that took 24 GB here); the answer is that of the renumbered maps
+    ms, md = hand_made()
+    big_s = np.array([0, 60001, 60002, 0, 65535, 0, 40000, 50000], np.int32)
+    big_d = np.array([0, 0, 0, 65000, 0, 64000], np.int32)
+    ms_big = Segmentation(big_s[ms.ids], {int(big_s[k]): v for k, v in ms.scores.items()})
+    md_big = Segmentation(
+        big_d[md.ids], {int(big_d[k]): v for k, v in md.scores.items()}, {65000: "cup", 64000: "bowl"}
+    )
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        r = overlap_ratios(ms_big, md_big)
+        mf = fuse_segmentations(ms_big, md_big)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 50e6
+    assert r == pytest.approx({60001: 1.0, 60002: 0.5, 65535: 0.7, 40000: 0.0, 50000: 0.4})
+    ref = fuse_segmentations(ms, md)
+    # ids are taken in id order: 64000 ("bowl") now comes before 65000 ("cup"), and the kept M_s segments
+    # come as 40000 (s=6), 50000 (s=7), 60002 (s=2)
+    assert mf.names == {1: "bowl", 2: "cup"} and len(mf.scores) == len(ref.scores) == 5
+    swap = np.array([0, 2, 1, 4, 5, 3], np.int32)
+    assert {int(swap[k]): v for k, v in mf.scores.items()} == ref.scores
+    np.testing.assert_array_equal(swap[mf.ids], ref.ids)
+    # negative ids are "no segment" (Segmentation's docstring): score 0, not the last id's score
+    seg = Segmentation(np.array([[-1, 0, 1, 2]], np.int32), {1: 0.9, 2: 0.95})
+    np.testing.assert_allclose(seg.score_map(), [[0.0, 0.0, 0.9, 0.95]])
+
+
 def test_sam_plus_detector_end_to_end(tmp_path):
     h, w = 96, 128
     enc = make_sam_encoder(tmp_path / "enc.onnx")

@@ -23,12 +23,12 @@ class Segmentation:
     names: dict[int, str] = field(default_factory=dict)
 
     def score_map(self) -> np.ndarray:
-        """Per-pixel score (0 where there is no segment)."""
+        """Per-pixel score (0 where there is no segment, negative ids included)."""
         lut = np.zeros(int(self.ids.max(initial=0)) + 1, dtype=np.float32)
         for k, v in self.scores.items():
             if 0 < k < lut.size:
                 lut[k] = v
-        return lut[self.ids]
+        return lut[np.maximum(self.ids, 0)]  # a negative id would index the lut from its end
 
 
 @runtime_checkable

@@ -32,13 +32,17 @@ def overlap_ratios(ms: Segmentation, md: Segmentation) -> dict[int, float]:
         raise ValueError(f"M_s {s_ids.shape} and M_d {d_ids.shape} id maps differ in shape")
     if s_ids.min(initial=0) < 0 or d_ids.min(initial=0) < 0:
         raise ValueError("segment ids must be >= 0")
-    ns, nd = int(s_ids.max(initial=0)) + 1, int(d_ids.max(initial=0)) + 1
+    # ids made compact first: a histogram over max id x max id would take gigabytes for sparse ids
+    # (e.g. precomputed maps numbered up to 65535), one over the present ids stays small
+    s_u, s_c = np.unique(s_ids.ravel(), return_inverse=True)
+    d_u, d_c = np.unique(d_ids.ravel(), return_inverse=True)
+    ns, nd = s_u.size, d_u.size
     # joint histogram of (s, d) pixel pairs: one bincount instead of a loop over segments
-    joint = np.bincount((s_ids * nd + d_ids).ravel(), minlength=ns * nd).reshape(ns, nd)
+    joint = np.bincount(s_c.ravel() * nd + d_c.ravel(), minlength=ns * nd).reshape(ns, nd)
     area = joint.sum(axis=1)
-    best = joint[:, 1:].max(axis=1) if nd > 1 else np.zeros(ns, dtype=np.int64)
-    present = np.flatnonzero(area[1:] > 0) + 1
-    return {int(s): float(best[s] / area[s]) for s in present}
+    d_seg = d_u > 0
+    best = joint[:, d_seg].max(axis=1) if d_seg.any() else np.zeros(ns, dtype=np.int64)
+    return {int(s): float(best[i] / area[i]) for i, s in enumerate(s_u) if s > 0}
 
 
 def fuse_segmentations(
