@@ -149,6 +149,18 @@ def test_bad_inputs():
     assert seg(rgb, holes).ids.min() >= 1
 
 
+def test_one_pixel_wide_images_with_depth():
+    # np.gradient needs two samples per axis: a 1-pixel strip (also a thin image shrunk to max_side) with
+    # depth raised a numpy ValueError; it has no normals, so colour and depth alone segment it
+    seg = ClassicalSegmenter()
+    for h, w in ((1, 1), (1, 7), (7, 1), (3, 2000)):
+        rgb = np.zeros((h, w, 3), np.uint8)
+        rgb[..., w // 2 :, :] = 200
+        out = seg(rgb, np.ones((h, w), np.float32))
+        assert out.ids.shape == (h, w) and out.ids.min() >= 1
+        assert all(0.88 <= v <= 1.0 for v in out.scores.values())
+
+
 def test_real_kinect_frame(shared_data):
     """7-Scenes (Kinect v1): the red cabinet front is one region, separate from the floor and the door."""
     import cv2

@@ -79,6 +79,8 @@ def depth_normals(depth: np.ndarray, fx: float, fy: float) -> tuple[np.ndarray, 
     (existing) four neighbours have valid depth. Oriented towards the camera (1 - n.n' sees creases only).
     """
     h, w = depth.shape
+    if h < 2 or w < 2:  # a one-pixel strip (e.g. a very thin image after max_side) has no surface normal
+        return np.zeros((h, w, 3), np.float32), np.zeros((h, w), bool)
     valid = depth > 0
     z = smooth_depth(depth)
     u = ((np.arange(w, dtype=np.float32) + 0.5 - w / 2) / fx)[None, :]
@@ -118,7 +120,10 @@ def depth_step_residual(
     step's gradient over its neighbours, which gives them a small residual too: the thin strips this can
     leave are merged by ``graph_segment``. 0 where either depth is invalid.
     """
-    gy, gx = np.gradient(smooth_depth(depth))
+    zs = smooth_depth(depth)
+    # np.gradient needs two samples per axis; along an axis of one pixel there are no edges to predict
+    gy = np.gradient(zs, axis=0) if zs.shape[0] > 1 else np.zeros_like(zs)
+    gx = np.gradient(zs, axis=1) if zs.shape[1] > 1 else np.zeros_like(zs)
     gy, gx = gy.ravel(), gx.ravel()
     z = depth.ravel().astype(np.float32)
     expected = 0.5 * ((gx[eu] + gx[ev]) * dx + (gy[eu] + gy[ev]) * dy)
