@@ -10,6 +10,17 @@ the corresponding segment being the M_d segment that covers most of s. Where the
 M_d overlap, M_d wins the pixel (it "maintains object-level precision"); a kept M_s segment therefore
 only fills pixels that no detector segment claims. Per-pixel scores are the winning segment's SAM
 predicted IoU (``Segmentation.score_map``).
+
+The paper does not define the ratio's denominator; |s| (not IoU) makes a grid segment that lies inside
+a detected object a duplicate of it however small it is. Ratios are taken on the painted id maps
+(each pixel belongs to one segment of M_s and one of M_d: the higher predicted IoU wins where masks of
+the same set overlap). Pixels covered by no kept segment have no segment (id 0).
+
+Deviation from "M_f includes all segments from M_d" (``SamDetectorSegmenter``): detector-prompted masks
+get the same clean-up as SAM's grid masks (holes and islands below ``min_region_area`` pixels), and a
+detector mask left with fewer than ``min_region_area`` visible pixels, because it is that small or
+because a better-scored detector mask covers it (two detections of one object, e.g. "chair" and
+"sofa"), is dropped: its slivers would otherwise become segments that override M_s.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ Used for the synthetic scenes (where no SAM model is needed to test the mapper) 
 ablations. Starting from the per-pixel instance ids it applies, in this order:
 
 1. **missed objects**: every instance is dropped with ``drop_prob``; small ones (area below
-   ``small_area`` of the image) and far ones (median depth beyond ``far_depth`` m) additionally
+   ``small_area`` of the image) and far ones (mean valid depth beyond ``far_depth`` m) additionally
    with ``miss_small_prob``;
 2. **merging**: a pair of touching small instances (both below ``merge_area``) becomes one segment
    with ``merge_prob`` (SAM often returns "the books", not each book);
