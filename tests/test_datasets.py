@@ -400,3 +400,16 @@ def test_bad_layouts_and_metadata(tmp_path):
         p.unlink()
     with pytest.raises(DataError, match="no frame"):
         open_dataset(scene2, kind="replica")
+
+
+def test_tum_depth_images_are_paired_one_to_one_as_associate_py_does():
+    """A depth image goes to one colour frame only, the closest; the other takes its next depth within
+    20 ms, or is no frame. Poses (100 Hz ground truth) stay nearest-stamp."""
+    from ogscene3d.datasets.tum import associate
+
+    rgb = np.array([0.000, 0.012, 0.060])
+    depth = np.array([0.030, 0.005])
+    assert associate(rgb, depth).tolist() == [1, 1, -1]  # nearest: depth 0.005 twice
+    assert associate(rgb, depth, one_to_one=True).tolist() == [1, 0, -1]  # 0.012 takes 0.030 (18 ms)
+    assert associate(rgb, np.array([0.005]), one_to_one=True).tolist() == [0, -1, -1]
+    assert associate(rgb, np.array([]), one_to_one=True).tolist() == [-1, -1, -1]

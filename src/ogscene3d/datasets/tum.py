@@ -3,7 +3,8 @@
 16-bit depth PNGs at 5000 units per metre.
 
 Frames are the rgb images that have a depth image (and, when ``groundtruth.txt`` exists, a pose)
-within ``MAX_DT`` seconds, as in TUM's ``associate.py``. Intrinsics: ``data.intrinsics`` if given,
+within ``MAX_DT`` seconds, as in TUM's ``associate.py``: colour and depth paired one to one, closest pairs
+first; the 100 Hz poses by nearest stamp. Intrinsics: ``data.intrinsics`` if given,
 else the published calibration of the freiburg1/2/3 sensor named in the folder name (the innermost
 folder that names one: ``data/freiburg1_runs/rgbd_dataset_freiburg3_office`` is freiburg3), else the
 ROS default (525, 525, 319.5, 239.5) with a warning.
@@ -76,16 +77,30 @@ def read_tum_list(path: Path, columns: int) -> tuple[np.ndarray, list[list[str]]
     return np.array(stamps), rest
 
 
-def associate(a: np.ndarray, b: np.ndarray, max_dt: float = MAX_DT) -> np.ndarray:
-    """For each stamp in ``a`` the index of the nearest stamp in ``b`` within ``max_dt`` (-1: none)."""
+def associate(a: np.ndarray, b: np.ndarray, max_dt: float = MAX_DT, one_to_one: bool = False) -> np.ndarray:
+    """For each stamp in ``a`` the index of the nearest stamp in ``b`` within ``max_dt`` (-1: none).
+
+    ``one_to_one``: as the TUM benchmark's ``associate.py`` pairs images: every pair within ``max_dt``,
+    closest first, each stamp of either list used at most once (a depth image is never given to two colour
+    frames; a colour frame whose nearest depth went to a closer one takes its next within ``max_dt``)."""
     order = np.argsort(b)
     bs = b[order]
-    pos = np.clip(np.searchsorted(bs, a), 1, max(len(bs) - 1, 1))
-    lo = np.clip(pos - 1, 0, len(bs) - 1)
-    hi = np.clip(pos, 0, len(bs) - 1)
-    pick = np.where(np.abs(bs[lo] - a) <= np.abs(bs[hi] - a), lo, hi)
-    ok = np.abs(bs[pick] - a) <= max_dt
-    return np.where(ok, order[pick], -1)
+    if not one_to_one:
+        pos = np.clip(np.searchsorted(bs, a), 1, max(len(bs) - 1, 1))
+        lo = np.clip(pos - 1, 0, len(bs) - 1)
+        hi = np.clip(pos, 0, len(bs) - 1)
+        pick = np.where(np.abs(bs[lo] - a) <= np.abs(bs[hi] - a), lo, hi)
+        ok = np.abs(bs[pick] - a) <= max_dt
+        return np.where(ok, order[pick], -1)
+    first = np.searchsorted(bs, a - max_dt, side="left")
+    last = np.searchsorted(bs, a + max_dt, side="right")
+    pairs = [(abs(float(bs[j]) - float(t)), i, j) for i, t in enumerate(a) for j in range(first[i], last[i])]
+    out = np.full(len(a), -1, dtype=np.int64)
+    used = np.zeros(len(bs), dtype=bool)
+    for _, i, j in sorted(pairs):
+        if out[i] < 0 and not used[j]:
+            out[i], used[j] = order[j], True
+    return out
 
 
 class TUMDataset(RGBDDataset):
@@ -100,7 +115,8 @@ class TUMDataset(RGBDDataset):
         root = Path(root)
         t_rgb, rgb_files = read_tum_list(root / "rgb.txt", 2)
         t_depth, depth_files = read_tum_list(root / "depth.txt", 2)
-        d_idx = associate(t_rgb, t_depth)
+        # one depth image per colour frame, as TUM's associate.py pairs them
+        d_idx = associate(t_rgb, t_depth, one_to_one=True)
         gt_path = root / "groundtruth.txt"
         poses = None
         if gt_path.is_file():
