@@ -425,7 +425,7 @@ class RGBDDataset:
         sequences mark lost tracking with a non-finite pose (ScanNet writes -inf), and a caller choosing
         frames to render must pass over those without reading every image."""
         try:
-            return _read_pose(self.records[i]) is not None
+            return self.pose(i) is not None
         except DataError:
             return False
 

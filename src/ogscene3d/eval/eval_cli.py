@@ -327,7 +327,7 @@ def _finish(report: dict[str, Any], out: Path) -> None:
         print()
         print(
             f"trajectory: ATE RMSE {t['ate_rmse_m']:.4f} m after {t['alignment']} alignment "
-            f"({t['num_poses']} poses{t.get('left_out', '')})"
+            f"({t['num_poses']} poses{_left_out(t)})"
         )
     for note in report.get("notes", []):
         print(f"note: {note}")
@@ -361,8 +361,12 @@ def _ate(traj: tuple[np.ndarray, np.ndarray, int], align: str) -> dict[str, Any]
     t = ate(traj[0], traj[1], align).to_dict()  # type: ignore[arg-type]
     if traj[2]:
         t["num_left_out"] = traj[2]
-        t["left_out"] = f"; {traj[2]} frames without a valid dataset pose left out"
     return t
+
+
+def _left_out(t: dict[str, Any]) -> str:
+    n = t.get("num_left_out", 0)
+    return f"; {n} frames without a valid dataset pose left out" if n else ""
 
 
 def _trajectory_only(args: argparse.Namespace, traj: tuple[np.ndarray, np.ndarray, int]) -> int:

@@ -34,6 +34,11 @@ def has_segments(directory: str | Path, stem: str) -> bool:
     return segments_paths(directory, stem)[0].is_file()
 
 
+def _not_finite(scores: dict) -> list[int]:
+    """The ids whose score is NaN or inf (json reads and writes both), sorted."""
+    return sorted(int(k) for k, v in scores.items() if not math.isfinite(float(v)))
+
+
 def write_segments(
     directory: str | Path,
     stem: str,
@@ -58,7 +63,7 @@ def write_segments(
             f"[{int(ids.min(initial=0))}, {int(ids.max(initial=0))}] (fewer segments: raise "
             "segmentation.min_region_area / classical_min_size)"
         )
-    bad = sorted(int(k) for k, v in (scores or {}).items() if not math.isfinite(float(v)))
+    bad = _not_finite(scores or {})
     if bad:
         raise ValueError(f"{png}: the scores of segment(s) {bad[:8]} are not finite (NaN or inf)")
     d.mkdir(parents=True, exist_ok=True)
@@ -103,7 +108,7 @@ def _read_sidecar(js: Path) -> tuple[dict[int, float], dict[int, str]]:
             '"names": {"<id>": "class"}'
         ) from e
     # json reads NaN / Infinity: a NaN score would become a NaN Gaussian confidence
-    bad = sorted(k for k, v in scores.items() if not math.isfinite(v))
+    bad = _not_finite(scores)
     if bad:
         raise DataError(f"{js}: the scores of segment(s) {bad[:8]} are not finite (NaN or inf)")
     return scores, names

@@ -213,9 +213,7 @@ class LiveViewer:
         self._stop = threading.Event()
         self._last_publish = -np.inf
         self._last_push = -np.inf
-        self._shown_map_key: tuple | None = None
-        # the snapshot that key was taken from, held so that its id() (the key when map_rev is None) cannot
-        # be given to a new snapshot while the key is compared against
+        # the published snapshot whose map is shown, held: without a map_rev it is recognised by identity
         self._shown_map_snap: MapSnapshot | None = None
         self._shown_graph: dict | None = None
         self._shown_texts: dict[str, str] = {}
@@ -474,19 +472,28 @@ class LiveViewer:
             return set()
         return {int(n["id"]) for n in graph.get("nodes", []) if node_matches(n, self._query)}
 
+    def _shows_map_of(self, snap: MapSnapshot) -> bool:
+        """Whether the map shown is ``snap``'s: the same map revision and size, or without a revision the
+        very snapshot object."""
+        shown = self._shown_map_snap
+        if shown is None:
+            return False
+        if snap.map_rev is None:
+            return snap is shown
+        return snap.map_rev == shown.map_rev and len(snap) == len(shown)
+
     def _push(self, snap: MapSnapshot, dirty: set[str]) -> None:
-        # keyed on the published snapshot, not on finite()'s copy (a new object at every push)
-        map_key = (id(snap) if snap.map_rev is None else snap.map_rev, len(snap))
+        # compared as published, not as finite()'s copy (a new object at every push)
+        same_map = self._shows_map_of(snap)
         published = snap
         snap = snap.finite()
         st = self.settings
         graph = drawable_graph(snap.graph)
         matches = self._matches(graph)
         with self.server.atomic():
-            if map_key != self._shown_map_key or "map" in dirty:
+            if not same_map or "map" in dirty:
                 self.layers.update_bounds(snap)
                 self.layers.update_map(snap, st, matches or None)
-                self._shown_map_key = map_key
                 self._shown_map_snap = published
                 self.stats["map_pushes"] += 1
                 if len(snap):
