@@ -20,6 +20,7 @@ import yaml
 
 from .atomic import atomic_write_text
 from .errors import ConfigError
+from .shipped_configs import resolve_config_path, shipped_configs
 
 
 @dataclass
@@ -685,12 +686,15 @@ def config_from_dict(values: dict) -> Config:
 
 
 def load_config(path: str | Path | None = None, overrides: list[str] | None = None) -> Config:
-    """Load a YAML config (None: all defaults) and apply ``key=value`` overrides."""
+    """Load a YAML config (None: all defaults; a bare name such as ``"replica"``: the config shipped with the
+    package) and apply ``key=value`` overrides."""
     values: dict = {}
     if path is not None:
-        p = Path(path)
+        p = resolve_config_path(path)
         if not p.is_file():
-            raise ConfigError(f"config file {str(p)!r} does not exist")
+            raise ConfigError(
+                f"config file {str(p)!r} does not exist (shipped configs, by name: {', '.join(shipped_configs())})"
+            )
         try:
             loaded = yaml.safe_load(p.read_text())
         except yaml.YAMLError as e:
