@@ -1,5 +1,5 @@
-"""The configs shipped in the package: ``load_config("replica")`` by bare name, from the source tree and from a
-wheel."""
+"""The configs shipped in the package: ``load_config("replica")`` by bare name, from the source tree and
+from a wheel."""
 
 from __future__ import annotations
 
@@ -52,7 +52,7 @@ def test_an_unknown_name_or_a_missing_path_names_the_shipped_configs(tmp_path, m
 
 
 def _build_wheel(tmp_path: Path) -> Path:
-    """The project's wheel, built offline from a copy of the sources (the build writes into its source tree)."""
+    """The project's wheel, built offline from a copy of the sources (a build writes into its source tree)."""
     try:
         import setuptools
     except ImportError:
@@ -73,7 +73,8 @@ def _build_wheel(tmp_path: Path) -> Path:
     for name in ("src", "kernels", "configs"):
         shutil.copytree(ROOT / name, src / name, ignore=ignore)
     out = tmp_path / "wheel"
-    cmd = [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(out), str(src)]
+    cmd = [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(out)]
+    cmd.append(str(src))
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     (whl,) = out.glob("ogscene3d-*.whl")

@@ -692,9 +692,8 @@ def load_config(path: str | Path | None = None, overrides: list[str] | None = No
     if path is not None:
         p = resolve_config_path(path)
         if not p.is_file():
-            raise ConfigError(
-                f"config file {str(p)!r} does not exist (shipped configs, by name: {', '.join(shipped_configs())})"
-            )
+            shipped = ", ".join(shipped_configs())
+            raise ConfigError(f"config file {str(p)!r} does not exist (shipped configs, by name: {shipped})")
         try:
             loaded = yaml.safe_load(p.read_text())
         except yaml.YAMLError as e:

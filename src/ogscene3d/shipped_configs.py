@@ -34,7 +34,7 @@ def shipped_configs() -> dict[str, Path]:
 
 def resolve_config_path(path: str | Path) -> Path:
     """``path`` itself when it is a file, else the shipped config that a bare name (``replica`` or
-    ``replica.yaml``, no folder part) names; otherwise ``path`` unchanged, for the caller to report missing."""
+    ``replica.yaml``, no folder part) names; otherwise ``path`` unchanged, which the caller reports."""
     p = Path(path)
     if p.is_file() or p.parent != Path("."):
         return p
