@@ -1,4 +1,5 @@
-"""Promises of the design document (docs/DESIGN.md) that no other test pinned down."""
+"""Promises of the design (docs/design.md and the file formats it points to, docs/formats.md) that no other
+test pinned down."""
 
 from __future__ import annotations
 
@@ -31,14 +32,15 @@ def _scannet_colour_larger(root: Path) -> Path:
 
 
 def _write_segments(seg_dir: Path, stem: str, ids: np.ndarray, scores: dict[int, float]) -> None:
-    """DESIGN "Files": DIR/<rgb stem>.png uint16, DIR/<rgb stem>.json {"scores": {"<id>": float}}."""
+    """docs/formats.md "Precomputed segments": DIR/<rgb stem>.png uint16, DIR/<rgb stem>.json
+    {"scores": {"<id>": float}}."""
     _png(seg_dir / f"{stem}.png", ids.astype(np.uint16))
     (seg_dir / f"{stem}.json").write_text(json.dumps({"scores": {str(k): v for k, v in scores.items()}}))
 
 
 def test_segments_at_the_rgb_files_size_are_read_where_colour_is_resampled(tmp_path):
-    """DESIGN: precomputed segments are "same size as the RGB image". ScanNet frames resample colour to the
-    depth size; segments a SAM run wrote at the colour file's size are resampled with it (nearest), and
+    """docs/formats.md: precomputed segments are at the RGB image's size. ScanNet frames resample colour to
+    the depth size; segments a SAM run wrote at the colour file's size are resampled with it (nearest), and
     segments at the frame's size (what ``ogscene3d segment`` writes) are read as they are."""
     root = _scannet_colour_larger(tmp_path / "scan")
     seg = tmp_path / "segs"
