@@ -8,7 +8,7 @@ git-ignored: name it in the device tool's carry to take it to a borrowed GPU mac
 ``semantic.py`` in fresh processes, this tree and the baseline (``PYTHONPATH=DIR``) in turn for
 ``--rounds`` rounds, and prints per scene the device-kernel and wall times of both, their ratio, and each
 one's ratio to a colour forward of the same scene. f5c2db7 is the last revision with two semantic kernels
-(a vote and a contribution pass), the one timed on an H100 in the README.
+(a vote and a contribution pass), the one timed on an H100 in docs/results.md.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Readers for what ``ogscene3d eval`` compares: a run directory and a ground truth.
 
-Run directory (README "File formats"): ``gaussians.ply`` (vertex fields ``x y z ... opacity ... label
+Run directory (docs/formats.md): ``gaussians.ply`` (vertex fields ``x y z ... opacity ... label
 confidence``) and, optionally, ``graph.json``.
 
 Ground truth, any of:
@@ -183,7 +183,7 @@ def read_run(run_dir: str | Path) -> RunData:
         raise DataError(f"{run}: run directory not found")
     ply = run / "gaussians.ply"
     if not ply.is_file():
-        raise DataError(f"{ply}: missing (a run directory holds gaussians.ply; README, 'File formats')")
+        raise DataError(f"{ply}: missing (a run directory holds gaussians.ply; docs/formats.md)")
     v = _read_ply_vertices(ply)
     names = v.dtype.names or ()
     if "label" not in names:

@@ -2,7 +2,7 @@
 
 A checkpoint ``RUN/map.npz`` keeps its memory views in ``RUN/map_memory/view_<keyframe>_<crc32>.npz``
 (``rgb``, ``depth``, ``keyframe`` and, when the view has them, ``segments``); ``map.npz`` lists the files
-it needs, relative to its own directory, with each file's size and CRC-32 (README "File formats"). A view
+it needs, relative to its own directory, with each file's size and CRC-32 (docs/formats.md). A view
 never changes once in the memory, so a checkpoint writes only the views the previous one did not have,
 instead of every view again (hundreds of MB with 64 views at 1200x680). The optimisation's recent keyframes
 (``mapping.opt_memory_frames``) that are not in the memory are kept the same way, listed apart

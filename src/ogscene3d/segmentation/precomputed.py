@@ -1,4 +1,4 @@
-"""The precomputed segments format (README "File formats").
+"""The precomputed segments format (docs/formats.md, "Precomputed segments").
 
 ``DIR/<rgb stem>.png``: uint16 segment ids, 0 = no segment, same size as the RGB image;
 ``DIR/<rgb stem>.json``: optional ``{"scores": {"<id>": float}, "names": {"<id>": str}}`` (SAM predicted
