@@ -212,3 +212,16 @@ def test_cli_refuses_an_out_of_range_override_before_any_work(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "mapping.opt_iters must be an integer >= 0" in err and "got -3" in err
     assert not out.exists()
+
+
+def test_a_config_file_that_is_not_utf8_is_one_clear_line(tmp_path, capsys):
+    bad = tmp_path / "latin1.yaml"
+    bad.write_bytes("mapping:\n  opt_iters: 5  # r\xe9glage\n".encode("latin-1"))
+    with pytest.raises(ConfigError, match=rf"config file '{re.escape(str(bad))}' is not UTF-8 text"):
+        load_config(bad)
+    # before: a UnicodeDecodeError traceback and exit 1
+    out = tmp_path / "o"
+    assert main(["run", "--config", str(bad), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "latin1.yaml" in err[0] and "not UTF-8" in err[0], err
+    assert not out.exists()
