@@ -87,15 +87,15 @@ import cv2
 import numpy as np
 
 from .camera import Camera
-from .config import TrackingConfig, add_override_argument
+from .config import TrackingConfig, add_override_argument, check_section, choices
 from .errors import ConfigError, OGSceneError
 from .frame import Frame, check_pose
 
 log = logging.getLogger(__name__)
 
 _METHODS = {"hybrid": "Hybrid", "color": "Intensity", "point_to_plane": "PointToPlane"}
-METHODS = ("auto", *_METHODS)
-POSE_SOURCES = ("gt", "odometry")
+METHODS = choices("tracking.method")
+POSE_SOURCES = choices("tracking.poses")
 _FITNESS_TIE = 0.05  # candidates within this overlap of the best are ranked by residual
 _RMSE_GATE = 1.5  # a prior-initialised result with a residual above this x the recent ones gets a second try
 _RECENT = 5  # accepted residuals remembered for that gate and the re-acquisition check
@@ -139,49 +139,8 @@ class TrackResult:
 
 
 def validate_tracking_config(cfg: TrackingConfig) -> None:
-    """Raise ConfigError naming the ``tracking.*`` key when a value is out of range."""
-
-    def bad(key: str, msg: str) -> ConfigError:
-        return ConfigError(f"tracking.{key}: {msg}")
-
-    if cfg.poses not in POSE_SOURCES:
-        raise bad("poses", f"must be one of {list(POSE_SOURCES)}, got {cfg.poses!r}")
-    if cfg.method not in METHODS:
-        raise bad("method", f"must be one of {list(METHODS)}, got {cfg.method!r}")
-    if not (math.isfinite(cfg.min_conditioning) and 0.0 <= cfg.min_conditioning < 1.0):
-        raise bad("min_conditioning", f"must be in [0, 1), got {cfg.min_conditioning}")
-    if not cfg.iterations or any(int(n) < 1 for n in cfg.iterations):
-        raise bad("iterations", f"must be a non-empty list of positive counts, got {cfg.iterations!r}")
-    if cfg.max_width < 0:
-        raise bad("max_width", f"must be >= 0 (0 = full resolution), got {cfg.max_width}")
-    if not (math.isfinite(cfg.depth_max) and cfg.depth_max > 0):
-        raise bad("depth_max", f"must be a positive number of metres, got {cfg.depth_max}")
-    if not 0.0 <= cfg.depth_min < cfg.depth_max:
-        raise bad("depth_min", f"must be in [0, depth_max={cfg.depth_max}), got {cfg.depth_min}")
-    for key in ("depth_outlier_trunc", "depth_huber_delta", "intensity_huber_delta", "max_inlier_rmse"):
-        v = getattr(cfg, key)
-        if not (math.isfinite(v) and v > 0):
-            raise bad(key, f"must be a positive number, got {v}")
-    for key in ("min_fitness", "keyframe_fitness"):
-        v = getattr(cfg, key)
-        if not 0.0 <= v <= 1.0:
-            raise bad(key, f"must be in [0, 1], got {v}")
-    for key in ("max_translation", "max_rotation_deg", "keyframe_translation", "keyframe_rotation_deg"):
-        v = getattr(cfg, key)
-        if not v > 0:
-            raise bad(key, f"must be positive, got {v}")
-    if cfg.keyframe_every < 1:
-        raise bad("keyframe_every", f"must be >= 1 (1 = frame-to-frame), got {cfg.keyframe_every}")
-    if cfg.max_lost_frames < 0:
-        raise bad("max_lost_frames", f"must be >= 0 (0 = never restart), got {cfg.max_lost_frames}")
-    if cfg.orb_features < 10:
-        raise bad("orb_features", f"must be >= 10, got {cfg.orb_features}")
-    if not (math.isfinite(cfg.ransac_threshold) and cfg.ransac_threshold > 0):
-        raise bad("ransac_threshold", f"must be a positive number of metres, got {cfg.ransac_threshold}")
-    if not (math.isfinite(cfg.max_residual_ratio) and cfg.max_residual_ratio >= 0):
-        raise bad("max_residual_ratio", f"must be >= 0 (0 = off), got {cfg.max_residual_ratio}")
-    if cfg.min_feature_inliers < 3:
-        raise bad("min_feature_inliers", f"must be >= 3, got {cfg.min_feature_inliers}")
+    """Raise ConfigError naming the ``tracking.*`` key when a value breaks its rule (written on the field)."""
+    check_section(cfg, "tracking")
 
 
 def open3d_device(device: Any = "cpu") -> Any:
