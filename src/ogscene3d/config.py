@@ -976,6 +976,19 @@ def add_override_argument(parser: Any, example: str = "mapping.opt_iters=5") -> 
     )
 
 
+def add_poses_argument(parser: Any) -> None:
+    """Add ``--poses gt|odometry`` (the choices of ``tracking.poses``) to a subcommand.
+
+    The command then does ``if args.poses: cfg.tracking.poses = args.poses``.
+    """
+    parser.add_argument(
+        "--poses",
+        choices=choices("tracking.poses"),
+        default=None,
+        help="camera poses: the dataset's (gt) or RGB-D odometry (odometry); default: config tracking.poses",
+    )
+
+
 def config_to_dict(cfg: Any) -> dict:
     return dataclasses.asdict(cfg)
 
