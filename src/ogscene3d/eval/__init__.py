@@ -55,8 +55,8 @@ __getattr__, __dir__ = lazy_exports(
             "rendered_view_metrics",
             "voxel_resample",
         ],
+        ".ground_truth": ["GroundTruth"],
         ".readers": [
-            "GroundTruth",
             "RunData",
             "find_ground_truth",
             "load_ground_truth",
@@ -65,7 +65,8 @@ __getattr__, __dir__ = lazy_exports(
         ],
         ".run_eval": ["EvalResult", "build_label_mapping", "evaluate_run"],
         ".trajectory": ["TrajectoryError", "ate", "ate_rmse", "read_trajectory", "umeyama_alignment"],
-        ".views": ["ViewsResult", "evaluate_views", "pick_frames"],
+        ".views": ["ViewsResult", "evaluate_views"],
+        ".held_out": ["pick_frames"],
     },
 )
 
