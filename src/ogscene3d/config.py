@@ -786,11 +786,17 @@ def choices(key: str) -> tuple[Any, ...]:
     raise KeyError(key)
 
 
-# Views of the field rules by dotted key (derived, never edited by hand): the numeric ranges and list checks.
-RANGES: dict[str, Range] = {s.key: s.range for s in settings() if s.range is not None}
-LIST_CHECKS: dict[str, Callable[[Any], str | None]] = {
-    s.key: s.check for s in settings() if s.check is not None
-}
+def __getattr__(name: str) -> Any:
+    """``RANGES`` (dotted key -> :class:`Range`) and ``LIST_CHECKS`` (dotted key -> check): views of the
+    field rules, derived on first use (not at import: ``ogscene3d --help`` imports this module)."""
+    if name == "RANGES":
+        value: Any = {s.key: s.range for s in settings() if s.range is not None}
+    elif name == "LIST_CHECKS":
+        value = {s.key: s.check for s in settings() if s.check is not None}
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value
+    return value
 
 
 def _problem(key: str, s: Setting, value: Any) -> str | None:
