@@ -214,9 +214,10 @@ def add_eval_arguments(parser: Any, defaults: dict[str, Any] | None = None) -> N
     for f in dataclasses.fields(EvalOptions):
         md = f.metadata
         default = defaults.get(f.name, md["cli_default"])
-        parser.add_argument(
-            md["flag"], dest=f"eval_{f.name}", default=default, help=md["help"], **md["argparse"]
-        )
+        kwargs = dict(md["argparse"])
+        if "action" not in kwargs and "choices" not in kwargs:
+            kwargs.setdefault("metavar", md["flag"].lstrip("-").upper().replace("-", "_"))
+        parser.add_argument(md["flag"], dest=f"eval_{f.name}", default=default, help=md["help"], **kwargs)
 
 
 def eval_options_from_args(args: argparse.Namespace) -> EvalOptions:
