@@ -5,8 +5,8 @@ from __future__ import annotations
 import cv2
 import pytest
 
-from ogscene3d.batch import protocol_line
 from ogscene3d.cli import main
+from ogscene3d.commands.batch import protocol_line
 from ogscene3d.errors import ConfigError
 from ogscene3d.render_demo import render_demo
 

@@ -212,3 +212,72 @@ def test_cli_refuses_an_out_of_range_override_before_any_work(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "mapping.opt_iters must be an integer >= 0" in err and "got -3" in err
     assert not out.exists()
+
+
+def test_a_config_file_that_is_not_utf8_is_one_clear_line(tmp_path, capsys):
+    bad = tmp_path / "latin1.yaml"
+    bad.write_bytes("mapping:\n  opt_iters: 5  # r\xe9glage\n".encode("latin-1"))
+    with pytest.raises(ConfigError, match=rf"config file '{re.escape(str(bad))}' is not UTF-8 text"):
+        load_config(bad)
+    # before: a UnicodeDecodeError traceback and exit 1
+    out = tmp_path / "o"
+    assert main(["run", "--config", str(bad), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "latin1.yaml" in err[0] and "not UTF-8" in err[0], err
+    assert not out.exists()
+
+
+def test_every_setting_and_section_has_a_doc():
+    from ogscene3d.config import sections, settings
+
+    undocumented = [s.key for s in settings() if len(s.doc) < 8]
+    assert not undocumented, f"settings without a doc: {undocumented}"
+    assert all(doc for _, _, doc in sections())
+
+
+@pytest.mark.parametrize(
+    "key", ["data.kind", "data.on_bad_frame", "segmentation.backend", "mapping.ablation", "tracking.poses",
+            "graph.captioner.kind", "graph.query_embedding", "segmentation.execution_provider"],
+)  # fmt: skip
+def test_choices_come_from_the_literal_and_are_checked(key):
+    from ogscene3d.config import choices
+
+    allowed = choices(key)
+    assert len(allowed) >= 2 and _default(key) in allowed
+    pattern = rf"^{re.escape(key)} must be one of \[.*\], got 'bogus'$"
+    with pytest.raises(ConfigError, match=pattern):
+        check_config(_with(key, "bogus"))  # a Config built in Python
+    with pytest.raises(ConfigError, match=pattern):
+        load_config(None, [f"{key}=bogus"])  # a YAML value or --set
+    load_config(None, [f"{key}={allowed[-1]}"])
+
+
+def test_consumers_accept_exactly_the_literal_choices():
+    """The choices a consumer checks itself (a section built in Python never passes check_config) are the
+    field's Literal: either read from it, or equal to it."""
+    from ogscene3d.config import choices
+    from ogscene3d.datasets.base import DEPTH_FORMATS
+    from ogscene3d.datasets.loader import READERS
+    from ogscene3d.mapping.mapper import ABLATIONS
+    from ogscene3d.mapping.pose_jump import ACTIONS
+    from ogscene3d.segmentation.simulated import NOISE_LEVELS
+    from ogscene3d.tracking import METHODS, POSE_SOURCES
+
+    assert ABLATIONS == choices("mapping.ablation")
+    assert ACTIONS == choices("mapping.on_pose_jump")
+    assert METHODS == choices("tracking.method") and POSE_SOURCES == choices("tracking.poses")
+    assert set(READERS) | {"auto"} == set(choices("data.kind"))
+    assert set(DEPTH_FORMATS) | {"auto"} == set(choices("data.depth_format"))
+    assert set(NOISE_LEVELS) == set(choices("segmentation.simulated_noise"))
+    assert set(NOISE_LEVELS) == set(choices("synthetic.noise"))
+
+
+def test_tracking_validator_is_the_field_rules():
+    from ogscene3d.config import TrackingConfig
+    from ogscene3d.tracking import validate_tracking_config
+
+    # the same wording as check_config, not a second set of ranges
+    with pytest.raises(ConfigError, match=r"^tracking\.min_fitness must be in \[0, 1\], got 1\.5$"):
+        validate_tracking_config(TrackingConfig(min_fitness=1.5))
+    with pytest.raises(ConfigError, match=r"^tracking\.depth_min must be < tracking\.depth_max"):
+        validate_tracking_config(TrackingConfig(depth_min=6.0))

@@ -78,12 +78,12 @@ def scene(tmp_path):
 
 
 def _main(argv, monkeypatch):
-    monkeypatch.setattr(cli, "_COMMAND_MODULES", ["ogscene3d.eval.eval_cli"])
+    monkeypatch.setattr(cli, "COMMAND_MODULES", ["ogscene3d.commands.eval"])
     return cli.main(argv)
 
 
 def test_eval_module_is_registered():
-    assert "ogscene3d.eval.eval_cli" in cli._COMMAND_MODULES
+    assert "ogscene3d.commands.eval" in cli.COMMAND_MODULES
 
 
 def test_ground_truth_reader_synthetic_layout(scene):

@@ -272,3 +272,13 @@ def test_procedural_room_relations(seed):
     support = [t for t in room.relations if t[1] in ("on", "in", "attached to")]
     assert found >= 0.8 * len(support)
     assert right >= 0.95 * found
+
+
+def test_geometric_settings_are_checked_by_the_field_rules():
+    from ogscene3d.errors import ConfigError
+
+    contact = r"^graph\.relations\.contact_tol must be a finite number > 0, got 0\.0$"
+    with pytest.raises(ConfigError, match=contact):
+        GeometricRelations(RelationsConfig(contact_tol=0.0))
+    with pytest.raises(ConfigError, match=r"^graph\.relations\.inside_ratio must be in \(0, 1\], got 1\.5$"):
+        GeometricRelations(RelationsConfig(inside_ratio=1.5))

@@ -1,11 +1,12 @@
-"""render.py internals: the bare Warp array descriptors of launch arguments, and the tile sort."""
+"""projection.py internals (shared by render.py and semantics.py): the bare Warp array descriptors of
+launch arguments, and the tile sort."""
 
 from __future__ import annotations
 
 import pytest
 import torch
 
-from ogscene3d import render
+from ogscene3d import projection
 from ogscene3d.device import init_warp
 
 wp = init_warp()
@@ -28,16 +29,16 @@ def _fields(arg) -> tuple:
     ],
 )
 def test_descriptor_matches_from_torch(tensor, dtype, count, stride, monkeypatch) -> None:
-    arg = render._as_wp(tensor, dtype)
+    arg = projection._as_wp(tensor, dtype)
     assert _fields(arg)[2:] == (1, count, stride)
     assert arg.data == arg.tensor.data_ptr() and arg.tensor.is_contiguous()
-    monkeypatch.setattr(render, "_array_descriptor", lambda: None)  # the wp.from_torch path
-    assert _fields(render._as_wp(tensor, dtype))[1:] == _fields(arg)[1:]
+    monkeypatch.setattr(projection, "_array_descriptor", lambda: None)  # the wp.from_torch path
+    assert _fields(projection._as_wp(tensor, dtype))[1:] == _fields(arg)[1:]
 
 
 def test_non_contiguous_tensor_is_copied() -> None:
     t = torch.arange(12, dtype=torch.float32).reshape(3, 4).t()
-    arg = render._as_wp(t)
+    arg = projection._as_wp(t)
     assert arg.tensor.is_contiguous() and torch.equal(arg.tensor, t)
 
 
@@ -53,14 +54,14 @@ def test_non_contiguous_tensor_is_copied() -> None:
 )
 def test_mismatched_dtype_is_refused(tensor, dtype) -> None:
     with pytest.raises(TypeError, match="cannot pass|trailing dims"):
-        render._as_wp(tensor, dtype)
+        projection._as_wp(tensor, dtype)
 
 
 @pytest.mark.parametrize("bit_range", [True, False])
 def test_binning_sorts_by_tile_then_depth(device, bit_range, monkeypatch) -> None:
     """The radix sort runs over the key bits in use (tile index and depth) where Warp takes a bit range:
     every tile's list is front to back, and both paths give the same lists."""
-    monkeypatch.setattr(render, "_sort_takes_bit_range", lambda: bit_range)
+    monkeypatch.setattr(projection, "_sort_takes_bit_range", lambda: bit_range)
     g = torch.Generator().manual_seed(3)
     C, N, W, H = 2, 3000, 300, 170  # 19 x 11 tiles per camera: 418 tiles, 9 bits
     means2d = (torch.rand(C, N, 2, generator=g) * torch.tensor([W, H])).to(device)
@@ -68,7 +69,7 @@ def test_binning_sorts_by_tile_then_depth(device, bit_range, monkeypatch) -> Non
     opac = torch.full((N,), 0.9, device=device)
     radii = torch.randint(1, 40, (C, N), generator=g, dtype=torch.int32).to(device)
     depths = (torch.rand(C, N, generator=g) * 10 + 0.1).to(device)
-    bins = render.bin_gaussians(means2d, conics, opac, radii, depths, W, H, 16)
+    bins = projection.bin_gaussians(means2d, conics, opac, radii, depths, W, H, 16)
     ids = bins.isect_ids.long().cpu()
     tiles = torch.repeat_interleave(
         torch.arange(bins.tile_start.numel()), (bins.tile_end - bins.tile_start).cpu()
@@ -94,9 +95,9 @@ def test_binning_keeps_only_voters(device) -> None:
     conf = torch.where(torch.rand(N, generator=g) < 0.2, 0.0, torch.rand(N, generator=g)).to(device)
     votes = (labels >= 0) & (conf > 0)
     assert 0 < int(votes.sum()) < N
-    bins = render.bin_gaussians(means2d, conics, opac, radii, depths, W, H, 16, voters=(labels, conf))
+    bins = projection.bin_gaussians(means2d, conics, opac, radii, depths, W, H, 16, voters=(labels, conf))
     zeroed = torch.where(votes, radii, torch.zeros_like(radii))
-    expect = render.bin_gaussians(means2d, conics, opac, zeroed, depths, W, H, 16)
+    expect = projection.bin_gaussians(means2d, conics, opac, zeroed, depths, W, H, 16)
     assert torch.equal(bins.isect_ids, expect.isect_ids)
     assert torch.equal(bins.tile_start, expect.tile_start) and torch.equal(bins.tile_end, expect.tile_end)
     assert torch.equal(bins.tiles_per_gaussian, expect.tiles_per_gaussian)

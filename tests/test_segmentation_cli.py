@@ -158,7 +158,7 @@ def test_bad_frames_are_skipped_when_asked(scene, tmp_path, caplog):
     out = tmp_path / "out"
     args = _classical(data, out)
     assert main(args) == 2  # the default: a bad frame is an error
-    with caplog.at_level("INFO", logger="ogscene3d.segmentation.segment_cli"):
+    with caplog.at_level("INFO", logger="ogscene3d.commands.segment"):
         assert main([*args, "--set", "data.on_bad_frame=skip"]) == 0
         assert sorted(p.name for p in out.glob("*.png")) == [
             "frame-000000.color.png",

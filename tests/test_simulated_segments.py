@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ogscene3d.datasets.simulated_segments import simulate_scene_segments
 from ogscene3d.segmentation.base import Segmenter
 from ogscene3d.segmentation.precomputed import read_segments
-from ogscene3d.segmentation.simulated import NOISE_LEVELS, SimulatedSegmenter, simulate_scene_segments
+from ogscene3d.segmentation.simulated import NOISE_LEVELS, SimulatedSegmenter
 
 H, W = 96, 128
 

@@ -274,7 +274,7 @@ def test_bad_arguments(tmp_path, kwargs, match):
 def test_synth_cli(tmp_path, capsys, monkeypatch):
     from ogscene3d import cli
 
-    monkeypatch.setattr(cli, "_COMMAND_MODULES", ["ogscene3d.datasets.synth_cli"])
+    monkeypatch.setattr(cli, "COMMAND_MODULES", ["ogscene3d.commands.synth"])
     out = tmp_path / "cli"
     rc = cli.main(
         ["synth", "--out", str(out), "--seed", "2", "--frames", "2", "--size", "40x30", "--noise", "low"]

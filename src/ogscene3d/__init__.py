@@ -2,22 +2,49 @@
 
 The top level re-exports the public API; subpackages hold the rest (``ogscene3d.datasets``,
 ``ogscene3d.segmentation``, ``ogscene3d.mapping``, ``ogscene3d.graph``, ``ogscene3d.eval``,
-``ogscene3d.viewer``). Heavy optional dependencies (open3d, onnxruntime, viser, ray) load on first use.
+``ogscene3d.viewer``). Every name loads on first use (PEP 562), so ``import ogscene3d`` imports no torch,
+warp or open3d until something needs them.
 """
 
-from .camera import Camera
-from .config import Config, load_config
-from .datasets import make_synthetic_scene, open_dataset
-from .eval import evaluate_run
-from .frame import Frame
-from .gaussians import GaussianMap
-from .graph import SceneGraph
-from .mapping import Mapper
-from .render import rasterization
-from .semantics import SemanticRender, render_semantics, rendering_contribution
-from .tracking import Tracker, track, track_sequence
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from ._lazy import lazy_exports
 
 __version__ = "0.1.0"
+
+__getattr__, __dir__ = lazy_exports(
+    globals(),
+    {
+        ".camera": ["Camera"],
+        ".config": ["Config", "load_config"],
+        ".datasets": ["make_synthetic_scene", "open_dataset"],
+        ".eval": ["evaluate_run"],
+        ".frame": ["Frame"],
+        ".gaussians": ["GaussianMap"],
+        ".graph": ["SceneGraph"],
+        ".mapping": ["Mapper"],
+        ".render": ["rasterization"],
+        ".segmentation": ["Segmentation"],
+        ".semantics": ["SemanticRender", "render_semantics", "rendering_contribution"],
+        ".tracking": ["Tracker", "track", "track_sequence"],
+    },
+)
+
+if TYPE_CHECKING:  # the same names, for type checkers and editors
+    from .camera import Camera
+    from .config import Config, load_config
+    from .datasets import make_synthetic_scene, open_dataset
+    from .eval import evaluate_run
+    from .frame import Frame
+    from .gaussians import GaussianMap
+    from .graph import SceneGraph
+    from .mapping import Mapper
+    from .render import rasterization
+    from .segmentation import Segmentation
+    from .semantics import SemanticRender, render_semantics, rendering_contribution
+    from .tracking import Tracker, track, track_sequence
 
 __all__ = [
     "Camera",
@@ -26,6 +53,7 @@ __all__ = [
     "GaussianMap",
     "Mapper",
     "SceneGraph",
+    "Segmentation",
     "SemanticRender",
     "Tracker",
     "evaluate_run",

@@ -1,4 +1,5 @@
-"""Many scenes at once: ``ogscene3d run-batch SCENES_FILE --out OUT`` and ``ogscene3d eval-batch OUT``.
+"""Many scenes at once: the engine of ``ogscene3d run-batch SCENES_FILE --out OUT`` and ``eval-batch OUT``
+(commands in :mod:`ogscene3d.commands.batch`).
 
 A *scenes file* lists the sequences to map. Two forms:
 
@@ -27,7 +28,6 @@ deviation (ddof = 1; 0 for a single scene).
 
 from __future__ import annotations
 
-import argparse
 import json
 import logging
 import math
@@ -35,7 +35,6 @@ import os
 import re
 import resource
 import socket
-import sys
 import time
 import traceback
 from collections.abc import Callable, Sequence
@@ -46,9 +45,8 @@ from typing import Any, Literal
 import yaml
 
 from .atomic import atomic_write_text
-from .config import add_override_argument
-from .errors import ConfigError, DataError, OGSceneError
-from .eval.protocols import CONCEPTGRAPHS_VOXEL_SIZE
+from .errors import ConfigError, DataError
+from .eval.options import EvalOptions
 
 log = logging.getLogger(__name__)
 
@@ -209,24 +207,6 @@ def read_scenes_file(path: str | Path) -> list[SceneSpec]:
 
 
 # ------------------------------------------------------------------------------------------- one scene
-@dataclass(frozen=True)
-class EvalOptions:
-    """What :func:`evaluate_scene` asks of :func:`ogscene3d.eval.evaluate_run` (same meanings)."""
-
-    protocols: tuple[str, ...] = ("hovsg",)
-    ignore: tuple[str, ...] | None = None
-    mapping: str = "auto"
-    k: int = 5
-    min_opacity: float = 0.0
-    assoc_radius: float | None = 0.1
-    num_views: int = 0
-    held_out: bool = False  # the views are frames the run did not map (novel views)
-    plots: bool = True
-    gt_points: str = "observed"
-    cg_voxel_size: float = CONCEPTGRAPHS_VOXEL_SIZE
-    classes: str | None = None  # class table (file or built-in name) for every scene's ground truth
-
-
 def _peak_rss_mb() -> float:
     # ru_maxrss is KiB on Linux: the high-water mark of this whole process, i.e. per scene only when
     # each scene runs in its own process (Ray workers are reused, so it is an upper bound there).
@@ -368,23 +348,7 @@ def evaluate_scene(
             f"{run}: no ground truth given and none found for this run (a synthetic scene's gt/, ScanNet's "
             "*_vh_clean_2.labels.ply, or frames with class maps in its data.path)"
         )
-    res = evaluate_run(
-        run,
-        gt_path,
-        protocols=opts.protocols,
-        ignore=opts.ignore,
-        mapping=opts.mapping,  # type: ignore[arg-type]
-        k=opts.k,
-        min_opacity=opts.min_opacity,
-        assoc_radius=opts.assoc_radius,
-        num_views=opts.num_views,
-        held_out=opts.held_out,
-        classes=opts.classes,
-        out_dir=run if opts.plots else None,
-        device=device,
-        gt_points=opts.gt_points,  # type: ignore[arg-type]
-        cg_voxel_size=opts.cg_voxel_size,
-    )
+    res = evaluate_run(run, gt_path, opts, out_dir=run if opts.plots else None, device=device)
     report = res.report
     if opts.plots:
         for proto, m in res.semantic.items():
@@ -807,198 +771,3 @@ def eval_batch(
     records += unmapped
     meta = {"command": "eval-batch", "executor": executor, "evaluation": asdict(opts)}
     return _finish(records, _metric_columns(records), root / EVAL_SUMMARY, meta)
-
-
-# ------------------------------------------------------------------------------------------ command line
-def _add_executor_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--executor",
-        default="sequential",
-        choices=EXECUTORS,
-        help="sequential (default): one scene after the other here; ray: one Ray task per scene",
-    )
-    p.add_argument(
-        "--ray-address",
-        default=None,
-        help="Ray cluster to join (e.g. ray://head:10001 or auto); default: RAY_ADDRESS, else a local one",
-    )
-    p.add_argument(
-        "--gpus-per-task",
-        type=float,
-        default=1.0,
-        help="GPUs per Ray task when the cluster has GPUs (default 1)",
-    )
-    p.add_argument("--cpus-per-task", type=float, default=1.0, help="CPUs per Ray task (default 1)")
-    p.add_argument(
-        "--device", default=None, help="sequential executor: cpu, cuda or cuda:N (default: config, else CUDA)"
-    )
-
-
-def _add_eval_args(p: Any) -> None:
-    from .eval.protocols import PROTOCOLS
-
-    p.add_argument(
-        "--protocol",
-        default="hovsg",
-        choices=[*PROTOCOLS, "both"],
-        help="3D protocol: hovsg (k-NN vote onto GT points) or conceptgraphs (nearest GT label per "
-        "predicted point) or both (default hovsg)",
-    )
-    p.add_argument(
-        "--ignore",
-        default=None,
-        help="comma-separated classes left out of the means (default: the protocol's)",
-    )
-    p.add_argument(
-        "--mapping",
-        default="auto",
-        choices=["auto", "text", "overlap"],
-        help="naming of scene labels (see `ogscene3d eval --help`; default auto)",
-    )
-    p.add_argument("--k", type=int, default=5, help="neighbours of the HOV-SG vote (default 5)")
-    p.add_argument(
-        "--cg-voxel-size",
-        type=float,
-        default=CONCEPTGRAPHS_VOXEL_SIZE,
-        help="metres; conceptgraphs' per-label voxel resampling of the Gaussians (see `ogscene3d eval "
-        f"--help`; default {CONCEPTGRAPHS_VOXEL_SIZE:g}, 0 = every Gaussian counts)",
-    )
-    p.add_argument("--min-opacity", type=float, default=0.0, help="drop Gaussians below this opacity")
-    p.add_argument(
-        "--classes",
-        default=None,
-        help="class-name JSON (list or {id: name}) or built-in table (scannet20, nyu40) for every scene's "
-        "ground truth, as `ogscene3d eval --classes` (default: each scene's own, e.g. its classes.json)",
-    )
-    p.add_argument(
-        "--views",
-        type=int,
-        default=0,
-        help="also render this many views per scene whose frames carry class maps (2D)",
-    )
-    p.add_argument(
-        "--held-out",
-        action="store_true",
-        help="the --views frames are frames each run did not map (novel views between its mapped frames; "
-        "see `ogscene3d eval --help`): a scene whose run mapped every frame fails (map at --set "
-        "data.stride=2)",
-    )
-    p.add_argument("--no-plots", action="store_true", help="write no PNG")
-    p.add_argument(
-        "--gt-points",
-        default="observed",
-        choices=["observed", "all"],
-        help="score only GT points some frame saw, where the GT says so (synthetic; default), or all",
-    )
-
-
-def _eval_options(args: argparse.Namespace) -> EvalOptions:
-    from .eval.protocols import PROTOCOLS
-
-    if args.k < 1:
-        raise ConfigError(f"--k must be >= 1, got {args.k}")
-    if args.views < 0:
-        raise ConfigError(f"--views must be >= 0, got {args.views}")
-    if args.held_out and args.views == 0:
-        raise ConfigError("--held-out needs views to score: --views N (N > 0)")
-    if not (args.cg_voxel_size >= 0 and math.isfinite(args.cg_voxel_size)):
-        raise ConfigError(f"--cg-voxel-size must be >= 0 metres (0 = none), got {args.cg_voxel_size}")
-    ignore = None if args.ignore is None else tuple(s.strip() for s in args.ignore.split(",") if s.strip())
-    return EvalOptions(
-        protocols=tuple(PROTOCOLS) if args.protocol == "both" else (args.protocol,),
-        ignore=ignore,
-        mapping=args.mapping,
-        k=args.k,
-        min_opacity=args.min_opacity,
-        num_views=args.views,
-        held_out=args.held_out,
-        plots=not args.no_plots,
-        gt_points=args.gt_points,
-        cg_voxel_size=args.cg_voxel_size,
-        classes=args.classes,
-    )
-
-
-def add_parser(subparsers: Any) -> None:
-    p = subparsers.add_parser(
-        "run-batch",
-        help="map many scenes (sequentially or on a Ray cluster) and summarise them",
-        description="Map every scene of SCENES_FILE into OUT/<name> (like `ogscene3d run`), one scene per "
-        "task; print a per-scene table with mean/std and write OUT/run_batch.json. SCENES_FILE: a text file "
-        "(one dataset folder or synthetic:SEED per line) or a YAML list (strings or {path|synthetic, name, "
-        "gt, segments, set}).",
-    )
-    p.add_argument("scenes_file", metavar="SCENES_FILE", type=Path, help="text or YAML list of scenes")
-    p.add_argument(
-        "--out", required=True, type=Path, help="batch output folder (one run directory per scene)"
-    )
-    p.add_argument("--config", default=None, help="YAML config for every scene (e.g. configs/replica.yaml)")
-    add_override_argument(p, "mapping.opt_iters=5")
-    _add_executor_args(p)
-    g = p.add_argument_group("evaluation (with --eval)")
-    g.add_argument("--eval", action="store_true", help="evaluate each run right after mapping (same task)")
-    _add_eval_args(g)
-    p.set_defaults(func=_run_batch_cli)
-
-    q = subparsers.add_parser(
-        "eval-batch",
-        help="evaluate every run of a batch folder and summarise (mean/std)",
-        description="Evaluate every run directory under OUT (the scenes of OUT/run_batch.json, else every "
-        "sub-folder with gaussians.ply) like `ogscene3d eval`: writes each run's metrics.json, prints a "
-        "per-scene table with mean/std and writes OUT/eval_batch.json. Ground truth: the scene's `gt` from "
-        "the scenes file, else the synthetic scene the run was made from.",
-    )
-    q.add_argument("out", metavar="OUT", type=Path, help="batch output folder of run-batch")
-    _add_executor_args(q)
-    _add_eval_args(q)
-    q.set_defaults(func=_eval_batch_cli)
-
-
-def protocol_line(name: str, text: str) -> str:
-    """The footer line of one protocol. Its text usually starts with the name ("hovsg (k=5 ...)"): say it
-    once ("protocol hovsg (k=5 ...)"), not "protocol hovsg: hovsg (...)"."""
-    if text == name or text.startswith((f"{name} ", f"{name}:")):
-        return f"protocol {text}"
-    return f"protocol {name}: {text}"
-
-
-def _report(res: BatchResult) -> int:
-    print(res.table)
-    for p, text in res.protocols.items():
-        print(protocol_line(p, text))
-    print(f"wrote {res.summary_path}")
-    if res.num_failed == len(res.records):
-        raise OGSceneError(f"all {len(res.records)} scene(s) failed")
-    if res.num_failed:
-        print(f"{res.num_failed} of {len(res.records)} scene(s) failed", file=sys.stderr)
-        return 1
-    return 0
-
-
-def _run_batch_cli(args: argparse.Namespace) -> int:
-    res = run_batch(
-        args.scenes_file,
-        args.out,
-        config=args.config,
-        overrides=args.overrides,
-        executor=args.executor,
-        ray_address=args.ray_address,
-        gpus_per_task=args.gpus_per_task,
-        cpus_per_task=args.cpus_per_task,
-        device=args.device,
-        evaluate=_eval_options(args) if args.eval else None,
-    )
-    return _report(res)
-
-
-def _eval_batch_cli(args: argparse.Namespace) -> int:
-    res = eval_batch(
-        args.out,
-        _eval_options(args),
-        executor=args.executor,
-        ray_address=args.ray_address,
-        gpus_per_task=args.gpus_per_task,
-        cpus_per_task=args.cpus_per_task,
-        device=args.device,
-    )
-    return _report(res)

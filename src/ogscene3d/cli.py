@@ -1,7 +1,7 @@
 """The ``ogscene3d`` command line: one entry point, one subcommand per capability.
 
-Each subcommand lives in the module that implements it and exposes ``add_parser(subparsers)``,
-which registers the subcommand and sets ``func`` (``args -> int`` exit code) as its default.
+Each subcommand lives in its own module, listed in :data:`ogscene3d.commands.COMMAND_MODULES`; it exposes
+``add_parser(subparsers)``, which registers the subcommand and sets ``func`` (``args -> int`` exit code).
 """
 
 from __future__ import annotations
@@ -12,20 +12,8 @@ import logging
 import os
 import sys
 
+from .commands import COMMAND_MODULES
 from .errors import OGSceneError
-
-# Modules that register a subcommand, in the order they appear in --help.
-_COMMAND_MODULES = [
-    "ogscene3d.mapping.run_cli",  # run
-    "ogscene3d.eval.eval_cli",  # eval
-    "ogscene3d.viewer.cli",  # live
-    "ogscene3d.datasets.synth_cli",  # synth
-    "ogscene3d.segmentation.segment_cli",  # segment
-    "ogscene3d.tracking",  # track
-    "ogscene3d.graph.graph_cli",  # graph
-    "ogscene3d.batch",  # run-batch, eval-batch
-    "ogscene3d.render_demo",  # render-demo
-]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -34,7 +22,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in _COMMAND_MODULES:
+    for name in COMMAND_MODULES:
         importlib.import_module(name).add_parser(sub)
     return parser
 

@@ -2,6 +2,10 @@
 
 Every section has the paper's defaults (Sec. IV-A.4); ``configs/*.yaml`` only state what differs per dataset.
 Unknown keys are errors, so a typo in a YAML file never silently falls back to a default.
+
+Each setting carries its own rules on the field: the type (a ``Literal`` lists the allowed choices), the
+allowed range of a number and the check of a numeric list as field metadata, and a doc string
+(:func:`setting`). :func:`check_config` walks the fields; ``ogscene3d config`` prints them (:func:`settings`).
 """
 
 from __future__ import annotations
@@ -11,10 +15,10 @@ import math
 import numbers
 import types
 import typing
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import yaml
 
@@ -23,279 +27,12 @@ from .errors import ConfigError
 from .shipped_configs import resolve_config_path, shipped_configs
 
 
-@dataclass
-class DataConfig:
-    # auto | replica | semantic_nerf | scannet | tum | sevenscenes | labelfusion | synthetic
-    kind: str = "auto"
-    path: str | None = None
-    segments_dir: str | None = None
-    stride: int = 1
-    start: int = 0
-    max_frames: int | None = None
-    depth_scale: float | None = None  # raw depth units per metre; None = the dataset's own
-    # auto (the layout's) | linear (raw / scale) | shift3 (APC: (raw >> 3) / scale)
-    depth_format: str = "auto"
-    intrinsics: list[float] | None = None  # [fx, fy, cx, cy] overriding the dataset's
-    # Where the intrinsics read (files, data.intrinsics) put the centre of pixel (0, 0): auto (the layout's:
-    # integer for ScanNet, TUM, 7-Scenes, label-fusion; half for Replica, synthetic, Semantic-NeRF) |
-    # integer (OpenCV, ROS calibrations: (0, 0)) | half (COLMAP, gsplat: (0.5, 0.5), ogscene3d's own K).
-    # Integer values are shifted by +0.5 on reading.
-    pixel_centers: str = "auto"
-    min_depth: float = 0.0
-    max_depth: float = 0.0  # 0 = no limit
-    on_bad_frame: str = "error"  # error | skip
-
-
-@dataclass
-class SyntheticConfig:
-    seed: int = 0
-    frames: int = 60
-    width: int = 160
-    height: int = 120
-    noise: str = "default"  # none | low | default | high
-    depth_noise: float = 0.0  # std in metres
-    pose_noise: float = 0.0  # std of translation in metres
-
-
-@dataclass
-class SegmentationConfig:
-    # Used for frames that carry no precomputed segments: precomputed (-> classical, with a warning) |
-    # sam | sam+detector | classical | simulated | none (map geometry only, every Gaussian unlabelled)
-    backend: str = "precomputed"
-    sam_encoder: str | None = None
-    sam_decoder: str | None = None
-    detector: str | None = None
-    detector_classes: list[str] = field(default_factory=list)
-    points_per_side: int = 32
-    pred_iou_thresh: float = 0.88
-    stability_score_thresh: float = 0.92
-    box_nms_thresh: float = 0.7
-    min_region_area: int = 100
-    tau_m: float = 0.7  # fusion: overlap ratio below which a SAM grid segment is kept
-    sam_score_range: list[float] = field(default_factory=lambda: [0.88, 1.0])
-    conf_range: list[float] = field(default_factory=lambda: [0.5, 1.0])
-    execution_provider: str = "auto"  # auto | cpu | cuda
-    # SAM automatic mask generation (paper Sec. III-B.1); defaults follow segment-anything's generator.
-    sam_input_size: int = 1024  # encoder side length, used only when the ONNX input has no fixed size
-    points_per_batch: int = 16  # grid prompts per decoder call (1 when the export fixes the batch to 1)
-    stability_score_offset: float = 1.0
-    mask_threshold: float = 0.0  # logit threshold that binarises decoder masks
-    # open-vocabulary detector (YOLO-World style export)
-    detector_input_size: int = 640  # letterbox side, used only when the ONNX input has no fixed size
-    detector_score_thresh: float = 0.25
-    detector_nms_thresh: float = 0.5
-    detector_max_detections: int = 100
-    detector_box_format: str = "xyxy"  # xyxy | cxcywh, for exports with separate boxes/scores/labels outputs
-    # classical (weight-free) fallback: graph segmentation on colour, depth and normals
-    classical_k: float = 100.0  # Felzenszwalb scale (CIELAB ΔE units): larger -> larger regions
-    classical_min_size: int = 60  # pixels at the working resolution
-    classical_max_side: int = 320  # images are segmented at most this large, labels upsampled
-    classical_depth_weight: float = 300.0  # ΔE per unit of relative depth discontinuity
-    classical_normal_weight: float = 100.0  # ΔE per unit of (1 - cos) between neighbouring normals
-    # simulated SAM from ground-truth instances (synthetic scenes only)
-    simulated_noise: str = "default"  # none | low | default | high
-    simulated_seed: int = 0
-
-
-@dataclass
-class MappingConfig:
-    ablation: str = "full"  # naive | local | local+global | full
-    keyframe_every: int = 1
-    keyframe_translation: float = 0.0  # metres; 0 = unused
-    keyframe_rotation_deg: float = 0.0  # 0 = unused
-    # Pose-jump check (mapping/pose_jump.py): the most a camera may move between two consecutive frames of
-    # the folder, times data.stride and the selected frames since the last accepted one; 0 = no limit. About
-    # twice the largest steps of the samples here (7-Scenes every 20th frame: 0.26 m, 13.6 deg).
-    max_pose_step: float = 0.5  # metres
-    max_pose_step_deg: float = 30.0
-    on_pose_jump: str = "warn"  # warn (map it anyway) | skip (leave the frame out) | error (stop, map saved)
-    pixels_per_gaussian: int = 4  # subsampling of back-projected pixels per segment
-    # Neighbours per probe in the association (the paper gives no k). Each probe votes once, for its nearest
-    # labelled Gaussian: with k=5 the few boundary matches of a mostly new segment (a door in a wall) drew
-    # votes from every neighbouring object, r(m) >= tau_valid, and the object stayed unlabelled (see local.py)
-    knn_k: int = 1
-    knn_radius: float = 0.05
-    # case (iii) before case (i): a segment that hardly overlaps the labelled map (p < tau_p) is novel
-    # whatever its few border matches give r; false = the paper's order (see mapping/local.py)
-    novel_before_ambiguous: bool = True
-    knn_radius_spacing: float = 0.0  # >0: per-probe KNN radius max(knn_radius, this x probe grid spacing)
-    # true: Eq. 5 updates come only from probes off their segment's boundary. A table segment's probes around
-    # a cup's base have the cup's Gaussians as nearest match and lower them at every view, which over a long
-    # run lets refinement give the cup the table's label; but the same boundary updates also lower wrongly
-    # labelled rims that refinement then fixes. Measured trade-off in README ("Ablation"); off by default.
-    eq5_skip_edges: bool = False
-    tau_valid: float = 0.25
-    tau_p: float = 0.15
-    tau_high: float = 0.7
-    tau_low: float = 0.3
-    r_search: float = 0.1
-    tau_long: float = 0.5
-    refine_every: int = 6
-    longterm_every: int = 6
-    longterm_views: int = 4
-    opt_iters: int = 10
-    opt_memory_frames: int = 2
-    # metres per Adam step (the paper gives none; SplaTAM's value). Adam moves every visible centre by about
-    # lr per step whatever its gradient; at 1e-3 a 240-frame synthetic stream left 7-9% of the centres more
-    # than 5 cm off the surfaces, and the distance-based association then split objects into new labels
-    lr_means: float = 0.0001
-    lr_scales: float = 0.001
-    lr_quats: float = 0.001  # the paper gives none (only scales, opacity, colour); 3DGS's value
-    lr_opacities: float = 0.05
-    lr_colors: float = 0.0001
-    lambda_c: float = 1.0
-    lambda_d: float = 0.1
-    ssim_lambda: float = 0.2
-    prune_opacity: float = 0.005
-    prune_scale: float = 0.5
-    checkpoint_every: int = 0  # keyframes; 0 = only at the end
-    init_opacity: float = 0.9  # opacity of newly added Gaussians
-    init_alpha_thresh: float = 0.5  # a pixel rendered with less alpha is unexplained -> new Gaussian
-    init_depth_margin: float = 0.1  # metres; observed depth this far in front of the render -> new Gaussian
-    refine_cluster_radius: float = 0.3  # metres; search radius of the cluster-level refinement
-    refine_graph_k: int = 8  # same-label neighbours linked per Gaussian when building clusters
-    memory_max: int = 64  # long-term memory buffer capacity (frames)
-    memory_point_step: int = 4  # pixel grid step of the memory point clouds (overlap criterion)
-    longterm_pixel_step: int = 2  # pixel grid step of the long-term pixel-to-Gaussian association
-    longterm_knn_k: int = 5  # Gaussians associated with each back-projected memory pixel (within knn_radius)
-    longterm_skip_edges: bool = True  # long-term: leave out pixels on segment / rendered-label boundaries
-    # Beyond the paper (which takes a pixel's nearest Gaussians, whatever their label): a memory pixel is
-    # associated only with Gaussians of the label rendered there, the ones that can have produced it (near a
-    # boundary the nearest include the neighbouring object's). Synthetic seeds 0-2: mIoU 70.25 vs 69.75.
-    longterm_same_class: bool = True
-    fill_unlabeled: bool = True  # unlabeled Gaussians under a labeled segment take its label
-    refine_unlabeled: bool = False  # individual refinement also labels unlabeled Gaussians (confidence 0)
-    # Beyond the paper (mapping/merge.py): an ambiguous segment that contains two labels' whole visible
-    # extent (>= merge_contain each) with SAM score >= merge_min_score merges them (one object, two labels).
-    merge_duplicates: bool = True
-    merge_contain: float = 0.8
-    merge_min_score: float = 0.95
-
-
-@dataclass
-class CaptionerConfig:
-    kind: str = "heuristic"  # heuristic | openai | groundtruth
-    base_url: str = "http://127.0.0.1:8000/v1"
-    model: str = ""
-    api_key_env: str = "OPENAI_API_KEY"
-    timeout_s: float = 30.0
-    max_retries: int = 2
-    backoff_s: float = 1.0  # first retry delay; doubles per retry
-    max_tokens: int = 300
-    concurrency: int = 4  # parallel per-node caption requests
-
-
-@dataclass
-class RelationsConfig:
-    kind: str = "geometric"  # geometric | llm
-    base_url: str = "http://127.0.0.1:8000/v1"
-    model: str = ""
-    api_key_env: str = "OPENAI_API_KEY"
-    timeout_s: float = 30.0
-    max_retries: int = 2
-    backoff_s: float = 1.0
-    max_tokens: int = 2000
-    # geometric predictor (metres / ratios); also the LLM's per-pair fallback
-    contact_tol: float = 0.05  # vertical gap still counted as contact ("on")
-    cell_size: float = 0.05  # horizontal grid for per-column stacking tests
-    overlap_ratio: float = 0.3  # shared footprint cells (of the smaller node) for on/above/under/below
-    inside_ratio: float = 0.8  # fraction of points inside the other's box for "in"
-    under_gap: float = 0.5  # lower, smaller node closer than this: "under", else "below"
-    attach_elevation: float = 0.1  # min height above a wall's bottom for "attached to"
-
-
-@dataclass
-class NodeConfidenceConfig:
-    kind: str = "mean"  # mean | clip
-    clip_image: str | None = None
-    clip_text: str | None = None
-    clip_vocab: str | None = None  # OpenAI bpe_simple_vocab_16e6.txt(.gz), or HF vocab.json (+ clip_merges)
-    clip_merges: str | None = None  # HF merges.txt, only with a vocab.json
-    # the image encoder's input size when its export leaves it dynamic (e.g. 336 for ViT-L/14-336); a static
-    # export's own size is used, and must agree if this is set; None: 224 for a dynamic one
-    clip_image_size: int | None = None
-    execution_provider: str = "auto"  # auto | cpu | cuda
-
-
-@dataclass
-class GraphConfig:
-    enabled: bool = True
-    init_keyframes: int = 12
-    update_every: int = 12
-    tau_update: float = 0.3
-    theta_e: float = 0.1
-    tau_e: float = 0.2
-    min_gaussians: int = 20
-    up_axis: list[float] = field(default_factory=lambda: [0.0, -1.0, 0.0])
-    # A node's points for edges and relations: its Gaussian means thinned to one per voxel of edge_voxel
-    # metres (0 = theta_e / 2, spatially uniform), then at most max_points_per_node (seeded random).
-    edge_voxel: float = 0.0
-    max_points_per_node: int = 4096
-    # Extension of Eqs. 20-21 (false = the paper's rule only): a pair is also a candidate when the bottom
-    # (or top) band of one node lies mostly within theta_e of the other (furniture on the floor, lamp on a
-    # ceiling), which R_ij misses because it normalises by the whole node.
-    support_edges: bool = True
-    support_band: float = 0.05  # metres along up
-    support_ratio: float = 0.5
-    background: bool = False  # run graph updates on a worker thread (never blocks mapping)
-    max_masked_views: int = 3
-    crop_max_side: int = 256  # stored crops are downscaled to this many pixels on the long side
-    context_pad: float = 0.25  # context crop: bbox grown by this fraction of its size on each side
-    min_obs_pixels: int = 50  # smaller projections are not stored as observations
-    query_embedding: str = "none"  # none | clip | openai (the captioner's endpoint, /embeddings)
-    embedding_model: str = ""
-    query_min_similarity: float = 0.25
-    captioner: CaptionerConfig = field(default_factory=CaptionerConfig)
-    relations: RelationsConfig = field(default_factory=RelationsConfig)
-    confidence: NodeConfidenceConfig = field(default_factory=NodeConfidenceConfig)
-
-
-@dataclass
-class TrackingConfig:
-    poses: str = "gt"  # gt | odometry
-    max_translation: float = 0.3  # metres per frame beyond which a step is implausible
-    max_rotation_deg: float = 30.0
-    keyframe_every: int = 5
-    # RGB-D odometry (ogscene3d.tracking); see that module's docstring for the meaning of each field.
-    method: str = "auto"  # auto (point_to_plane, hybrid if degenerate) | hybrid | color | point_to_plane
-    min_conditioning: float = 0.01  # auto: keyframe conditioning below which hybrid replaces point_to_plane
-    iterations: list[int] = field(default_factory=lambda: [20, 10, 5])  # per pyramid level, coarse to fine
-    max_width: int = 640  # track on images downsampled by an integer factor to at most this width; 0 = full
-    depth_min: float = 0.1  # metres
-    depth_max: float = 5.0  # metres
-    depth_outlier_trunc: float = 0.07  # metres
-    depth_huber_delta: float = 0.05  # metres
-    intensity_huber_delta: float = 0.1  # intensity in [0, 1]
-    min_fitness: float = 0.25  # fraction of pixels with a valid correspondence below which a step fails
-    max_inlier_rmse: float = 0.02  # Open3D residual above which a step fails (good steps: 1e-5..4e-3)
-    keyframe_fitness: float = 0.7  # overlap with the keyframe below which the frame becomes a keyframe
-    keyframe_translation: float = 0.1  # metres from the keyframe beyond which the frame becomes a keyframe
-    keyframe_rotation_deg: float = 10.0
-    max_lost_frames: int = 0  # consecutive failures after which tracking restarts at the last pose; 0 = never
-    max_residual_ratio: float = 5.0  # re-acquisition fails above this x the recent residuals; 0 = off
-    feature_init: bool = True  # ORB + RANSAC initial guess when the motion prior does not converge
-    orb_features: int = 500
-    ransac_threshold: float = 0.05  # metres
-    min_feature_inliers: int = 20
-
-
-@dataclass
-class Config:
-    device: str | None = None
-    seed: int = 0
-    data: DataConfig = field(default_factory=DataConfig)
-    synthetic: SyntheticConfig = field(default_factory=SyntheticConfig)
-    segmentation: SegmentationConfig = field(default_factory=SegmentationConfig)
-    mapping: MappingConfig = field(default_factory=MappingConfig)
-    graph: GraphConfig = field(default_factory=GraphConfig)
-    tracking: TrackingConfig = field(default_factory=TrackingConfig)
-
-
-# --------------------------------------------------------------------------------------------------- ranges
+# --------------------------------------------------------------------------------------------------- rules
 @dataclass(frozen=True)
 class Range:
     """The allowed values of one numeric setting: ``lo``/``hi`` (None: unbounded), open or closed. Floats must
-    also be finite (NaN and inf fail every float setting); ``optional`` settings also take None."""
+    also be finite (NaN and inf fail every float setting); ``optional`` settings (typed ``... | None``) also
+    take None."""
 
     lo: float | None = None
     hi: float | None = None
@@ -339,8 +76,8 @@ class Range:
         return f"{text} ({self.note})" if self.note else text
 
 
-def _int(lo: int, hi: int | None = None, note: str = "", optional: bool = False) -> Range:
-    return Range(lo, hi, integer=True, optional=optional, note=note)
+def _int(lo: int, hi: int | None = None, note: str = "") -> Range:
+    return Range(lo, hi, integer=True, note=note)
 
 
 def _float(
@@ -349,146 +86,13 @@ def _float(
     lo_open: bool = False,
     hi_open: bool = False,
     note: str = "",
-    optional: bool = False,
 ) -> Range:
-    return Range(lo, hi, lo_open, hi_open, optional=optional, note=note)
+    return Range(lo, hi, lo_open, hi_open, note=note)
 
 
 _UNIT = _float(0.0, 1.0)  # probabilities, ratios, thresholds on scores
 _NONNEG = _float(0.0)
 _POS = _float(0.0, lo_open=True)
-_LLM = {  # graph.captioner and graph.relations: the OpenAI-compatible client's settings
-    "timeout_s": _POS,
-    "max_retries": _int(0),
-    "backoff_s": _NONNEG,
-    "max_tokens": _int(0, note="0 = no max_tokens in the request"),
-}
-
-# Every int / float setting of Config, by dotted key. Each range follows what the setting's consumer does
-# with it: where 0 means "off" or "no limit" it stays allowed. tests/test_config_ranges.py checks that every
-# numeric field has an entry.
-RANGES: dict[str, Range] = {
-    "seed": _int(0),
-    "data.stride": _int(1),
-    "data.start": _int(0),
-    "data.max_frames": _int(1, optional=True, note="null = all frames"),
-    "data.depth_scale": _float(0.0, lo_open=True, optional=True, note="null = the dataset's own"),
-    "data.min_depth": _float(0.0, note="0 = the dataset's own"),
-    "data.max_depth": _float(0.0, note="0 = no limit"),
-    "synthetic.seed": _int(0),
-    "synthetic.frames": _int(1),
-    "synthetic.width": _int(8),
-    "synthetic.height": _int(8),
-    "synthetic.depth_noise": _NONNEG,
-    "synthetic.pose_noise": _NONNEG,
-    "segmentation.points_per_side": _int(1),
-    "segmentation.pred_iou_thresh": _UNIT,
-    "segmentation.stability_score_thresh": _UNIT,
-    "segmentation.box_nms_thresh": _UNIT,
-    "segmentation.min_region_area": _int(0, note="0 = no clean-up"),
-    "segmentation.tau_m": _UNIT,
-    "segmentation.sam_input_size": _int(1),
-    "segmentation.points_per_batch": _int(1),
-    "segmentation.stability_score_offset": _NONNEG,
-    "segmentation.mask_threshold": _float(),
-    "segmentation.detector_input_size": _int(1),
-    "segmentation.detector_score_thresh": _UNIT,
-    "segmentation.detector_nms_thresh": _UNIT,
-    "segmentation.detector_max_detections": _int(1),
-    "segmentation.classical_k": _POS,
-    "segmentation.classical_min_size": _int(0),
-    "segmentation.classical_max_side": _int(8),
-    "segmentation.classical_depth_weight": _NONNEG,
-    "segmentation.classical_normal_weight": _NONNEG,
-    "segmentation.simulated_seed": _int(0),
-    "mapping.keyframe_every": _int(0, note="0 = by camera motion only"),
-    "mapping.keyframe_translation": _float(0.0, note="0 = unused"),
-    "mapping.keyframe_rotation_deg": _float(0.0, note="0 = unused"),
-    "mapping.max_pose_step": _float(0.0, note="0 = no limit"),
-    "mapping.max_pose_step_deg": _float(0.0, note="0 = no limit"),
-    "mapping.pixels_per_gaussian": _int(1),
-    "mapping.knn_k": _int(1),
-    "mapping.knn_radius": _POS,
-    "mapping.knn_radius_spacing": _float(0.0, note="0 = off"),
-    "mapping.tau_valid": _UNIT,
-    "mapping.tau_p": _UNIT,
-    "mapping.tau_high": _UNIT,
-    "mapping.tau_low": _UNIT,
-    "mapping.r_search": _POS,
-    "mapping.tau_long": _UNIT,
-    "mapping.refine_every": _int(0, note="0 = off"),
-    "mapping.longterm_every": _int(0, note="0 = off"),
-    "mapping.longterm_views": _int(1),
-    "mapping.opt_iters": _int(0, note="0 = no optimisation"),
-    "mapping.opt_memory_frames": _int(0),
-    "mapping.lr_means": _NONNEG,
-    "mapping.lr_scales": _NONNEG,
-    "mapping.lr_quats": _NONNEG,
-    "mapping.lr_opacities": _NONNEG,
-    "mapping.lr_colors": _NONNEG,
-    "mapping.lambda_c": _NONNEG,
-    "mapping.lambda_d": _NONNEG,
-    "mapping.ssim_lambda": _UNIT,
-    "mapping.prune_opacity": _float(0.0, 1.0, hi_open=True, note="1 would prune every Gaussian"),
-    "mapping.prune_scale": _float(0.0, note="0 = off"),
-    "mapping.checkpoint_every": _int(0, note="0 = only at the end"),
-    "mapping.init_opacity": _float(0.0, 1.0, lo_open=True, hi_open=True),
-    "mapping.init_alpha_thresh": _UNIT,
-    "mapping.init_depth_margin": _NONNEG,
-    "mapping.refine_cluster_radius": _POS,
-    "mapping.refine_graph_k": _int(1),
-    "mapping.memory_max": _int(1),
-    "mapping.memory_point_step": _int(1),
-    "mapping.longterm_pixel_step": _int(1),
-    "mapping.longterm_knn_k": _int(1),
-    "mapping.merge_contain": _UNIT,
-    "mapping.merge_min_score": _UNIT,
-    "graph.init_keyframes": _int(1),
-    "graph.update_every": _int(1),
-    "graph.tau_update": _UNIT,
-    "graph.theta_e": _POS,
-    "graph.tau_e": _float(0.0, 1.0, hi_open=True),
-    "graph.min_gaussians": _int(1),
-    "graph.edge_voxel": _float(0.0, note="0 = theta_e / 2"),
-    "graph.max_points_per_node": _int(1),
-    "graph.support_band": _POS,
-    "graph.support_ratio": _float(0.0, 1.0, lo_open=True),
-    "graph.max_masked_views": _int(1),
-    "graph.crop_max_side": _int(1),
-    "graph.context_pad": _NONNEG,
-    "graph.min_obs_pixels": _int(0),
-    "graph.query_min_similarity": _float(-1.0, 1.0),  # a cosine similarity
-    **{f"graph.captioner.{k}": r for k, r in _LLM.items()},
-    "graph.captioner.concurrency": _int(1),
-    **{f"graph.relations.{k}": r for k, r in _LLM.items()},
-    "graph.relations.contact_tol": _POS,
-    "graph.relations.cell_size": _POS,
-    "graph.relations.overlap_ratio": _float(0.0, 1.0, lo_open=True),
-    "graph.relations.inside_ratio": _float(0.0, 1.0, lo_open=True),
-    "graph.relations.under_gap": _POS,
-    "graph.relations.attach_elevation": _NONNEG,
-    "graph.confidence.clip_image_size": _int(1, optional=True, note="null = the export's own, or 224"),
-    "tracking.max_translation": _POS,
-    "tracking.max_rotation_deg": _POS,
-    "tracking.keyframe_every": _int(1, note="1 = frame-to-frame"),
-    "tracking.min_conditioning": _float(0.0, 1.0, hi_open=True),
-    "tracking.max_width": _int(0, note="0 = full resolution"),
-    "tracking.depth_min": _NONNEG,
-    "tracking.depth_max": _POS,
-    "tracking.depth_outlier_trunc": _POS,
-    "tracking.depth_huber_delta": _POS,
-    "tracking.intensity_huber_delta": _POS,
-    "tracking.min_fitness": _UNIT,
-    "tracking.max_inlier_rmse": _POS,
-    "tracking.keyframe_fitness": _UNIT,
-    "tracking.keyframe_translation": _POS,
-    "tracking.keyframe_rotation_deg": _POS,
-    "tracking.max_lost_frames": _int(0, note="0 = never restart"),
-    "tracking.max_residual_ratio": _float(0.0, note="0 = off"),
-    "tracking.orb_features": _int(10),
-    "tracking.ransac_threshold": _POS,
-    "tracking.min_feature_inliers": _int(3),
-}
 
 
 def _numbers(value: Any, count: int | None = None, integer: bool = False) -> list | None:
@@ -550,52 +154,700 @@ LIST_CHECKS: dict[str, Callable[[Any], str | None]] = {
 }
 
 
-def _get(cfg: Any, key: str) -> Any:
-    for part in key.split("."):
-        cfg = getattr(cfg, part)
-    return cfg
+def setting(
+    default: Any,
+    doc: str,
+    range: Range | None = None,
+    check: Callable[[Any], str | None] | None = None,
+) -> Any:
+    """A config field with its rules: ``range`` for an int / float setting (each follows what the setting's
+    consumer does with it: where 0 means "off" or "no limit" it stays allowed), ``check`` for a numeric list
+    (returns what is wrong, None when fine), ``doc`` printed by ``ogscene3d config``. Choices come from the
+    field's ``Literal`` type. A list default is copied per instance."""
+    metadata = {"doc": doc, "range": range, "check": check}
+    if isinstance(default, list):
+        return field(default_factory=lambda: list(default), metadata=metadata)
+    return field(default=default, metadata=metadata)
 
 
-def _cross_checks(cfg: Config) -> str | None:
-    m, d, t = cfg.mapping, cfg.data, cfg.tracking
-    if not m.tau_low <= m.tau_high:
-        return f"mapping.tau_low must be <= mapping.tau_high, got {m.tau_low!r} > {m.tau_high!r}"
-    if m.keyframe_every == 0 and m.keyframe_translation == 0 and m.keyframe_rotation_deg == 0:
-        return (
-            "mapping.keyframe_every is 0 and so are mapping.keyframe_translation and "
-            "mapping.keyframe_rotation_deg: no frame would become a keyframe; set one of them > 0"
-        )
-    if d.max_depth > 0 and not d.min_depth < d.max_depth:
-        return (
-            f"data.min_depth must be < data.max_depth when data.max_depth > 0 (0 = no limit), got "
-            f"{d.min_depth!r} >= {d.max_depth!r}"
-        )
-    if not t.depth_min < t.depth_max:
-        return f"tracking.depth_min must be < tracking.depth_max, got {t.depth_min!r} >= {t.depth_max!r}"
-    return None
+def section(cls: type, doc: str) -> Any:
+    """A nested config section (its own dataclass), documented like a setting."""
+    return field(default_factory=cls, metadata={"doc": doc})
 
 
-def check_config(cfg: Config) -> None:
-    """Raise :class:`ConfigError` naming the key, the value and the allowed range of the first numeric
-    setting of ``cfg`` out of its range (:data:`RANGES`, :data:`LIST_CHECKS`, then the cross-field rules).
+# ------------------------------------------------------------------------------------------------- sections
+DatasetKind = Literal[
+    "auto", "replica", "semantic_nerf", "scannet", "tum", "sevenscenes", "labelfusion", "synthetic"
+]
+NoiseLevel = Literal["none", "low", "default", "high"]
+ExecutionProvider = Literal["auto", "cpu", "cuda"]
+_LLM_KEY_DOC = "environment variable holding the endpoint's API key (the key itself never goes in a config)"
 
-    ``load_config`` calls it, and so does ``Mapper`` (a ``Config()`` built and changed in Python)."""
-    for key, rng in RANGES.items():
-        value = _get(cfg, key)
-        if not rng.contains(value):
-            raise ConfigError(f"{key} must be {rng.describe()}, got {value!r}")
-    for key, check in LIST_CHECKS.items():
-        value = _get(cfg, key)
-        problem = check(value)
-        if problem is not None:
-            raise ConfigError(f"{key} {problem}, got {value!r}")
-    problem = _cross_checks(cfg)
-    if problem is not None:
-        raise ConfigError(problem)
+
+@dataclass
+class DataConfig:
+    kind: DatasetKind = setting("auto", "dataset layout; auto detects it from the folder")
+    path: str | None = setting(None, "dataset folder (the commands' --data sets it)")
+    segments_dir: str | None = setting(
+        None,
+        "folder of precomputed 2D segments (`ogscene3d segment`); null: a synthetic scene's own segments/",
+    )
+    stride: int = setting(1, "use every stride-th frame of the folder", _int(1))
+    start: int = setting(0, "index of the first frame used", _int(0))
+    max_frames: int | None = setting(None, "at most this many frames", _int(1, note="null = all frames"))
+    depth_scale: float | None = setting(
+        None,
+        "raw depth units per metre",
+        _float(0.0, lo_open=True, note="null = the dataset's own"),
+    )
+    depth_format: Literal["auto", "linear", "shift3"] = setting(
+        "auto",
+        "how raw depth values become metres: auto (the layout's) | linear (raw / scale) | "
+        "shift3 (APC: (raw >> 3) / scale)",
+    )
+    intrinsics: list[float] | None = setting(
+        None, "[fx, fy, cx, cy] overriding the dataset's", check=_check_intrinsics
+    )
+    pixel_centers: Literal["auto", "integer", "half"] = setting(
+        "auto",
+        "where the intrinsics read (files, data.intrinsics) put the centre of pixel (0, 0): auto (the "
+        "layout's: integer for ScanNet, TUM, 7-Scenes, label-fusion; half for Replica, synthetic, "
+        "Semantic-NeRF) | integer (OpenCV, ROS calibrations: (0, 0)) | half (COLMAP, gsplat: (0.5, 0.5), "
+        "ogscene3d's own K). Integer values are shifted by +0.5 on reading.",
+    )
+    min_depth: float = setting(
+        0.0, "metres; nearer depth is invalid", _float(0.0, note="0 = the dataset's own")
+    )
+    max_depth: float = setting(0.0, "metres; farther depth is invalid", _float(0.0, note="0 = no limit"))
+    on_bad_frame: Literal["error", "skip"] = setting(
+        "error", "a frame that cannot be read: stop with an error naming the file, or skip it with a warning"
+    )
+
+    def cross_check(self) -> str | None:
+        if self.max_depth > 0 and not self.min_depth < self.max_depth:
+            return (
+                f"data.min_depth must be < data.max_depth when data.max_depth > 0 (0 = no limit), got "
+                f"{self.min_depth!r} >= {self.max_depth!r}"
+            )
+        return None
+
+
+@dataclass
+class SyntheticConfig:
+    seed: int = setting(0, "seed of the procedural room", _int(0))
+    frames: int = setting(60, "frames of the camera path", _int(1))
+    width: int = setting(160, "image width in pixels", _int(8))
+    height: int = setting(120, "image height in pixels", _int(8))
+    noise: NoiseLevel = setting("default", "how far the simulated SAM segments err")
+    depth_noise: float = setting(0.0, "std of the depth noise in metres", _NONNEG)
+    pose_noise: float = setting(0.0, "std of the translation noise of the given poses in metres", _NONNEG)
+
+
+@dataclass
+class SegmentationConfig:
+    backend: Literal["precomputed", "sam", "sam+detector", "classical", "simulated", "none"] = setting(
+        "precomputed",
+        "the 2D segmenter for frames that carry no precomputed segments: precomputed (-> classical, with a "
+        "warning) | sam | sam+detector | classical | simulated | none (map geometry only, every Gaussian "
+        "unlabelled)",
+    )
+    sam_encoder: str | None = setting(None, "ONNX file of the SAM image encoder")
+    sam_decoder: str | None = setting(None, "ONNX file of the SAM prompt decoder")
+    detector: str | None = setting(None, "ONNX file of the open-vocabulary detector (YOLO-World style)")
+    detector_classes: list[str] = setting([], "class names the detector is prompted with")
+    points_per_side: int = setting(32, "SAM automatic masks: grid prompts per image side", _int(1))
+    pred_iou_thresh: float = setting(0.88, "SAM: masks with a lower predicted IoU are dropped", _UNIT)
+    stability_score_thresh: float = setting(
+        0.92, "SAM: masks with a lower stability score are dropped", _UNIT
+    )
+    box_nms_thresh: float = setting(
+        0.7, "SAM: box IoU above which the lower-scored mask is suppressed", _UNIT
+    )
+    min_region_area: int = setting(
+        100, "regions and holes smaller than this many pixels are removed", _int(0, note="0 = no clean-up")
+    )
+    tau_m: float = setting(
+        0.7,
+        "fusion (paper tau_m): overlap ratio below which a SAM grid segment is kept beside the detector's",
+        _UNIT,
+    )
+    sam_score_range: list[float] = setting(
+        [0.88, 1.0], "SAM scores mapped linearly onto segmentation.conf_range", check=_check_score_range
+    )
+    conf_range: list[float] = setting(
+        [0.5, 1.0], "confidence range a segment's rescaled SAM score is mapped to", check=_check_conf_range
+    )
+    execution_provider: ExecutionProvider = setting("auto", "onnxruntime device for the segmentation models")
+    sam_input_size: int = setting(
+        1024, "encoder side length, used only when the ONNX input has no fixed size", _int(1)
+    )
+    points_per_batch: int = setting(
+        16, "grid prompts per decoder call (1 when the export fixes the batch to 1)", _int(1)
+    )
+    stability_score_offset: float = setting(1.0, "SAM: logit offset of the stability score", _NONNEG)
+    mask_threshold: float = setting(0.0, "logit threshold that binarises decoder masks", _float())
+    detector_input_size: int = setting(
+        640, "detector letterbox side, used only when the ONNX input has no fixed size", _int(1)
+    )
+    detector_score_thresh: float = setting(0.25, "detections scoring lower are dropped", _UNIT)
+    detector_nms_thresh: float = setting(0.5, "detector box IoU of non-maximum suppression", _UNIT)
+    detector_max_detections: int = setting(100, "at most this many detections per image", _int(1))
+    detector_box_format: Literal["xyxy", "cxcywh"] = setting(
+        "xyxy", "box layout of exports with separate boxes/scores/labels outputs"
+    )
+    classical_k: float = setting(
+        100.0, "classical segmenter: Felzenszwalb scale (CIELAB dE units); larger -> larger regions", _POS
+    )
+    classical_min_size: int = setting(
+        60, "classical: smallest region in pixels at the working resolution", _int(0)
+    )
+    classical_max_side: int = setting(
+        320, "classical: images are segmented at most this large, labels upsampled", _int(8)
+    )
+    classical_depth_weight: float = setting(
+        300.0, "classical: dE per unit of relative depth discontinuity", _NONNEG
+    )
+    classical_normal_weight: float = setting(
+        100.0, "classical: dE per unit of (1 - cos) between neighbouring normals", _NONNEG
+    )
+    simulated_noise: NoiseLevel = setting(
+        "default", "simulated SAM from ground-truth instances (synthetic scenes only): how far it errs"
+    )
+    simulated_seed: int = setting(0, "seed of the simulated SAM's errors", _int(0))
+
+
+@dataclass
+class MappingConfig:
+    ablation: Literal["naive", "local", "local+global", "full"] = setting(
+        "full",
+        "which stages run: naive | local (+ local 3D optimisation) | local+global (+ global refinement) "
+        "| full (+ long-term optimisation)",
+    )
+    keyframe_every: int = setting(
+        1, "every n-th frame is a keyframe", _int(0, note="0 = by camera motion only")
+    )
+    keyframe_translation: float = setting(
+        0.0,
+        "metres of camera motion since the last keyframe that make a keyframe",
+        _float(0.0, note="0 = unused"),
+    )
+    keyframe_rotation_deg: float = setting(
+        0.0,
+        "degrees of camera rotation since the last keyframe that make a keyframe",
+        _float(0.0, note="0 = unused"),
+    )
+    max_pose_step: float = setting(
+        0.5,
+        "pose-jump check (mapping/pose_jump.py): the most a camera may move between two consecutive "
+        "frames of the folder in metres, times data.stride and the selected frames since the last "
+        "accepted one; about twice the largest steps of the sample data (docs/deviations.md)",
+        _float(0.0, note="0 = no limit"),
+    )
+    max_pose_step_deg: float = setting(
+        30.0,
+        "pose-jump check: the most a camera may turn between consecutive frames, degrees",
+        _float(0.0, note="0 = no limit"),
+    )
+    on_pose_jump: Literal["warn", "skip", "error"] = setting(
+        "warn", "a pose jump: warn (map it anyway) | skip (leave the frame out) | error (stop, map saved)"
+    )
+    pixels_per_gaussian: int = setting(4, "subsampling of back-projected pixels per segment", _int(1))
+    knn_k: int = setting(
+        1,
+        "neighbours per probe in the association (the paper gives no k). Each probe votes once, for its "
+        "nearest labelled Gaussian: with more, the few boundary matches of a mostly new segment (a door in a "
+        "wall) draw votes from every neighbouring object, r(m) >= tau_valid, and the object stays unlabelled "
+        "(see mapping/local.py)",
+        _int(1),
+    )
+    knn_radius: float = setting(0.05, "metres; a probe's neighbours lie within this distance", _POS)
+    novel_before_ambiguous: bool = setting(
+        True,
+        "case (iii) before case (i): a segment that hardly overlaps the labelled map (p < tau_p) is novel "
+        "whatever its few border matches give r; false = the paper's order (see mapping/local.py)",
+    )
+    knn_radius_spacing: float = setting(
+        0.0,
+        "> 0: per-probe KNN radius max(knn_radius, this x probe grid spacing)",
+        _float(0.0, note="0 = off"),
+    )
+    eq5_skip_edges: bool = setting(
+        False,
+        "Eq. 5 updates come only from probes off their segment's boundary. A table segment's probes around a "
+        "cup's base have the cup's Gaussians as nearest match and lower them at every view, which over a "
+        "long run lets refinement give the cup the table's label; but the same boundary updates also lower "
+        "wrongly labelled rims that refinement then fixes. Measured trade-off: docs/deviations.md",
+    )
+    tau_valid: float = setting(
+        0.25, "paper tau_valid: label ratio r(m) at or above which a segment is ambiguous", _UNIT
+    )
+    tau_p: float = setting(0.15, "paper tau_p: overlap p(m) below which a segment is a new object", _UNIT)
+    tau_high: float = setting(
+        0.7, "paper tau_high: confidence above which a Gaussian's label is reliable", _UNIT
+    )
+    tau_low: float = setting(0.3, "paper tau_low: confidence below which a label is refined", _UNIT)
+    r_search: float = setting(
+        0.1, "paper r_search: metres searched for a reliable neighbour in refinement", _POS
+    )
+    tau_long: float = setting(
+        0.5, "paper tau_long: viewpoint-distinctiveness and overlap threshold of the long-term memory", _UNIT
+    )
+    refine_every: int = setting(6, "keyframes between global refinements", _int(0, note="0 = off"))
+    longterm_every: int = setting(6, "keyframes between long-term optimisations", _int(0, note="0 = off"))
+    longterm_views: int = setting(4, "memory views used per long-term optimisation", _int(1))
+    opt_iters: int = setting(
+        10, "geometry / appearance optimisation steps per keyframe", _int(0, note="0 = no optimisation")
+    )
+    opt_memory_frames: int = setting(2, "memory frames optimised together with each keyframe", _int(0))
+    lr_means: float = setting(
+        0.0001,
+        "metres per Adam step (the paper gives none; SplaTAM's value). Adam moves every visible centre by "
+        "about lr per step whatever its gradient; a larger one moves centres off the surfaces, and the "
+        "distance-based association then splits objects into new labels (docs/deviations.md)",
+        _NONNEG,
+    )
+    lr_scales: float = setting(0.001, "learning rate of the scales (paper)", _NONNEG)
+    lr_quats: float = setting(
+        0.001,
+        "learning rate of the rotations; the paper gives none (only scales, opacity, colour): 3DGS's",
+        _NONNEG,
+    )
+    lr_opacities: float = setting(0.05, "learning rate of the opacities (paper)", _NONNEG)
+    lr_colors: float = setting(0.0001, "learning rate of the colours (paper)", _NONNEG)
+    lambda_c: float = setting(1.0, "paper lambda_c: weight of the colour loss", _NONNEG)
+    lambda_d: float = setting(0.1, "paper lambda_d: weight of the depth loss", _NONNEG)
+    ssim_lambda: float = setting(0.2, "paper lambda: SSIM share of the colour loss", _UNIT)
+    prune_opacity: float = setting(
+        0.005,
+        "Gaussians less opaque are pruned",
+        _float(0.0, 1.0, hi_open=True, note="1 would prune every Gaussian"),
+    )
+    prune_scale: float = setting(0.5, "metres; Gaussians larger are pruned", _float(0.0, note="0 = off"))
+    checkpoint_every: int = setting(0, "keyframes between checkpoints", _int(0, note="0 = only at the end"))
+    init_opacity: float = setting(
+        0.9, "opacity of newly added Gaussians", _float(0.0, 1.0, lo_open=True, hi_open=True)
+    )
+    init_alpha_thresh: float = setting(
+        0.5, "a pixel rendered with less alpha is unexplained -> new Gaussian", _UNIT
+    )
+    init_depth_margin: float = setting(
+        0.1, "metres; observed depth this far in front of the render -> new Gaussian", _NONNEG
+    )
+    refine_cluster_radius: float = setting(0.3, "metres; search radius of the cluster-level refinement", _POS)
+    refine_graph_k: int = setting(
+        8, "same-label neighbours linked per Gaussian when building clusters", _int(1)
+    )
+    memory_max: int = setting(64, "long-term memory buffer capacity (frames)", _int(1))
+    memory_point_step: int = setting(
+        4, "pixel grid step of the memory point clouds (overlap criterion)", _int(1)
+    )
+    longterm_pixel_step: int = setting(
+        2, "pixel grid step of the long-term pixel-to-Gaussian association", _int(1)
+    )
+    longterm_knn_k: int = setting(
+        5, "Gaussians associated with each back-projected memory pixel (within knn_radius)", _int(1)
+    )
+    longterm_skip_edges: bool = setting(
+        True, "long-term: leave out pixels on segment / rendered-label boundaries"
+    )
+    longterm_same_class: bool = setting(
+        True,
+        "beyond the paper (which takes a pixel's nearest Gaussians, whatever their label): a memory pixel is "
+        "associated only with Gaussians of the label rendered there, the ones that can have produced it "
+        "(near a boundary the nearest include the neighbouring object's). Measured effect: "
+        "docs/deviations.md",
+    )
+    fill_unlabeled: bool = setting(True, "unlabelled Gaussians under a labelled segment take its label")
+    refine_unlabeled: bool = setting(
+        False, "individual refinement also labels unlabelled Gaussians (confidence 0)"
+    )
+    merge_duplicates: bool = setting(
+        True,
+        "beyond the paper (mapping/merge.py): an ambiguous segment that contains two labels' whole visible "
+        "extent (>= merge_contain each) with SAM score >= merge_min_score merges them (one object, two "
+        "labels)",
+    )
+    merge_contain: float = setting(
+        0.8, "share of each label's visible extent the segment must contain", _UNIT
+    )
+    merge_min_score: float = setting(0.95, "SAM score a merging segment needs at least", _UNIT)
+
+    def cross_check(self) -> str | None:
+        if not self.tau_low <= self.tau_high:
+            return f"mapping.tau_low must be <= mapping.tau_high, got {self.tau_low!r} > {self.tau_high!r}"
+        if self.keyframe_every == 0 and self.keyframe_translation == 0 and self.keyframe_rotation_deg == 0:
+            return (
+                "mapping.keyframe_every is 0 and so are mapping.keyframe_translation and "
+                "mapping.keyframe_rotation_deg: no frame would become a keyframe; set one of them > 0"
+            )
+        return None
+
+
+@dataclass
+class CaptionerConfig:
+    kind: Literal["heuristic", "openai", "groundtruth"] = setting(
+        "heuristic",
+        "node captions: heuristic (from labels and geometry) | openai (a vision-language model at "
+        "an OpenAI-compatible endpoint) | groundtruth (synthetic scenes' instance names)",
+    )
+    base_url: str = setting("http://127.0.0.1:8000/v1", "OpenAI-compatible endpoint")
+    model: str = setting("", "model name sent to the endpoint")
+    api_key_env: str = setting("OPENAI_API_KEY", _LLM_KEY_DOC)
+    timeout_s: float = setting(30.0, "seconds per request", _POS)
+    max_retries: int = setting(2, "retries of a failed request", _int(0))
+    backoff_s: float = setting(1.0, "first retry delay in seconds; doubles per retry", _NONNEG)
+    max_tokens: int = setting(
+        300, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request")
+    )
+    concurrency: int = setting(4, "parallel per-node caption requests", _int(1))
+
+
+@dataclass
+class RelationsConfig:
+    kind: Literal["geometric", "llm"] = setting(
+        "geometric",
+        "edge relations: geometric (rules on boxes and points) | llm (a language model, with the "
+        "geometric rules as per-pair fallback)",
+    )
+    base_url: str = setting("http://127.0.0.1:8000/v1", "OpenAI-compatible endpoint")
+    model: str = setting("", "model name sent to the endpoint")
+    api_key_env: str = setting("OPENAI_API_KEY", _LLM_KEY_DOC)
+    timeout_s: float = setting(30.0, "seconds per request", _POS)
+    max_retries: int = setting(2, "retries of a failed request", _int(0))
+    backoff_s: float = setting(1.0, "first retry delay in seconds; doubles per retry", _NONNEG)
+    max_tokens: int = setting(
+        2000, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request")
+    )
+    contact_tol: float = setting(0.05, 'metres; vertical gap still counted as contact ("on")', _POS)
+    cell_size: float = setting(0.05, "metres; horizontal grid for per-column stacking tests", _POS)
+    overlap_ratio: float = setting(
+        0.3,
+        "shared footprint cells (of the smaller node) for on/above/under/below",
+        _float(0.0, 1.0, lo_open=True),
+    )
+    inside_ratio: float = setting(
+        0.8, 'fraction of points inside the other\'s box for "in"', _float(0.0, 1.0, lo_open=True)
+    )
+    under_gap: float = setting(
+        0.5, 'metres; a lower, smaller node closer than this is "under", else "below"', _POS
+    )
+    attach_elevation: float = setting(
+        0.1, 'metres; min height above a wall\'s bottom for "attached to"', _NONNEG
+    )
+
+
+@dataclass
+class NodeConfidenceConfig:
+    kind: Literal["mean", "clip"] = setting(
+        "mean", "node confidence: mean (of its Gaussians' confidences) | clip (image-text similarity)"
+    )
+    clip_image: str | None = setting(None, "ONNX file of the CLIP image encoder")
+    clip_text: str | None = setting(None, "ONNX file of the CLIP text encoder")
+    clip_vocab: str | None = setting(
+        None, "OpenAI bpe_simple_vocab_16e6.txt(.gz), or HF vocab.json (+ clip_merges)"
+    )
+    clip_merges: str | None = setting(None, "HF merges.txt, only with a vocab.json")
+    clip_image_size: int | None = setting(
+        None,
+        "the image encoder's input size when its export leaves it dynamic (e.g. 336 for ViT-L/14-336); a "
+        "static export's own size is used, and must agree if this is set",
+        _int(1, note="null = the export's own, or 224"),
+    )
+    execution_provider: ExecutionProvider = setting("auto", "onnxruntime device for the CLIP models")
+
+
+@dataclass
+class GraphConfig:
+    enabled: bool = setting(
+        True, "build the 3D scene graph; false: the graph.* settings are neither used nor checked"
+    )
+    init_keyframes: int = setting(12, "keyframes before the first graph update", _int(1))
+    update_every: int = setting(12, "keyframes between graph updates", _int(1))
+    tau_update: float = setting(
+        0.3, "paper tau_update: nodes with a lower confidence are re-described", _UNIT
+    )
+    theta_e: float = setting(0.1, "paper theta_e: metres within which two nodes' points are proximate", _POS)
+    tau_e: float = setting(
+        0.2,
+        "paper tau_e: proximate-point ratio R_ij above which two nodes get an edge",
+        _float(0.0, 1.0, hi_open=True),
+    )
+    min_gaussians: int = setting(20, "labels with fewer Gaussians make no node", _int(1))
+    up_axis: list[float] = setting([0.0, -1.0, 0.0], "the world's up direction", check=_check_up_axis)
+    edge_voxel: float = setting(
+        0.0,
+        "a node's points for edges and relations: its Gaussian means thinned to one per voxel of this many "
+        "metres, then at most max_points_per_node (seeded random)",
+        _float(0.0, note="0 = theta_e / 2"),
+    )
+    max_points_per_node: int = setting(4096, "at most this many points per node for edges", _int(1))
+    support_edges: bool = setting(
+        True,
+        "extension of Eqs. 20-21 (false = the paper's rule only): a pair is also a candidate when the bottom "
+        "(or top) band of one node lies mostly within theta_e of the other (furniture on the floor, lamp on "
+        "a ceiling), which R_ij misses because it normalises by the whole node",
+    )
+    support_band: float = setting(0.05, "metres along up of the bottom / top band", _POS)
+    support_ratio: float = setting(
+        0.5, "share of the band within theta_e that makes a support edge", _float(0.0, 1.0, lo_open=True)
+    )
+    background: bool = setting(False, "run graph updates on a worker thread (never blocks mapping)")
+    max_masked_views: int = setting(3, "views stored per node for captioning", _int(1))
+    crop_max_side: int = setting(
+        256, "stored crops are downscaled to this many pixels on the long side", _int(1)
+    )
+    context_pad: float = setting(
+        0.25, "context crop: bbox grown by this fraction of its size on each side", _NONNEG
+    )
+    min_obs_pixels: int = setting(50, "smaller projections are not stored as observations", _int(0))
+    query_embedding: Literal["none", "clip", "openai"] = setting(
+        "none",
+        "text embedding of `ogscene3d graph -q`: none (words only) | clip | openai (the captioner's "
+        "endpoint, /embeddings)",
+    )
+    embedding_model: str = setting("", "model name for query_embedding=openai")
+    query_min_similarity: float = setting(
+        0.25, "cosine similarity below which a node does not answer a query", _float(-1.0, 1.0)
+    )
+    captioner: CaptionerConfig = section(CaptionerConfig, "node captions")
+    relations: RelationsConfig = section(RelationsConfig, "edge relations")
+    confidence: NodeConfidenceConfig = section(NodeConfidenceConfig, "node confidence")
+
+
+@dataclass
+class TrackingConfig:
+    poses: Literal["gt", "odometry"] = setting(
+        "gt", "camera poses: gt (the dataset's) | odometry (estimated by ogscene3d.tracking)"
+    )
+    max_translation: float = setting(0.3, "metres per frame beyond which a step is implausible", _POS)
+    max_rotation_deg: float = setting(30.0, "degrees per frame beyond which a step is implausible", _POS)
+    keyframe_every: int = setting(5, "frames between tracking keyframes", _int(1, note="1 = frame-to-frame"))
+    method: Literal["auto", "hybrid", "color", "point_to_plane"] = setting(
+        "auto",
+        "RGB-D odometry (see ogscene3d.tracking): auto (point_to_plane, hybrid if degenerate) | hybrid "
+        "| color | point_to_plane",
+    )
+    min_conditioning: float = setting(
+        0.01,
+        "auto: keyframe conditioning below which hybrid replaces point_to_plane",
+        _float(0.0, 1.0, hi_open=True),
+    )
+    iterations: list[int] = setting(
+        [20, 10, 5], "iterations per pyramid level, coarse to fine", check=_check_iterations
+    )
+    max_width: int = setting(
+        640,
+        "track on images downsampled by an integer factor to at most this width",
+        _int(0, note="0 = full resolution"),
+    )
+    depth_min: float = setting(0.1, "metres; nearer depth is not used", _NONNEG)
+    depth_max: float = setting(5.0, "metres; farther depth is not used", _POS)
+    depth_outlier_trunc: float = setting(0.07, "metres; larger depth residuals are outliers", _POS)
+    depth_huber_delta: float = setting(0.05, "metres; Huber delta of the depth residual", _POS)
+    intensity_huber_delta: float = setting(0.1, "Huber delta of the intensity residual (intensity in [0, 1])",
+                                           _POS)  # fmt: skip
+    min_fitness: float = setting(
+        0.25, "fraction of pixels with a valid correspondence below which a step fails", _UNIT
+    )
+    max_inlier_rmse: float = setting(
+        0.02, "Open3D residual above which a step fails (typical good steps: docs/deviations.md)", _POS
+    )
+    keyframe_fitness: float = setting(
+        0.7, "overlap with the keyframe below which the frame becomes one", _UNIT
+    )
+    keyframe_translation: float = setting(
+        0.1, "metres from the keyframe beyond which the frame becomes a keyframe", _POS
+    )
+    keyframe_rotation_deg: float = setting(
+        10.0, "degrees from the keyframe beyond which the frame becomes a keyframe", _POS
+    )
+    max_lost_frames: int = setting(
+        0,
+        "consecutive failures after which tracking restarts at the last pose",
+        _int(0, note="0 = never restart"),
+    )
+    max_residual_ratio: float = setting(
+        5.0, "re-acquisition fails above this x the recent residuals", _float(0.0, note="0 = off")
+    )
+    feature_init: bool = setting(True, "ORB + RANSAC initial guess when the motion prior does not converge")
+    orb_features: int = setting(500, "ORB features per image", _int(10))
+    ransac_threshold: float = setting(0.05, "metres; RANSAC inlier distance", _POS)
+    min_feature_inliers: int = setting(20, "RANSAC inliers a feature guess needs", _int(3))
+
+    def cross_check(self) -> str | None:
+        if not self.depth_min < self.depth_max:
+            return (
+                f"tracking.depth_min must be < tracking.depth_max, "
+                f"got {self.depth_min!r} >= {self.depth_max!r}"
+            )
+        return None
+
+
+@dataclass
+class Config:
+    device: str | None = setting(None, "cpu | cuda | cuda:N; null: CUDA when available")
+    seed: int = setting(0, "random seed of the run", _int(0))
+    data: DataConfig = section(DataConfig, "the RGB-D input")
+    synthetic: SyntheticConfig = section(SyntheticConfig, "the procedural scene of --synthetic")
+    segmentation: SegmentationConfig = section(SegmentationConfig, "open-set 2D segmentation (Sec. III-B.1)")
+    mapping: MappingConfig = section(MappingConfig, "semantic mapping (Sec. III-B, III-C)")
+    graph: GraphConfig = section(GraphConfig, "the 3D scene graph (Sec. III-D)")
+    tracking: TrackingConfig = section(TrackingConfig, "camera poses")
+
+
+# ---------------------------------------------------------------------------------------------- the walker
+@dataclass(frozen=True)
+class Setting:
+    """One leaf setting of :class:`Config`, as ``ogscene3d config`` prints it and :func:`check_config`
+    checks it."""
+
+    key: str  # dotted, e.g. "mapping.tau_p"
+    type: Any
+    default: Any
+    doc: str
+    choices: tuple[Any, ...] | None  # from a Literal type
+    range: Range | None  # numbers; ``optional`` set from the type
+    check: Callable[[Any], str | None] | None  # numeric lists
+
+    def describe_type(self) -> str:
+        if self.choices is not None:
+            return " | ".join(str(c) for c in self.choices)
+        return _type_name(self.type)
+
+
+def _type_name(tp: Any) -> str:
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        return " | ".join(_type_name(a) for a in typing.get_args(tp))
+    if origin is list:
+        return f"list[{', '.join(_type_name(a) for a in typing.get_args(tp))}]"
+    if tp is type(None):
+        return "null"
+    return getattr(tp, "__name__", str(tp))
+
+
+def _split_optional(tp: Any) -> tuple[Any, bool]:
+    """(the type without None, whether None is allowed)."""
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        if len(args) < len(typing.get_args(tp)):
+            rest: Any = args[0]
+            for a in args[1:]:
+                rest = rest | a
+            return rest, True
+    return tp, False
 
 
 def _is_dataclass_type(tp: Any) -> bool:
     return isinstance(tp, type) and dataclasses.is_dataclass(tp)
+
+
+def _default_of(f: dataclasses.Field) -> Any:
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    return f.default_factory()  # type: ignore[misc]
+
+
+def settings(cls: type = Config, prefix: str = "") -> Iterator[Setting]:
+    """Every leaf setting of the config dataclass ``cls`` (default: :class:`Config`), in field order."""
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        tp = hints[f.name]
+        key = prefix + f.name
+        if _is_dataclass_type(tp):
+            yield from settings(tp, key + ".")
+            continue
+        base, optional = _split_optional(tp)
+        choices = typing.get_args(base) if typing.get_origin(base) is Literal else None
+        rng = f.metadata.get("range")
+        if rng is not None:
+            rng = dataclasses.replace(rng, optional=optional)
+        yield Setting(
+            key, tp, _default_of(f), f.metadata.get("doc", ""), choices, rng, f.metadata.get("check")
+        )
+
+
+def sections(cls: type = Config, prefix: str = "") -> Iterator[tuple[str, type, str]]:
+    """(dotted key, dataclass, doc) of every nested section of ``cls``."""
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        if _is_dataclass_type(hints[f.name]):
+            yield prefix + f.name, hints[f.name], f.metadata.get("doc", "")
+            yield from sections(hints[f.name], f"{prefix}{f.name}.")
+
+
+def choices(key: str) -> tuple[Any, ...]:
+    """The allowed values of the ``Literal`` setting ``key`` (e.g. ``choices("mapping.ablation")``), for the
+    consumers that check a value given to them directly."""
+    for s in settings():
+        if s.key == key:
+            if s.choices is None:
+                raise KeyError(f"{key} is not a setting with choices")
+            return s.choices
+    raise KeyError(key)
+
+
+def __getattr__(name: str) -> Any:
+    """``RANGES`` (dotted key -> :class:`Range`) and ``LIST_CHECKS`` (dotted key -> check): views of the
+    field rules, derived on first use (not at import: ``ogscene3d --help`` imports this module)."""
+    if name == "RANGES":
+        value: Any = {s.key: s.range for s in settings() if s.range is not None}
+    elif name == "LIST_CHECKS":
+        value = {s.key: s.check for s in settings() if s.check is not None}
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def _problem(key: str, s: Setting, value: Any) -> str | None:
+    if s.choices is not None:
+        if value is None and _split_optional(s.type)[1]:
+            return None
+        if value not in s.choices:
+            return f"{key} must be one of {list(s.choices)}, got {value!r}"
+    if s.range is not None and not s.range.contains(value):
+        return f"{key} must be {s.range.describe()}, got {value!r}"
+    if s.check is not None:
+        problem = s.check(value)
+        if problem is not None:
+            return f"{key} {problem}, got {value!r}"
+    return None
+
+
+def check_section(obj: Any, prefix: str) -> None:
+    """Raise :class:`ConfigError` for the first setting of the config section ``obj`` (e.g. a
+    ``TrackingConfig`` with ``prefix="tracking"``) out of its choices, range or list rule, then for its
+    cross-field rule (a section's ``cross_check``); nested sections come after their parent's fields."""
+    if getattr(obj, "enabled", True) is False:
+        return  # a section switched off: its settings are not used
+    nested = []
+    for s in settings(type(obj), f"{prefix}." if prefix else ""):
+        name = s.key[len(prefix) + 1 :] if prefix else s.key
+        if "." in name:
+            continue  # a nested section's field: checked below, with its own cross-field rule
+        problem = _problem(s.key, s, getattr(obj, name))
+        if problem is not None:
+            raise ConfigError(problem)
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(value):
+            nested.append((f"{prefix}.{f.name}" if prefix else f.name, value))
+    cross = getattr(obj, "cross_check", None)
+    problem = cross() if cross is not None else None
+    if problem is not None:
+        raise ConfigError(problem)
+    for key, value in nested:
+        check_section(value, key)
+
+
+def check_config(cfg: Config) -> None:
+    """Raise :class:`ConfigError` naming the key, the value and what is allowed for the first setting of
+    ``cfg`` out of its rules (a ``Literal``'s choices, a number's range, a list's check, each written on the
+    field), then the sections' cross-field rules.
+
+    ``load_config`` calls it, and so does ``Mapper`` (a ``Config()`` built and changed in Python)."""
+    check_section(cfg, "")
 
 
 def _coerce(value: Any, tp: Any, key: str) -> Any:
@@ -613,6 +865,10 @@ def _coerce(value: Any, tp: Any, key: str) -> Any:
             except ConfigError as e:
                 errors.append(str(e))
         raise ConfigError(errors[0] if errors else f"{key}: bad value {value!r}")
+    if (
+        origin is Literal
+    ):  # the type of its choices; the choice itself is check_config's (a section may be off)
+        return _coerce(value, type(typing.get_args(tp)[0]), key)
     if origin is list:
         if not isinstance(value, list | tuple):
             raise ConfigError(f"{key}: expected a list, got {value!r}")
@@ -695,7 +951,14 @@ def load_config(path: str | Path | None = None, overrides: list[str] | None = No
             shipped = ", ".join(shipped_configs())
             raise ConfigError(f"config file {str(p)!r} does not exist (shipped configs, by name: {shipped})")
         try:
-            loaded = yaml.safe_load(p.read_text())
+            text = p.read_text(encoding="utf-8")
+        except UnicodeDecodeError as e:
+            raise ConfigError(
+                f"config file {str(p)!r} is not UTF-8 text (byte {e.start} is {e.object[e.start]:#04x}); "
+                "save it as UTF-8"
+            ) from e
+        try:
+            loaded = yaml.safe_load(text)
         except yaml.YAMLError as e:
             raise ConfigError(f"config file {str(p)!r} is not valid YAML: {e}") from e
         if loaded is None:
@@ -719,6 +982,19 @@ def add_override_argument(parser: Any, example: str = "mapping.opt_iters=5") -> 
         default=[],
         metavar="KEY=VALUE",
         help=f"config override, repeatable (e.g. --set {example})",
+    )
+
+
+def add_poses_argument(parser: Any) -> None:
+    """Add ``--poses gt|odometry`` (the choices of ``tracking.poses``) to a subcommand.
+
+    The command then does ``if args.poses: cfg.tracking.poses = args.poses``.
+    """
+    parser.add_argument(
+        "--poses",
+        choices=choices("tracking.poses"),
+        default=None,
+        help="camera poses: the dataset's (gt) or RGB-D odometry (odometry); default: config tracking.poses",
     )
 
 

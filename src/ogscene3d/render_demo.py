@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import math
 import numbers
 from pathlib import Path
@@ -10,7 +9,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .cli_types import image_size, positive_int
 from .device import resolve_device
 from .errors import ConfigError, DataError
 
@@ -92,47 +90,3 @@ def render_demo(
     if not cv2.imwrite(str(out), cv2.cvtColor(mosaic, cv2.COLOR_RGB2BGR)):
         raise DataError(f"could not write {out}")
     return out
-
-
-# ---------------------------------------------------------------------------------------------- CLI
-# argparse types: the CLI names the option in its message (the library checks again, naming the argument)
-
-
-def _image_path(text: str) -> Path:
-    import cv2
-
-    if not cv2.haveImageWriter(text):
-        raise argparse.ArgumentTypeError(
-            f"{text!r} is not an image file name OpenCV can write; end it in .png (or .jpg)"
-        )
-    return Path(text)
-
-
-def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "render-demo", help="render a procedural Gaussian scene to a PNG (rasterizer smoke test)"
-    )
-    p.add_argument(
-        "--out",
-        type=_image_path,
-        default=Path("outputs/render_demo.png"),
-        help="image file to write, e.g. render.png (default outputs/render_demo.png)",
-    )
-    p.add_argument("--gaussians", type=positive_int, default=20000, help="Gaussians (default 20000)")
-    p.add_argument(
-        "--size",
-        type=image_size(1, "320x240"),
-        default=(320, 240),
-        metavar="WxH",
-        help="each view's size (320x240)",
-    )
-    p.add_argument("--views", type=positive_int, default=4, help="orbit views side by side (default 4)")
-    p.add_argument("--device", default=None, help="cpu, cuda or cuda:N (default: cuda when available)")
-    p.set_defaults(func=_run)
-
-
-def _run(args: argparse.Namespace) -> int:
-    w, h = args.size
-    path = render_demo(args.out, args.gaussians, w, h, args.views, args.device)
-    print(f"wrote {path}")
-    return 0

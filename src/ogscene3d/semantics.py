@@ -14,7 +14,7 @@ import torch
 
 from ._validate import ValueChecks, check_int, check_tensor
 from .device import warp_stream
-from .render import (
+from .projection import (
     TileBins,
     _as_wp,
     _check_shapes,

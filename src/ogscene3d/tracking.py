@@ -87,15 +87,16 @@ import cv2
 import numpy as np
 
 from .camera import Camera
-from .config import TrackingConfig, add_override_argument
-from .errors import ConfigError, OGSceneError
+from .config import TrackingConfig, check_section, choices
+from .config import add_poses_argument as add_poses_argument  # the option lives with the config
+from .errors import OGSceneError
 from .frame import Frame, check_pose
 
 log = logging.getLogger(__name__)
 
 _METHODS = {"hybrid": "Hybrid", "color": "Intensity", "point_to_plane": "PointToPlane"}
-METHODS = ("auto", *_METHODS)
-POSE_SOURCES = ("gt", "odometry")
+METHODS = choices("tracking.method")
+POSE_SOURCES = choices("tracking.poses")
 _FITNESS_TIE = 0.05  # candidates within this overlap of the best are ranked by residual
 _RMSE_GATE = 1.5  # a prior-initialised result with a residual above this x the recent ones gets a second try
 _RECENT = 5  # accepted residuals remembered for that gate and the re-acquisition check
@@ -139,49 +140,8 @@ class TrackResult:
 
 
 def validate_tracking_config(cfg: TrackingConfig) -> None:
-    """Raise ConfigError naming the ``tracking.*`` key when a value is out of range."""
-
-    def bad(key: str, msg: str) -> ConfigError:
-        return ConfigError(f"tracking.{key}: {msg}")
-
-    if cfg.poses not in POSE_SOURCES:
-        raise bad("poses", f"must be one of {list(POSE_SOURCES)}, got {cfg.poses!r}")
-    if cfg.method not in METHODS:
-        raise bad("method", f"must be one of {list(METHODS)}, got {cfg.method!r}")
-    if not (math.isfinite(cfg.min_conditioning) and 0.0 <= cfg.min_conditioning < 1.0):
-        raise bad("min_conditioning", f"must be in [0, 1), got {cfg.min_conditioning}")
-    if not cfg.iterations or any(int(n) < 1 for n in cfg.iterations):
-        raise bad("iterations", f"must be a non-empty list of positive counts, got {cfg.iterations!r}")
-    if cfg.max_width < 0:
-        raise bad("max_width", f"must be >= 0 (0 = full resolution), got {cfg.max_width}")
-    if not (math.isfinite(cfg.depth_max) and cfg.depth_max > 0):
-        raise bad("depth_max", f"must be a positive number of metres, got {cfg.depth_max}")
-    if not 0.0 <= cfg.depth_min < cfg.depth_max:
-        raise bad("depth_min", f"must be in [0, depth_max={cfg.depth_max}), got {cfg.depth_min}")
-    for key in ("depth_outlier_trunc", "depth_huber_delta", "intensity_huber_delta", "max_inlier_rmse"):
-        v = getattr(cfg, key)
-        if not (math.isfinite(v) and v > 0):
-            raise bad(key, f"must be a positive number, got {v}")
-    for key in ("min_fitness", "keyframe_fitness"):
-        v = getattr(cfg, key)
-        if not 0.0 <= v <= 1.0:
-            raise bad(key, f"must be in [0, 1], got {v}")
-    for key in ("max_translation", "max_rotation_deg", "keyframe_translation", "keyframe_rotation_deg"):
-        v = getattr(cfg, key)
-        if not v > 0:
-            raise bad(key, f"must be positive, got {v}")
-    if cfg.keyframe_every < 1:
-        raise bad("keyframe_every", f"must be >= 1 (1 = frame-to-frame), got {cfg.keyframe_every}")
-    if cfg.max_lost_frames < 0:
-        raise bad("max_lost_frames", f"must be >= 0 (0 = never restart), got {cfg.max_lost_frames}")
-    if cfg.orb_features < 10:
-        raise bad("orb_features", f"must be >= 10, got {cfg.orb_features}")
-    if not (math.isfinite(cfg.ransac_threshold) and cfg.ransac_threshold > 0):
-        raise bad("ransac_threshold", f"must be a positive number of metres, got {cfg.ransac_threshold}")
-    if not (math.isfinite(cfg.max_residual_ratio) and cfg.max_residual_ratio >= 0):
-        raise bad("max_residual_ratio", f"must be >= 0 (0 = off), got {cfg.max_residual_ratio}")
-    if cfg.min_feature_inliers < 3:
-        raise bad("min_feature_inliers", f"must be >= 3, got {cfg.min_feature_inliers}")
+    """Raise ConfigError naming the ``tracking.*`` key when a value breaks its rule (written on the field)."""
+    check_section(cfg, "tracking")
 
 
 def open3d_device(device: Any = "cpu") -> Any:
@@ -842,118 +802,8 @@ def track(
     return track_sequence(frames, config, device, frame_step).poses
 
 
-# ---------------------------------------------------------------------------------------------- CLI
-def add_poses_argument(parser: Any) -> None:
-    """Add ``--poses gt|odometry`` to a subcommand.
-
-    The command then does ``if args.poses: cfg.tracking.poses = args.poses``.
-    """
-    parser.add_argument(
-        "--poses",
-        choices=POSE_SOURCES,
-        default=None,
-        help="camera poses: the dataset's (gt) or RGB-D odometry (odometry); default: config tracking.poses",
-    )
-
-
 def trajectory_text(poses: Iterable[np.ndarray]) -> str:
     """One row-major c2w 4x4 per line (the Replica ``traj.txt`` format read by eval.read_trajectory)."""
     return "".join(
         " ".join(f"{v:.9e}" for v in np.asarray(p, dtype=np.float64).reshape(-1)) + "\n" for p in poses
     )
-
-
-def add_parser(subparsers: Any) -> None:
-    p = subparsers.add_parser(
-        "track",
-        help="estimate camera poses of an RGB-D sequence with Open3D RGB-D odometry",
-        description="Track a dataset with keyframe-to-frame RGB-D odometry (config section `tracking`). "
-        "Writes OUT/traj.txt (one row-major c2w 4x4 per frame; a skipped frame repeats the last good "
-        "pose) and OUT/tracking.json (per-frame status, and the ATE against the dataset's poses when it "
-        "has them).",
-    )
-    p.add_argument("--data", default=None, help="dataset folder (default: config data.path)")
-    p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--config", default=None, help="YAML config; defaults otherwise")
-    p.add_argument(
-        "--device", default=None, help="cpu, cuda or cuda:N (default: config, else CUDA if usable)"
-    )
-    p.add_argument("--max-frames", type=int, default=None, help="track at most this many frames")
-    add_override_argument(p, "tracking.max_width=320")
-    p.set_defaults(func=run)
-
-
-def run(args: Any) -> int:
-    import json
-    import time
-    from pathlib import Path
-
-    from .atomic import atomic_write_text
-    from .config import load_config
-    from .datasets import open_dataset
-    from .eval.trajectory import ate
-
-    cfg = load_config(args.config, args.overrides)
-    validate_tracking_config(cfg.tracking)
-    if args.data is None and cfg.data.path is None:
-        # open_dataset's own message names its `path` argument, which this command does not have
-        raise ConfigError("no dataset to track: pass --data DIR (or set data.path in --config)")
-    ds = open_dataset(args.data, max_frames=args.max_frames, config=cfg.data)
-    try:
-        tracker = Tracker(cfg.tracking, device=args.device or cfg.device, frame_step=cfg.data.stride)
-    except ValueError as e:  # a device Open3D cannot use
-        raise ConfigError(f"track: {e}") from e
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-
-    poses: list[np.ndarray | None] = []
-    given: list[np.ndarray | None] = []
-    rows: list[dict[str, Any]] = []
-    t0 = time.perf_counter()
-    for frame in ds:
-        given.append(frame.pose)
-        poses.append(tracker.step(frame))
-        info = tracker.last
-        assert info is not None
-        rows.append(
-            {
-                "index": frame.index,
-                "name": frame.name,
-                "status": info.status,
-                "reason": info.reason,
-                "fitness": None if math.isnan(info.fitness) else info.fitness,
-                "inlier_rmse": None if math.isnan(info.inlier_rmse) else info.inlier_rmse,
-                "keyframe": info.keyframe,
-                "reference": info.reference,
-                "method": info.method,
-            }
-        )
-    seconds = time.perf_counter() - t0
-    if not poses:
-        raise OGSceneError(f"track: the dataset at {ds.root} yielded no frames")
-    filled = hold_last_good(poses)
-    if not filled:
-        raise OGSceneError(f"track: none of the {len(poses)} frames could be tracked ({rows[0]['reason']})")
-    valid = [q is not None for q in poses]
-    summary: dict[str, Any] = {
-        "frames": len(poses),
-        "tracked": int(sum(valid)),
-        "skipped": int(len(valid) - sum(valid)),
-        "keyframes": int(sum(r["keyframe"] or r["status"] == "anchor" for r in rows)),
-        "seconds": seconds,
-        "device": str(tracker.device),
-    }
-    pairs = [(q, g) for q, g in zip(poses, given, strict=True) if q is not None and g is not None]
-    if len(pairs) >= 3:
-        err = ate([q for q, _ in pairs], [g for _, g in pairs], "se3")
-        summary["ate_rmse_m"] = err.rmse
-        summary["ate_protocol"] = f"positions of {err.num_poses} tracked frames vs dataset poses, se3-aligned"
-    atomic_write_text(out / "traj.txt", trajectory_text(filled))
-    atomic_write_text(
-        out / "tracking.json", json.dumps({"summary": summary, "frames": rows}, indent=1) + "\n"
-    )
-    msg = f"tracked {summary['tracked']}/{summary['frames']} frames in {seconds:.1f} s"
-    if "ate_rmse_m" in summary:
-        msg += f", ATE RMSE {summary['ate_rmse_m'] * 100:.2f} cm vs the dataset's poses"
-    print(f"{msg}; wrote {out / 'traj.txt'} and {out / 'tracking.json'}")
-    return 0

@@ -4,19 +4,25 @@
 ``open_dataset(path)`` detects the layout and returns an :class:`RGBDDataset` (``len``, ``ds[i]``,
 iteration yielding :class:`~ogscene3d.frame.Frame`). Synthetic scenes (``make_synthetic_scene``)
 carry their simulated SAM segments in ``segments/``, which is used automatically when
-``segments_dir`` is None; for other layouts segments are read only from ``segments_dir``.
-"""
+``segments_dir`` is None; for other layouts segments are read only from ``segments_dir``."""
 
 from __future__ import annotations
 
-from .base import FrameRecord, RGBDDataset, decode_depth, read_depth_raw, read_rgb
-from .loader import READERS, detect_kind, open_dataset
-from .replica import ReplicaDataset
-from .scannet import ScanNetDataset
-from .semantic_nerf import SemanticNeRFDataset
-from .sevenscenes import LabelFusionDataset, SevenScenesDataset
-from .synthetic import SyntheticDataset, configured_scene, load_instances, make_synthetic_scene
-from .tum import TUMDataset
+from .._lazy import lazy_exports
+
+__getattr__, __dir__ = lazy_exports(
+    globals(),
+    {
+        ".base": ["FrameRecord", "RGBDDataset", "decode_depth", "read_depth_raw", "read_rgb"],
+        ".loader": ["READERS", "detect_kind", "open_dataset"],
+        ".replica": ["ReplicaDataset"],
+        ".scannet": ["ScanNetDataset"],
+        ".semantic_nerf": ["SemanticNeRFDataset"],
+        ".sevenscenes": ["LabelFusionDataset", "SevenScenesDataset"],
+        ".synthetic": ["SyntheticDataset", "configured_scene", "load_instances", "make_synthetic_scene"],
+        ".tum": ["TUMDataset"],
+    },
+)
 
 __all__ = [
     "READERS",

@@ -126,7 +126,7 @@ def find_class_info(seq: Path) -> Path | None:
 def read_class_names(path: Path) -> dict[int, str]:
     """Class id -> name from ``info_semantic.json``'s ``classes``, without id 0: the renderer writes 0 for
     pixels of no class, and Semantic-NeRF scores 0 as void."""
-    from ..eval.replica_gt import read_info_semantic
+    from .replica_semantic import read_info_semantic
 
     classes, _ = read_info_semantic(path)
     classes.pop(VOID_ID, None)

@@ -7,45 +7,68 @@
 * :mod:`.trajectory` — ATE RMSE after Umeyama alignment.
 * :mod:`.plots` — stable label colours, side-by-side panels, per-class IoU bar chart (OpenCV).
 * :mod:`.views` — render a run at dataset poses: 2D metrics and RGB | labels | GT | confidence PNGs.
-* :mod:`.run_eval` — :func:`evaluate_run`, the engine of ``ogscene3d eval``.
-"""
+* :mod:`.run_eval` — :func:`evaluate_run`, the engine of ``ogscene3d eval``."""
 
-from .graph_metrics import RelationRecall, match_nodes_by_overlap, node_overlap_iou, relation_recall
-from .label_mapping import (
-    DEFAULT_SYNONYMS,
-    TextEmbedder,
-    TextMatch,
-    majority_overlap_mapping,
-    normalize_label,
-    text_label_mapping,
+from __future__ import annotations
+
+from .._lazy import lazy_exports
+
+__getattr__, __dir__ = lazy_exports(
+    globals(),
+    {
+        ".graph_metrics": ["RelationRecall", "match_nodes_by_overlap", "node_overlap_iou", "relation_recall"],
+        ".label_mapping": [
+            "DEFAULT_SYNONYMS",
+            "TextEmbedder",
+            "TextMatch",
+            "majority_overlap_mapping",
+            "normalize_label",
+            "text_label_mapping",
+        ],
+        ".metrics": [
+            "SegmentationMetrics",
+            "confusion_matrix",
+            "format_metrics_table",
+            "segmentation_metrics",
+            "void_predictions",
+        ],
+        ".plots": [
+            "colorize_confidence",
+            "colorize_labels",
+            "iou_bar_chart",
+            "label_colors",
+            "side_by_side",
+            "write_png",
+        ],
+        ".protocols": [
+            "CONCEPTGRAPHS_DEFAULT_IGNORE",
+            "CONCEPTGRAPHS_VOXEL_SIZE",
+            "HOVSG_DEFAULT_IGNORE",
+            "PROTOCOLS",
+            "conceptgraphs_protocol",
+            "evaluate_semantic_3d",
+            "hovsg_protocol",
+            "label_lookup",
+            "majority_vote",
+            "nearest_neighbors",
+            "novel_view_metrics",
+            "rendered_view_metrics",
+            "voxel_resample",
+        ],
+        ".ground_truth": ["GroundTruth"],
+        ".readers": [
+            "RunData",
+            "find_ground_truth",
+            "load_ground_truth",
+            "read_graph_json",
+            "read_run",
+        ],
+        ".run_eval": ["EvalResult", "build_label_mapping", "evaluate_run"],
+        ".trajectory": ["TrajectoryError", "ate", "ate_rmse", "read_trajectory", "umeyama_alignment"],
+        ".views": ["ViewsResult", "evaluate_views"],
+        ".held_out": ["pick_frames"],
+    },
 )
-from .metrics import (
-    SegmentationMetrics,
-    confusion_matrix,
-    format_metrics_table,
-    segmentation_metrics,
-    void_predictions,
-)
-from .plots import colorize_confidence, colorize_labels, iou_bar_chart, label_colors, side_by_side, write_png
-from .protocols import (
-    CONCEPTGRAPHS_DEFAULT_IGNORE,
-    CONCEPTGRAPHS_VOXEL_SIZE,
-    HOVSG_DEFAULT_IGNORE,
-    PROTOCOLS,
-    conceptgraphs_protocol,
-    evaluate_semantic_3d,
-    hovsg_protocol,
-    label_lookup,
-    majority_vote,
-    nearest_neighbors,
-    novel_view_metrics,
-    rendered_view_metrics,
-    voxel_resample,
-)
-from .readers import GroundTruth, RunData, find_ground_truth, load_ground_truth, read_graph_json, read_run
-from .run_eval import EvalResult, build_label_mapping, evaluate_run
-from .trajectory import TrajectoryError, ate, ate_rmse, read_trajectory, umeyama_alignment
-from .views import ViewsResult, evaluate_views, pick_frames
 
 __all__ = [
     "CONCEPTGRAPHS_DEFAULT_IGNORE",

@@ -70,6 +70,13 @@ class RunFrames:
         }
 
 
+def pick_frames(num_frames: int, num_views: int) -> list[int]:
+    """``num_views`` frame indices spread evenly over ``[0, num_frames)`` (first and last included)."""
+    if num_frames <= 0 or num_views <= 0:
+        return []
+    return sorted({int(round(x)) for x in np.linspace(0, num_frames - 1, min(num_views, num_frames))})
+
+
 def _mapped_count(run_dir: Path, selection: Any, data: Any) -> tuple[int, str]:
     """How many frames of ``selection`` (the run's, opened now) the run read, from ``map.npz``; the whole
     selection without one."""
@@ -187,8 +194,6 @@ def pick_held_out(ds: Any, run: RunFrames, num_views: int) -> HeldOut:
     Raises:
         DataError: the run mapped every frame (with a valid pose) of the sequence.
     """
-    from .views import pick_frames
-
     mapped = set(run.mapped)
     unmapped = [i for i in range(len(ds)) if i not in mapped]
     usable = [i for i in unmapped if ds.has_valid_pose(i)]
@@ -238,7 +243,5 @@ def check_held_out(ds: Any, run: RunFrames, frames: Sequence[int]) -> HeldOut:
 def naming_frames(ds: Any, run: RunFrames, count: int) -> list[int]:
     """``count`` mapped frames with a valid pose, evenly spread: the renders a 2D overlap naming reads when
     the scored frames are held out (naming from them would look at the very views being scored)."""
-    from .views import pick_frames
-
     usable = [i for i in run.mapped if ds.has_valid_pose(i)]
     return [usable[j] for j in pick_frames(len(usable), count)]

@@ -81,17 +81,15 @@ from .metrics import (
     segmentation_metrics,
     void_predictions,
 )
+from .options import CONCEPTGRAPHS_VOXEL_SIZE, PROTOCOLS
 
 Protocol3D = Literal["hovsg", "conceptgraphs"]
-PROTOCOLS: tuple[str, ...] = ("hovsg", "conceptgraphs")
 
 #: HOV-SG's background classes. Its own evaluation ignores more, by data set: ``--ignore
 #: preset:hovsg-replica`` / ``preset:hovsg-scannet`` (metrics.IGNORE_PRESETS) for comparing with its tables.
 HOVSG_DEFAULT_IGNORE: tuple[str, ...] = ("wall", "floor", "ceiling")
 #: ConceptGraphs' default run ignores only its catch-all "other" class.
 CONCEPTGRAPHS_DEFAULT_IGNORE: tuple[str, ...] = ("other",)
-#: ConceptGraphs' ``downsample_voxel_size`` (metres): its object clouds are voxel-downsampled at this size.
-CONCEPTGRAPHS_VOXEL_SIZE = 0.025
 
 _CHUNK = 1 << 16
 

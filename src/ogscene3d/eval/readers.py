@@ -35,14 +35,16 @@ from __future__ import annotations
 
 import json
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..datasets.replica_semantic import class_entries
 from ..errors import DataError
-from .replica_gt import class_entries, load_replica_ground_truth, replica_semantic_files
+from .ground_truth import GroundTruth, reindex_class_ids
+from .replica_gt import load_replica_ground_truth, replica_semantic_files
 
 log = logging.getLogger(__name__)
 
@@ -61,32 +63,6 @@ class RunData:
     confidences: np.ndarray  # [N] float32 in [0, 1]
     opacities: np.ndarray | None  # [N] float32 in (0, 1) (sigmoid of the stored logit), None if absent
     graph: dict[str, Any] | None  # parsed graph.json or None
-
-
-@dataclass
-class GroundTruth:
-    """A labelled ground-truth point cloud with class names, instances and relation triplets."""
-
-    points: np.ndarray  # [M, 3] float64
-    classes: np.ndarray  # [M] int64 index into class_names, -1 = void
-    class_names: list[str]
-    instances: np.ndarray | None = None  # [M] int64 instance ids, -1 = none
-    instance_classes: dict[int, int] = field(default_factory=dict)  # instance id -> class index
-    relations: list[tuple[int, str, int]] = field(default_factory=list)
-    symmetric_relations: list[str] | None = None  # None = the evaluator's defaults
-    inverse_relations: list[tuple[str, str]] | None = None
-    class_ids: list[int] | None = None  # the dataset's own id of each class (for its 2D label maps)
-    source: str = ""
-    observed: np.ndarray | None = None  # [M] bool, seen by some frame (synthetic scenes); None = unknown
-    has_3d: bool = True  # False: per-frame class maps only (points is empty), 2D scores only
-
-    def class_index_of_ids(self, ids: Any) -> np.ndarray:
-        """Dataset class ids (e.g. a GT class image) -> indices into ``class_names``, -1 if unknown."""
-        raw = np.asarray(ids).astype(np.int64)
-        if self.class_ids is None:
-            raise DataError(f"{self.source}: the ground truth has no class-id table for 2D label maps")
-        out, _ = _reindex(raw, dict(zip(self.class_ids, self.class_names)))
-        return out
 
 
 def run_data_path(run_dir: str | Path) -> Path | None:
@@ -271,17 +247,6 @@ def read_class_table(path: str | Path) -> dict[int, str]:
                 raise DataError(f"{path}: class table entry {k!r}: {n!r} is not 'id': name") from None
         return out
     raise DataError(f"{path}: expected a list of class names or an {{id: name}} object")
-
-
-def _reindex(raw: np.ndarray, table: dict[int, str]) -> tuple[np.ndarray, list[str]]:
-    """Raw class ids -> compact indices in table order (ids sorted); unknown ids -> -1."""
-    ids = np.array(sorted(table), dtype=np.int64)
-    names = [table[int(i)] for i in ids]
-    if ids.size == 0:
-        return np.full(raw.shape, -1, np.int64), names
-    pos = np.clip(np.searchsorted(ids, raw), 0, ids.size - 1)
-    out = np.where(ids[pos] == raw, pos, -1).astype(np.int64)
-    return out, names
 
 
 @dataclass
@@ -496,7 +461,7 @@ def _load_labelled_ply(ply: Path, classes: str | Path | None) -> GroundTruth:
         )
     else:
         table = read_class_table(table_path)
-    cls, class_names = _reindex(raw, table)
+    cls, class_names = reindex_class_ids(raw, table)
     unexpected = (raw >= 0) & (cls < 0)
     if scannet:
         # ScanNet's id 0 is "unannotated", and a built-in subset (scannet20) voids the other NYU40 ids on

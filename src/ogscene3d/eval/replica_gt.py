@@ -23,18 +23,16 @@ run of such a sequence with its poses lies on it without any transform.
 
 from __future__ import annotations
 
-import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, BinaryIO
+from typing import Any, BinaryIO
 
 import numpy as np
 
+from ..datasets.replica_semantic import read_info_semantic
 from ..errors import DataError
-
-if TYPE_CHECKING:
-    from .readers import GroundTruth
+from .ground_truth import GroundTruth, reindex_class_ids
 
 log = logging.getLogger(__name__)
 
@@ -302,44 +300,6 @@ def read_face_mesh(path: str | Path) -> FaceMesh:
 # ---------------------------------------------------------------------------------- info_semantic.json
 
 
-def class_entries(entries: list, path: Path) -> dict[int, str]:
-    """Class id -> name from ``[{"id", "name"}, ...]``: Replica's ``info_semantic.json`` ``classes`` (also
-    the names of Semantic-NeRF's class maps), COCO-style category lists."""
-    out: dict[int, str] = {}
-    for n in entries:
-        try:
-            out[int(n["id"])] = str(n["name"])
-        except (KeyError, TypeError, ValueError):
-            raise DataError(f"{path}: class entry {n!r:.80} needs an integer 'id' and a 'name'") from None
-    return out
-
-
-def read_info_semantic(path: str | Path) -> tuple[dict[int, str], dict[int, int]]:
-    """(class id -> name, object id -> class id) from Replica's ``info_semantic.json``."""
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise DataError(
-            f"{path}: missing; Replica's semantic mesh needs the info_semantic.json beside it "
-            "(its object -> class table)"
-        ) from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise DataError(f"{path}: invalid JSON ({e})") from None
-    if not isinstance(data, dict) or not isinstance(data.get("classes"), list):
-        raise DataError(f"{path}: expected an object with a 'classes' list of {{'id', 'name'}}")
-    if not isinstance(data.get("objects"), list):
-        raise DataError(f"{path}: expected an 'objects' list of {{'id', 'class_id'}}")
-    classes = class_entries(data["classes"], path)
-    objects: dict[int, int] = {}
-    for o in data["objects"]:
-        try:
-            objects[int(o["id"])] = int(o["class_id"])
-        except (KeyError, TypeError, ValueError):
-            raise DataError(f"{path}: object entry {o!r:.80} needs integer 'id' and 'class_id'") from None
-    return classes, objects
-
-
 # ------------------------------------------------------------------------------------------ ground truth
 
 
@@ -349,10 +309,9 @@ def _first(ids: np.ndarray, shown: int = 8) -> str:
 
 
 def load_replica_ground_truth(ply: str | Path, info: str | Path) -> GroundTruth:
-    """A :class:`~ogscene3d.eval.readers.GroundTruth` from Replica's ``mesh_semantic.ply`` and
+    """A :class:`~ogscene3d.eval.ground_truth.GroundTruth` from Replica's ``mesh_semantic.ply`` and
     ``info_semantic.json``, built as HOV-SG builds it (module docstring): one point per face corner,
     ``instances`` = object ids, ``class_ids`` = Replica's class ids (plus 0, background)."""
-    from .readers import GroundTruth, _reindex  # (readers imports this module)
 
     ply, info = Path(ply), Path(info)
     if not info.is_file():
@@ -384,7 +343,7 @@ def load_replica_ground_truth(ply: str | Path, info: str | Path) -> GroundTruth:
             _first(uniq[~known]),
             info.name,
         )
-    uniq_cls, class_names = _reindex(raw, class_table)
+    uniq_cls, class_names = reindex_class_ids(raw, class_table)
     if (uniq_cls < 0).any():
         bad = uniq_cls[inverse] < 0
         log.warning(

@@ -25,9 +25,8 @@ from ..errors import DataError
 from .graph_metrics import match_nodes_by_overlap, relation_recall
 from .label_mapping import TextEmbedder, majority_overlap_mapping, text_label_mapping
 from .metrics import SegmentationMetrics, warn_unknown_ignore
+from .options import EvalOptions
 from .protocols import (
-    CONCEPTGRAPHS_VOXEL_SIZE,
-    PROTOCOLS,
     evaluate_semantic_3d,
     label_lookup,
     nearest_neighbors,
@@ -159,67 +158,55 @@ def build_label_mapping(
 def evaluate_run(
     run_dir: str | Path,
     gt_path: str | Path,
-    protocols: Sequence[str] = ("hovsg",),
-    ignore: Iterable[str] | None = None,
-    mapping: MappingMethod = "auto",
-    classes: str | Path | None = None,
-    k: int = 5,
-    min_opacity: float = 0.0,
-    assoc_radius: float | None = 0.1,
-    min_node_iou: float = 0.1,
+    options: EvalOptions | None = None,
+    *,
     embedder: TextEmbedder | None = None,
-    num_views: int = 0,
-    view_frames: Sequence[int] | None = None,
     out_dir: str | Path | None = None,
     device: str | torch.device = "cpu",
-    gt_points: Literal["observed", "all"] = "observed",
-    cg_voxel_size: float = CONCEPTGRAPHS_VOXEL_SIZE,
-    mapping_frames: Sequence[int] | None = None,
-    held_out: bool = False,
+    **settings: Any,
 ) -> EvalResult:
     """Evaluate ``run_dir`` against ``gt_path`` (see the module docstring).
 
     Args:
-        protocols: any of "hovsg", "conceptgraphs".
-        ignore: class names left out of the means; None = each protocol's default.
-        mapping: "auto", "text" or "overlap" (see :func:`build_label_mapping`).
-        classes: class-name table for a bare labelled PLY ground truth or a sequence's class maps.
-        k: neighbours of the HOV-SG vote.
-        min_opacity: Gaussians below this opacity are left out (floaters); 0 keeps all. Unlabelled
-            Gaussians stay: misses under conceptgraphs, no vote under hovsg (``unlabelled_fraction``).
-        assoc_radius: metres; a Gaussian farther than this from every GT point takes no part in the
-            overlap label mapping and node matching (None = no limit). The protocols themselves use
-            no radius, as in the original code.
-        min_node_iou: IoU a node needs to match a GT instance for relation recall.
-        num_views, view_frames: render the map at that many evenly spread dataset frames (or at the
-            given frame indices) of ``gt_path`` when it is a sequence with ground-truth class maps
-            (synthetic, label-fusion, ScanNet with label-filt/), and report 2D semantic metrics
-            ("semantic_2d"); 0 / None = no rendering, which a ground truth without 3D points refuses.
+        options: how to score (:class:`~ogscene3d.eval.options.EvalOptions`, its defaults when None);
+            ``settings`` change single fields by name, e.g. ``protocols=["hovsg"], ignore=[],
+            mapping="overlap"`` (an unknown name is a TypeError). The fields:
+            ``protocols`` (any of "hovsg", "conceptgraphs"); ``ignore`` (class names left out of the means;
+            None = each protocol's default); ``mapping`` ("auto", "text" or "overlap", see
+            :func:`build_label_mapping`); ``classes`` (class-name table for a bare labelled PLY ground truth
+            or a sequence's class maps); ``k`` (neighbours of the HOV-SG vote); ``min_opacity`` (Gaussians
+            below it are left out as floaters; unlabelled Gaussians stay: misses under conceptgraphs, no vote
+            under hovsg, ``unlabelled_fraction``); ``assoc_radius`` (metres; a Gaussian farther than this
+            from every GT point takes no part in the overlap label mapping and node matching, None = no
+            limit; the protocols themselves use no radius, as in the original code); ``min_node_iou`` (IoU a
+            node needs to match a GT instance for relation recall); ``num_views`` / ``view_frames`` (render
+            the map at that many evenly spread dataset frames, or at the given frame indices, of
+            ``gt_path`` when it is a sequence with ground-truth class maps, and report 2D semantic metrics
+            "semantic_2d"; 0 / None = no rendering, which a ground truth without 3D points refuses);
+            ``gt_points`` ("observed" scores only the GT points that some frame saw, when the ground truth
+            says which: synthetic scenes' ``observed`` in gt/points.ply; "all" scores every point, as
+            HOV-SG does on its meshes); ``cg_voxel_size`` (metres; conceptgraphs resamples the Gaussians to
+            one point per scene label and voxel of this size, 0 = every Gaussian); ``mapping_frames``
+            (without 3D ground truth, the frames whose renders the overlap naming reads; None = the scored
+            frames, or with ``held_out`` as many frames the run mapped); ``held_out`` (score frames the run
+            did not map, :mod:`~ogscene3d.eval.held_out`: ``num_views`` spread evenly over them, or
+            ``view_frames``, refused if the run mapped one); ``plots`` (false: no pictures).
+        embedder: text embeddings for the text label mapping (None: words only).
         out_dir: where the side-by-side view PNGs go (None = no pictures).
         device: rendering device.
-        gt_points: "observed" scores only the GT points that some frame of the sequence saw, when the
-            ground truth says which (synthetic scenes: ``observed`` in gt/points.ply; hovsg scores no
-            unobserved point, conceptgraphs skips the Gaussians nearest to one); "all" scores every
-            point, as HOV-SG does on its meshes.
-        cg_voxel_size: metres; the conceptgraphs protocol resamples the Gaussians to one point per
-            scene label and voxel of this size, like ConceptGraphs' object clouds (0 = every Gaussian).
-        mapping_frames: without 3D ground truth, the frames whose renders the overlap naming reads
-            (None = the scored frames, or with ``held_out`` as many frames the run mapped); both lists are
-            in the report.
-        held_out: score frames the run did not map (novel views; :mod:`~ogscene3d.eval.held_out`):
-            ``num_views`` spread evenly over them, or ``view_frames``, refused if the run mapped one.
     """
-    if gt_points not in ("observed", "all"):
-        raise ValueError(f"gt_points must be 'observed' or 'all', got {gt_points!r}")
+    opts = (options or EvalOptions()).replace(**settings)
+    opts.check()
+    protocols, ignore, mapping, classes, k = opts.protocols, opts.ignore, opts.mapping, opts.classes, opts.k
+    min_opacity, assoc_radius, min_node_iou = opts.min_opacity, opts.assoc_radius, opts.min_node_iou
+    num_views, view_frames, held_out = opts.num_views, opts.view_frames, opts.held_out
+    gt_points, cg_voxel_size, mapping_frames = opts.gt_points, opts.cg_voxel_size, opts.mapping_frames
+    if not opts.plots:
+        out_dir = None
     device = resolve_device(device)
-    for p in protocols:
-        if p not in PROTOCOLS:
-            raise ValueError(f"unknown protocol {p!r}; expected one of {PROTOCOLS}")
     run = read_run(run_dir)
     gt = load_ground_truth(gt_path, classes)
     want_views = num_views > 0 or bool(view_frames)
-    if held_out and not want_views:
-        raise ValueError("held-out views need a number of views (--views N) or frames (--view-frames)")
     if not gt.has_3d and not want_views:
         raise DataError(
             f"{gt.source}: no 3D ground truth, only per-frame class maps: render views to score (--views N)"

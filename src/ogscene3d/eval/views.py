@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
-from .held_out import HeldOut, check_held_out, naming_frames, pick_held_out, run_frames
+from .held_out import HeldOut, check_held_out, naming_frames, pick_frames, pick_held_out, run_frames
 from .label_mapping import majority_overlap_mapping
 from .metrics import SegmentationMetrics
 from .plots import side_by_side, write_png
@@ -61,13 +61,6 @@ class RenderedView:
     weights: np.ndarray  # [H, W] float32 rendered label confidence
     gt: np.ndarray  # [H, W] int64 GT class indices, -1 = void
     rgb: np.ndarray  # [H, W, 3] uint8
-
-
-def pick_frames(num_frames: int, num_views: int) -> list[int]:
-    """``num_views`` frame indices spread evenly over ``[0, num_frames)`` (first and last included)."""
-    if num_frames <= 0 or num_views <= 0:
-        return []
-    return sorted({int(round(x)) for x in np.linspace(0, num_frames - 1, min(num_views, num_frames))})
 
 
 def spread_frames(ds: Any, num_views: int) -> tuple[list[int], int]:

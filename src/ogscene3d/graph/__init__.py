@@ -2,33 +2,55 @@
 
 The mapper uses :class:`SceneGraph` only (``observe`` every keyframe, ``update`` when ``is_due``,
 ``finalize`` at the end); captioners, relation predictors and node-confidence scorers are pluggable
-through the :class:`Captioner`, :class:`RelationPredictor` and :class:`NodeConfidence` protocols.
-"""
+through the :class:`Captioner`, :class:`RelationPredictor` and :class:`NodeConfidence` protocols."""
 
-from .captioner import (
-    CAPTION_PROMPT,
-    TAG_PROMPT,
-    Captioner,
-    GroundTruthCaptioner,
-    HeuristicCaptioner,
-    OpenAICaptioner,
-    build_captioner,
+from __future__ import annotations
+
+from .._lazy import lazy_exports
+
+__getattr__, __dir__ = lazy_exports(
+    globals(),
+    {
+        ".captioner": [
+            "CAPTION_PROMPT",
+            "TAG_PROMPT",
+            "Captioner",
+            "GroundTruthCaptioner",
+            "HeuristicCaptioner",
+            "OpenAICaptioner",
+            "build_captioner",
+        ],
+        ".confidence": [
+            "ClipConfidence",
+            "ClipTokenizer",
+            "MeanConfidence",
+            "NodeConfidence",
+            "build_confidence",
+        ],
+        ".geometry": ["directed_ratios", "proximate_points", "proximity_ratios"],
+        ".openai_client": ["ChatClient", "EndpointUnreachable"],
+        ".relations": [
+            "RELATIONS",
+            "GeometricRelations",
+            "LLMRelations",
+            "Relation",
+            "RelationPredictor",
+            "build_relations",
+            "edge_prompt",
+            "normalize_relation",
+        ],
+        ".scenegraph": ["SceneGraph"],
+        ".types": [
+            "CaptionRequest",
+            "Crop",
+            "Description",
+            "ObservationSet",
+            "SceneContext",
+            "SceneEdge",
+            "SceneNode",
+        ],
+    },
 )
-from .confidence import ClipConfidence, ClipTokenizer, MeanConfidence, NodeConfidence, build_confidence
-from .geometry import directed_ratios, proximate_points, proximity_ratios
-from .openai_client import ChatClient, EndpointUnreachable
-from .relations import (
-    RELATIONS,
-    GeometricRelations,
-    LLMRelations,
-    Relation,
-    RelationPredictor,
-    build_relations,
-    edge_prompt,
-    normalize_relation,
-)
-from .scenegraph import SceneGraph
-from .types import CaptionRequest, Crop, Description, ObservationSet, SceneContext, SceneEdge, SceneNode
 
 __all__ = [
     "CAPTION_PROMPT",

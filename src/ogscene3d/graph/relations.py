@@ -31,7 +31,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from ..config import RelationsConfig
+from ..config import RelationsConfig, check_section
 from .geometry import Shape, unit_up
 from .openai_client import ChatClient, extract_json
 from .types import SceneNode
@@ -239,13 +239,7 @@ class GeometricRelations:
     def __init__(self, config: RelationsConfig | None = None, up: Sequence[float] = (0.0, -1.0, 0.0)) -> None:
         self.config = config or RelationsConfig()
         self.up = unit_up(up)
-        c = self.config
-        for k in ("contact_tol", "cell_size", "under_gap"):
-            if not getattr(c, k) > 0:
-                raise ValueError(f"graph.relations.{k} must be positive, got {getattr(c, k)}")
-        for k in ("overlap_ratio", "inside_ratio"):
-            if not 0 < getattr(c, k) <= 1:
-                raise ValueError(f"graph.relations.{k} must be in (0, 1], got {getattr(c, k)}")
+        check_section(self.config, "graph.relations")  # the rules on the fields (a config built in Python)
 
     def predict(self, pairs: Sequence[tuple[SceneNode, SceneNode]]) -> list[Relation]:
         return [self.predict_pair(a, b) for a, b in pairs]

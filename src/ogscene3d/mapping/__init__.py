@@ -1,12 +1,21 @@
 """Semantic mapping core (paper Sec. III-A to III-C): keyframes, Gaussian initialization, local 3D
 optimization, geometry/appearance optimization, global refinement, long-term optimization, the Mapper."""
 
-from .keyframes import KeyframeSelector
-from .local import associate_segments, eq5_update, rescale_sam_scores, update_confidences
-from .longterm import MemoryBuffer, eq16_update
-from .mapper import ABLATIONS, Mapper
-from .neighbors import any_within, count_within, knn
-from .refine import connected_clusters, global_refinement
+from __future__ import annotations
+
+from .._lazy import lazy_exports
+
+__getattr__, __dir__ = lazy_exports(
+    globals(),
+    {
+        ".keyframes": ["KeyframeSelector"],
+        ".local": ["associate_segments", "eq5_update", "rescale_sam_scores", "update_confidences"],
+        ".longterm": ["MemoryBuffer", "eq16_update"],
+        ".mapper": ["ABLATIONS", "Mapper"],
+        ".neighbors": ["any_within", "count_within", "knn"],
+        ".refine": ["connected_clusters", "global_refinement"],
+    },
+)
 
 __all__ = [
     "ABLATIONS",

@@ -43,7 +43,7 @@ import numpy as np
 import torch
 
 from ..atomic import atomic_write_text
-from ..config import Config, check_config, save_config
+from ..config import Config, check_config, choices, save_config
 from ..device import resolve_device
 from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame, implausible_median_depth
@@ -67,7 +67,7 @@ from .refine import global_refinement
 
 log = logging.getLogger(__name__)
 
-ABLATIONS = ("naive", "local", "local+global", "full")
+ABLATIONS = choices("mapping.ablation")
 
 
 def _segment_ids(ids, frame: Frame, source: str) -> np.ndarray:

@@ -27,10 +27,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config import choices
 from ..errors import ConfigError, DataError
 from .keyframes import pose_delta
 
-ACTIONS = ("warn", "skip", "error")
+ACTIONS = choices("mapping.on_pose_jump")
 
 
 class PoseJumpError(DataError):

@@ -11,20 +11,8 @@ from typing import Any
 
 import yaml
 
-from ..config import add_override_argument, load_config
-from ..device import resolve_device
+from ..config import add_override_argument, add_poses_argument, load_config
 from ..errors import DataError
-from ..tracking import add_poses_argument
-from .pose_jump import PoseJumpError
-from .source import (
-    check_same_source,
-    dataset_source,
-    matching_pixel_centers,
-    record_data,
-    remove_run_temps,
-    resumed_run_id,
-    start_run_dir,
-)
 
 log = logging.getLogger(__name__)
 
@@ -63,8 +51,20 @@ def add_parser(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # heavy imports here, not at module level: `ogscene3d --help` imports this module
     from ..datasets import configured_scene, open_dataset
+    from ..device import resolve_device
     from .mapper import Mapper
+    from .pose_jump import PoseJumpError
+    from .source import (
+        check_same_source,
+        dataset_source,
+        matching_pixel_centers,
+        record_data,
+        remove_run_temps,
+        resumed_run_id,
+        start_run_dir,
+    )
 
     overrides = list(args.overrides)
     if args.ablation:

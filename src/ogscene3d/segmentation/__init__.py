@@ -1,12 +1,21 @@
 """Open-set 2D segmentation: precomputed segments, SAM/detector ONNX front-ends, fusion, fallbacks."""
 
-from .base import Segmentation, Segmenter
-from .classical import ClassicalSegmenter
-from .detector_onnx import DetectorOnnx
-from .factory import make_segmenter
-from .fusion import SamDetectorSegmenter, fuse_segmentations
-from .precomputed import read_segmentation, read_segments, write_segments
-from .sam_onnx import SamOnnx
+from __future__ import annotations
+
+from .._lazy import lazy_exports
+
+__getattr__, __dir__ = lazy_exports(
+    globals(),
+    {
+        ".base": ["Segmentation", "Segmenter"],
+        ".classical": ["ClassicalSegmenter"],
+        ".detector_onnx": ["DetectorOnnx"],
+        ".factory": ["make_segmenter"],
+        ".fusion": ["SamDetectorSegmenter", "fuse_segmentations"],
+        ".precomputed": ["read_segmentation", "read_segments", "write_segments"],
+        ".sam_onnx": ["SamOnnx"],
+    },
+)
 
 __all__ = [
     "ClassicalSegmenter",

@@ -9,10 +9,11 @@ import logging
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args
 
 import numpy as np
 
+from ..config import ExecutionProvider
 from ..errors import ConfigError, ModelError
 
 log = logging.getLogger(__name__)
@@ -57,7 +58,7 @@ def choose_providers(provider: str = "auto") -> list[str]:
     import onnxruntime as ort
 
     provider = (provider or "auto").lower()
-    if provider not in ("auto", "cpu", "cuda"):
+    if provider not in get_args(ExecutionProvider):
         raise ConfigError(f"segmentation.execution_provider must be auto, cpu or cuda, got {provider!r}")
     available = ort.get_available_providers()
     has_cuda = "CUDAExecutionProvider" in available

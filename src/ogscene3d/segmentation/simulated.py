@@ -24,7 +24,6 @@ Level "none" returns the ground truth, permuted, with score 1.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -265,19 +264,3 @@ class SimulatedSegmenter:
     def segment_frame(self, frame) -> Segmentation:
         """Segment an :class:`~ogscene3d.frame.Frame` that carries ``gt_instances``."""
         return self(frame.rgb, frame.depth, gt_instances=frame.gt_instances, frame_index=frame.index)
-
-
-def simulate_scene_segments(
-    scene_dir: str | Path, out_dir: str | Path, noise: str = "default", seed: int = 0
-) -> Path:
-    """Write simulated segments for every frame of a synthetic scene (e.g. another noise level)."""
-    from ..datasets import open_dataset
-    from .precomputed import write_segments
-
-    ds = open_dataset(scene_dir, kind="synthetic")
-    seg = SimulatedSegmenter(noise, seed)
-    out = Path(out_dir)
-    for frame in ds:
-        s = seg(frame.rgb, frame.depth, gt_instances=frame.gt_instances, frame_index=frame.index)
-        write_segments(out, frame.name, s.ids, s.scores)
-    return out

@@ -5,12 +5,15 @@ from __future__ import annotations
 import argparse
 import textwrap
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..cli_types import positive_int
 from ..config import add_override_argument, load_config
 from ..errors import DataError
-from .scenegraph import SceneGraph
-from .types import SceneNode
+
+if TYPE_CHECKING:
+    from ..graph.scenegraph import SceneGraph
+    from ..graph.types import SceneNode
 
 
 def _query_text(text: str) -> str:
@@ -70,6 +73,8 @@ def node_line(n: SceneNode, caption_width: int = 60) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..graph.scenegraph import SceneGraph
+
     path = Path(args.path)
     if path.is_dir():
         path = path / "graph.json"

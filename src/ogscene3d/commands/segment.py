@@ -13,12 +13,14 @@ import argparse
 import logging
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..cli_types import positive_int
 from ..config import add_override_argument, load_config
 from ..errors import ConfigError, DataError
-from .base import Segmentation
-from .precomputed import segments_paths, write_segments
+
+if TYPE_CHECKING:
+    from ..segmentation.base import Segmentation
 
 log = logging.getLogger(__name__)
 
@@ -80,6 +82,8 @@ def parse_classes(text: str) -> list[str]:
 
 def write_frame_segments(out: Path, stem: str, seg: Segmentation) -> Path:
     """Write one frame's segments: the JSON (scores, names) first, the PNG (the 'done' marker) last."""
+    from ..segmentation.precomputed import write_segments
+
     return write_segments(out, stem, seg.ids, seg.scores, seg.names)
 
 
@@ -87,7 +91,8 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from ..datasets import open_dataset
-    from .factory import make_segmenter
+    from ..segmentation.factory import make_segmenter
+    from ..segmentation.precomputed import segments_paths
 
     overrides = list(args.overrides)
     cfg = load_config(args.config, overrides)

@@ -40,7 +40,7 @@ def _reusable(out: str | Path, params: dict, overwrite: bool) -> bool:
     """Whether ``make_synthetic_scene`` will reuse ``out`` as is: it holds a scene made with the same
     arguments (its scene.json) and --force was not given. Decided before the call, so that the final
     line can say "reused" instead of "written"."""
-    from .synthetic import _scene_params
+    from ..datasets.synthetic import _scene_params
 
     marker = Path(out) / "scene.json"
     if overwrite or not marker.is_file():
@@ -52,7 +52,7 @@ def _reusable(out: str | Path, params: dict, overwrite: bool) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .synthetic import make_synthetic_scene
+    from ..datasets.synthetic import make_synthetic_scene
 
     cfg = load_config(args.config, args.overrides).synthetic
     width, height = args.size if args.size is not None else (cfg.width, cfg.height)

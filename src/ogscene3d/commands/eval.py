@@ -8,16 +8,9 @@ import math
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from ..atomic import atomic_write_text
-from ..errors import ConfigError, DataError, OGSceneError
-from .metrics import format_metrics_table
-from .plots import iou_bar_chart, write_png
-from .protocols import CONCEPTGRAPHS_VOXEL_SIZE, PROTOCOLS
-from .readers import find_ground_truth
-from .run_eval import evaluate_run
-from .trajectory import ate, dataset_trajectory, read_trajectory
+from ..errors import DataError, OGSceneError
+from ..eval.options import add_eval_arguments, eval_options_from_args
 
 
 def add_parser(subparsers: Any) -> None:
@@ -44,62 +37,7 @@ def add_parser(subparsers: Any) -> None:
         "(or its habitat/mesh_semantic.ply) or a sequence with per-frame class maps (default: the scene "
         "the run was made from, RUN_DIR/scene or config.yaml's data.path, when it holds one of these)",
     )
-    p.add_argument(
-        "--protocol",
-        default="hovsg",
-        choices=[*PROTOCOLS, "both"],
-        help="hovsg: k-NN vote onto GT points, counted on GT points; conceptgraphs: nearest GT label per "
-        "predicted point, counted on predicted points (default: hovsg)",
-    )
-    p.add_argument(
-        "--ignore",
-        default=None,
-        help="comma-separated class names left out of the means (default: wall,floor,ceiling for hovsg, "
-        "'other' for conceptgraphs; '' = none); names matching no class are warned about. "
-        "preset:hovsg-replica / preset:hovsg-scannet: the lists HOV-SG's own evaluation ignores, to compare "
-        "with its tables",
-    )
-    p.add_argument(
-        "--mapping",
-        default="auto",
-        choices=["auto", "text", "overlap"],
-        help="naming of scene labels: text (graph node tags vs class names), overlap (majority overlap with "
-        "GT instances: oracle), auto (text when tags match, else overlap)",
-    )
-    p.add_argument(
-        "--classes",
-        type=Path,
-        default=None,
-        help="class-name JSON (list or {id: name}) for a bare labelled PLY or a sequence's per-frame class "
-        "ids (label-fusion; default classes.json beside them; ScanNet's NYU40 names are built in); "
-        "'scannet20': ScanNet's 20 benchmark classes (the other NYU40 ids void), as HOV-SG scores ScanNet; "
-        "'nyu40': all 40",
-    )
-    p.add_argument("--k", type=int, default=5, help="neighbours of the HOV-SG majority vote (default 5)")
-    p.add_argument(
-        "--cg-voxel-size",
-        type=float,
-        default=CONCEPTGRAPHS_VOXEL_SIZE,
-        help="metres; conceptgraphs resamples the Gaussians to one point per scene label and voxel, like "
-        f"ConceptGraphs' voxel-downsampled object clouds (default {CONCEPTGRAPHS_VOXEL_SIZE:g}, its "
-        "downsample_voxel_size; 0 = every Gaussian counts)",
-    )
-    p.add_argument("--min-opacity", type=float, default=0.0, help="drop Gaussians below this opacity")
-    p.add_argument(
-        "--assoc-radius",
-        type=float,
-        default=0.1,
-        help="metres; Gaussians farther from the GT take no part in overlap mapping and node matching "
-        "(default 0.1; 0 = no limit)",
-    )
-    p.add_argument(
-        "--gt-points",
-        default="observed",
-        choices=["observed", "all"],
-        help="score only GT points some frame saw, where the GT says so (synthetic scenes; default), "
-        "or all of them",
-    )
-    p.add_argument("--min-node-iou", type=float, default=0.1, help="IoU for a node to match a GT instance")
+    add_eval_arguments(p, defaults={"num_views": 3})
     p.add_argument(
         "--traj",
         nargs=2,
@@ -111,42 +49,11 @@ def add_parser(subparsers: Any) -> None:
         "RUN_DIR/traj.txt DATA after a run with --poses odometry); without semantic ground truth, the ATE "
         "alone is reported",
     )
-    p.add_argument(
-        "--views",
-        type=int,
-        default=3,
-        help="render the map at this many evenly spread frames of a GT sequence whose frames carry class "
-        "maps (synthetic, label-fusion, ScanNet label-filt/): 2D metrics and RGB | labels | GT | confidence "
-        "PNGs (default 3; 0 = none; --no-plots keeps the metrics only). The frames are spread over the whole "
-        "sequence, mostly frames the run mapped; --held-out picks frames it did not map",
-    )
-    p.add_argument(
-        "--view-frames",
-        default=None,
-        help="comma-separated frame indices to render instead (positions in the whole sequence: the run's "
-        "data.start/stride/max_frames do not apply)",
-    )
-    p.add_argument(
-        "--held-out",
-        action="store_true",
-        help="score held-out novel views: the --views frames are spread over the frames the run did NOT "
-        "map (its config.yaml's data.start/stride/max_frames, and how far map.npz says it got), those "
-        "between its first and last mapped frames first (e.g. every odd frame of a run at --set "
-        "data.stride=2); frames outside that range only when no other is left (extrapolation, noted). "
-        "--view-frames that the run mapped are refused. A run that mapped every frame has none",
-    )
-    p.add_argument(
-        "--mapping-frames",
-        default=None,
-        help="without 3D GT: comma-separated frame indices whose renders the overlap mapping reads "
-        "(default: the scored frames; with --held-out as many evenly spread frames the run mapped)",
-    )
     p.add_argument("--device", default="cpu", help="rendering device for --views (cpu, cuda, cuda:0)")
     p.add_argument("--align", default="se3", choices=["se3", "sim3", "none"], help="trajectory alignment")
     p.add_argument(
         "--out", type=Path, default=None, help="where to write metrics.json and PNGs (default RUN_DIR)"
     )
-    p.add_argument("--no-plots", action="store_true", help="write no PNG (bar chart, views)")
     p.set_defaults(func=run)
 
 
@@ -163,15 +70,6 @@ def _json_safe(x: Any) -> Any:
     if isinstance(x, float) and not math.isfinite(x):
         return None
     return x
-
-
-def _int_list(text: str | None, option: str = "--view-frames") -> list[int] | None:
-    if text is None:
-        return None
-    try:
-        return [int(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise ConfigError(f"{option}: expected comma-separated integers, got {text!r}") from None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -229,14 +127,12 @@ def _gaussians_line(report: dict[str, Any]) -> str:
 
 
 def _run(args: argparse.Namespace) -> int:
-    protocols = list(PROTOCOLS) if args.protocol == "both" else [args.protocol]
-    ignore = None if args.ignore is None else [s.strip() for s in args.ignore.split(",") if s.strip()]
-    if args.k < 1:
-        raise ConfigError(f"--k must be >= 1, got {args.k}")
-    if not (math.isfinite(args.cg_voxel_size) and args.cg_voxel_size >= 0):
-        raise ConfigError(f"--cg-voxel-size must be >= 0 metres (0 = none), got {args.cg_voxel_size}")
-    if args.held_out and args.views <= 0 and not args.view_frames:
-        raise ConfigError("--held-out needs views to score: --views N (N > 0) or --view-frames")
+    from ..eval.metrics import format_metrics_table
+    from ..eval.plots import iou_bar_chart, write_png
+    from ..eval.readers import find_ground_truth
+    from ..eval.run_eval import evaluate_run
+
+    options = eval_options_from_args(args)
     if not args.run_dir.is_dir():
         raise DataError(f"{args.run_dir}: no such run directory (RUN_DIR is the --out of ogscene3d run)")
     # Read the trajectories first so that a bad file fails before the (longer) map evaluation.
@@ -255,22 +151,9 @@ def _run(args: argparse.Namespace) -> int:
     result = evaluate_run(
         args.run_dir,
         gt_path,
-        protocols=protocols,
-        ignore=ignore,
-        mapping=args.mapping,
-        classes=args.classes,
-        k=args.k,
-        min_opacity=args.min_opacity,
-        assoc_radius=args.assoc_radius if args.assoc_radius > 0 else None,
-        min_node_iou=args.min_node_iou,
-        num_views=args.views,
-        view_frames=_int_list(args.view_frames),
-        out_dir=None if args.no_plots else (args.out or args.run_dir),
+        options,
+        out_dir=None if not options.plots else (args.out or args.run_dir),
         device=args.device,
-        gt_points=args.gt_points,
-        cg_voxel_size=args.cg_voxel_size,
-        mapping_frames=_int_list(args.mapping_frames, "--mapping-frames"),
-        held_out=args.held_out,
     )
     report = result.report
     if traj is not None:
@@ -289,7 +172,7 @@ def _run(args: argparse.Namespace) -> int:
     for name, metrics in result.semantic.items():
         print()
         print(format_metrics_table(metrics))
-        if not args.no_plots:
+        if options.plots:
             chart = iou_bar_chart(
                 metrics.class_names,
                 metrics.iou,
@@ -336,9 +219,13 @@ def _finish(report: dict[str, Any], out: Path) -> None:
     print(f"\nwrote {path}")
 
 
-def _trajectories(paths: list[Path], run_dir: Path) -> tuple[np.ndarray, np.ndarray, int]:
+def _trajectories(paths: list[Path], run_dir: Path) -> tuple[Any, Any, int]:
     """(estimated, ground truth, poses left out) for ``--traj EST GT``: GT a file, or the dataset folder
     the run read, whose frames without a valid pose are left out of both."""
+    import numpy as np
+
+    from ..eval.trajectory import dataset_trajectory, read_trajectory
+
     est = read_trajectory(paths[0])
     if not paths[1].is_dir():
         return est, read_trajectory(paths[1]), 0
@@ -357,7 +244,9 @@ def _trajectories(paths: list[Path], run_dir: Path) -> tuple[np.ndarray, np.ndar
     return est[keep], np.stack([gt[i] for i in keep]), len(gt) - len(keep)
 
 
-def _ate(traj: tuple[np.ndarray, np.ndarray, int], align: str) -> dict[str, Any]:
+def _ate(traj: tuple[Any, Any, int], align: str) -> dict[str, Any]:
+    from ..eval.trajectory import ate
+
     t = ate(traj[0], traj[1], align).to_dict()  # type: ignore[arg-type]
     if traj[2]:
         t["num_left_out"] = traj[2]
@@ -369,7 +258,7 @@ def _left_out(t: dict[str, Any]) -> str:
     return f"; {n} frames without a valid dataset pose left out" if n else ""
 
 
-def _trajectory_only(args: argparse.Namespace, traj: tuple[np.ndarray, np.ndarray, int]) -> int:
+def _trajectory_only(args: argparse.Namespace, traj: tuple[Any, Any, int]) -> int:
     """``--traj`` for a run with no semantic ground truth (e.g. a 7-Scenes run under odometry)."""
     report: dict[str, Any] = {
         "run_dir": str(args.run_dir),

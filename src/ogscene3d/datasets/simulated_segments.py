@@ -1,0 +1,24 @@
+"""Simulated SAM segments for a whole synthetic scene (e.g. at another noise level than the one it was
+made with), in the precomputed-segments format. Here, not in :mod:`ogscene3d.segmentation.simulated`: it
+reads a dataset, and datasets build on segmentation, not the other way round."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def simulate_scene_segments(
+    scene_dir: str | Path, out_dir: str | Path, noise: str = "default", seed: int = 0
+) -> Path:
+    """Write simulated segments for every frame of a synthetic scene (e.g. another noise level)."""
+    from ..segmentation.precomputed import write_segments
+    from ..segmentation.simulated import SimulatedSegmenter
+    from .loader import open_dataset
+
+    ds = open_dataset(scene_dir, kind="synthetic")
+    seg = SimulatedSegmenter(noise, seed)
+    out = Path(out_dir)
+    for frame in ds:
+        s = seg(frame.rgb, frame.depth, gt_instances=frame.gt_instances, frame_index=frame.index)
+        write_segments(out, frame.name, s.ids, s.scores)
+    return out
