@@ -270,6 +270,37 @@ def test_json_roundtrip_networkx_graphml_and_query(tmp_path):
     assert nx.read_graphml(gml).number_of_nodes() == 3
 
 
+def test_load_accepts_a_run_directory_and_nodes_have_labels(tmp_path):
+    """``SceneGraph.load`` takes the run directory the CLI takes; nodes carry graph.json's ``label``."""
+    g = SceneGraph(GraphConfig(), captioner=HeuristicCaptioner(), node_confidence=MeanConfidence())
+    g.update(11, *blob_map([0, 3]))
+    g.save(tmp_path / "graph.json")
+    h = SceneGraph.load(tmp_path)
+    assert sorted(h.nodes) == [0, 3]
+    doc = json.loads((tmp_path / "graph.json").read_text())
+    assert [n.label for n in h.nodes.values()] == [d["label"] for d in doc["nodes"]] == [0, 3]
+    (tmp_path / "unfinished").mkdir()
+    with pytest.raises(DataError, match="has no graph.json"):
+        SceneGraph.load(tmp_path / "unfinished")
+
+
+def test_graphml_has_the_node_boxes(tmp_path):
+    """GraphML keeps each node's axis-aligned and oriented box, not only its centre."""
+    import networkx as nx
+
+    g = SceneGraph(GraphConfig(), captioner=HeuristicCaptioner(), node_confidence=MeanConfidence())
+    g.update(11, *blob_map([0, 1]))
+    g.save_graphml(tmp_path / "g.graphml")
+    G = nx.read_graphml(tmp_path / "g.graphml", node_type=int)
+    for i, n in g.nodes.items():
+        d = G.nodes[i]
+        assert d["label"] == i
+        assert np.allclose([d[f"bbox_min_{a}"] for a in "xyz"], n.bbox_min)
+        assert np.allclose([d[f"bbox_max_{a}"] for a in "xyz"], n.bbox_max)
+        assert np.allclose([d[f"obb_extent_{a}"] for a in "xyz"], n.obb_extent)
+        assert np.allclose(np.reshape(json.loads(d["obb_axes"]), (3, 3)), n.obb_axes, atol=1e-6)
+
+
 def test_state_resumes_captions_and_schedule():
     """A graph restored from ``state()`` (through JSON, as in a checkpoint) keeps the captions and the update
     schedule: the next update is the one the original would make, and captions only what it would."""

@@ -657,9 +657,14 @@ class SceneGraph:
 
     @classmethod
     def load(cls, path: str | Path, config: GraphConfig | None = None) -> SceneGraph:
-        """Read a graph.json (for queries and export). Node point subsamples and observations are not stored
-        in the file, so geometric predicates on a loaded graph use node centres only."""
+        """Read a graph.json, or the one in a run directory (for queries and export). Node point subsamples
+        and observations are not stored in the file, so geometric predicates on a loaded graph use node
+        centres only."""
         p = Path(path)
+        if p.is_dir():
+            if not (p / "graph.json").is_file():
+                raise DataError(f"run directory {str(p)!r} has no graph.json (did the run finish?)")
+            p = p / "graph.json"
         if not p.is_file():
             raise DataError(f"scene graph file {str(p)!r} does not exist")
         try:
@@ -772,9 +777,12 @@ class SceneGraph:
         self._initialized = True
 
     def to_networkx(self):
-        """A ``networkx.DiGraph``: node attributes caption, tag, confidence, center_x/y/z, num_gaussians,
-        first_seen, last_updated, caption_source; edge attributes relation, score, predictor.
-        networkx is optional (``pip install networkx``)."""
+        """A ``networkx.DiGraph``: node attributes label, caption, tag, confidence, center_x/y/z, the
+        axis-aligned box bbox_min_x/y/z and bbox_max_x/y/z, the oriented box obb_center_x/y/z,
+        obb_extent_x/y/z (full side lengths) and obb_axes (its 3x3 rows, 9 numbers, as a JSON list),
+        num_gaussians, first_seen, last_updated, caption_source; edge attributes relation, score,
+        predictor. GraphML holds scalars only, hence one attribute per coordinate. networkx is optional
+        (``pip install networkx``)."""
         try:
             import networkx as nx
         except ImportError:
@@ -785,14 +793,19 @@ class SceneGraph:
         with self._lock:
             for i in sorted(self.nodes):
                 n = self.nodes[i]
+                xyz = {
+                    f"{name}_{axis}": float(getattr(n, name)[k])
+                    for name in ("center", "bbox_min", "bbox_max", "obb_center", "obb_extent")
+                    for k, axis in enumerate("xyz")
+                }
                 G.add_node(
                     int(i),
+                    label=int(n.label),
                     caption=n.caption,
                     tag=n.tag,
                     confidence=float(n.confidence),
-                    center_x=float(n.center[0]),
-                    center_y=float(n.center[1]),
-                    center_z=float(n.center[2]),
+                    **xyz,
+                    obb_axes=json.dumps([round(float(v), 6) for v in np.ravel(n.obb_axes)]),
                     num_gaussians=int(n.num_gaussians),
                     first_seen=int(n.first_seen),
                     last_updated=int(n.last_updated),

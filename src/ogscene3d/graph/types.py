@@ -165,6 +165,12 @@ class SceneNode:
         g = node_geometry(node_id, points, colors, confidences, max_points, voxel)
         return cls(id=int(node_id), first_seen=keyframe, last_updated=keyframe, **g)
 
+    @property
+    def label(self) -> int:
+        """The scene label of the node's Gaussians (``label`` in gaussians.ply and graph.json): a node is
+        the set of Gaussians sharing one label, so it is the node's id."""
+        return int(self.id)
+
     def shape(self, up: np.ndarray) -> Shape:
         """The node's up-aware :class:`Shape` (cached per up vector)."""
         key = tuple(np.asarray(up, dtype=np.float64).round(9).tolist())
