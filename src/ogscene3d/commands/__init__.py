@@ -1,0 +1,1 @@
+"""The ``ogscene3d`` subcommands, one module per command, each with ``add_parser(subparsers)``."""
