@@ -84,7 +84,9 @@ def test_missing_files_are_clear_errors(tmp_path, run_dir):
 
 def test_cli_export(run_dir, tmp_path, capsys):
     out = tmp_path / "exp"
-    assert main(["export", str(run_dir), "--out", str(out), "--colors", "semantic", "--min-opacity", "0.5"]) == 0
+    assert (
+        main(["export", str(run_dir), "--out", str(out), "--colors", "semantic", "--min-opacity", "0.5"]) == 0
+    )
     printed = capsys.readouterr().out
     assert f"wrote {out / 'points_semantic.ply'}" in printed and "3 node clouds" in printed
     assert (out / "graph.graphml").is_file() and len(list((out / "nodes").glob("*.ply"))) == 3

@@ -71,7 +71,11 @@ def write_point_cloud(
     from plyfile import PlyData, PlyElement
 
     n = len(points)
-    for name, arr, shape in (("rgb", rgb, (n, 3)), ("labels", labels, (n,)), ("confidences", confidences, (n,))):
+    for name, arr, shape in (
+        ("rgb", rgb, (n, 3)),
+        ("labels", labels, (n,)),
+        ("confidences", confidences, (n,)),
+    ):
         if np.shape(arr) != shape:
             raise ValueError(f"write_point_cloud: {name} must have shape {shape}, got {np.shape(arr)}")
     vert = np.empty(n, dtype=_CLOUD_DTYPE)
@@ -147,7 +151,9 @@ def export_run(
                 node = graph.nodes[nid]
                 sel = arrays["labels"] == node.label
                 if not sel.any():
-                    log.warning("export: node #%d (label %d) has no Gaussians in gaussians.ply", nid, node.label)
+                    log.warning(
+                        "export: node #%d (label %d) has no Gaussians in gaussians.ply", nid, node.label
+                    )
                     continue
                 result.nodes[nid] = write_point_cloud(
                     out / "nodes" / node_file_name(nid, node.tag),
@@ -163,4 +169,11 @@ def export_run(
     return result
 
 
-__all__ = ["COLOR_SOURCES", "ExportResult", "export_run", "node_file_name", "point_colors", "write_point_cloud"]
+__all__ = [
+    "COLOR_SOURCES",
+    "ExportResult",
+    "export_run",
+    "node_file_name",
+    "point_colors",
+    "write_point_cloud",
+]
