@@ -260,6 +260,7 @@ def test_json_roundtrip_networkx_graphml_and_query(tmp_path):
     assert [n.id for n in h.query("table")] == [1, 2]  # tag beats caption
     assert [n.id for n in h.query("cushion")] == [0]  # caption, plural-tolerant
     assert h.query("giraffe") == []
+    assert [n.id for n in h.query("#2")] == [2] and h.query("#7") == []  # a node by id
     G = h.to_networkx()
     assert set(G.nodes) == {0, 1, 2} and G.nodes[1]["tag"] == "coffee table"
     assert all("relation" in d for _, _, d in G.edges(data=True)) and G.number_of_edges() == len(h.edges)

@@ -760,6 +760,7 @@ class SceneGraph:
                 tag=str(d.get("tag", "")),
                 caption_source=str(d.get("caption_source", "")),
                 confidence=float(d.get("confidence", 0.0)),
+                stored_extent=vec(d, "extent", (3,), k) if "extent" in d else None,
             )
             nodes[node.id] = node
         for k, e in enumerate(doc["edges"]):
@@ -843,11 +844,17 @@ class SceneGraph:
         (:data:`SYNONYM_GROUPS`) in the tag (score 1.0 for the exact tag, 0.9 inside it) or the caption
         (0.6); synonym matches count 0.9 times. When ``graph.query_embedding`` is "clip" or "openai", the
         cosine similarity between the query and "tag: caption" embeddings is also used (kept when at least
-        ``graph.query_min_similarity``); a node's score is the larger of the two.
+        ``graph.query_min_similarity``); a node's score is the larger of the two. ``#<id>`` names one
+        node by id (score 1.0).
         """
         q = " ".join(str(text).lower().split())
         if not q:
             raise ConfigError("SceneGraph.query: the query text is empty")
+        by_id = re.fullmatch(r"#(\d+)", q)
+        if by_id:
+            with self._lock:
+                node = self.nodes.get(int(by_id.group(1)))
+            return [(node, 1.0)] if node is not None else []
         terms = {q: 1.0}
         for group in SYNONYM_GROUPS:
             if q in group:

@@ -147,6 +147,8 @@ class SceneNode:
     color: np.ndarray = field(default_factory=lambda: np.full(3, 0.5))
     mean_confidence: float = 0.0
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
+    # graph.json's "extent", for a node read back from the file (which does not store ``points``)
+    stored_extent: np.ndarray | None = field(default=None, repr=False)
     _shape: Shape | None = field(default=None, repr=False)
     _shape_up: tuple[float, ...] | None = field(default=None, repr=False)
 
@@ -180,8 +182,18 @@ class SceneNode:
             self._shape_up = key
         return self._shape
 
+    def extent(self) -> np.ndarray | None:
+        """The node's size: robust (2nd-98th percentile) extents along its principal axes, largest first,
+        in metres, as the heuristic caption's "about ..." gives the first (:attr:`Shape.extent`; it does
+        not depend on the up vector). None for a node read from a file that does not store it."""
+        if len(self.points):
+            shape = self._shape if self._shape is not None else self.shape(np.array([0.0, 0.0, 1.0]))
+            return np.asarray(shape.extent, dtype=np.float64)
+        return self.stored_extent
+
     def to_dict(self) -> dict:
         """The node as graph.json stores it (README "File formats")."""
+        extent = self.extent()
         return {
             "id": int(self.id),
             "label": int(self.id),
@@ -198,6 +210,7 @@ class SceneNode:
             "obb_axes": [[float(v) for v in row] for row in self.obb_axes],
             "obb_extent": [float(v) for v in self.obb_extent],
             "caption_source": self.caption_source,
+            **({"extent": [float(v) for v in extent]} if extent is not None else {}),
         }
 
 
