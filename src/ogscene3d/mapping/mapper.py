@@ -154,10 +154,10 @@ class Timings:
         return "\n".join(rows)
 
 
+
 def _ran_at(keyframe_count: int, every: int) -> bool:
     """Whether a step scheduled every ``every`` keyframes (0 = never) runs at keyframe ``keyframe_count``."""
     return every > 0 and keyframe_count % every == 0
-
 
 class Mapper:
     """Incremental semantic Gaussian mapper: ``process(frame)`` per frame, ``finalize()``, ``save(dir)``."""
