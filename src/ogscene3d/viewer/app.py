@@ -188,9 +188,10 @@ def fit_camera(
     view_dir: np.ndarray | None = None,
     elevation_deg: float = 40.0,
 ) -> np.ndarray:
-    """A camera position that shows the whole map: outside the sphere of diameter ``extent`` around
-    ``center``, far enough for that sphere to fill the vertical field of view ``fov`` (radians), seen
-    from ``elevation_deg`` above the horizon. ``view_dir`` (e.g. the run's first viewing direction) sets
+    """A camera position that shows the whole map: outside the sphere of diameter ``extent`` (the
+    diagonal of the map's robust box) around ``center``, at the distance where that sphere about fills
+    the vertical field of view ``fov`` (radians; the box's corners leave it some slack), seen from
+    ``elevation_deg`` above the horizon. ``view_dir`` (e.g. the run's first viewing direction) sets
     the horizontal direction the camera looks in, so the first view faces what the run saw first."""
     up = np.asarray(up, dtype=np.float64)
     up = up / np.linalg.norm(up)
@@ -202,7 +203,7 @@ def fit_camera(
     d = d / np.linalg.norm(d)
     el = np.deg2rad(elevation_deg)
     back = -np.cos(el) * d + np.sin(el) * up  # from the centre towards the camera
-    dist = 0.5 * float(extent) / np.sin(0.5 * float(fov)) * 1.05
+    dist = 0.5 * float(extent) / np.sin(0.5 * float(fov)) * 0.85
     return np.asarray(center, dtype=np.float64) + dist * back
 
 
