@@ -821,21 +821,34 @@ def test_first_camera_sees_the_whole_map_from_outside(open_browser):
     from ogscene3d.viewer.app import LiveViewer, fit_camera
 
     up = np.array([0.0, 0.0, 1.0])
-    eye = fit_camera(np.zeros(3), 4.0, up, np.deg2rad(75), view_dir=np.array([0.0, 1.0, 0.0]))
+    fov = np.deg2rad(75)
+    eye, target = fit_camera(np.zeros(3), 4.0, up, fov, view_dir=np.array([0.0, 1.0, 0.0]))
+    np.testing.assert_allclose(target, 0.0, atol=1e-12)
     # outside the 4 m sphere, far enough for it to about fill the field of view
-    assert 2.0 < 0.8 * 2.0 / np.sin(np.deg2rad(37.5)) <= np.linalg.norm(eye) <= 2.0 / np.sin(np.deg2rad(37.5))
-    assert eye[1] < 0 and eye[2] > 0  # behind the first view direction, above the horizon
+    assert 2.0 < 0.8 * 2.0 / np.sin(fov / 2) <= np.linalg.norm(eye) <= 2.0 / np.sin(fov / 2)
+    assert abs(eye[0]) < 1e-9 and eye[1] < 0 and eye[2] > 0  # behind the first view direction, above
+    # a wide canvas whose right third is under the GUI panel: the map is centred in the left two thirds
+    eye2, target2 = fit_camera(
+        np.zeros(3), 4.0, up, fov, np.array([0.0, 1.0, 0.0]), aspect=2.0, covered=1 / 3
+    )
+    fwd = (target2 - eye2) / np.linalg.norm(target2 - eye2)
+    rel = -eye2  # the map's centre seen from the camera
+    x = (rel @ np.array([1.0, 0.0, 0.0])) / (rel @ fwd)  # its horizontal image coordinate, tan units
+    half_w = np.tan(fov / 2) * 2.0
+    assert (x / half_w + 1) / 2 == pytest.approx((1 - 1 / 3) / 2)  # middle of the uncovered part
     with LiveViewer(port=0, max_rate_hz=50, up="+z") as viewer:
         view = open_browser(viewer)
         snap = make_scene(200)
         viewer.publish(snap)
         assert viewer.wait_until(lambda s: s["gaussians"] == 600, timeout=20)
-        assert viewer.wait_until(lambda s: view._camera_placed, timeout=20)
+        assert viewer.wait_until(lambda s: view.camera_placed, timeout=20)
         lo, hi = np.percentile(snap.means, [2, 98], axis=0)
         for cam_pos, look_at in (
             (view.client.camera.position, view.client.camera.look_at),
             (viewer.server.initial_camera.position, viewer.server.initial_camera.look_at),
         ):
+            # the target is the map's centre, slid sideways only (the fake browser is 640 px wide: no panel
+            # allowance; the server-wide initial camera has none either)
             np.testing.assert_allclose(look_at, 0.5 * (lo + hi), atol=1e-6)
             assert not np.all((cam_pos > snap.means.min(axis=0)) & (cam_pos < snap.means.max(axis=0)))
             assert np.linalg.norm(cam_pos - look_at) >= 0.5 * np.linalg.norm(hi - lo)

@@ -180,19 +180,32 @@ def caption_line(node: dict) -> str:
     return f"caption ({label}): {node['caption']}" if label else f"caption: {node['caption']}"
 
 
+# Width (CSS pixels) of viser's control panel, which floats over the right of the canvas on wide screens
+_PANEL_PX = 340
+# a browser is moved to the first whole-map view at most this many times (see BrowserView._on_camera)
+_CAMERA_TRIES = 5
+
+
 def fit_camera(
     center: np.ndarray,
     extent: float,
     up: np.ndarray,
     fov: float,
     view_dir: np.ndarray | None = None,
+    *,
+    aspect: float = 1.0,
+    covered: float = 0.0,
     elevation_deg: float = 40.0,
-) -> np.ndarray:
-    """A camera position that shows the whole map: outside the sphere of diameter ``extent`` (the
-    diagonal of the map's robust box) around ``center``, at the distance where that sphere about fills
-    the vertical field of view ``fov`` (radians; the box's corners leave it some slack), seen from
-    ``elevation_deg`` above the horizon. ``view_dir`` (e.g. the run's first viewing direction) sets
-    the horizontal direction the camera looks in, so the first view faces what the run saw first."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """A camera ``(position, look_at)`` that shows the whole map from outside.
+
+    The map is the sphere of diameter ``extent`` (the diagonal of its robust box) around ``center``; the
+    camera is put where that sphere about fills the view (the box's corners leave it some slack), seen
+    from ``elevation_deg`` above the horizon. ``fov``: vertical field of view (radians), ``aspect``:
+    width / height of the canvas, ``covered``: the fraction of its width on the right that the GUI panel
+    hides (the map is fitted into the rest and centred there). ``view_dir`` (e.g. the run's first viewing
+    direction) sets the horizontal direction the camera looks in, so the first view faces what the run
+    saw first."""
     up = np.asarray(up, dtype=np.float64)
     up = up / np.linalg.norm(up)
     d = None if view_dir is None else np.asarray(view_dir, dtype=np.float64)
@@ -202,9 +215,17 @@ def fit_camera(
         d = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 1.0, 0.0])
     d = d / np.linalg.norm(d)
     el = np.deg2rad(elevation_deg)
-    back = -np.cos(el) * d + np.sin(el) * up  # from the centre towards the camera
-    dist = 0.5 * float(extent) / np.sin(0.5 * float(fov)) * 0.85
-    return np.asarray(center, dtype=np.float64) + dist * back
+    forward = np.cos(el) * d - np.sin(el) * up
+    tan_v = np.tan(0.5 * float(fov))
+    tan_h = tan_v * float(aspect)
+    half = min(np.arctan(tan_v), np.arctan(tan_h * (1.0 - float(covered))))
+    dist = 0.5 * float(extent) / np.sin(half) * 0.85
+    right = np.cross(forward, up)
+    right /= np.linalg.norm(right)
+    # slide camera and target sideways so that the map's centre sits in the middle of the visible part
+    shift = float(covered) * dist * tan_h * right
+    look_at = np.asarray(center, dtype=np.float64) + shift
+    return look_at - dist * forward, look_at
 
 
 class LiveViewer:
@@ -430,8 +451,8 @@ class LiveViewer:
             c0, ext0 = self._framed
             if np.linalg.norm(c - c0) < 0.1 * ext0 and abs(ext - ext0) < 0.2 * ext0:
                 return
-        eye = fit_camera(c, ext, self.up, self.server.initial_camera.fov, first_view_dir(snap))
-        self.server.initial_camera.look_at = tuple(c)
+        eye, target = fit_camera(c, ext, self.up, self.server.initial_camera.fov, first_view_dir(snap))
+        self.server.initial_camera.look_at = tuple(target)
         self.server.initial_camera.position = tuple(eye)
         self._framed = (c, ext)
 
@@ -468,7 +489,10 @@ class BrowserView:
         self._shown_map_snap: MapSnapshot | None = None
         self._shown_graph_key: tuple | None = None
         self._shown_texts: dict[str, str] = {}
-        self._camera_placed = False
+        self._camera_goal: np.ndarray | None = None  # where _place_camera put the camera
+        self._camera_again = False
+        self._camera_tries = 0
+        client.camera.on_update(self._on_camera)
         self._build_gui()
 
     # ------------------------------------------------------------------ GUI
@@ -640,7 +664,7 @@ class BrowserView:
                 self.layers.update_map(snap, st, matches or None)
                 self._shown_map_snap = published
                 stats["map_pushes"] += 1
-            if len(snap) and not self._camera_placed:
+            if len(snap) and (self._camera_goal is None or self._camera_again):
                 self._place_camera(snap)
             self.layers.update_camera(snap, st)
             graph_key = (graph, frozenset(matches), self.selected, st.show_edge_labels)
@@ -654,24 +678,50 @@ class BrowserView:
         self.pushed_snap = published
 
     def _place_camera(self, snap: MapSnapshot) -> None:
-        """Move this browser's camera to the whole-map view once, when it first gets Gaussians (later the
-        user drives; "Reset View" returns to the viewer's initial camera, which follows the map)."""
+        """Move this browser's camera to the whole-map view fitted to its canvas (left of the GUI panel)
+        when it first gets Gaussians; later the user drives ("Reset View" returns to the viewer's initial
+        camera, which follows the map's bounds)."""
         camera = self.client.camera
         if camera.update_timestamp == 0.0:
             # the browser has not reported its camera yet (viser cannot move it before): next push
             self.request("camera")
             return
-        eye = fit_camera(
+        w, h = max(int(camera.image_width), 1), max(int(camera.image_height), 1)
+        eye, target = fit_camera(
             self.layers.center,
             self.layers.extent,
             self.viewer.up,
-            self.viewer.server.initial_camera.fov,
+            camera.fov,
             first_view_dir(snap),
+            aspect=w / h,
+            covered=min(_PANEL_PX / w, 0.5) if w >= 2 * _PANEL_PX else 0.0,
         )
+        self._camera_goal = np.asarray(eye, dtype=np.float64)
+        self._camera_again = False
+        self._camera_tries += 1
         camera.up_direction = tuple(self.viewer.up)
         camera.position = tuple(eye)  # moves look_at along: set it after
-        camera.look_at = tuple(self.layers.center)
-        self._camera_placed = True
+        camera.look_at = tuple(target)
+
+    def _on_camera(self, camera) -> None:
+        """A camera report from the browser. It resets its camera to the initial camera when that first
+        arrives, which can overtake the move of :meth:`_place_camera` (they travel apart): a browser seen
+        back at the initial camera is moved again (a few times at most)."""
+        goal = self._camera_goal
+        if goal is None or self._camera_tries >= _CAMERA_TRIES:
+            return
+        initial = np.asarray(self.viewer.server.initial_camera.position, dtype=np.float64)
+        tol = 1e-3 * max(self.layers.extent, 1e-3)
+        if np.linalg.norm(camera.position - initial) < tol < np.linalg.norm(goal - initial):
+            self._camera_again = True
+            self.request("camera")
+
+    @property
+    def camera_placed(self) -> bool:
+        """Whether this browser's camera is (as last reported) at the whole-map view it was given."""
+        goal = self._camera_goal
+        tol = 1e-3 * max(self.layers.extent, 1e-3)
+        return goal is not None and bool(np.linalg.norm(self.client.camera.position - goal) < tol)
 
     def _set_text(self, handle, key: str, text: str) -> None:
         if self._shown_texts.get(key) != text:
