@@ -200,8 +200,7 @@ def fit_camera(
     """A camera ``(position, look_at)`` that shows the whole map from outside.
 
     The map is the sphere of diameter ``extent`` (the diagonal of its robust box) around ``center``; the
-    camera is put where that sphere about fills the view (the box's corners leave it some slack), seen
-    from ``elevation_deg`` above the horizon. ``fov``: vertical field of view (radians), ``aspect``:
+    camera is put where that sphere just fits the view, seen from ``elevation_deg`` above the horizon. ``fov``: vertical field of view (radians), ``aspect``:
     width / height of the canvas, ``covered``: the fraction of its width on the right that the GUI panel
     hides (the map is fitted into the rest and centred there). ``view_dir`` (e.g. the run's first viewing
     direction) sets the horizontal direction the camera looks in, so the first view faces what the run
@@ -219,7 +218,7 @@ def fit_camera(
     tan_v = np.tan(0.5 * float(fov))
     tan_h = tan_v * float(aspect)
     half = min(np.arctan(tan_v), np.arctan(tan_h * (1.0 - float(covered))))
-    dist = 0.5 * float(extent) / np.sin(half) * 0.85
+    dist = 0.5 * float(extent) / np.sin(half)
     right = np.cross(forward, up)
     right /= np.linalg.norm(right)
     # slide camera and target sideways so that the map's centre sits in the middle of the visible part
