@@ -165,3 +165,45 @@ def test_browser_opens_on_the_whole_map_and_our_layers_send_no_nan_geometry(tmp_
         assert not nan, nan
     finally:
         viewer.close()
+
+
+def _page_text(browser: HeadlessBrowser) -> str:
+    return browser.call("Runtime.evaluate", {"expression": "document.body.innerText", "returnByValue": True})[
+        "result"
+    ]["value"]
+
+
+def test_two_browsers_keep_their_own_gui_state_and_the_legend_shows():
+    """In Chromium: the first browser switches to semantic colours and finds a node; a second browser
+    opens with RGB and an empty Find box, and only the first shows the semantic legend."""
+    from ogscene3d.viewer.app import LiveViewer
+
+    viewer = LiveViewer(port=0, max_rate_hz=10)
+    try:
+        viewer.publish(make_scene(100, objects=3))
+        with HeadlessBrowser(viewer.url, WIDTH, HEIGHT) as first:
+            assert viewer.wait_until(lambda s: s["clients"] == 1 and s["nodes"] == 3, 45), first.log_tail()
+            view1 = viewer.views[0]
+            view1._dd_color.value = "Semantic label"
+            view1._txt_query.value = "lamp"
+            assert viewer.wait_until(lambda s: "1 match" in view1._md_matches.content, 30)
+            deadline = time.monotonic() + 30
+            while "sofa (#0)" not in (text1 := _page_text(first)) and time.monotonic() < deadline:
+                time.sleep(0.5)
+            assert "sofa (#0)" in text1 and "1 match" in text1, text1[-1500:]
+            with HeadlessBrowser(viewer.url, WIDTH, HEIGHT) as second:
+                assert viewer.wait_until(lambda s: s["clients"] == 2, 45), second.log_tail()
+                view2 = viewer.views[1]
+                assert viewer.wait_until(lambda s: view2.layers.shown_gaussians == 300, 30)
+                deadline = time.monotonic() + 30
+                while (
+                    "RGB: the Gaussians" not in (text2 := _page_text(second)) and time.monotonic() < deadline
+                ):
+                    time.sleep(0.5)
+                assert "RGB: the Gaussians" in text2 and "sofa (#0)" not in text2, text2[-1500:]
+                assert "match" not in text2
+                assert view2._dd_color.value == "RGB" and view2._txt_query.value == ""
+                # and the first browser still shows its own choices
+                assert "sofa (#0)" in _page_text(first) and view1.settings.color_mode == "semantic"
+    finally:
+        viewer.close()
