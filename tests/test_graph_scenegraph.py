@@ -561,3 +561,21 @@ def test_graph_help_override_examples_are_valid_keys(capsys):
     examples = re.findall(r"--set ([a-z_]+\.[\w.]+=[^\s)]+)", text)  # not the usage's KEY=VALUE
     assert examples
     load_config(None, [e.replace("MODEL", "text-embedding-3-small") for e in examples])
+
+
+def test_graph_json_extent_is_the_size_the_heuristic_caption_gives(tmp_path):
+    """A node's caption says "about <size>"; graph.json's ``extent`` (shown as the viewer's size) holds that
+    size as its first value, and it survives a save and load."""
+    from ogscene3d.graph.geometry import format_length
+
+    g = SceneGraph(GraphConfig(), captioner=HeuristicCaptioner(), node_confidence=MeanConfidence())
+    means, labels, conf, colors = blob_map([0, 1, 2])
+    means[labels == 1] *= np.array([3.0, 1.0, 0.5])  # an elongated node
+    g.update(11, means, labels, conf, colors)
+    doc = g.to_json()
+    for n in doc["nodes"]:
+        assert len(n["extent"]) == 3
+        assert f"about {format_length(n['extent'][0])}" in n["caption"], n["caption"]
+    g.save(tmp_path / "graph.json")
+    h = SceneGraph.load(tmp_path / "graph.json")
+    assert [n["extent"] for n in h.to_json()["nodes"]] == [n["extent"] for n in doc["nodes"]]

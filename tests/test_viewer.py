@@ -1116,3 +1116,23 @@ def test_find_box_and_graph_query_are_one_function():
         assert viewer.find(graph, "couch")[0] == [0]  # the sofa, by synonym (a substring match finds none)
         ids, error = viewer.find({"version": 1, "nodes": [{"id": 1, "center": [0, 0, 0]}], "edges": []}, "x")
         assert ids == [] and "Find is unavailable" in error and "bbox_min" in error
+
+
+def test_node_panel_gives_the_captions_size_and_the_box_apart():
+    from ogscene3d.viewer.app import node_details
+
+    node = {
+        "id": 4,
+        "tag": "gray object",
+        "caption": "medium gray object, about 78 cm (geometric heuristic)",
+        "caption_source": "heuristic",
+        "center": [0, 0, 0],
+        "extent": [0.78, 0.5, 0.31],
+        "bbox_min": [0, 0, 0],
+        "bbox_max": [1.41, 0.9, 1.02],
+    }
+    text = node_details({"nodes": [node], "edges": []}, 4)
+    assert "size: 0.78 x 0.50 x 0.31 m" in text and "box: 1.41 x 0.90 x 1.02 m" in text
+    assert "about 78 cm" in text
+    assert "size:" not in node_details({"nodes": [{k: v for k, v in node.items() if k != "extent"}]}, 4)
+    assert node_details(None, None).startswith("*Pick")

@@ -183,9 +183,10 @@ class SceneNode:
         return self._shape
 
     def extent(self) -> np.ndarray | None:
-        """The node's size: robust (2nd-98th percentile) extents along its principal axes, largest first,
-        in metres, as the heuristic caption's "about ..." gives the first (:attr:`Shape.extent`; it does
-        not depend on the up vector). None for a node read from a file that does not store it."""
+        """The node's size: robust (2nd-98th percentile) extents along its principal axes (the axis of
+        largest spread first), in metres; the heuristic caption's "about ..." is the first
+        (:attr:`Shape.extent`, which does not depend on the up vector). None for a node read from a file
+        that does not store it."""
         if len(self.points):
             shape = self._shape if self._shape is not None else self.shape(np.array([0.0, 0.0, 1.0]))
             return np.asarray(shape.extent, dtype=np.float64)

@@ -200,11 +200,11 @@ def fit_camera(
     """A camera ``(position, look_at)`` that shows the whole map from outside.
 
     The map is the sphere of diameter ``extent`` (the diagonal of its robust box) around ``center``; the
-    camera is put where that sphere just fits the view, seen from ``elevation_deg`` above the horizon. ``fov``: vertical field of view (radians), ``aspect``:
-    width / height of the canvas, ``covered``: the fraction of its width on the right that the GUI panel
-    hides (the map is fitted into the rest and centred there). ``view_dir`` (e.g. the run's first viewing
-    direction) sets the horizontal direction the camera looks in, so the first view faces what the run
-    saw first."""
+    camera is put where that sphere just fits the view, seen from ``elevation_deg`` above the horizon.
+    ``fov``: vertical field of view (radians); ``aspect``: width / height of the canvas; ``covered``: the
+    fraction of its width on the right that the GUI panel hides (the map is fitted into the rest and
+    centred there). ``view_dir`` (e.g. the run's first viewing direction) sets the horizontal direction
+    the camera looks in, so the first view faces what the run saw first."""
     up = np.asarray(up, dtype=np.float64)
     up = up / np.linalg.norm(up)
     d = None if view_dir is None else np.asarray(view_dir, dtype=np.float64)
@@ -799,8 +799,8 @@ def node_details(graph: dict | None, selected: int | None) -> str:
     """The node panel (markdown): text, id, confidence, caption and its source, Gaussians, size, relations.
 
     The size is the one the heuristic caption's "about ..." is: the node's robust extents along its
-    principal axes, largest first (graph.json ``extent``); the axis-aligned box of all its Gaussians,
-    which outliers and the axes' orientation make larger, is given apart as "box"."""
+    principal axes, the axis of largest spread first (graph.json ``extent``); the axis-aligned box of
+    all its Gaussians, which outliers and the axes' orientation make larger, is given apart as "box"."""
     if selected is None:
         return "*Pick a node above or click its marker.*"
     nodes = {int(n["id"]): n for n in (graph or {}).get("nodes", [])}
