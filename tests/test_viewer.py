@@ -824,8 +824,8 @@ def test_first_camera_sees_the_whole_map_from_outside(open_browser):
     fov = np.deg2rad(75)
     eye, target = fit_camera(np.zeros(3), 4.0, up, fov, view_dir=np.array([0.0, 1.0, 0.0]))
     np.testing.assert_allclose(target, 0.0, atol=1e-12)
-    # outside the 4 m sphere, where it just fits the field of view
-    assert np.linalg.norm(eye) == pytest.approx(2.0 / np.sin(fov / 2))
+    # outside the 4 m sphere, where it fits the field of view with some margin
+    assert 2.0 / np.sin(fov / 2) < np.linalg.norm(eye) < 1.3 * 2.0 / np.sin(fov / 2)
     assert abs(eye[0]) < 1e-9 and eye[1] < 0 and eye[2] > 0  # behind the first view direction, above
     # a wide canvas whose right third is under the GUI panel: the map is centred in the left two thirds
     eye2, target2 = fit_camera(

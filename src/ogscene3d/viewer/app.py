@@ -182,6 +182,8 @@ def caption_line(node: dict) -> str:
 
 # Width (CSS pixels) of viser's control panel, which floats over the right of the canvas on wide screens
 _PANEL_PX = 340
+# the first view's distance over the one where the map's robust sphere just fits (see fit_camera)
+_FIT_MARGIN = 1.15
 # a browser is moved to the first whole-map view at most this many times (see BrowserView._on_camera)
 _CAMERA_TRIES = 5
 
@@ -200,7 +202,8 @@ def fit_camera(
     """A camera ``(position, look_at)`` that shows the whole map from outside.
 
     The map is the sphere of diameter ``extent`` (the diagonal of its robust box) around ``center``; the
-    camera is put where that sphere just fits the view, seen from ``elevation_deg`` above the horizon.
+    camera is put where that sphere fits the view with a margin for the Gaussians beyond the robust box
+    (walls reach past it), seen from ``elevation_deg`` above the horizon.
     ``fov``: vertical field of view (radians); ``aspect``: width / height of the canvas; ``covered``: the
     fraction of its width on the right that the GUI panel hides (the map is fitted into the rest and
     centred there). ``view_dir`` (e.g. the run's first viewing direction) sets the horizontal direction
@@ -218,7 +221,7 @@ def fit_camera(
     tan_v = np.tan(0.5 * float(fov))
     tan_h = tan_v * float(aspect)
     half = min(np.arctan(tan_v), np.arctan(tan_h * (1.0 - float(covered))))
-    dist = 0.5 * float(extent) / np.sin(half)
+    dist = 0.5 * float(extent) / np.sin(half) * _FIT_MARGIN
     right = np.cross(forward, up)
     right /= np.linalg.norm(right)
     # slide camera and target sideways so that the map's centre sits in the middle of the visible part
