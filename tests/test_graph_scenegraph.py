@@ -260,6 +260,7 @@ def test_json_roundtrip_networkx_graphml_and_query(tmp_path):
     assert [n.id for n in h.query("table")] == [1, 2]  # tag beats caption
     assert [n.id for n in h.query("cushion")] == [0]  # caption, plural-tolerant
     assert h.query("giraffe") == []
+    assert [n.id for n in h.query("#2")] == [2] and h.query("#7") == []  # a node by id
     G = h.to_networkx()
     assert set(G.nodes) == {0, 1, 2} and G.nodes[1]["tag"] == "coffee table"
     assert all("relation" in d for _, _, d in G.edges(data=True)) and G.number_of_edges() == len(h.edges)
@@ -268,6 +269,37 @@ def test_json_roundtrip_networkx_graphml_and_query(tmp_path):
     import networkx as nx
 
     assert nx.read_graphml(gml).number_of_nodes() == 3
+
+
+def test_load_accepts_a_run_directory_and_nodes_have_labels(tmp_path):
+    """``SceneGraph.load`` takes the run directory the CLI takes; nodes carry graph.json's ``label``."""
+    g = SceneGraph(GraphConfig(), captioner=HeuristicCaptioner(), node_confidence=MeanConfidence())
+    g.update(11, *blob_map([0, 3]))
+    g.save(tmp_path / "graph.json")
+    h = SceneGraph.load(tmp_path)
+    assert sorted(h.nodes) == [0, 3]
+    doc = json.loads((tmp_path / "graph.json").read_text())
+    assert [n.label for n in h.nodes.values()] == [d["label"] for d in doc["nodes"]] == [0, 3]
+    (tmp_path / "unfinished").mkdir()
+    with pytest.raises(DataError, match="has no graph.json"):
+        SceneGraph.load(tmp_path / "unfinished")
+
+
+def test_graphml_has_the_node_boxes(tmp_path):
+    """GraphML keeps each node's axis-aligned and oriented box, not only its centre."""
+    import networkx as nx
+
+    g = SceneGraph(GraphConfig(), captioner=HeuristicCaptioner(), node_confidence=MeanConfidence())
+    g.update(11, *blob_map([0, 1]))
+    g.save_graphml(tmp_path / "g.graphml")
+    G = nx.read_graphml(tmp_path / "g.graphml", node_type=int)
+    for i, n in g.nodes.items():
+        d = G.nodes[i]
+        assert d["label"] == i
+        assert np.allclose([d[f"bbox_min_{a}"] for a in "xyz"], n.bbox_min)
+        assert np.allclose([d[f"bbox_max_{a}"] for a in "xyz"], n.bbox_max)
+        assert np.allclose([d[f"obb_extent_{a}"] for a in "xyz"], n.obb_extent)
+        assert np.allclose(np.reshape(json.loads(d["obb_axes"]), (3, 3)), n.obb_axes, atol=1e-6)
 
 
 def test_state_resumes_captions_and_schedule():
@@ -529,3 +561,21 @@ def test_graph_help_override_examples_are_valid_keys(capsys):
     examples = re.findall(r"--set ([a-z_]+\.[\w.]+=[^\s)]+)", text)  # not the usage's KEY=VALUE
     assert examples
     load_config(None, [e.replace("MODEL", "text-embedding-3-small") for e in examples])
+
+
+def test_graph_json_extent_is_the_size_the_heuristic_caption_gives(tmp_path):
+    """A node's caption says "about <size>"; graph.json's ``extent`` (shown as the viewer's size) holds that
+    size as its first value, and it survives a save and load."""
+    from ogscene3d.graph.geometry import format_length
+
+    g = SceneGraph(GraphConfig(), captioner=HeuristicCaptioner(), node_confidence=MeanConfidence())
+    means, labels, conf, colors = blob_map([0, 1, 2])
+    means[labels == 1] *= np.array([3.0, 1.0, 0.5])  # an elongated node
+    g.update(11, means, labels, conf, colors)
+    doc = g.to_json()
+    for n in doc["nodes"]:
+        assert len(n["extent"]) == 3
+        assert f"about {format_length(n['extent'][0])}" in n["caption"], n["caption"]
+    g.save(tmp_path / "graph.json")
+    h = SceneGraph.load(tmp_path / "graph.json")
+    assert [n["extent"] for n in h.to_json()["nodes"]] == [n["extent"] for n in doc["nodes"]]

@@ -20,7 +20,7 @@ from ogscene3d.colors import confidence_colors, label_colors, turbo
 from ogscene3d.errors import ConfigError, DataError
 from ogscene3d.gaussians import GaussianMap
 from ogscene3d.viewer.runs import load_run, read_graph_json
-from ogscene3d.viewer.scene import SceneLayers, ViewerSettings, node_matches, node_text
+from ogscene3d.viewer.scene import SceneLayers, ViewerSettings, labelled_nodes, legend_html, node_text
 from ogscene3d.viewer.snapshot import (
     MapSnapshot,
     covariances,
@@ -414,13 +414,36 @@ def server():
     srv.stop()
 
 
-def test_node_text_and_query_matching():
+def test_node_text():
     assert node_text({"id": 3, "tag": "chair", "caption": "a red chair"}) == "chair"
     assert node_text({"id": 3, "tag": "", "caption": "one two three four five"}) == "one two three four..."
     assert node_text({"id": 3}) == "#3"
-    node = {"id": 12, "tag": "Coffee table", "caption": "a low wooden table"}
-    assert node_matches(node, "TABLE") and node_matches(node, "wooden") and node_matches(node, "#12")
-    assert not node_matches(node, "chair") and not node_matches(node, "   ")
+
+
+def test_labelled_nodes_keep_the_largest_of_a_cluster_and_the_chosen_ones():
+    nodes = {
+        0: {"id": 0, "center": [0.0, 0, 0], "num_gaussians": 50},
+        1: {"id": 1, "center": [0.1, 0, 0], "num_gaussians": 500},  # next to 0, larger
+        2: {"id": 2, "center": [0.15, 0, 0], "num_gaussians": 10},
+        3: {"id": 3, "center": [2.0, 0, 0], "num_gaussians": 5},  # alone
+    }
+    assert labelled_nodes(nodes, 0.5) == {1, 3}
+    # the selected node or a Find match is labelled, and takes its neighbourhood's place
+    assert labelled_nodes(nodes, 0.5, always={2}) == {2, 3}
+    assert labelled_nodes(nodes, 0.0) == {0, 1, 2, 3}
+
+
+def test_legend_lists_the_semantic_colours_of_the_graph_nodes():
+    graph = make_scene(5, objects=3).graph
+    html = legend_html("semantic", graph)
+    for n in graph["nodes"]:
+        r, g, b = label_colors(np.array([n["id"]]))[0] * 255
+        assert f"rgb({round(r)},{round(g)},{round(b)})" in html and f"{n['tag']} (#{n['id']})" in html
+    assert "unlabelled" in html
+    assert "linear-gradient" in legend_html("confidence", graph) and legend_html("rgb", graph) == ""
+    assert "<script>" not in legend_html(
+        "semantic", {"nodes": [{"id": 1, "tag": "<script>", "center": [0, 0, 0]}]}
+    )
 
 
 def test_drawable_graph_drops_malformed_entries():
@@ -492,18 +515,23 @@ def test_layers_graph_updates_only_what_changed(server):
     layers.update_graph(snap.graph, st, set())
     assert layers.shown_nodes == 4 and layers.shown_edges == 3
     handles = dict(layers._node_handles)
-    edge_handles = list(layers._edge_handles)
-    assert len(edge_handles) == 1 + 3  # segments + one relation label per edge
+    segments = layers._edge_segments
+    assert layers._edge_labels == []  # relation labels only for a selected node, or on demand
     layers.update_graph(json.loads(json.dumps(snap.graph)), st, set())  # same content: nothing re-created
     assert all(layers._node_handles[k] is handles[k] for k in handles)
-    assert all(a is b for a, b in zip(layers._edge_handles, edge_handles, strict=True))
+    assert layers._edge_segments is segments
+    layers.update_graph(snap.graph, st, set(), selected=1)  # node 1 has two relations
+    assert sorted(h.position[0] for h in layers._edge_labels) == pytest.approx([0.6, 1.8])
+    assert layers._edge_segments is segments
+    layers.update_graph(snap.graph, ViewerSettings(show_edge_labels=True), set())
+    assert len(layers._edge_labels) == 3
     # a node changes its tag, another disappears (with its edges), a query matches one
     g = json.loads(json.dumps(snap.graph))
     g["nodes"][0]["tag"] = "armchair"
     g["nodes"] = g["nodes"][:3]
     g["edges"] = g["edges"][:2]
     layers.update_graph(g, st, {1})
-    assert layers.shown_nodes == 3 and layers.shown_edges == 2
+    assert layers.shown_nodes == 3 and layers.shown_edges == 2 and layers._edge_segments is not segments
     assert handles[3][0]._impl.removed and layers._node_handles[0][0] is handles[0][0]
     assert layers._node_handles[0][0].text == "armchair"
     assert layers._node_handles[1][0].text.endswith("table") and layers._node_handles[1][0].text.startswith(
@@ -568,28 +596,83 @@ def test_layers_resend_a_new_camera_image_even_at_a_freed_images_address(server)
 # ------------------------------------------------------------------------------ viewer + session
 
 
+class FakeBrowser:
+    """A websocket client that joins a viewer as a browser does (viser counts a browser as connected
+    once it reports its camera) and drains what the server sends; the browser test covers real ones."""
+
+    def __init__(self, url: str) -> None:
+        import msgspec
+        import viser
+        from viser import _messages
+        from websockets.sync.client import connect
+
+        self.ws = connect(
+            url.replace("http", "ws", 1), subprotocols=[f"viser-v{viser.__version__}"], max_size=None
+        )
+        camera = _messages.ViewerCameraMessage(
+            (1.0, 0.0, 0.0, 0.0),
+            (0.0, 0.0, 3.0),
+            1.0,
+            0.01,
+            100.0,
+            480,
+            640,
+            (0.0, 0.0, 0.0),
+            (0.0, 0.0, 1.0),
+        )
+        self.ws.send(msgspec.msgpack.encode(camera.as_serializable_dict()))
+        self.received = 0
+        self._thread = threading.Thread(target=self._drain, daemon=True)
+        self._thread.start()
+
+    def _drain(self) -> None:
+        try:
+            for _ in self.ws:
+                self.received += 1
+        except Exception:  # noqa: BLE001 - the connection closed
+            pass
+
+    def close(self) -> None:
+        self.ws.close()
+        self._thread.join(10)
+
+
 @pytest.fixture
-def watched(monkeypatch):
-    """Pretend a browser is connected (the browser test covers real ones)."""
-    from ogscene3d.viewer.app import LiveViewer
+def open_browser():
+    """``open_browser(viewer)`` connects a FakeBrowser and returns its view once the viewer has it."""
+    browsers: list[FakeBrowser] = []
 
-    monkeypatch.setattr(LiveViewer, "num_clients", property(lambda self: 1))
+    def open_(viewer):
+        before = {v.client_id for v in viewer.views}
+        browsers.append(FakeBrowser(viewer.url))
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:
+            new = [v for v in viewer.views if v.client_id not in before]
+            if new:
+                return new[0]
+            time.sleep(0.02)
+        raise AssertionError("the fake browser did not connect")
+
+    yield open_
+    for b in browsers:
+        b.close()
 
 
-def test_publish_never_waits_on_a_stuck_viewer(watched):
+def test_publish_never_waits_on_a_stuck_viewer(open_browser):
     from ogscene3d.viewer.app import LiveViewer
 
     viewer = LiveViewer(port=0, max_rate_hz=50)
+    view = open_browser(viewer)
     release = threading.Event()
     entered = threading.Event()
-    real_push = viewer._push
+    real_push = view.push
 
     def stuck_push(snap, dirty):
         entered.set()
         release.wait(30)
         real_push(snap, dirty)
 
-    viewer._push = stuck_push
+    view.push = stuck_push
     try:
         viewer.publish(make_scene(10, seed=0))
         assert entered.wait(10)
@@ -607,14 +690,15 @@ def test_publish_never_waits_on_a_stuck_viewer(watched):
         viewer.close()
 
 
-def test_unchanged_layers_are_not_resent(watched):
+def test_unchanged_layers_are_not_resent(open_browser):
     from ogscene3d.viewer.app import LiveViewer
 
     with LiveViewer(port=0, max_rate_hz=50) as viewer:
+        view = open_browser(viewer)
         snap = make_scene(20)
         viewer.publish(snap)
         assert viewer.wait_until(lambda s: s["nodes"] == 3 and s["map_pushes"] == 1, timeout=20)
-        frustum = viewer.layers._frustum
+        frustum = view.layers._frustum
         pose = snap.pose.copy()
         pose[:3, 3] += [0.5, 0.0, 0.0]
         n = viewer.stats["pushes"]
@@ -622,113 +706,196 @@ def test_unchanged_layers_are_not_resent(watched):
         viewer.publish(dataclasses.replace(snap, pose=pose, graph=json.loads(json.dumps(snap.graph))))
         assert viewer.wait_until(lambda s: s["pushes"] > n, timeout=20)
         assert viewer.stats["map_pushes"] == 1 and viewer.stats["graph_pushes"] == 1
-        assert viewer.layers._frustum is frustum
+        assert view.layers._frustum is frustum
         np.testing.assert_allclose(frustum.position, pose[:3, 3])
         viewer.publish(dataclasses.replace(snap, map_rev=snap.map_rev + 1))
         assert viewer.wait_until(lambda s: s["map_pushes"] == 2, timeout=20)
 
 
-def test_snapshots_without_map_rev_are_compared_by_identity_not_a_reusable_id(watched):
+def test_snapshots_without_map_rev_are_compared_by_identity_not_a_reusable_id(open_browser):
     from ogscene3d.viewer.app import LiveViewer
 
     with LiveViewer(port=0) as viewer:
-        # _push is called here directly, as the push thread does (nothing is published, so it idles)
+        view = open_browser(viewer)
+        # push is called here directly, as the push thread does (nothing is published, so it idles)
         snap = dataclasses.replace(make_scene(20), map_rev=None)
-        viewer._push(snap, set())
+        view.push(snap, set())
         for seed in range(1, 5):
             # a new map of the same size, built after the shown one was dropped: CPython may give it the
             # shown snapshot's id(), which must not make the viewer take it for the map already shown
             del snap
             snap = dataclasses.replace(make_scene(20, seed=seed), map_rev=None)
-            viewer._push(snap, set())
+            view.push(snap, set())
             assert viewer.stats["map_pushes"] == 1 + seed
-            np.testing.assert_allclose(viewer.layers._gauss_handle.centers, snap.means)
-        viewer._push(snap, set())  # the same snapshot again (e.g. a GUI change): the map is not re-sent
+            np.testing.assert_allclose(view.layers._gauss_handle.centers, snap.means)
+        view.push(snap, set())  # the same snapshot again (e.g. a GUI change): the map is not re-sent
         assert viewer.stats["map_pushes"] == 5
         # Gaussians with NaN are dropped before drawing; the map is still the same snapshot, not re-sent
         means = snap.means.copy()
         means[0] = np.nan
         bad = dataclasses.replace(snap, means=means)
-        viewer._push(bad, set())
-        assert viewer.stats["map_pushes"] == 6 and viewer.layers.shown_gaussians == 59
+        view.push(bad, set())
+        assert viewer.stats["map_pushes"] == 6 and view.layers.shown_gaussians == 59
         for _ in range(3):
-            viewer._push(bad, set())
+            view.push(bad, set())
         assert viewer.stats["map_pushes"] == 6
 
 
-def test_gui_query_and_selection_update_the_panels(watched):
+def test_gui_query_and_selection_update_the_panels(open_browser):
     from ogscene3d.viewer.app import LiveViewer
 
     with LiveViewer(port=0, max_rate_hz=50) as viewer:
+        view = open_browser(viewer)
         viewer.publish(make_scene(20))
         assert viewer.wait_until(lambda s: s["nodes"] == 3, timeout=20)
-        assert "| gaussians | 60 |" in viewer._md_counts.content
-        assert "optimize" in viewer._md_timings.content
+        assert "| gaussians | 60 |" in view._md_counts.content
+        assert "optimize" in view._md_timings.content
         n = viewer.stats["pushes"]
-        viewer._txt_query.value = "tab"  # what typing in the browser does
-        assert viewer.wait_until(lambda s: s["pushes"] > n and "1 match" in viewer._md_matches.content, 20)
-        assert "table" in viewer._md_matches.content
-        assert viewer._dd_node.options == ("(none)", "#1 table")  # the node list follows the query
+        view._txt_query.value = "Table"  # what typing in the browser does; whole words, as graph -q
+        assert viewer.wait_until(lambda s: s["pushes"] > n and "1 match" in view._md_matches.content, 20)
+        assert "table" in view._md_matches.content
+        assert view._dd_node.options == ("(none)", "#1 table")  # the node list follows the query
         n = viewer.stats["pushes"]
-        viewer._on_node_pick("#1 table")  # picking it in the GUI list
-        assert viewer.wait_until(lambda s: s["pushes"] > n and "caption" in viewer._md_selected.content, 20)
-        assert "a test object number 1" in viewer._md_selected.content
-        assert "next to" in viewer._md_selected.content
+        view._on_node_pick("#1 table")  # picking it in the GUI list
+        assert viewer.wait_until(lambda s: s["pushes"] > n and "caption" in view._md_selected.content, 20)
+        assert "a test object number 1" in view._md_selected.content
+        assert "next to" in view._md_selected.content
+        assert len(view.layers._edge_labels) == 2  # the selected node's relations are labelled
         n = viewer.stats["pushes"]
-        viewer.select_node(0)  # a click on a node marker
-        assert viewer.wait_until(lambda s: s["pushes"] > n and "sofa" in viewer._md_selected.content, 20)
-        assert viewer._dd_node.value == "(none)"  # node 0 does not match "tab": not in the list
+        view.select_node(0)  # a click on a node marker
+        assert viewer.wait_until(lambda s: s["pushes"] > n and "sofa" in view._md_selected.content, 20)
+        assert view._dd_node.value == "(none)"  # node 0 does not match "table": not in the list
         n = viewer.stats["pushes"]
-        viewer._txt_query.value = ""
-        assert viewer.wait_until(lambda s: s["pushes"] > n and len(viewer._dd_node.options) == 4, 20)
-        assert viewer._dd_node.value == "#0 sofa"
+        view._txt_query.value = "#2"  # a node by id
+        assert viewer.wait_until(
+            lambda s: s["pushes"] > n and view._dd_node.options == ("(none)", "#2 lamp"), 20
+        )
+        n = viewer.stats["pushes"]
+        view._txt_query.value = ""
+        assert viewer.wait_until(lambda s: s["pushes"] > n and len(view._dd_node.options) == 4, 20)
+        assert view._dd_node.value == "#0 sofa"
         n = viewer.stats["map_pushes"]
-        viewer._dd_color.value = "Semantic label"
+        view._dd_color.value = "Semantic label"
         assert viewer.wait_until(lambda s: s["map_pushes"] > n, 20)
-        assert viewer.settings.color_mode == "semantic"
+        assert view.settings.color_mode == "semantic"
+        assert "sofa (#0)" in view._html_legend.content
         n = viewer.stats["map_pushes"]
-        viewer._dd_render.value = "Points"
-        viewer._sl_point.value = 2.5
+        view._dd_render.value = "Points"
+        view._sl_point.value = 2.5
         assert viewer.wait_until(lambda s: s["render"] == "points" and s["map_pushes"] > n, 20)
-        assert viewer.wait_until(lambda s: viewer.layers._gauss_handle.point_size == 0.025, 20)
+        assert viewer.wait_until(lambda s: view.layers._gauss_handle.point_size == 0.025, 20)
 
 
-def test_live_session_maps_pauses_saves_and_finishes(watched, tmp_path):
+def test_each_browser_keeps_its_own_gui_state(open_browser):
+    """A second browser opens with the start settings, not with what the first one chose, and its
+    choices do not change the first one's scene."""
+    from ogscene3d.viewer.app import LiveViewer
+
+    with LiveViewer(port=0, max_rate_hz=50) as viewer:
+        first = open_browser(viewer)
+        snap = make_scene(20)
+        viewer.publish(snap)
+        assert viewer.wait_until(lambda s: s["nodes"] == 3, timeout=20)
+        first._dd_color.value = "Semantic label"
+        first._txt_query.value = "lamp"
+        assert viewer.wait_until(lambda s: "1 match" in first._md_matches.content, 20)
+        second = open_browser(viewer)
+        assert viewer.wait_until(lambda s: second.layers.shown_gaussians == 60, 20)
+        assert second.settings.color_mode == "rgb" and second._dd_color.value == "RGB"
+        assert second._txt_query.value == "" and second._md_matches.content == ""
+        np.testing.assert_allclose(
+            second.layers._gauss_handle.rgbs[:, :3] / 255, snap.colors, atol=1 / 255 + 1e-6
+        )
+        np.testing.assert_allclose(
+            first.layers._gauss_handle.rgbs[:, :3] / 255, label_colors(snap.labels), atol=0.76
+        )  # semantic, with the non-matching nodes dimmed
+        assert first.layers._highlight_handle is not None and second.layers._highlight_handle is None
+        n = viewer.stats["map_pushes"]
+        second._dd_color.value = "Confidence"
+        assert viewer.wait_until(lambda s: s["map_pushes"] > n, 20)
+        assert first.settings.color_mode == "semantic" and first._dd_color.value == "Semantic label"
+        assert "lamp" in first._md_matches.content
+
+
+def test_first_camera_sees_the_whole_map_from_outside(open_browser):
+    from ogscene3d.viewer.app import LiveViewer, fit_camera
+
+    up = np.array([0.0, 0.0, 1.0])
+    fov = np.deg2rad(75)
+    eye, target = fit_camera(np.zeros(3), 4.0, up, fov, view_dir=np.array([0.0, 1.0, 0.0]))
+    np.testing.assert_allclose(target, 0.0, atol=1e-12)
+    # outside the 4 m sphere, where it fits the field of view with some margin
+    assert 2.0 / np.sin(fov / 2) < np.linalg.norm(eye) < 1.3 * 2.0 / np.sin(fov / 2)
+    assert abs(eye[0]) < 1e-9 and eye[1] < 0 and eye[2] > 0  # behind the first view direction, above
+    # a wide canvas whose right third is under the GUI panel: the map is centred in the left two thirds
+    eye2, target2 = fit_camera(
+        np.zeros(3), 4.0, up, fov, np.array([0.0, 1.0, 0.0]), aspect=2.0, covered=1 / 3
+    )
+    fwd = (target2 - eye2) / np.linalg.norm(target2 - eye2)
+    rel = -eye2  # the map's centre seen from the camera
+    x = (rel @ np.array([1.0, 0.0, 0.0])) / (rel @ fwd)  # its horizontal image coordinate, tan units
+    half_w = np.tan(fov / 2) * 2.0
+    assert (x / half_w + 1) / 2 == pytest.approx((1 - 1 / 3) / 2)  # middle of the uncovered part
+    with LiveViewer(port=0, max_rate_hz=50, up="+z") as viewer:
+        view = open_browser(viewer)
+        snap = make_scene(200)
+        viewer.publish(snap)
+        assert viewer.wait_until(lambda s: s["gaussians"] == 600, timeout=20)
+        assert viewer.wait_until(lambda s: view.camera_placed, timeout=20)
+        lo, hi = np.percentile(snap.means, [2, 98], axis=0)
+        for cam_pos, look_at in (
+            (view.client.camera.position, view.client.camera.look_at),
+            (viewer.server.initial_camera.position, viewer.server.initial_camera.look_at),
+        ):
+            # the target is the map's centre, slid sideways only (the fake browser is 640 px wide: no panel
+            # allowance; the server-wide initial camera has none either)
+            np.testing.assert_allclose(look_at, 0.5 * (lo + hi), atol=1e-6)
+            assert not np.all((cam_pos > snap.means.min(axis=0)) & (cam_pos < snap.means.max(axis=0)))
+            assert np.linalg.norm(cam_pos - look_at) >= 0.5 * np.linalg.norm(hi - lo)
+
+
+def test_live_session_maps_pauses_saves_and_finishes(open_browser, tmp_path):
     from ogscene3d.viewer.app import LiveViewer
     from ogscene3d.viewer.live import LiveSession
 
     mapper = FakeMapper(per_frame=40)
     with LiveViewer(port=0, max_rate_hz=100) as viewer:
+        view = open_browser(viewer)
         session = LiveSession(mapper, _frames(6), viewer, budget=100, out_dir=tmp_path / "run")
         viewer.set_control(session)
         session.set_paused(True)
         session.start()
         time.sleep(0.5)
         assert mapper.frames_seen == 0 and not session.done  # paused before the first frame
-        assert viewer.wait_until(lambda s: viewer._btn_pause.label == "Resume mapping", timeout=10)
-        assert "(paused)" in viewer._md_status.content
-        viewer._toggle_pause()  # the GUI button
+        assert viewer.wait_until(lambda s: view._btn_pause.label == "Resume mapping", timeout=10)
+        assert "(paused)" in view._md_status.content and not view._btn_pause.disabled
+        view._toggle_pause()  # the GUI button
         assert not session.paused
         assert session.join(30) and session.error is None
         assert mapper.frames_seen == 6 and mapper.finalized
         assert session.saved_to == tmp_path / "run" and (tmp_path / "run" / "gaussians.ply").is_file()
         assert viewer.wait_until(lambda s: s["gaussians"] == 100 and s["nodes"] == 1, timeout=20)
+        # mapping is over: nothing to pause any more
+        assert viewer.wait_until(lambda s: view._btn_pause.disabled, timeout=10)
+        assert view._btn_pause.label == "Mapping finished"
+        view._toggle_pause()
+        assert not session.paused
         latest = viewer._latest
         assert (
             latest.total_gaussians == 240
             and len(latest.trajectory) == 6
             and latest.status.startswith("finished")
         )
-        viewer._txt_out.value = str(tmp_path / "again")
-        viewer._on_save()  # the GUI's save button, after mapping
+        view._txt_out.value = str(tmp_path / "again")
+        view._on_save()  # the GUI's save button, after mapping
         assert (tmp_path / "again" / "gaussians.ply").is_file()
-        assert viewer._md_save.content.startswith("Saved to") and not viewer._btn_save.disabled
+        assert view._md_save.content.startswith("Saved to") and not view._btn_save.disabled
         mapper.save = lambda out: (_ for _ in ()).throw(OSError("disk full"))
-        viewer._on_save()
-        assert "Save failed" in viewer._md_save.content and "disk full" in viewer._md_save.content
+        view._on_save()
+        assert "Save failed" in view._md_save.content and "disk full" in view._md_save.content
 
 
-def test_live_session_reports_mapping_errors(watched):
+def test_live_session_reports_mapping_errors():
     from ogscene3d.viewer.app import LiveViewer
     from ogscene3d.viewer.live import LiveSession
 
@@ -934,3 +1101,38 @@ def test_aborted_browser_handshakes_are_not_logged_as_errors():
     assert keep(record("opening handshake failed", chained(ValueError("bad header"))))
     assert keep(record("opening handshake failed", None))
     assert keep(record("connection handler failed", chained(EOFError())))
+
+
+def test_find_box_and_graph_query_are_one_function():
+    """The viewer's Find gives the nodes ``ogscene3d graph -q`` gives (SceneGraph.query), synonyms too."""
+    from ogscene3d.graph import SceneGraph
+    from ogscene3d.viewer.app import LiveViewer
+
+    graph = make_scene(5, objects=4).graph
+    g = SceneGraph.from_json(graph)
+    with LiveViewer(port=0) as viewer:
+        for q in ("couch", "table", "object", "#3", "giraffe"):
+            assert viewer.find(graph, q) == ([n.id for n in g.query(q)], "")
+        assert viewer.find(graph, "couch")[0] == [0]  # the sofa, by synonym (a substring match finds none)
+        ids, error = viewer.find({"version": 1, "nodes": [{"id": 1, "center": [0, 0, 0]}], "edges": []}, "x")
+        assert ids == [] and "Find is unavailable" in error and "bbox_min" in error
+
+
+def test_node_panel_gives_the_captions_size_and_the_box_apart():
+    from ogscene3d.viewer.app import node_details
+
+    node = {
+        "id": 4,
+        "tag": "gray object",
+        "caption": "medium gray object, about 78 cm (geometric heuristic)",
+        "caption_source": "heuristic",
+        "center": [0, 0, 0],
+        "extent": [0.78, 0.5, 0.31],
+        "bbox_min": [0, 0, 0],
+        "bbox_max": [1.41, 0.9, 1.02],
+    }
+    text = node_details({"nodes": [node], "edges": []}, 4)
+    assert "size: 0.78 x 0.50 x 0.31 m" in text and "box: 1.41 x 0.90 x 1.02 m" in text
+    assert "about 78 cm" in text
+    assert "size:" not in node_details({"nodes": [{k: v for k, v in node.items() if k != "extent"}]}, 4)
+    assert node_details(None, None).startswith("*Pick")

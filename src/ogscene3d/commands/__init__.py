@@ -20,4 +20,5 @@ COMMAND_MODULES: list[str] = [
     "ogscene3d.commands.batch",  # run-batch, eval-batch
     "ogscene3d.commands.render_demo",  # render-demo
     "ogscene3d.commands.config",  # config
+    "ogscene3d.commands.export",  # export
 ]

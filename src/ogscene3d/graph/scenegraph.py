@@ -657,9 +657,14 @@ class SceneGraph:
 
     @classmethod
     def load(cls, path: str | Path, config: GraphConfig | None = None) -> SceneGraph:
-        """Read a graph.json (for queries and export). Node point subsamples and observations are not stored
-        in the file, so geometric predicates on a loaded graph use node centres only."""
+        """Read a graph.json, or the one in a run directory (for queries and export). Node point subsamples
+        and observations are not stored in the file, so geometric predicates on a loaded graph use node
+        centres only."""
         p = Path(path)
+        if p.is_dir():
+            if not (p / "graph.json").is_file():
+                raise DataError(f"run directory {str(p)!r} has no graph.json (did the run finish?)")
+            p = p / "graph.json"
         if not p.is_file():
             raise DataError(f"scene graph file {str(p)!r} does not exist")
         try:
@@ -755,6 +760,7 @@ class SceneGraph:
                 tag=str(d.get("tag", "")),
                 caption_source=str(d.get("caption_source", "")),
                 confidence=float(d.get("confidence", 0.0)),
+                stored_extent=vec(d, "extent", (3,), k) if "extent" in d else None,
             )
             nodes[node.id] = node
         for k, e in enumerate(doc["edges"]):
@@ -772,9 +778,12 @@ class SceneGraph:
         self._initialized = True
 
     def to_networkx(self):
-        """A ``networkx.DiGraph``: node attributes caption, tag, confidence, center_x/y/z, num_gaussians,
-        first_seen, last_updated, caption_source; edge attributes relation, score, predictor.
-        networkx is optional (``pip install networkx``)."""
+        """A ``networkx.DiGraph``: node attributes label, caption, tag, confidence, center_x/y/z, the
+        axis-aligned box bbox_min_x/y/z and bbox_max_x/y/z, the oriented box obb_center_x/y/z,
+        obb_extent_x/y/z (full side lengths) and obb_axes (its 3x3 rows, 9 numbers, as a JSON list),
+        num_gaussians, first_seen, last_updated, caption_source; edge attributes relation, score,
+        predictor. GraphML holds scalars only, hence one attribute per coordinate. networkx is optional
+        (``pip install networkx``)."""
         try:
             import networkx as nx
         except ImportError:
@@ -785,14 +794,19 @@ class SceneGraph:
         with self._lock:
             for i in sorted(self.nodes):
                 n = self.nodes[i]
+                xyz = {
+                    f"{name}_{axis}": float(getattr(n, name)[k])
+                    for name in ("center", "bbox_min", "bbox_max", "obb_center", "obb_extent")
+                    for k, axis in enumerate("xyz")
+                }
                 G.add_node(
                     int(i),
+                    label=int(n.label),
                     caption=n.caption,
                     tag=n.tag,
                     confidence=float(n.confidence),
-                    center_x=float(n.center[0]),
-                    center_y=float(n.center[1]),
-                    center_z=float(n.center[2]),
+                    **xyz,
+                    obb_axes=json.dumps([round(float(v), 6) for v in np.ravel(n.obb_axes)]),
                     num_gaussians=int(n.num_gaussians),
                     first_seen=int(n.first_seen),
                     last_updated=int(n.last_updated),
@@ -830,11 +844,17 @@ class SceneGraph:
         (:data:`SYNONYM_GROUPS`) in the tag (score 1.0 for the exact tag, 0.9 inside it) or the caption
         (0.6); synonym matches count 0.9 times. When ``graph.query_embedding`` is "clip" or "openai", the
         cosine similarity between the query and "tag: caption" embeddings is also used (kept when at least
-        ``graph.query_min_similarity``); a node's score is the larger of the two.
+        ``graph.query_min_similarity``); a node's score is the larger of the two. ``#<id>`` names one
+        node by id (score 1.0).
         """
         q = " ".join(str(text).lower().split())
         if not q:
             raise ConfigError("SceneGraph.query: the query text is empty")
+        by_id = re.fullmatch(r"#(\d+)", q)
+        if by_id:
+            with self._lock:
+                node = self.nodes.get(int(by_id.group(1)))
+            return [(node, 1.0)] if node is not None else []
         terms = {q: 1.0}
         for group in SYNONYM_GROUPS:
             if q in group:

@@ -147,6 +147,8 @@ class SceneNode:
     color: np.ndarray = field(default_factory=lambda: np.full(3, 0.5))
     mean_confidence: float = 0.0
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
+    # graph.json's "extent", for a node read back from the file (which does not store ``points``)
+    stored_extent: np.ndarray | None = field(default=None, repr=False)
     _shape: Shape | None = field(default=None, repr=False)
     _shape_up: tuple[float, ...] | None = field(default=None, repr=False)
 
@@ -165,6 +167,12 @@ class SceneNode:
         g = node_geometry(node_id, points, colors, confidences, max_points, voxel)
         return cls(id=int(node_id), first_seen=keyframe, last_updated=keyframe, **g)
 
+    @property
+    def label(self) -> int:
+        """The scene label of the node's Gaussians (``label`` in gaussians.ply and graph.json): a node is
+        the set of Gaussians sharing one label, so it is the node's id."""
+        return int(self.id)
+
     def shape(self, up: np.ndarray) -> Shape:
         """The node's up-aware :class:`Shape` (cached per up vector)."""
         key = tuple(np.asarray(up, dtype=np.float64).round(9).tolist())
@@ -174,8 +182,19 @@ class SceneNode:
             self._shape_up = key
         return self._shape
 
+    def extent(self) -> np.ndarray | None:
+        """The node's size: robust (2nd-98th percentile) extents along its principal axes (the axis of
+        largest spread first), in metres; the heuristic caption's "about ..." is the first
+        (:attr:`Shape.extent`, which does not depend on the up vector). None for a node read from a file
+        that does not store it."""
+        if len(self.points):
+            shape = self._shape if self._shape is not None else self.shape(np.array([0.0, 0.0, 1.0]))
+            return np.asarray(shape.extent, dtype=np.float64)
+        return self.stored_extent
+
     def to_dict(self) -> dict:
         """The node as graph.json stores it (README "File formats")."""
+        extent = self.extent()
         return {
             "id": int(self.id),
             "label": int(self.id),
@@ -192,6 +211,7 @@ class SceneNode:
             "obb_axes": [[float(v) for v in row] for row in self.obb_axes],
             "obb_extent": [float(v) for v in self.obb_extent],
             "caption_source": self.caption_source,
+            **({"extent": [float(v) for v in extent]} if extent is not None else {}),
         }
 
 

@@ -31,6 +31,9 @@ CHROMIUM_FLAGS = [
     "--disable-dev-shm-usage",
     "--remote-debugging-address=127.0.0.1",
     "--remote-debugging-port=0",
+    # the page's console messages go to the log (console_messages() reads them back)
+    "--enable-logging=stderr",
+    "--v=0",
 ]
 
 
@@ -99,6 +102,14 @@ class HeadlessBrowser:
             return (Path(self._profile) / "chromium.log").read_bytes()[-n:].decode("utf-8", "replace")
         except OSError:
             return ""
+
+    def console_messages(self) -> list[str]:
+        """The page's console messages so far (three.js warnings among them), oldest first."""
+        try:
+            text = (Path(self._profile) / "chromium.log").read_text("utf-8", "replace")
+        except OSError:
+            return []
+        return [line.split("] ", 1)[1] for line in text.splitlines() if ":CONSOLE" in line and "] " in line]
 
     def _page_ws_url(self) -> str:
         with urllib.request.urlopen(f"http://127.0.0.1:{self.devtools_port}/json/list", timeout=10) as r:

@@ -6,13 +6,14 @@ push thread (never on the mapping thread), so they may take their time.
 
 from __future__ import annotations
 
+import html
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..colors import confidence_colors, dim, label_color_uint8, label_colors
+from ..colors import UNLABELED_RGB, confidence_colors, dim, label_color_uint8, label_colors, turbo
 from .snapshot import MapSnapshot, covariances, decimate_indices, rotmat_to_wxyz
 
 log = logging.getLogger(__name__)
@@ -29,7 +30,10 @@ class ViewerSettings:
 
     ``max_splats``: at most this many Gaussians are sent as splats; ``max_points``: as points. In
     ``render="auto"`` a map up to ``max_splats`` is drawn as splats, a larger one as points.
-    ``point_size`` is in metres (0 = from the median Gaussian scale).
+    ``point_size`` is in metres (0 = from the median Gaussian scale). ``show_edge_labels``: every
+    relation's label (otherwise only those of the selected node's relations). ``label_spacing``: a node
+    label is left out where a larger node's label is nearer than this fraction of the map's size (the
+    selected node and Find matches are always labelled; 0 labels every node).
     """
 
     color_mode: str = "rgb"
@@ -42,8 +46,9 @@ class ViewerSettings:
     show_camera: bool = True
     show_nodes: bool = True
     show_edges: bool = True
-    show_edge_labels: bool = True
+    show_edge_labels: bool = False
     max_edge_labels: int = 300
+    label_spacing: float = 0.08
 
     def validate(self) -> ViewerSettings:
         if self.color_mode not in COLOR_MODES:
@@ -56,6 +61,8 @@ class ViewerSettings:
             )
         if not np.isfinite(self.point_size) or self.point_size < 0:
             raise ValueError(f"point_size must be a finite number >= 0, got {self.point_size}")
+        if not 0 <= self.label_spacing <= 1:
+            raise ValueError(f"label_spacing must be in [0, 1], got {self.label_spacing}")
         return self
 
 
@@ -81,13 +88,62 @@ def node_text(node: dict) -> str:
     return f"#{node.get('id')}"
 
 
-def node_matches(node: dict, query: str) -> bool:
-    """Case-insensitive substring match of ``query`` over the node's tag and caption (and '#id')."""
-    q = query.strip().lower()
-    if not q:
-        return False
-    hay = f"{node.get('tag') or ''}\n{node.get('caption') or ''}\n#{node.get('id')}".lower()
-    return q in hay
+def labelled_nodes(nodes: dict[int, dict], spacing: float, always: set[int] = frozenset()) -> set[int]:
+    """The ids of the nodes whose labels are drawn: a greedy pass from the largest node (most Gaussians)
+    down, keeping a label unless a kept one is within ``spacing`` metres (3D centre distance), so that a
+    cluster of small objects shows its largest one instead of a pile of overlapping texts. ``always``
+    (the selected node, Find matches) are labelled whatever their neighbours."""
+    keep = {i for i in always if i in nodes}
+    if spacing <= 0:
+        return set(nodes)
+    centers = [np.asarray(nodes[i]["center"], dtype=np.float64) for i in keep]
+    order = sorted(nodes, key=lambda i: (-int(nodes[i].get("num_gaussians") or 0), i))
+    for i in order:
+        if i in keep:
+            continue
+        c = np.asarray(nodes[i]["center"], dtype=np.float64)
+        if all(np.linalg.norm(c - k) >= spacing for k in centers):
+            keep.add(i)
+            centers.append(c)
+    return keep
+
+
+def _swatch(rgb: tuple[int, int, int] | np.ndarray, text: str) -> str:
+    r, g, b = (int(v) for v in rgb)
+    return (
+        f'<div style="display:flex;align-items:center;gap:6px;line-height:1.5">'
+        f'<span style="display:inline-block;width:12px;height:12px;border-radius:2px;'
+        f'background:rgb({r},{g},{b})"></span><span>{html.escape(text)}</span></div>'
+    )
+
+
+def legend_html(color_mode: str, graph: dict | None, max_rows: int = 40) -> str:
+    """The colour legend of ``color_mode`` as HTML: per scene-graph node its label colour and text
+    (largest nodes first) in "semantic" mode, the colour ramp in "confidence" mode, "" in "rgb"."""
+    grey = tuple(int(round(float(v) * 255)) for v in UNLABELED_RGB)
+    if color_mode == "confidence":
+        ts = np.linspace(0.0, 1.0, 6)
+        ramp = np.round(turbo(ts) * 255).astype(int)
+        stops = ", ".join(f"rgb({r},{g},{b}) {t * 100:.0f}%" for (r, g, b), t in zip(ramp, ts))
+        return (
+            f'<div style="height:12px;border-radius:2px;background:linear-gradient(to right, {stops})"></div>'
+            '<div style="display:flex;justify-content:space-between"><span>0</span>'
+            "<span>label confidence</span><span>1</span></div>" + _swatch(grey, "unlabelled")
+        )
+    if color_mode != "semantic":
+        return ""
+    nodes = sorted(
+        (graph or {}).get("nodes", []), key=lambda n: (-int(n.get("num_gaussians") or 0), int(n["id"]))
+    )
+    rows = [_swatch(label_color_uint8(int(n["id"])), f"{node_text(n)} (#{n['id']})") for n in nodes]
+    rows = rows[:max_rows]
+    if len(nodes) > max_rows:
+        rows.append(f"<div>... {len(nodes) - max_rows} more nodes</div>")
+    if not nodes:
+        rows.append("<div><i>no scene-graph nodes yet</i></div>")
+    rows.append(_swatch(grey, "unlabelled"))
+    rows.append("<div><small>labels without a graph node keep their own colour</small></div>")
+    return "".join(rows)
 
 
 def _valid_node(node: dict) -> bool:
@@ -127,11 +183,12 @@ def _box_segments(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 
 class SceneLayers:
-    """Owns the viser scene nodes of the viewer (server-wide, so every browser sees the same scene)."""
+    """Owns the viser scene nodes of one view: ``target`` is a viser ``ClientHandle`` (one browser's
+    scene, as the viewer uses it) or a ``ViserServer`` (a scene every browser shares)."""
 
-    def __init__(self, server, on_node_click: Callable[[int], None] | None = None) -> None:
-        self.server = server
-        self.scene = server.scene
+    def __init__(self, target, on_node_click: Callable[[int], None] | None = None) -> None:
+        self.target = target
+        self.scene = target.scene
         self.on_node_click = on_node_click
         self.center = np.zeros(3)
         self.extent = 1.0
@@ -151,8 +208,11 @@ class SceneLayers:
         # id -> the frame /graph/nodes/<id> holding them (removing it removes both; viser would otherwise
         # keep an implicit frame per node id ever shown and replay it to every browser that connects)
         self._node_frames: dict[int, object] = {}
+        self._labelled: set[int] = set()  # nodes whose label is drawn
         self._edges_key: tuple | None = None
-        self._edge_handles: list = []
+        self._edge_segments = None
+        self._edge_labels: list = []
+        self._edge_labels_key: tuple | None = None
         self._highlight_handle = None
         self._highlight_key: tuple | None = None
 
@@ -280,27 +340,36 @@ class SceneLayers:
             self._image = snap.image
 
     # ------------------------------------------------------------------ graph
-    def update_graph(self, graph: dict | None, st: ViewerSettings, matches: set[int]) -> None:
-        """Node labels + clickable spheres at node centres, edges with relation labels, match boxes."""
+    def update_graph(
+        self, graph: dict | None, st: ViewerSettings, matches: set[int], selected: int | None = None
+    ) -> None:
+        """Clickable spheres at node centres with the labels :func:`labelled_nodes` keeps, edges, the
+        relation labels (all, or the ``selected`` node's), boxes around the Find ``matches``."""
         nodes = {int(n["id"]): n for n in (graph or {}).get("nodes", []) if _valid_node(n)}
         radius = float(np.clip(0.012 * self.extent, 0.015, 0.08))
+        always = set(matches) | ({selected} if selected is not None else set())
+        labelled = labelled_nodes(nodes, st.label_spacing * self.extent, always)
         for nid in [i for i in self._node_handles if i not in nodes]:
             self._node_handles.pop(nid)
             self._node_frames.pop(nid).remove()  # and the label and marker in it
             self._nodes.pop(nid, None)
         for nid, node in nodes.items():
             center = np.asarray(node["center"], dtype=np.float64)
-            state = (node_text(node), tuple(np.round(center, 5)), nid in matches, radius)
+            hl, sel = nid in matches, nid == selected
+            state = (node_text(node), tuple(np.round(center, 5)), hl, sel, nid in labelled, radius)
             if self._nodes.get(nid) == state:
                 continue
-            text, _, hl, _ = state
+            text = ("★ " if hl else "") + state[0]
             color = HIGHLIGHT_RGB if hl else label_color_uint8(nid)
-            r = radius * (1.6 if hl else 1.0)
+            r = radius * (1.6 if hl or sel else 1.0)
+            font = 1.2 if hl or sel else 0.9
+            label_visible = st.show_nodes and nid in labelled
             if nid in self._node_handles:
                 label, sphere = self._node_handles[nid]
-                label.text = ("★ " + text) if hl else text
+                label.text = text
                 label.position = center
-                label.font_screen_scale = 1.3 if hl else 1.0
+                label.font_screen_scale = font
+                label.visible = label_visible
                 sphere.position = center
                 sphere.color = color
                 sphere.scale = (r / radius,) * 3
@@ -308,11 +377,11 @@ class SceneLayers:
                 self._node_frames[nid] = self.scene.add_frame(f"/graph/nodes/{nid}", show_axes=False)
                 label = self.scene.add_label(
                     f"/graph/nodes/{nid}/label",
-                    ("★ " + text) if hl else text,
+                    text,
                     position=center,
                     anchor="bottom-center",
-                    font_screen_scale=1.3 if hl else 1.0,
-                    visible=st.show_nodes,
+                    font_screen_scale=font,
+                    visible=label_visible,
                 )
                 sphere = self.scene.add_icosphere(
                     f"/graph/nodes/{nid}/marker",
@@ -328,10 +397,13 @@ class SceneLayers:
                     sphere.on_click(lambda _event, nid=nid, cb=cb: cb(nid))
                 self._node_handles[nid] = (label, sphere)
             self._nodes[nid] = state
-        self._update_edges(graph, nodes, st)
+        self._labelled = labelled
+        self._update_edges(graph, nodes, st, selected)
         self._update_highlight(nodes, matches)
 
-    def _update_edges(self, graph: dict | None, nodes: dict[int, dict], st: ViewerSettings) -> None:
+    def _update_edges(
+        self, graph: dict | None, nodes: dict[int, dict], st: ViewerSettings, selected: int | None
+    ) -> None:
         edges = [
             e
             for e in (graph or {}).get("edges", [])
@@ -347,39 +419,44 @@ class SceneLayers:
             )
             for e in edges
         )
-        if key == self._edges_key:
+        if key != self._edges_key:
+            if self._edge_segments is not None:
+                self._edge_segments.remove()
+                self._edge_segments = None
+            self._edges_key = key
+            if edges:
+                src = np.array([k[3] for k in key], dtype=np.float32)
+                dst = np.array([k[4] for k in key], dtype=np.float32)
+                self._edge_segments = self.scene.add_line_segments(
+                    "/graph/edges",
+                    points=np.stack([src, dst], axis=1),
+                    colors=EDGE_RGB,
+                    thickness=1.5,
+                    thickness_units="screen",
+                    visible=st.show_edges,
+                )
+        # Relation labels: on a room-sized graph (a hundred edges) all of them at once are a pile of
+        # overlapping text, so by default only the selected node's relations are labelled.
+        shown = [
+            i for i, k in enumerate(key) if k[2].strip() and (st.show_edge_labels or selected in (k[0], k[1]))
+        ][: st.max_edge_labels]
+        label_key = (key, tuple(shown))
+        if label_key == self._edge_labels_key:
             return
-        for h in self._edge_handles:
+        for h in self._edge_labels:
             h.remove()
-        self._edge_handles = []
-        self._edges_key = key
-        if not edges:
-            return
-        src = np.array([nodes[int(e["source"])]["center"] for e in edges], dtype=np.float32)
-        dst = np.array([nodes[int(e["target"])]["center"] for e in edges], dtype=np.float32)
-        self._edge_handles.append(
-            self.scene.add_line_segments(
-                "/graph/edges",
-                points=np.stack([src, dst], axis=1),
-                colors=EDGE_RGB,
-                thickness=1.5,
-                thickness_units="screen",
-                visible=st.show_edges,
-            )
-        )
-        mid = 0.5 * (src + dst)
-        for i, e in enumerate(edges[: st.max_edge_labels]):
-            rel = str(e.get("relation") or "").strip()
-            if not rel:
-                continue
-            self._edge_handles.append(
+        self._edge_labels = []
+        self._edge_labels_key = label_key
+        for i in shown:
+            mid = 0.5 * (np.asarray(key[i][3]) + np.asarray(key[i][4]))
+            self._edge_labels.append(
                 self.scene.add_label(
                     f"/graph/edge_labels/{i}",
-                    rel,
-                    position=mid[i],
+                    key[i][2].strip(),
+                    position=mid,
                     anchor="center-center",
                     font_screen_scale=0.75,
-                    visible=st.show_edges and st.show_edge_labels,
+                    visible=st.show_edges,
                 )
             )
 
@@ -424,11 +501,13 @@ class SceneLayers:
             self._traj_handle.visible = st.show_trajectory
         if self._frustum is not None:
             self._frustum.visible = st.show_camera
-        for label, sphere in self._node_handles.values():
-            label.visible = st.show_nodes
+        for nid, (label, sphere) in self._node_handles.items():
+            label.visible = st.show_nodes and nid in self._labelled
             sphere.visible = st.show_nodes
-        for i, h in enumerate(self._edge_handles):
-            h.visible = st.show_edges and (i == 0 or st.show_edge_labels)
+        if self._edge_segments is not None:
+            self._edge_segments.visible = st.show_edges
+        for h in self._edge_labels:
+            h.visible = st.show_edges
 
 
 __all__ = [
@@ -437,7 +516,8 @@ __all__ = [
     "SceneLayers",
     "ViewerSettings",
     "drawable_graph",
-    "node_matches",
+    "labelled_nodes",
+    "legend_html",
     "node_text",
     "scene_bounds",
 ]

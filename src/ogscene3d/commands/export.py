@@ -1,0 +1,69 @@
+"""``ogscene3d export``: a run's map and scene graph as files other tools open (see docs/exports.md)."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def _unit_interval(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}") from e
+    if not 0.0 <= v <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {v}")
+    return v
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser(
+        "export",
+        help="export a run as a coloured point cloud, per-node clouds and GraphML",
+        description="Write a run's Gaussians as a PLY point cloud with standard red/green/blue colours and "
+        "label/confidence properties (Open3D, CloudCompare, MeshLab show its colours), one such cloud "
+        "per scene-graph node, and the scene graph as GraphML with each node's boxes.",
+    )
+    p.add_argument("run", help="run directory (with gaussians.ply and graph.json)")
+    p.add_argument("--out", help="output directory (default RUN/export)")
+    p.add_argument(
+        "--colors",
+        choices=("rgb", "semantic"),
+        default="rgb",
+        help="vertex colours: the Gaussians' colour, or their semantic label's colour as the viewer shows "
+        "it (default rgb)",
+    )
+    p.add_argument("--no-cloud", action="store_true", help="skip the whole-map cloud points_<colors>.ply")
+    p.add_argument("--no-nodes", action="store_true", help="skip the per-node clouds in nodes/")
+    p.add_argument("--no-graphml", action="store_true", help="skip graph.graphml (which needs networkx)")
+    p.add_argument(
+        "--min-opacity",
+        type=_unit_interval,
+        default=0.0,
+        help="leave out Gaussians less opaque than this (0-1, default 0: all)",
+    )
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..errors import ConfigError
+    from ..export import export_run
+
+    if args.no_cloud and args.no_nodes and args.no_graphml:
+        raise ConfigError("nothing to export: --no-cloud, --no-nodes and --no-graphml were all given")
+    result = export_run(
+        args.run,
+        args.out,
+        colors=args.colors,
+        cloud=not args.no_cloud,
+        nodes=not args.no_nodes,
+        graphml=not args.no_graphml,
+        min_opacity=args.min_opacity,
+    )
+    if result.cloud:
+        print(f"wrote {result.cloud}")
+    if result.nodes:
+        first = result.nodes[min(result.nodes)]
+        print(f"wrote {len(result.nodes)} node clouds to {first.parent}")
+    if result.graphml:
+        print(f"wrote {result.graphml}")
+    return 0
