@@ -24,7 +24,8 @@ from .errors import ConfigError
 
 @dataclass
 class DataConfig:
-    # auto | replica | semantic_nerf | scannet | tum | sevenscenes | labelfusion | synthetic
+    # auto | replica | semantic_nerf | scannet | tum | sevenscenes | labelfusion | synthetic | rosbag |
+    # record3d
     kind: str = "auto"
     path: str | None = None
     segments_dir: str | None = None
@@ -43,6 +44,20 @@ class DataConfig:
     min_depth: float = 0.0
     max_depth: float = 0.0  # 0 = no limit
     on_bad_frame: str = "error"  # error | skip
+    # --- robot input (issue #27): ROS bags (data.kind rosbag) and Record3D captures (data.kind record3d).
+    # Topics are found by message type when the bag has one candidate; these choose among several.
+    ros_rgb_topic: str | None = None  # str: sensor_msgs/Image or CompressedImage colour topic
+    ros_depth_topic: str | None = None  # str: depth topic registered to colour (e.g. aligned_depth_to_color)
+    ros_camera_info_topic: str | None = None  # str: the colour camera's sensor_msgs/CameraInfo topic
+    # str: a PoseStamped / PoseWithCovarianceStamped / Odometry topic used instead of /tf
+    ros_pose_topic: str | None = None
+    ros_world_frame: str | None = None  # str: tf world frame; None = the root of the camera frame's tf tree
+    ros_camera_frame: str | None = None  # str: tf camera frame; None = the colour images' header.frame_id
+    # float >= 0, seconds: most colour/depth stamp difference of a pair, and how far a pose is held beyond
+    # the first/last transform sample
+    ros_sync_tolerance: float = 0.02
+    # int in 0..2: Record3D depth of lower confidence (0 low, 1 medium, 2 high) is left out
+    r3d_min_confidence: int = 1
 
 
 @dataclass
@@ -374,6 +389,8 @@ RANGES: dict[str, Range] = {
     "data.depth_scale": _float(0.0, lo_open=True, optional=True, note="null = the dataset's own"),
     "data.min_depth": _float(0.0, note="0 = the dataset's own"),
     "data.max_depth": _float(0.0, note="0 = no limit"),
+    "data.ros_sync_tolerance": _NONNEG,  # robot input (#27)
+    "data.r3d_min_confidence": _int(0, 2),  # robot input (#27)
     "synthetic.seed": _int(0),
     "synthetic.frames": _int(1),
     "synthetic.width": _int(8),
