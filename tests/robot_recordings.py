@@ -243,9 +243,12 @@ def write_r3d(
     conf: list[np.ndarray] | None = None,
     with_depth_size: bool = True,
     rgb_scale: int = 1,
+    lossless: bool = False,
 ) -> Path:
     """A Record3D capture of ``frames``: colour as JPEG (``rgb_scale`` times the depth size), depth and
-    confidence LZFSE-compressed, poses converted to ARKit's axes, K (of the colour size) column-major."""
+    confidence LZFSE-compressed, poses converted to ARKit's axes, K (of the colour size) column-major.
+    ``lossless``: colour as PNG under the same ``N.jpg`` names (readers decode by content), so that a test can
+    compare maps without JPEG's loss."""
     from ogscene3d.datasets.record3d import lzfse_module
 
     liblzfse = lzfse_module()
@@ -271,7 +274,10 @@ def write_r3d(
         z.writestr("metadata", json.dumps(meta))
         for i, f in enumerate(frames):
             rgb = cv2.resize(f.rgb, (w * rgb_scale, h * rgb_scale), interpolation=cv2.INTER_NEAREST)
-            ok, buf = cv2.imencode(".jpg", rgb[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY, 95])
+            if lossless:
+                ok, buf = cv2.imencode(".png", rgb[:, :, ::-1])
+            else:
+                ok, buf = cv2.imencode(".jpg", rgb[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY, 95])
             z.writestr(f"rgbd/{i}.jpg", buf.tobytes())
             z.writestr(f"rgbd/{i}.depth", liblzfse.compress(f.depth.astype(np.float32).tobytes()))
             c = conf[i] if conf is not None else np.full((h, w), 2, np.uint8)
