@@ -283,3 +283,73 @@ def write_r3d(
             c = conf[i] if conf is not None else np.full((h, w), 2, np.uint8)
             z.writestr(f"rgbd/{i}.conf", liblzfse.compress(c.astype(np.uint8).tobytes()))
     return path
+
+
+def _rs_intrinsics(rs, K: np.ndarray, w: int, h: int):
+    intr = rs.intrinsics()
+    intr.width, intr.height = w, h
+    intr.fx, intr.fy = float(K[0, 0]), float(K[1, 1])
+    intr.ppx, intr.ppy = float(K[0, 2]), float(K[1, 2])
+    intr.model, intr.coeffs = rs.distortion.none, [0.0] * 5
+    return intr
+
+
+def write_realsense_recording(
+    path: Path, frames: list, K_integer: np.ndarray, depth_units: float = 0.001, depth_half: bool = False
+) -> Path:
+    """A librealsense recording (``.db3``) of ``frames``, made with pyrealsense2's software device and
+    recorder: a z16 depth and an rgb8 colour stream with ``K_integer``, at one place (identity extrinsics).
+    ``depth_half``: depth at half the size (every other pixel, K halved), so that it needs aligning to colour,
+    as a D400's depth does; otherwise depth is registered to colour already. Frame i is stamped
+    1 s + i / 30 s. Played back, the recording lacks the first frame or two (librealsense's recorder misses
+    them)."""
+    import time
+
+    import pyrealsense2 as rs
+
+    h, w = frames[0].depth.shape
+    step = 2 if depth_half else 1
+    K_depth = K_integer.astype(np.float64).copy()
+    K_depth[:2] /= step  # pixel (u, v) of the half image is pixel (2u, 2v) of the full one
+    dev = rs.software_device()
+    sensors = {"depth": dev.add_sensor("Depth"), "color": dev.add_sensor("Color")}
+    profiles = {}
+    streams = [
+        ("depth", rs.stream.depth, rs.format.z16, 2, _rs_intrinsics(rs, K_depth, w // step, h // step)),
+        ("color", rs.stream.color, rs.format.rgb8, 3, _rs_intrinsics(rs, K_integer, w, h)),
+    ]
+    for uid, (name, stream, fmt, bpp, intr) in enumerate(streams):
+        vs = rs.video_stream()
+        vs.type, vs.index, vs.uid, vs.fps, vs.bpp, vs.fmt = stream, 0, uid, 30, bpp, fmt
+        vs.width, vs.height, vs.intrinsics = intr.width, intr.height, intr
+        profiles[name] = sensors[name].add_video_stream(vs)
+    sensors["depth"].add_read_only_option(rs.option.depth_units, depth_units)
+    same_place = rs.extrinsics()
+    same_place.rotation = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    same_place.translation = [0.0, 0.0, 0.0]
+    profiles["depth"].register_extrinsics_to(profiles["color"], same_place)
+    recorder = rs.recorder(str(path), dev)
+    for name in sensors:
+        sensors[name].open(profiles[name])
+        sensors[name].start(lambda f: None)
+    time.sleep(0.5)
+    for i, f in enumerate(frames):
+        raw = np.ascontiguousarray(np.round(f.depth[::step, ::step] / depth_units).astype(np.uint16))
+        for name, arr, bpp in (("depth", raw, 2), ("color", np.ascontiguousarray(f.rgb), 3)):
+            vf = rs.software_video_frame()
+            vf.pixels, vf.stride, vf.bpp = arr, arr.shape[1] * bpp, bpp
+            vf.timestamp, vf.domain, vf.frame_number = (
+                1000.0 + i * 1000.0 / 30,
+                rs.timestamp_domain.hardware_clock,
+                i + 1,
+            )
+            vf.profile = profiles[name].as_video_stream_profile()
+            if name == "depth":
+                vf.depth_units = depth_units
+            sensors[name].on_video_frame(vf)
+        time.sleep(0.05)  # the recorder writes on its own thread
+    for s in sensors.values():
+        s.stop()
+        s.close()
+    del recorder  # closes the file
+    return path
