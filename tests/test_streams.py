@@ -280,3 +280,53 @@ def test_live_maps_a_realsense_recording_and_saves_the_map(tmp_path, scene):
     assert len((out / "traj.txt").read_text().strip().split("\n")) >= 2  # tracked: odometry poses
     with pytest.raises(SystemExit):
         main(["--source", "realsense", "--data", str(scene[0])])  # one source at a time
+
+
+class _StillCamera(CameraStream):
+    """A camera that keeps seeing ``frame`` (no pose) until it is closed."""
+
+    name = "still camera"
+
+    def __init__(self, frame, **kw) -> None:
+        super().__init__(**kw)
+        self.frame, self._stop = frame, threading.Event()
+
+    def _open(self) -> None:
+        def run():
+            while not self._stop.wait(0.01):
+                self.buffer.put(self.frame)
+
+        threading.Thread(target=run, daemon=True).start()
+
+    def _close(self) -> None:
+        self._stop.set()
+
+    def _to_frame(self, raw, index):
+        from ogscene3d.streams.base import frame_from_arrays
+
+        return frame_from_arrays(index, raw.rgb, raw.depth, raw.K, float(index))
+
+
+def test_sigterm_stops_a_live_camera_and_saves_the_map(tmp_path, scene, monkeypatch):
+    import os
+    import signal
+
+    import ogscene3d.streams.base as streams
+    from ogscene3d.viewer.cli import main
+
+    camera = _StillCamera(scene[1][0])
+    monkeypatch.setattr(streams, "open_stream", lambda source, max_frames=None, **kw: camera)
+
+    def terminate_after_two_frames():
+        deadline = time.monotonic() + 120
+        while camera.delivered < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    threading.Thread(target=terminate_after_two_frames, daemon=True).start()
+    out = tmp_path / "run"
+    argv = ["--source", "realsense", "--out", str(out), "--port", "0", "--device", "cpu",
+            "--set", "graph.enabled=false", "--set", "mapping.opt_iters=1",
+            "--set", "segmentation.backend=none"]  # fmt: skip
+    assert main(argv) == 0
+    assert camera.delivered >= 2 and (out / "gaussians.ply").is_file() and (out / "map.npz").is_file()
