@@ -250,3 +250,49 @@ def test_track_and_run_accept_a_bag_path(tmp_path, scene):
     )  # fmt: skip
     assert code == 0 and (out / "gaussians.ply").is_file()
     assert dataclasses.asdict(load_config(out / "config.yaml").data)["path"] == str(path.resolve())
+
+
+def test_image_decoding_details():
+    """Row padding, big-endian 16-bit depth, image_transport's 32FC1 compressedDepth, a truncated PNG."""
+    import types
+
+    import cv2
+
+    from ogscene3d.datasets.rosbag_io import colour_from_image, depth_from_compressed, depth_from_image
+
+    rgb = np.arange(2 * 3 * 3, dtype=np.uint8).reshape(2, 3, 3)
+    padded = np.zeros((2, 12), np.uint8)  # step 12 > 3 pixels x 3 bytes
+    padded[:, :9] = rgb.reshape(2, 9)
+    msg = types.SimpleNamespace(
+        height=2, width=3, step=12, encoding="rgb8", is_bigendian=0, data=padded.ravel()
+    )
+    np.testing.assert_array_equal(colour_from_image(msg), rgb)
+
+    mm = np.array([[1000, 2500], [0, 65535]], np.uint16)
+    msg = types.SimpleNamespace(
+        height=2,
+        width=2,
+        step=4,
+        encoding="16UC1",
+        is_bigendian=1,
+        data=np.frombuffer(mm.astype(">u2").tobytes(), np.uint8),
+    )
+    np.testing.assert_array_equal(depth_from_image(msg), mm)
+
+    # compressed_depth_image_transport's 32FC1: q = A / depth + B in a 16-bit PNG, 0 = no depth
+    depth = np.array([[0.5, 1.0], [4.0, 0.0]], np.float32)
+    A = 100.0 * 101.0
+    B = 1.0 - A / 10.0
+    q = np.where(depth > 0, np.round(A / np.maximum(depth, 1e-6) + B), 0).astype(np.uint16)
+    ok, png = cv2.imencode(".png", q)
+    header = np.array([0], "<i4").tobytes() + np.array([A, B], "<f4").tobytes()
+    msg = types.SimpleNamespace(
+        format="32FC1; compressedDepth png", data=np.frombuffer(header + png.tobytes(), np.uint8)
+    )
+    np.testing.assert_allclose(depth_from_compressed(msg), depth, rtol=2e-4)
+
+    msg = types.SimpleNamespace(
+        format="16UC1; compressedDepth png", data=np.frombuffer(header + png.tobytes()[:-20], np.uint8)
+    )
+    with pytest.raises(ValueError, match="PNG is truncated"):
+        depth_from_compressed(msg)
