@@ -38,6 +38,9 @@ class BagSpec:
     corrupt_colour: set[int] = field(default_factory=set)  # frames whose colour message is garbage bytes
     truncated_colour: set[int] = field(default_factory=set)  # frames whose pixel data is cut short
     missing_depth: set[int] = field(default_factory=set)  # frames without a depth image
+    extra_colour_topic: tuple[str, str] | None = (
+        None  # (topic, encoding): the colour again, e.g. an IR camera
+    )
     extra_depth_topic: bool = False  # also an unregistered /camera/depth/image_rect_raw
     distortion: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
 
@@ -210,6 +213,10 @@ def write_bag(path: Path, frames: list, K_integer: np.ndarray, spec: BagSpec) ->
             writer.write(conn(topic, img_type), int(round(t * 1e9)), b"\x01\x02garbage")
         else:
             write(topic, img_type, t, msg)
+        if spec.extra_colour_topic is not None:
+            topic2, enc = spec.extra_colour_topic
+            arr = cv2.cvtColor(f.rgb, cv2.COLOR_RGB2GRAY) if enc == "mono8" else f.rgb
+            write(topic2, "sensor_msgs/msg/Image", t, msgs.image(t, "camera2_optical_frame", arr, enc))
         if spec.depth != "none" and i not in spec.missing_depth:
             depth = f.depth
             if spec.depth_size is not None:

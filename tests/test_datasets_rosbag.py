@@ -126,6 +126,16 @@ def test_track_interpolates_between_samples_and_holds_only_within_tolerance():
     )
 
 
+def test_several_colour_topics_need_an_option_unless_the_others_are_infrared(tmp_path, scene):
+    path = _bag(tmp_path, scene, extra_colour_topic=("/camera/infra1/image_rect_raw", "mono8"))
+    assert open_dataset(path).rgb_conn.topic == "/camera/color/image_raw"  # mono8 beside colour: infrared
+    path = _bag(tmp_path / "b", scene, extra_colour_topic=("/camera2/color/image_raw", "rgb8"))
+    with pytest.raises(DataError, match=r"several colour image topics \(/camera/color/image_raw, "
+                       r"/camera2/color/image_raw\); choose one with data.ros_rgb_topic"):  # fmt: skip
+        open_dataset(path)
+    assert _open(path, ros_rgb_topic="/camera/color/image_raw").rgb_conn.topic == "/camera/color/image_raw"
+
+
 def test_several_depth_topics_take_the_registered_one(tmp_path, scene):
     ds = open_dataset(_bag(tmp_path, scene, extra_depth_topic=True))
     assert ds.depth_conn.topic == "/camera/aligned_depth_to_color/image_raw"
