@@ -229,6 +229,9 @@ def test_a_kind_given_in_the_config_opens_a_bag(tmp_path, scene):
     notes.write_text("not a recording")
     with pytest.raises(DataError, match="is a file, but not a .bag, .mcap or .r3d recording"):
         open_dataset(notes)
+    (tmp_path / "desk.db3").write_bytes(b"SQLite format 3\x00")
+    with pytest.raises(DataError, match="librealsense recording.*--source realsense:FILE.*metadata.yaml"):
+        open_dataset(tmp_path / "desk.db3")
 
 
 def test_without_rosbags_the_error_names_the_extra(tmp_path, scene, monkeypatch):

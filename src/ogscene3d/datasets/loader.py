@@ -50,6 +50,11 @@ def detect_kind(path: str | Path) -> tuple[str, Path]:
         for kind in ("rosbag", "record3d"):
             if READERS[kind].detect(root):
                 return kind, root
+        if root.suffix.lower() == ".db3":
+            raise DataError(
+                f"{root}: a .db3 file alone is a librealsense recording (map it with ogscene3d-live --source "
+                "realsense:FILE) or part of a ROS 2 bag (give the bag's folder, which holds metadata.yaml)"
+            )
         raise DataError(f"{root}: dataset path is a file, but not a .bag, .mcap or .r3d recording")
     for kind, reader in READERS.items():
         if reader.detect(root):
