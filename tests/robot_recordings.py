@@ -38,6 +38,7 @@ class BagSpec:
     corrupt_colour: set[int] = field(default_factory=set)  # frames whose colour message is garbage bytes
     truncated_colour: set[int] = field(default_factory=set)  # frames whose pixel data is cut short
     missing_depth: set[int] = field(default_factory=set)  # frames without a depth image
+    tf_publishers: int = 1  # ROS 1: /tf written through this many connections (one per publishing node)
     extra_colour_topic: tuple[str, str] | None = (
         None  # (topic, encoding): the colour again, e.g. an IR camera
     )
@@ -230,7 +231,17 @@ def write_bag(path: Path, frames: list, K_integer: np.ndarray, spec: BagSpec) ->
         c2w = np.asarray(f.pose, dtype=np.float64)
         if spec.poses == "tf":
             link = c2w @ np.linalg.inv(LINK_TO_OPTICAL)
-            write("/tf", "tf2_msgs/msg/TFMessage", t, msgs.tf(t, "odom", "camera_link", link))
+            msg = msgs.tf(t, "odom", "camera_link", link)
+            if spec.tf_publishers > 1:
+                key = f"/tf#{i % spec.tf_publishers}"
+                if key not in conns:
+                    kw = {"callerid": f"/publisher{i % spec.tf_publishers}"}
+                    conns[key] = writer.add_connection(
+                        "/tf", "tf2_msgs/msg/TFMessage", typestore=msgs.ts, **kw
+                    )
+                writer.write(conns[key], int(round(t * 1e9)), msgs.serialize(msg, "tf2_msgs/msg/TFMessage"))
+            else:
+                write("/tf", "tf2_msgs/msg/TFMessage", t, msg)
         elif spec.poses == "odometry":
             write("/odom", "nav_msgs/msg/Odometry", t, msgs.odometry(t, "odom", OPTICAL, c2w))
         elif spec.poses == "pose":

@@ -201,6 +201,15 @@ def test_a_bag_without_poses_needs_odometry(tmp_path, scene, caplog):
         Mapper(load_config(None, ["graph.enabled=false"]), "cpu").process(frame)
 
 
+def test_a_topic_with_several_publishers_is_read_whole(tmp_path, scene):
+    """ROS 1 bags hold one connection per publisher: /tf from two nodes gives every transform."""
+    _, frames, _ = scene
+    ds = open_dataset(_bag(tmp_path, scene, tf_publishers=2))
+    assert len(ds.bag.topic_map()["/tf"].connections) == 2 and len(ds) == 4
+    for f, g in zip(frames, ds):
+        np.testing.assert_allclose(g.pose, f.pose, atol=1e-9)
+
+
 def test_tf_frame_options(tmp_path, scene):
     path = _bag(tmp_path, scene)
     with pytest.raises(

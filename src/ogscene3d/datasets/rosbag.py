@@ -129,7 +129,7 @@ class RosBagDataset(DecodedDataset):
         self, root: Path, config: DataConfig, tol: float
     ) -> tuple[list[BagFrameRecord], np.ndarray | None, tuple[int, int]]:
         bag = self.bag
-        by_topic = {c.topic: c for c in bag.connections}
+        by_topic = bag.topic_map()
         self._skip = config.on_bad_frame == "skip"
         rgb_topic, depth_topic = self._image_topics(config, by_topic)
         self.rgb_conn, self.depth_conn = by_topic[rgb_topic], by_topic[depth_topic]
@@ -153,8 +153,7 @@ class RosBagDataset(DecodedDataset):
             raise DataError(
                 f"{root}: no colour image on {rgb_topic} has a depth image on {depth_topic} within "
                 f"data.ros_sync_tolerance = {tol} s (the closest pair among the first 50 of each is "
-                f"{gap:.3f} s "
-                "apart): the streams are not synchronised, or their stamps use different clocks"
+                f"{gap:.3f} s apart): the streams are not synchronised, or their stamps use different clocks"
             )
         self._warn_dropped(unpaired, f"have no depth image on {depth_topic} within {tol} s", len(colour))
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -64,8 +65,17 @@ def field(msg: Any, *names: str) -> Any:
     raise AttributeError(f"message has none of the fields {names}")
 
 
+@dataclass(frozen=True)
+class Topic:
+    """A topic with all its connections (a ROS 1 bag has one per publisher: /tf often has several)."""
+
+    topic: str
+    msgtype: str
+    connections: tuple
+
+
 class Bag:
-    """A ROS recording open for reading: ``connections``, ``messages()`` and ``deserialize()``."""
+    """A ROS recording open for reading: ``topic_map()``, ``messages()`` and ``deserialize()``."""
 
     def __init__(self, path: Path) -> None:
         require("rosbags", "ros", "reading ROS bags")
@@ -109,9 +119,22 @@ class Bag:
             return "  (no topics)"
         return "\n".join(f"  {t}  [{m}, {n} messages]" for t, m, n in rows)
 
-    def messages(self, connections: list, start: int | None = None, stop: int | None = None) -> Iterator:
-        """(connection, receive time in ns, raw bytes) of ``connections`` in receive-time order."""
+    def topic_map(self) -> dict[str, Topic]:
+        """The recording's topics by name (connections of one topic with another type than its first are
+        left out: no recorder writes them)."""
+        out: dict[str, Topic] = {}
+        for c in self.connections:
+            t = out.get(c.topic)
+            if t is None:
+                out[c.topic] = Topic(c.topic, c.msgtype, (c,))
+            elif c.msgtype == t.msgtype:
+                out[c.topic] = Topic(c.topic, c.msgtype, (*t.connections, c))
+        return out
+
+    def messages(self, topics: list[Topic], start: int | None = None, stop: int | None = None) -> Iterator:
+        """(connection, receive time in ns, raw bytes) of the ``topics`` in receive-time order."""
         reader = self._mcap if self._mcap is not None else self._any
+        connections = [c for t in topics for c in t.connections]
         try:
             yield from reader.messages(connections=connections, start=start, stop=stop)
         except DataError:
