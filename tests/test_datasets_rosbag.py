@@ -272,6 +272,8 @@ def test_track_and_run_accept_a_bag_path(tmp_path, scene):
     )  # fmt: skip
     assert code == 0 and (out / "gaussians.ply").is_file()
     assert dataclasses.asdict(load_config(out / "config.yaml").data)["path"] == str(path.resolve())
+    assert main(["track", "--data", str(path), "--out", str(tmp_path / "track")]) == 0
+    assert (tmp_path / "track" / "traj.txt").is_file()
 
 
 def test_image_decoding_details():
