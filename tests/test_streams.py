@@ -330,3 +330,19 @@ def test_sigterm_stops_a_live_camera_and_saves_the_map(tmp_path, scene, monkeypa
             "--set", "segmentation.backend=none"]  # fmt: skip
     assert main(argv) == 0
     assert camera.delivered >= 2 and (out / "gaussians.ply").is_file() and (out / "map.npz").is_file()
+
+
+def test_live_sources_map_with_odometry_unless_told_otherwise():
+    from ogscene3d.config import load_config
+    from ogscene3d.streams import stream_for_live
+
+    cfg = load_config(None, [])
+    stream_for_live("realsense", cfg, None, [])
+    assert cfg.tracking.poses == "odometry"
+    cfg = load_config(None, ["tracking.poses=gt", "data.r3d_min_confidence=2"])
+    stream = stream_for_live("record3d", cfg, 5, ["tracking.poses=gt"])
+    assert (
+        cfg.tracking.poses == "gt" and stream.min_confidence == 2 and stream.max_frames == 5
+    )  # ARKit's poses
+    with pytest.raises(ConfigError, match="the camera gives no poses"):
+        stream_for_live("realsense", load_config(None, ["tracking.poses=gt"]), None, ["tracking.poses=gt"])
