@@ -140,6 +140,10 @@ class CameraStream:
         finally:
             self.close()
 
+    def check(self) -> None:
+        """Raise a clear error when the camera is not there (a driver package, a device, a recording),
+        without starting it."""
+
     # -- for subclasses
 
     def _open(self) -> None:
@@ -202,10 +206,13 @@ def close_stream(frames: Any) -> None:
         frames.close()
 
 
-def stream_for_live(source: str, cfg: Any, max_frames: int | None, overrides: list[str]) -> CameraStream:
+def stream_for_live(
+    source: str, cfg: Any, max_frames: int | None, overrides: list[str], check: bool = True
+) -> CameraStream:
     """The stream ``ogscene3d-live --source`` maps, with ``cfg.tracking.poses`` set for it: odometry unless
     ``--set tracking.poses=...`` says otherwise (Record3D frames carry ARKit's poses, which ``gt`` uses; a
-    RealSense has none)."""
+    RealSense has none). ``check``: look for the camera (or recording) now, so that a missing one is an
+    error before the viewer and the mapper are set up; it starts streaming when mapping starts."""
     kind = source.partition(":")[0].strip().lower()
     options = {"min_confidence": int(cfg.data.r3d_min_confidence)} if kind == "record3d" else {}
     stream = open_stream(source, max_frames=max_frames, **options)
@@ -214,4 +221,6 @@ def stream_for_live(source: str, cfg: Any, max_frames: int | None, overrides: li
     elif kind == "realsense" and cfg.tracking.poses != "odometry":
         raise ConfigError("--source realsense: the camera gives no poses; leave tracking.poses at odometry")
     log.info("%s: mapping with tracking.poses=%s", stream.name, cfg.tracking.poses)
+    if check:
+        stream.check()
     return stream

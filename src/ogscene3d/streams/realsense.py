@@ -55,8 +55,27 @@ class RealSenseStream(CameraStream):
         self.unsynchronised = 0  # framesets left out: colour and depth more than half a frame apart
         self.depth_scale = 0.001
 
+    def _module(self) -> Any:
+        return self._rs or require("pyrealsense2", "realsense", "--source realsense")
+
+    def check(self) -> None:
+        rs = self._module()
+        if self.playback is not None:
+            if not self.playback.is_file():
+                raise DataError(f"{self.playback}: RealSense recording does not exist")
+            return
+        serials = [d.get_info(rs.camera_info.serial_number) for d in rs.context().query_devices()]
+        if not serials:
+            raise DataError(
+                "RealSense: no camera connected (on a USB 3 port?); rs-enumerate-devices lists them"
+            )
+        if self.serial and self.serial not in serials:
+            raise DataError(
+                f"RealSense: no camera with serial {self.serial}; connected: {', '.join(serials)}"
+            )
+
     def _open(self) -> None:
-        rs = self._rs or require("pyrealsense2", "realsense", "--source realsense")
+        rs = self._module()
         if self.playback is not None and not self.playback.is_file():
             raise DataError(f"{self.playback}: RealSense recording does not exist")
         pipe, cfg = rs.pipeline(), rs.config()

@@ -49,7 +49,7 @@ class Record3DUSBStream(CameraStream):
         self._grab_lock = threading.Lock()
         self._warned_K = False
 
-    def _open(self) -> None:
+    def _devices(self) -> tuple[Any, list]:
         r3d = self._r3d or require("record3d", "record3d-usb", "--source record3d")
         devices = list(r3d.Record3DStream.get_connected_devices())
         if len(devices) <= self.device_index:
@@ -58,6 +58,13 @@ class Record3DUSBStream(CameraStream):
                 "connect the iPhone/iPad by cable, open Record3D, turn on USB Streaming mode in its settings "
                 "and press record"
             )
+        return r3d, devices
+
+    def check(self) -> None:
+        self._devices()
+
+    def _open(self) -> None:
+        r3d, devices = self._devices()
         session = r3d.Record3DStream()
         session.on_new_frame = self._on_new_frame
         session.on_stream_stopped = self._on_stopped
