@@ -3,6 +3,7 @@ played back by pyrealsense2 as the device, and the Record3D USB stream through a
 
 from __future__ import annotations
 
+import importlib.util
 import threading
 import time
 import types
@@ -262,6 +263,9 @@ def test_the_record3d_stream_gives_depth_sized_frames_with_arkit_poses(scene):
 
 def test_no_record3d_device_is_a_clear_error(scene):
     _, frames, K = scene
+    if importlib.util.find_spec("record3d") is not None:  # the real library, with no phone plugged in
+        with pytest.raises(DataError, match="0 device.*turn on USB Streaming mode"):
+            Record3DUSBStream().check()
     with pytest.raises(DataError, match="0 device.*turn on USB Streaming mode"):
         Record3DUSBStream(r3d=_FakeRecord3D(frames, K, devices=0)).check()
 
