@@ -177,7 +177,8 @@ def section(cls: type, doc: str) -> Any:
 
 # ------------------------------------------------------------------------------------------------- sections
 DatasetKind = Literal[
-    "auto", "replica", "semantic_nerf", "scannet", "tum", "sevenscenes", "labelfusion", "synthetic"
+    "auto", "replica", "semantic_nerf", "scannet", "tum", "sevenscenes", "labelfusion", "synthetic", "rosbag",
+    "record3d",
 ]
 NoiseLevel = Literal["none", "low", "default", "high"]
 ExecutionProvider = Literal["auto", "cpu", "cuda"]
@@ -221,6 +222,35 @@ class DataConfig:
     max_depth: float = setting(0.0, "metres; farther depth is invalid", _float(0.0, note="0 = no limit"))
     on_bad_frame: Literal["error", "skip"] = setting(
         "error", "a frame that cannot be read: stop with an error naming the file, or skip it with a warning"
+    )
+    # robot input: ROS bags (data.kind rosbag) and Record3D captures (data.kind record3d); topics are found by
+    # message type when the bag has one candidate, these choose among several
+    ros_rgb_topic: str | None = setting(
+        None, "ROS bag: the sensor_msgs/Image or CompressedImage colour topic"
+    )
+    ros_depth_topic: str | None = setting(
+        None, "ROS bag: the depth topic registered to colour (e.g. .../aligned_depth_to_color/image_raw)"
+    )
+    ros_camera_info_topic: str | None = setting(
+        None, "ROS bag: the colour camera's sensor_msgs/CameraInfo topic"
+    )
+    ros_pose_topic: str | None = setting(
+        None, "ROS bag: a PoseStamped / PoseWithCovarianceStamped / Odometry topic used instead of /tf"
+    )
+    ros_world_frame: str | None = setting(
+        None, "ROS bag: the tf world frame; null = the root of the camera frame's tf tree"
+    )
+    ros_camera_frame: str | None = setting(
+        None, "ROS bag: the tf camera (optical) frame; null = the colour images' header.frame_id"
+    )
+    ros_sync_tolerance: float = setting(
+        0.02,
+        "ROS bag: seconds; the largest colour/depth stamp difference of a pair, and how far a pose is held "
+        "beyond the first/last transform sample",
+        _NONNEG,
+    )
+    r3d_min_confidence: int = setting(
+        1, "Record3D: depth of lower confidence (0 low, 1 medium, 2 high) is left out", _int(0, 2)
     )
 
     def cross_check(self) -> str | None:

@@ -8,7 +8,9 @@ from pathlib import Path
 from ..config import DataConfig
 from ..errors import DataError
 from .base import RGBDDataset
+from .record3d import Record3DDataset
 from .replica import ReplicaDataset
+from .rosbag import RosBagDataset
 from .scannet import ScanNetDataset
 from .semantic_nerf import SemanticNeRFDataset
 from .sevenscenes import LabelFusionDataset, SevenScenesDataset
@@ -24,13 +26,18 @@ READERS: dict[str, type[RGBDDataset]] = {
     "tum": TUMDataset,
     "labelfusion": LabelFusionDataset,
     "sevenscenes": SevenScenesDataset,
+    # recordings in one file (or a ROS 2 bag folder): their readers import their libraries only when opening
+    "rosbag": RosBagDataset,
+    "record3d": Record3DDataset,
 }
 
 _LAYOUTS = (
     "synthetic (results/ + traj.txt + gt/instances.json), replica (results/frame*.jpg + traj.txt), "
     "semantic_nerf (rgb/rgb_N.png + depth/depth_N.png + traj_w_c.txt or SNI-SLAM's traj.txt, or a scene's "
     "Sequence_N/ of them), "
-    "scannet (color/ + depth/ + pose/), tum (rgb.txt + depth.txt), labelfusion/sevenscenes (frame-*.color.*)"
+    "scannet (color/ + depth/ + pose/), tum (rgb.txt + depth.txt), labelfusion/sevenscenes "
+    "(frame-*.color.*), "
+    "rosbag (a ROS 1 .bag, a ROS 2 bag folder with metadata.yaml, or an .mcap file), record3d (an .r3d file)"
 )
 
 
@@ -40,7 +47,15 @@ def detect_kind(path: str | Path) -> tuple[str, Path]:
     if not root.exists():
         raise DataError(f"{root}: dataset path does not exist")
     if not root.is_dir():
-        raise DataError(f"{root}: dataset path is not a folder")
+        for kind in ("rosbag", "record3d"):
+            if READERS[kind].detect(root):
+                return kind, root
+        if root.suffix.lower() == ".db3":
+            raise DataError(
+                f"{root}: a .db3 file alone is a librealsense recording (map it with ogscene3d-live --source "
+                "realsense:FILE) or part of a ROS 2 bag (give the bag's folder, which holds metadata.yaml)"
+            )
+        raise DataError(f"{root}: dataset path is a file, but not a .bag, .mcap or .r3d recording")
     for kind, reader in READERS.items():
         if reader.detect(root):
             return kind, root
@@ -79,8 +94,8 @@ def open_dataset(
     ``segments_dir``, ``stride``, ``max_frames``, and also ``start``, ``depth_scale``,
     ``depth_format``, ``intrinsics``, ``min_depth``/``max_depth``, ``on_bad_frame``), then to the
     defaults (stride 1, all frames). ``kind``: auto | replica | semantic_nerf | scannet | tum |
-    sevenscenes | labelfusion | synthetic. Raises :class:`DataError` for a missing folder or an unknown
-    layout.
+    sevenscenes | labelfusion | synthetic | rosbag | record3d. Raises :class:`DataError` for a missing
+    folder or an unknown layout.
     """
     cfg = dataclasses.replace(config) if config is not None else DataConfig()
     if path is None:
@@ -101,9 +116,9 @@ def open_dataset(
         if kind not in READERS:
             raise DataError(f"unknown dataset kind {kind!r}; expected auto or one of {sorted(READERS)}")
         root = Path(path)
-        if not root.is_dir():
+        if not root.is_dir() and not (root.is_file() and READERS[kind].detect(root)):
             raise DataError(f"{root}: dataset path does not exist or is not a folder")
-        if not READERS[kind].detect(root):
+        if root.is_dir() and not READERS[kind].detect(root):
             # as with kind auto, a folder holding a single scene is entered (data.kind set in a config)
             found = _single_scene(root, [kind])
             if found is None:

@@ -51,6 +51,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     src = p.add_mutually_exclusive_group()
     src.add_argument("--data", default=None, help="dataset folder to map live (Replica, ScanNet, TUM, ...)")
     src.add_argument("--synthetic", action="store_true", help="generate the synthetic scene and map it live")
+    src.add_argument(  # robot input (#27): ogscene3d.streams
+        "--source",
+        default=None,
+        help="live camera to map: realsense[:SERIAL], realsense:RECORDING.db3, record3d[:DEVICE_INDEX]",
+    )
     p.add_argument("--config", default=None, help="YAML config (e.g. configs/replica.yaml)")
     p.add_argument("--segments", default=None, help="folder of precomputed segments (<rgb stem>.png/.json)")
     p.add_argument("--device", default=None, help="mapping device: cpu, cuda or cuda:N")
@@ -182,12 +187,12 @@ def run(args: argparse.Namespace) -> int:
     """Entry point shared by ``ogscene3d-live`` and ``ogscene3d live``; returns the exit code."""
     from .app import LiveViewer, check_bindable
 
-    if args.run_dir is not None and (args.data or args.synthetic):
+    if args.run_dir is not None and (args.data or args.synthetic or args.source):
         raise ConfigError(
             "give either RUN_DIR (browse a saved run) or --data/--synthetic (map live), not both"
         )
-    if args.run_dir is None and not args.data and not args.synthetic:
-        raise ConfigError("nothing to show: give RUN_DIR, --data DATASET or --synthetic")
+    if args.run_dir is None and not args.data and not args.synthetic and not args.source:
+        raise ConfigError("nothing to show: give RUN_DIR, --data DATASET, --synthetic or --source CAMERA")
     # before reading a run or building a mapper: a host/port the server cannot bind is an error now
     check_bindable(args.host, args.port)
 
@@ -231,6 +236,9 @@ def run(args: argparse.Namespace) -> int:
         pass
     finally:
         if session is not None:
+            from ..streams import close_stream
+
+            close_stream(session.frames)  # a camera's stream ends: the session finishes and saves its map
             session.stop()
         if viewer is not None:
             viewer.close()
@@ -255,6 +263,11 @@ def _start_live(args: argparse.Namespace):
         overrides.append(f"device={args.device}")
     cfg = load_config(args.config, overrides)
     data = args.data
+    stream = None
+    if args.source:  # a live camera (ogscene3d.streams)
+        from ..streams import stream_for_live
+
+        stream = stream_for_live(args.source, cfg, args.max_frames, overrides)
     if args.synthetic:
         s = cfg.synthetic
         scene_dir = Path(
@@ -271,13 +284,15 @@ def _start_live(args: argparse.Namespace):
             progress=True,
             remedy="give another --synthetic-dir, or remove that folder to generate the scene there again",
         )
-    if data is not None or cfg.data.path is not None:  # a saved run records its data, as `run` does
-        record_data(cfg, data if data is not None else cfg.data.path, args.segments)
-    ds = open_dataset(max_frames=args.max_frames, config=cfg.data)
-    if len(ds) == 0:
-        raise DataError(f"{data}: the dataset has no frames")
+    if stream is None:
+        if data is not None or cfg.data.path is not None:  # a saved run records its data, as `run` does
+            record_data(cfg, data if data is not None else cfg.data.path, args.segments)
+        ds = open_dataset(max_frames=args.max_frames, config=cfg.data)
+        if len(ds) == 0:
+            raise DataError(f"{data}: the dataset has no frames")
     mapper = Mapper(cfg, cfg.device)
-    mapper.source = dataset_source(cfg, ds)
+    if stream is None:
+        mapper.source = dataset_source(cfg, ds)
 
     up = args.up or _up_from_config(cfg)
     viewer = LiveViewer(
@@ -286,11 +301,11 @@ def _start_live(args: argparse.Namespace):
         settings=_settings(args),
         up=up,
         max_rate_hz=args.rate,
-        title=f"ogscene3d: {Path(str(data)).name}",
+        title=f"ogscene3d: {stream.name if stream is not None else Path(str(data)).name}",
     )
     session = LiveSession(
         mapper,
-        (ds[i] for i in range(len(ds))),
+        stream if stream is not None else (ds[i] for i in range(len(ds))),
         viewer,
         budget=max(args.max_points, args.max_splats),
         out_dir=args.out,
