@@ -16,9 +16,9 @@ from .errors import OGSceneError
 
 # Modules that register a subcommand, in the order they appear in --help.
 _COMMAND_MODULES = [
-    "ogscene3d.mapping.run_cli",  # run
+    "ogscene3d.commands.run",  # run
     "ogscene3d.eval.eval_cli",  # eval
-    "ogscene3d.viewer.cli",  # live
+    "ogscene3d.commands.live",  # live
     "ogscene3d.datasets.synth_cli",  # synth
     "ogscene3d.segmentation.segment_cli",  # segment
     "ogscene3d.tracking",  # track

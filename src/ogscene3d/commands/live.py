@@ -19,7 +19,7 @@ from pathlib import Path
 
 from ..cli_types import image_size, positive_int
 from ..config import add_override_argument
-from ..errors import ConfigError, DataError, OGSceneError
+from ..errors import ConfigError, OGSceneError
 
 log = logging.getLogger(__name__)
 
@@ -132,7 +132,7 @@ def _up_from_config(cfg) -> tuple[float, float, float]:
 
 
 def _settings(args):
-    from .scene import ViewerSettings
+    from ..viewer.scene import ViewerSettings
 
     try:
         return ViewerSettings(
@@ -158,7 +158,7 @@ def take_screenshot(
     ``timeout`` seconds have passed.
     """
     from ..atomic import atomic_write_bytes
-    from .headless import HeadlessBrowser, find_chromium
+    from ..viewer.headless import HeadlessBrowser, find_chromium
 
     if find_chromium() is None:
         raise ConfigError("--screenshot needs chromium (e.g. apt-get install chromium)")
@@ -180,7 +180,7 @@ def take_screenshot(
 
 def run(args: argparse.Namespace) -> int:
     """Entry point shared by ``ogscene3d-live`` and ``ogscene3d live``; returns the exit code."""
-    from .app import LiveViewer, check_bindable
+    from ..viewer.app import check_bindable
 
     if args.run_dir is not None and (args.data or args.synthetic):
         raise ConfigError(
@@ -190,6 +190,17 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("nothing to show: give RUN_DIR, --data DATASET or --synthetic")
     # before reading a run or building a mapper: a host/port the server cannot bind is an error now
     check_bindable(args.host, args.port)
+    if args.run_dir is not None or args.out is None:
+        return _serve(args)
+    from ..mapping.engine import run_directory
+
+    with run_directory(args.out, "live"):  # one writer per run directory, as for `ogscene3d run`
+        return _serve(args)
+
+
+def _serve(args: argparse.Namespace) -> int:
+    from ..mapping.engine import stopped_message
+    from ..viewer.app import LiveViewer
 
     stop = threading.Event()
     prev = signal.getsignal(signal.SIGTERM)
@@ -199,7 +210,7 @@ def run(args: argparse.Namespace) -> int:
     viewer = None
     try:
         if args.run_dir is not None:
-            from .runs import load_run
+            from ..viewer.runs import load_run
 
             snap, info = load_run(args.run_dir)
             up = args.up or (tuple(info.up) if info.up is not None else None)
@@ -231,32 +242,59 @@ def run(args: argparse.Namespace) -> int:
         pass
     finally:
         if session is not None:
-            session.stop()
+            # no timeout: a stop saves the map so far (--out), which must not be cut short at exit
+            session.stop(timeout=None)
         if viewer is not None:
             viewer.close()
         if threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGTERM, prev)
     if session is not None and session.error is not None:
         print(f"ogscene3d-live: mapping failed: {session.status}", file=sys.stderr)
-        return 1
+        return 2 if isinstance(session.error, OGSceneError) else 1
+    if session is not None and session.summary is not None and session.summary.status == "stopped":
+        print(f"ogscene3d-live: {stopped_message(session.summary)}")
+        return 130
     return 0
 
 
+def _synthetic_config() -> Path | None:
+    """The shipped ``synthetic.yaml`` (small images, few Gaussians): what ``--synthetic`` maps with when
+    no ``--config`` is given, as the README's demo does."""
+    from importlib import resources
+
+    packaged = resources.files("ogscene3d") / "configs" / "synthetic.yaml"
+    if packaged.is_file():
+        return Path(str(packaged))
+    checkout = Path(__file__).resolve().parents[3] / "configs" / "synthetic.yaml"  # an editable install
+    return checkout if checkout.is_file() else None
+
+
 def _start_live(args: argparse.Namespace):
+    import copy
+
     from ..config import load_config
-    from ..datasets import configured_scene, open_dataset
+    from ..datasets import configured_scene
+    from ..mapping.engine import MappingEngine, open_frames
     from ..mapping.mapper import Mapper
-    from ..mapping.source import dataset_source, record_data
-    from .app import LiveViewer
-    from .live import LiveSession
+    from ..viewer.app import LiveViewer
+    from ..viewer.live import LiveSession
 
     overrides = list(args.overrides)
     if args.device:
         overrides.append(f"device={args.device}")
-    cfg = load_config(args.config, overrides)
+    config = args.config
+    if args.synthetic and config is None:
+        config = _synthetic_config()
+        if config is None:
+            log.warning("synthetic.yaml not found with the package: mapping with defaults (see --config)")
+        else:
+            log.info("mapping the synthetic scene with %s (--config to change)", config)
+    cfg = load_config(config, overrides)
     data = args.data
     if args.synthetic:
-        s = cfg.synthetic
+        s = copy.copy(cfg.synthetic)
+        if args.max_frames is not None:
+            s.frames = min(s.frames, args.max_frames)  # only the frames that are mapped are rendered
         scene_dir = Path(
             args.synthetic_dir or (Path(args.out) / "scene" if args.out else "outputs/live-synthetic")
         )
@@ -271,13 +309,15 @@ def _start_live(args: argparse.Namespace):
             progress=True,
             remedy="give another --synthetic-dir, or remove that folder to generate the scene there again",
         )
-    if data is not None or cfg.data.path is not None:  # a saved run records its data, as `run` does
-        record_data(cfg, data if data is not None else cfg.data.path, args.segments)
-    ds = open_dataset(max_frames=args.max_frames, config=cfg.data)
-    if len(ds) == 0:
-        raise DataError(f"{data}: the dataset has no frames")
+    if data is None:
+        data = cfg.data.path
+    if data is None:
+        raise ConfigError("nothing to map: give --data DATASET or --synthetic (the config sets no data.path)")
+    # a saved run records its data, as `run` does
+    ds = open_frames(cfg, data, args.segments, args.max_frames)
     mapper = Mapper(cfg, cfg.device)
-    mapper.source = dataset_source(cfg, ds)
+    engine = MappingEngine(mapper, args.out, data)
+    engine.open(cfg, ds)  # with --out: config.yaml and run_id, so that `run --resume` goes on from a stop
 
     up = args.up or _up_from_config(cfg)
     viewer = LiveViewer(
@@ -290,10 +330,12 @@ def _start_live(args: argparse.Namespace):
     )
     session = LiveSession(
         mapper,
-        (ds[i] for i in range(len(ds))),
+        ds.frames(),
         viewer,
         budget=max(args.max_points, args.max_splats),
         out_dir=args.out,
+        engine=engine,
+        total=len(ds),
     )
     viewer.set_control(session)
     session.start()

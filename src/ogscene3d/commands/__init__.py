@@ -1,0 +1,1 @@
+"""The command modules of ``ogscene3d`` (one per command, each with ``add_parser(subparsers)``)."""
