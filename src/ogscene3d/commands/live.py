@@ -269,15 +269,10 @@ def _synthetic_config() -> Path | None:
     return checkout if checkout.is_file() else None
 
 
-def _start_live(args: argparse.Namespace):
-    import copy
-
+def live_config(args: argparse.Namespace):
+    """The config live mapping runs with: ``--config`` (for ``--synthetic`` by default the shipped
+    ``synthetic.yaml``), ``--set`` and ``--device``."""
     from ..config import load_config
-    from ..datasets import configured_scene
-    from ..mapping.engine import MappingEngine, open_frames
-    from ..mapping.mapper import Mapper
-    from ..viewer.app import LiveViewer
-    from ..viewer.live import LiveSession
 
     overrides = list(args.overrides)
     if args.device:
@@ -289,12 +284,21 @@ def _start_live(args: argparse.Namespace):
             log.warning("synthetic.yaml not found with the package: mapping with defaults (see --config)")
         else:
             log.info("mapping the synthetic scene with %s (--config to change)", config)
-    cfg = load_config(config, overrides)
+    return load_config(config, overrides)
+
+
+def live_data(args: argparse.Namespace, cfg) -> str | Path:
+    """The dataset to map live: ``--data``, or the synthetic scene generated for ``--synthetic`` (only
+    the frames that ``--max-frames`` maps), or the config's ``data.path``."""
+    import copy
+
+    from ..datasets import configured_scene
+
     data = args.data
     if args.synthetic:
         s = copy.copy(cfg.synthetic)
         if args.max_frames is not None:
-            s.frames = min(s.frames, args.max_frames)  # only the frames that are mapped are rendered
+            s.frames = min(s.frames, args.max_frames)
         scene_dir = Path(
             args.synthetic_dir or (Path(args.out) / "scene" if args.out else "outputs/live-synthetic")
         )
@@ -313,6 +317,17 @@ def _start_live(args: argparse.Namespace):
         data = cfg.data.path
     if data is None:
         raise ConfigError("nothing to map: give --data DATASET or --synthetic (the config sets no data.path)")
+    return data
+
+
+def _start_live(args: argparse.Namespace):
+    from ..mapping.engine import MappingEngine, open_frames
+    from ..mapping.mapper import Mapper
+    from ..viewer.app import LiveViewer
+    from ..viewer.live import LiveSession
+
+    cfg = live_config(args)
+    data = live_data(args, cfg)
     # a saved run records its data, as `run` does
     ds = open_frames(cfg, data, args.segments, args.max_frames)
     mapper = Mapper(cfg, cfg.device)
