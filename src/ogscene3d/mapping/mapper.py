@@ -48,7 +48,8 @@ from ..config import Config, check_config, save_config
 from ..device import resolve_device
 from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame, implausible_median_depth
-from ..gaussians import NPZ_READ_ERRORS, GaussianMap, corrupt_npz_message
+from ..gaussians import GaussianMap, corrupt_npz_message
+from .checkpoint import CheckpointArrays, read_checkpoint
 from .init import make_probes
 from .keyframes import KeyframeSelector
 from .local import (
@@ -821,8 +822,11 @@ class Mapper:
         self._count_map()  # the final map's: pruning and refinement change the counts of the last keyframe
         self.finalized = True
 
-    def _state_extra(self) -> dict[str, np.ndarray]:
-        extra = {
+    def state(self) -> dict[str, np.ndarray]:
+        """The mapper's state besides the Gaussians, as the arrays of a checkpoint (``checkpoint.py``): its
+        counters and random stream, and the ``state()`` of its parts."""
+        nan = np.full((4, 4), np.nan)
+        state = {
             "mapper_frames_seen": np.array(self.frames_seen),
             "mapper_next_index": np.array(self.next_index),
             "mapper_keyframe_count": np.array(self.keyframe_count),
@@ -833,24 +837,25 @@ class Mapper:
             "mapper_source": np.array(json.dumps(self.source)),
             # the module times of a run go on across resumes (ms per keyframe divides by all keyframes)
             "mapper_timings": np.array(json.dumps(self.timings.state())),
+            "mapper_trajectory": np.stack([nan if p is None else p for p in self.trajectory])
+            if self.trajectory
+            else np.zeros((0, 4, 4)),
+            "mapper_recent": np.array([e.keyframe for e in self.recent], dtype=np.int64),
         }
-        if self.trajectory:
-            nan = np.full((4, 4), np.nan)
-            extra["mapper_trajectory"] = np.stack([nan if p is None else p for p in self.trajectory])
-        extra.update(self.keyframes.state())
-        extra.update(self.pose_check.state())
+        state.update(self.keyframes.state())
+        state.update(self.pose_check.state())
         if self._tracker is not None:
-            extra.update(self._tracker.state())  # the odometry goes on in the same trajectory
+            state.update(self._tracker.state())  # the odometry goes on in the same trajectory
         if self._graph is not None and not self._graph_failed:
             # captions (possibly paid VLM calls), first_seen and the update schedule go on after a resume
-            extra["graph_state"] = np.array(json.dumps(self._graph.state()))
-        return extra
+            state["graph_state"] = np.array(json.dumps(self._graph.state()))
+        return state
 
     def save_checkpoint(self, path: str | Path) -> None:
         """Write ``map.npz``: the Gaussians plus the mapper state needed to resume (atomically), and the
         memory views it does not have on disk yet, each in its own file (``memory_files``)."""
         path = Path(path)
-        extra = self._state_extra()
+        extra = self.state()
         mem = self.memory.entries
         # the keyframes the next one is optimised with (opt_memory_frames) that are not in the memory
         recent = [e for e in self.recent if not any(e is m for m in mem)]
@@ -860,65 +865,45 @@ class Mapper:
         recent_files = [store_view(path, e) for e in recent]
         extra.update(manifest(mem, files))
         extra.update(manifest(recent, recent_files, prefix="recent"))
-        extra["mapper_recent"] = np.array([e.keyframe for e in self.recent], dtype=np.int64)
         self.map.save_npz(path, extra=extra)
         for f in remove_unreferenced(path, files + recent_files):
             log.debug("removed %s, a view no longer in the memory", f)
 
     def load_checkpoint(self, path: str | Path) -> None:
-        """Restore the map and mapper state from ``map.npz`` (written by ``save``/``save_checkpoint``)."""
+        """Restore the map and mapper state from ``map.npz`` (written by ``save``/``save_checkpoint``, by
+        this version or, upgraded by ``checkpoint.upgrade``, an older one)."""
         p = Path(path)
         self.map = GaussianMap.load_npz(p, self.device)
+        self.load_state(read_checkpoint(p, self.config.seed), p)
+
+    def load_state(self, state: CheckpointArrays, path: Path) -> None:
+        """Restore :meth:`state` (read from the checkpoint ``path`` by ``checkpoint.read_checkpoint``),
+        and the memory views its lists name (from their files beside ``path``)."""
+        p = path
         try:
-            with np.load(p, allow_pickle=False) as z:
-                self.frames_seen = int(z["mapper_frames_seen"])
-                # checkpoints from before the position was saved: frames_seen was used
-                self.next_index = (
-                    int(z["mapper_next_index"]) if "mapper_next_index" in z.files else self.frames_seen
-                )
-                self.keyframe_count = int(z["mapper_keyframe_count"])
-                # older checkpoints lack these: not finalized, no source, times from zero
-                self.finalized = bool(z["mapper_finalized"]) if "mapper_finalized" in z.files else False
-                if "mapper_rng" in z.files:
-                    self.rng.bit_generator.state = json.loads(str(z["mapper_rng"]))
-                self.source = json.loads(str(z["mapper_source"])) if "mapper_source" in z.files else {}
-                if "mapper_timings" in z.files:
-                    self.timings.load_state(json.loads(str(z["mapper_timings"])))
-                traj = z["mapper_trajectory"] if "mapper_trajectory" in z.files else np.zeros((0, 4, 4))
-                self.trajectory = [None if np.isnan(p).any() else p for p in traj]
-                self.keyframes.load_state({k: z[k] for k in ("kf_since_last", "kf_last_pose")})
-                self.pose_check.load_state({k: z[k] for k in z.files if k.startswith("posecheck_")})
-                self.memory.entries = []
-                cursor = int(z["mapper_memory_cursor"]) if "mapper_memory_cursor" in z.files else 0
-                views = read_manifest(z, p)
-                recent_views = read_manifest(z, p, "recent")
-                # older checkpoints lack it: the first keyframes after the resume pair with memory views only
-                recent = [int(k) for k in z["mapper_recent"]] if "mapper_recent" in z.files else []
-                if "mem_file" not in z.files and "mem_keyframe" in z.files:
-                    # a checkpoint from before the views had their own files: all of them inline
-                    scores = json.loads(str(z["mem_scores"]))
-                    # each z[...] reads (and decompresses) the whole array: once per array, not per view
-                    mem = {k: z[f"mem_{k}"] for k in ("rgb", "depth", "K", "pose", "segments")}
-                    for i, kf in enumerate(z["mem_keyframe"]):
-                        entry = MemoryEntry(
-                            int(kf),
-                            mem["rgb"][i].copy(),
-                            mem["depth"][i].copy(),
-                            mem["K"][i].copy(),
-                            mem["pose"][i].copy(),
-                            mem["segments"][i].copy(),
-                            {int(k): float(v) for k, v in scores[i].items()},
-                        )
-                        self.memory.restore(entry, self.device)
-                    del mem
-                tracker_state = {k: z[k] for k in z.files if k.startswith("trk_")}
-                graph_state = str(z["graph_state"]) if "graph_state" in z.files else None
+            self.frames_seen = int(state["mapper_frames_seen"])
+            self.next_index = int(state["mapper_next_index"])
+            self.keyframe_count = int(state["mapper_keyframe_count"])
+            self.finalized = bool(state["mapper_finalized"])
+            self.rng.bit_generator.state = json.loads(str(state["mapper_rng"]))
+            self.source = json.loads(str(state["mapper_source"]))
+            self.timings.load_state(json.loads(str(state["mapper_timings"])))
+            self.trajectory = [None if np.isnan(t).any() else t for t in state["mapper_trajectory"]]
+            self.keyframes.load_state(state)
+            self.pose_check.load_state(state)
+            cursor = int(state["mapper_memory_cursor"])
+            views = read_manifest(state, p)
+            recent_views = read_manifest(state, p, "recent")
+            recent = [int(k) for k in state["mapper_recent"]]
         except DataError:
             raise
         except KeyError as e:
             raise DataError(f"{p}: not a mapper checkpoint (missing {e})") from e
-        except NPZ_READ_ERRORS as e:  # a damaged array, read late
+        except (ValueError, TypeError) as e:  # a damaged array
             raise DataError(corrupt_npz_message(p, e)) from e
+        self.memory.entries = []
+        for entry in state.get("mem_inline", []):  # an older checkpoint's inline views (checkpoint.upgrade)
+            self.memory.restore(entry, self.device)
         # a smaller memory_max keeps the newest views: the older ones are not even read
         for record in views[max(0, len(views) - self.memory.max_size) :]:
             self.memory.restore(load_view(p, record), self.device)  # one file read per view
@@ -934,36 +919,43 @@ class Mapper:
                 entry = load_view(p, records[kf])
             if entry is not None:
                 self.recent.append(entry)
-        self._graph_failed = False
-        if self.config.graph.enabled:
-            # the graph built with the Mapper takes the checkpoint's state (its models are loaded once)
-            if self._graph is None or self._graph.num_updates or self._graph.nodes:
-                self._graph = self._new_graph()
-            if graph_state is not None:
-                try:
-                    self._graph.load_state(json.loads(graph_state), source=f"{p} (graph_state)")
-                except Exception as e:  # noqa: BLE001 - the graph is optional: the map resumes without it
-                    log.warning(
-                        "scene graph not restored (%s: %s): the next update builds it anew",
-                        type(e).__name__,
-                        e,
-                    )
-                    self._graph = self._new_graph()
-        self._tracker = None
-        if self.config.tracking.poses == "odometry":
-            if tracker_state:
-                try:
-                    self._get_tracker().load_state(tracker_state)
-                except (ValueError, OGSceneError) as e:
-                    raise DataError(f"{p}: cannot restore the tracker: {e}") from e
-            elif self.frames_seen:
-                log.warning(
-                    "%s holds no tracker state (written with dataset poses, or by an older version): "
-                    "odometry restarts at the next frame's own pose, or the identity where it has none",
-                    p,
-                )
+        self._load_graph_state(state.get("graph_state"), p)
+        self._load_tracker_state({k: v for k, v in state.items() if k.startswith("trk_")}, p)
         self.timings.counts["keyframes"] = self.keyframe_count
         self.timings.counts["frames"] = self.frames_seen
+
+    def _load_graph_state(self, graph_state: np.ndarray | None, p: Path) -> None:
+        self._graph_failed = False
+        if not self.config.graph.enabled:
+            return
+        # the graph built with the Mapper takes the checkpoint's state (its models are loaded once)
+        if self._graph is None or self._graph.num_updates or self._graph.nodes:
+            self._graph = self._new_graph()
+        if graph_state is None:
+            return
+        try:
+            self._graph.load_state(json.loads(str(graph_state)), source=f"{p} (graph_state)")
+        except Exception as e:  # noqa: BLE001 - the graph is optional: the map resumes without it
+            log.warning(
+                "scene graph not restored (%s: %s): the next update builds it anew", type(e).__name__, e
+            )
+            self._graph = self._new_graph()
+
+    def _load_tracker_state(self, tracker_state: dict[str, np.ndarray], p: Path) -> None:
+        self._tracker = None
+        if self.config.tracking.poses != "odometry":
+            return
+        if tracker_state:
+            try:
+                self._get_tracker().load_state(tracker_state)
+            except (ValueError, OGSceneError) as e:
+                raise DataError(f"{p}: cannot restore the tracker: {e}") from e
+        elif self.frames_seen:
+            log.warning(
+                "%s holds no tracker state (written with dataset poses, or by an older version): "
+                "odometry restarts at the next frame's own pose, or the identity where it has none",
+                p,
+            )
 
     def save(self, out_dir: str | Path) -> Path:
         """Write the run directory: config.yaml and map.npz (with its memory views in map_memory/) first,
