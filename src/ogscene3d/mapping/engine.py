@@ -351,35 +351,53 @@ class MappingEngine:
 
             it = tqdm(frames, desc=desc, unit="frame", total=total)
         t0 = time.perf_counter()
-        given, last_index = 0, None
         self._status("mapping")
         try:
-            for frame in it:
-                self._before_frame()
-                if self.stop.requested:
-                    break
-                with self.guard():
-                    is_kf = mapper.process(frame)
-                given += 1
-                last_index = getattr(frame, "index", None)
-                if hasattr(it, "set_postfix"):
-                    it.set_postfix(gaussians=len(mapper.map), kf=mapper.keyframe_count)
-                self._after_frame(frame, is_kf)
-                if self.stop.requested:
-                    break
+            given, last_index = self._loop(it)
         except DataError as e:
             self._save_on_error(e)
             raise
         summary = self._summary(given, last_index, seen0, counts0, total)
         if self.stop.requested:
             summary.status = "stopped"
-            summary.saved = self._save_partial()
             summary.seconds = time.perf_counter() - t0
+            summary.saved = self._save_partial()
             return summary
         if given == 0 and getattr(mapper, "finalized", False):
             summary.status = "up to date"
             self._write_stale_exports()
             return summary
+        self._finish(given, finalize)
+        summary.seconds = time.perf_counter() - t0
+        if self.out is not None:
+            self._save(self.out)
+            summary.saved = True
+        summary.status = "finished"
+        summary.gaussians = len(mapper.map)
+        return summary
+
+    def _loop(self, it: Iterable) -> tuple[int, int | None]:
+        """The frame loop: -> the number of frames given to the mapper, and the position of the last one."""
+        mapper = self.mapper
+        given, last_index = 0, None
+        for frame in it:
+            self._before_frame()
+            if self.stop.requested:
+                break
+            with self.guard():
+                is_kf = mapper.process(frame)
+            given += 1
+            last_index = getattr(frame, "index", None)
+            if hasattr(it, "set_postfix"):
+                it.set_postfix(gaussians=len(mapper.map), kf=mapper.keyframe_count)
+            self._after_frame(frame, is_kf)
+            if self.stop.requested:
+                break
+        return given, last_index
+
+    def _finish(self, given: int, finalize: bool) -> None:
+        """After the last frame: the final pass, unless nothing (or nothing new) could be mapped."""
+        mapper = self.mapper
         if mapper.keyframe_count == 0:
             untracked = int(_counts(mapper).get("frames_untracked", 0))
             why = f", {untracked} of them untracked by odometry (see the warnings above)" if untracked else ""
@@ -396,13 +414,6 @@ class MappingEngine:
             with self.guard():
                 mapper.finalize()
         self._check_not_empty()
-        summary.seconds = time.perf_counter() - t0
-        if self.out is not None:
-            self._save(self.out)
-            summary.saved = True
-        summary.status = "finished"
-        summary.gaussians = len(mapper.map)
-        return summary
 
     def _before_frame(self) -> None:
         if self.hooks is not None:
