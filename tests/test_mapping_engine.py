@@ -286,26 +286,26 @@ def test_timings_count_the_labels_of_the_final_map(tmp_path):
 # ------------------------------------------------------------------------------------------- #30 live
 
 
-def test_live_synthetic_uses_the_synthetic_config_and_renders_only_the_mapped_frames(tmp_path):
+def test_live_synthetic_uses_the_synthetic_config_and_renders_only_the_mapped_frames(tmp_path, monkeypatch):
     from ogscene3d.commands.live import build_parser, live_config, live_data
 
-    args = build_parser().parse_args(
-        [
-            "--synthetic",
-            "--max-frames",
-            "3",
-            "--synthetic-dir",
-            str(tmp_path / "scene"),
-            "--set",
-            "synthetic.width=32",
-            "--set",
-            "synthetic.height=24",
-        ]  # fmt: skip
-    )
+    monkeypatch.chdir(tmp_path)  # the default scene folder, outputs/live-synthetic, is relative
+    small = ["--set", "synthetic.width=32", "--set", "synthetic.height=24"]
+    args = build_parser().parse_args(["--synthetic", "--max-frames", "3", *small])
     cfg = live_config(args)
     assert cfg.mapping.keyframe_every == 2 and cfg.synthetic.frames == 60  # configs/synthetic.yaml
     data = live_data(args, cfg)
     assert len(list((data / "results").glob("frame*.jpg"))) == 3
+    # that default folder is a cache: other settings make the scene again there
+    args = build_parser().parse_args(["--synthetic", "--max-frames", "2", *small])
+    assert live_data(args, live_config(args)) == data
+    assert len(list((data / "results").glob("frame*.jpg"))) == 2
+    # a folder the user named is never overwritten
+    args = build_parser().parse_args(
+        ["--synthetic", "--synthetic-dir", str(data), "--max-frames", "3", *small]
+    )
+    with pytest.raises(Exception, match="give another --synthetic-dir"):
+        live_data(args, live_config(args))
     args = build_parser().parse_args(["--synthetic", "--config", str(tmp_path / "missing.yaml")])
     with pytest.raises(Exception, match="missing.yaml"):
         live_config(args)

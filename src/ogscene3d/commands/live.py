@@ -19,7 +19,7 @@ from pathlib import Path
 
 from ..cli_types import image_size, positive_int
 from ..config import add_override_argument
-from ..errors import ConfigError, OGSceneError
+from ..errors import ConfigError, DataError, OGSceneError
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +54,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", default=None, help="YAML config (e.g. configs/replica.yaml)")
     p.add_argument("--segments", default=None, help="folder of precomputed segments (<rgb stem>.png/.json)")
     p.add_argument("--device", default=None, help="mapping device: cpu, cuda or cuda:N")
-    p.add_argument("--max-frames", type=positive_int, default=None, help="map at most this many frames")
+    p.add_argument(
+        "--max-frames",
+        type=positive_int,
+        default=None,
+        help="map at most this many frames (--synthetic: the scene is generated with at most this many)",
+    )
     p.add_argument(
         "--out",
         default=None,
@@ -299,6 +304,7 @@ def live_data(args: argparse.Namespace, cfg) -> str | Path:
         s = copy.copy(cfg.synthetic)
         if args.max_frames is not None:
             s.frames = min(s.frames, args.max_frames)
+        cache = args.synthetic_dir is None and args.out is None
         scene_dir = Path(
             args.synthetic_dir or (Path(args.out) / "scene" if args.out else "outputs/live-synthetic")
         )
@@ -307,12 +313,15 @@ def live_data(args: argparse.Namespace, cfg) -> str | Path:
             f"in {scene_dir}",
             flush=True,
         )
-        data = configured_scene(
-            scene_dir,
-            s,
-            progress=True,
-            remedy="give another --synthetic-dir, or remove that folder to generate the scene there again",
-        )
+        remedy = "give another --synthetic-dir, or remove that folder to generate the scene there again"
+        try:
+            data = configured_scene(scene_dir, s, progress=True, remedy=remedy)
+        except DataError:
+            if not (cache and (scene_dir / "scene.json").is_file()):
+                raise
+            # the default folder is this command's cache: a scene made there with other settings (another
+            # --max-frames) is made again
+            data = configured_scene(scene_dir, s, progress=True, overwrite=True)
     if data is None:
         data = cfg.data.path
     if data is None:
