@@ -74,6 +74,18 @@ def test_the_lock_is_one_per_folder_and_free_again_after_release(tmp_path):
         pass
 
 
+def test_a_filesystem_without_locks_warns_and_runs(tmp_path, monkeypatch, caplog):
+    import fcntl
+
+    def no_locks(fd, op):
+        raise OSError(errno.ENOLCK, os.strerror(errno.ENOLCK))
+
+    monkeypatch.setattr(fcntl, "flock", no_locks)
+    with caplog.at_level("WARNING"), RunDirLock(tmp_path, "run"):
+        pass
+    assert "refuses file locks" in caplog.text and not (tmp_path / LOCK_FILE).exists()
+
+
 def test_run_batch_scenes_and_live_take_the_lock(tmp_path, capsys):
     from ogscene3d.batch import SceneSpec, map_scene
     from ogscene3d.commands.live import main as live_main

@@ -69,14 +69,28 @@ class RunDirLock:
         self._fd: int | None = None
 
     def acquire(self) -> None:
-        import fcntl
-
+        try:
+            import fcntl
+        except ImportError:  # not a POSIX system
+            log.warning("%s: no file locks here: a second run writing there is not detected", self.out)
+            return
         while True:
             fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError as e:
                 os.close(fd)
+                if e.errno in (errno.ENOLCK, errno.ENOTSUP, errno.EOPNOTSUPP):
+                    # a filesystem without locks (some network mounts): the run goes on unguarded
+                    log.warning(
+                        "%s: the filesystem refuses file locks (%s): a second run writing there is not "
+                        "detected",
+                        self.out,
+                        e.strerror,
+                    )
+                    with contextlib.suppress(OSError):
+                        self.path.unlink()
+                    return
                 if e.errno not in (errno.EAGAIN, errno.EACCES, errno.EWOULDBLOCK):
                     raise
                 raise RunDirBusyError(self._busy_message()) from None
