@@ -19,6 +19,12 @@ Per keyframe:
    inconsistent Gaussians and the refinement relabels them in the same keyframe;
 9. scene-graph observation/update when ``config.graph.enabled`` (failures there never stop mapping).
 
+``process`` reads as these stages, each a method and one timed section of ``timings``: ``_admit`` (the
+frame's checks, tracking and pose-jump test; where the frame starts to count as read, the rule a resume
+depends on), ``_render_check`` (2), ``_init`` (3), ``_local`` (4), ``_add`` (5), ``_optimize`` (6),
+``_memory`` (7), ``_scheduled_passes`` (8: ``_longterm``, ``_refine``), ``_graph_update`` (9) and
+``_checkpoint`` (``mapping.checkpoint_every``).
+
 Every frame's pose (the dataset's, or the tracker's under ``tracking.poses: odometry``) is first compared
 with the last accepted frame's: a jump beyond ``mapping.max_pose_step`` / ``max_pose_step_deg`` warns, leaves
 the frame out or stops the run (``mapping.on_pose_jump``, ``pose_jump.py``).
