@@ -177,11 +177,9 @@ class StopRequest:
 
     def __init__(self) -> None:
         self.requested = False
-        self.reason = ""
 
-    def request(self, reason: str = "stop requested") -> None:
+    def request(self) -> None:
         self.requested = True
-        self.reason = self.reason or reason
 
     @contextlib.contextmanager
     def signals(self) -> Iterator[StopRequest]:
@@ -200,7 +198,7 @@ class StopRequest:
     def _handle(self, signum: int, frame: Any) -> None:
         if self.requested:
             raise KeyboardInterrupt
-        self.request(signal.Signals(signum).name)
+        self.request()
         log.warning("stopping after this frame to save the map (again to stop at once, losing it)")
 
 

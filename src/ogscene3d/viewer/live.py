@@ -156,7 +156,7 @@ class LiveSession:
             self._run.wait(0.2)
             self._publish()  # keep late joiners served while paused
         if self._stop.is_set():
-            self.engine.stop.request("stopped from the viewer")
+            self.engine.stop.request()
 
     def after_frame(self, frame: Any, is_keyframe: bool) -> None:
         if frame.pose is not None:
@@ -166,7 +166,7 @@ class LiveSession:
             self._map_rev += 1
         self._publish()
         if self._stop.is_set():
-            self.engine.stop.request("stopped from the viewer")
+            self.engine.stop.request()
 
     def status_changed(self, text: str) -> None:
         self.status = text
