@@ -175,6 +175,29 @@ def test_live_mapping_saves_the_map_on_sigterm(tmp_path, capsys, monkeypatch):
     assert "read 2 frames: 2 mapped (4 keyframes in all)" in capsys.readouterr().out
 
 
+def test_a_stopped_batch_scene_keeps_its_map_and_stops_the_batch(tmp_path, monkeypatch):
+    from ogscene3d.batch import SceneSpec, map_scene
+    from ogscene3d.mapping.mapper import Mapper
+
+    scene = _replica_scene(tmp_path / "scene", frames=4)
+    process = Mapper.process
+
+    def interrupted_at_frame_1(self, frame):
+        kept = process(self, frame)
+        if frame.index == 1:
+            signal.raise_signal(signal.SIGINT)
+        return kept
+
+    monkeypatch.setattr(Mapper, "process", interrupted_at_frame_1)
+    spec = SceneSpec("a", data=str(scene), segments=str(scene / "segs"))
+    ov = ["graph.enabled=false", "mapping.opt_iters=1", "mapping.knn_radius=0.1"]
+    with pytest.raises(KeyboardInterrupt, match="stopped after 2 frames"):
+        map_scene(spec, tmp_path / "out", overrides=ov, device="cpu")
+    run = tmp_path / "out" / "a"
+    assert (run / "map.npz").is_file() and (run / "gaussians.ply").is_file()
+    assert json.loads((run / "timings.json").read_text())["finalized"] is False
+
+
 # --------------------------------------------------------------------------------------- full disk
 
 

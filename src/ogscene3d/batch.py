@@ -281,7 +281,11 @@ def map_scene(
         if dev.type == "cuda":
             torch.cuda.reset_peak_memory_stats(dev)
         # bad frames raise, or are skipped with a warning (data.on_bad_frame)
-        summary = engine.run(ds.frames(), total=len(ds), progress=progress, desc=spec.name)
+        with engine.stop.signals():
+            summary = engine.run(ds.frames(), total=len(ds), progress=progress, desc=spec.name)
+    if summary.status == "stopped":
+        # Ctrl-C / SIGTERM: this scene's map so far is saved (`run --resume --out`); the batch stops
+        raise KeyboardInterrupt(f"{run_dir}: stopped after {summary.read} frames")
     map_seconds = summary.seconds  # the frame loop and the final pass (synchronised by the timed sections)
     counts = mapper.timings.counts
     frames = int(mapper.frames_seen)

@@ -1003,6 +1003,7 @@ class Mapper:
         timings = self.timings.as_dict()
         timings["device"] = str(self.device)
         timings["ablation"] = self.cfg.ablation
+        timings["finalized"] = self.finalized  # False: the map of a stopped run, which --resume goes on from
         atomic_write_text(path, json.dumps(timings, indent=2))
 
     def _save_trajectory(self, path: Path) -> None:
