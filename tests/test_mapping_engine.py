@@ -118,6 +118,7 @@ def test_a_run_refused_before_its_first_write_leaves_no_empty_folder(tmp_path, c
 
 
 def test_a_stopped_run_leaves_what_eval_and_the_viewer_read(tmp_path, capsys, monkeypatch):
+    from ogscene3d.eval import read_run
     from ogscene3d.mapping.mapper import Mapper
     from ogscene3d.viewer.runs import load_run
 
@@ -138,6 +139,7 @@ def test_a_stopped_run_leaves_what_eval_and_the_viewer_read(tmp_path, capsys, mo
         assert (out / name).is_file(), name
     snap, info = load_run(out)  # the viewer's reader
     assert snap.total_gaussians > 0
+    assert len(read_run(out).means) == snap.total_gaussians  # eval's reader
     with np.load(out / "map.npz") as z:
         assert not bool(z["mapper_finalized"])  # a resume goes on from it
     monkeypatch.setattr(Mapper, "process", process)
