@@ -295,6 +295,25 @@ def test_a_resume_bounded_at_or_before_the_map_says_so(tmp_path, capsys, caplog)
     assert "leave --max-frames out, or raise it" in caplog.text
 
 
+def test_bad_frames_skipped_before_a_failing_frame_are_counted_in_the_saved_map(tmp_path, monkeypatch):
+    from ogscene3d.errors import DataError
+    from ogscene3d.mapping.mapper import Mapper
+
+    scene = _replica_scene(tmp_path / "scene", frames=4)
+    (scene / "results" / "depth000001.png").write_bytes(b"not a png")
+    out = tmp_path / "run"
+    process = Mapper.process
+
+    def fails_at_frame_3(self, frame):
+        if frame.index == 3:
+            raise DataError("frame 3: a segmenter's bad output")
+        return process(self, frame)
+
+    monkeypatch.setattr(Mapper, "process", fails_at_frame_3)
+    assert main(["run", *_common(scene, out), "--set", "data.on_bad_frame=skip"]) == 2
+    assert json.loads((out / "timings.json").read_text())["counts"]["frames_skipped_bad"] == 1
+
+
 def test_timings_count_the_labels_of_the_final_map(tmp_path):
     """The final pass relabels and prunes: the counts are the saved map's, not the last keyframe's."""
     from ogscene3d.config import load_config

@@ -283,6 +283,8 @@ class MappingEngine:
         self.resumed = False
         self.bounded = False  # the frames end before the whole sequence's (--max-frames)
         self.stop = StopRequest()
+        self._given = 0  # frames given to the mapper by this run() so far
+        self._last_index: int | None = None  # the position of the last one
 
     # ------------------------------------------------------------------ before the first frame
     def open(self, cfg: Config, ds: Any, *, resume: bool = False, bounded: bool = False) -> int:
@@ -364,12 +366,16 @@ class MappingEngine:
             it = tqdm(frames, desc=desc, unit="frame", total=total)
         t0 = time.perf_counter()
         self._status("mapping")
+        self._given, self._last_index = 0, None
         try:
-            given, last_index = self._loop(it)
+            self._loop(it)
         except DataError as e:
+            # the bad frames skipped up to the last frame mapped count in the map saved now
+            self._summary(self._given, self._last_index, seen0, counts0, None)
             self._save_on_error(e)
             raise
-        summary = self._summary(given, last_index, seen0, counts0, total)
+        given = self._given
+        summary = self._summary(given, self._last_index, seen0, counts0, total)
         if self.stop.requested:
             summary.status = "stopped"
             summary.seconds = time.perf_counter() - t0
@@ -388,24 +394,22 @@ class MappingEngine:
         summary.gaussians = len(mapper.map)
         return summary
 
-    def _loop(self, it: Iterable) -> tuple[int, int | None]:
-        """The frame loop: -> the number of frames given to the mapper, and the position of the last one."""
+    def _loop(self, it: Iterable) -> None:
+        """The frame loop; counts the frames given to the mapper and keeps the position of the last one."""
         mapper = self.mapper
-        given, last_index = 0, None
         for frame in it:
             self._before_frame()
             if self.stop.requested:
                 break
             with self.guard():
                 is_kf = mapper.process(frame)
-            given += 1
-            last_index = getattr(frame, "index", None)
+            self._given += 1
+            self._last_index = getattr(frame, "index", None)
             if hasattr(it, "set_postfix"):
                 it.set_postfix(gaussians=len(mapper.map), kf=mapper.keyframe_count)
             self._after_frame(frame, is_kf)
             if self.stop.requested:
                 break
-        return given, last_index
 
     def _finish(self, given: int, finalize: bool) -> None:
         """After the last frame: the final pass, unless nothing (or nothing new) could be mapped."""
