@@ -58,7 +58,7 @@ def test_track_without_data_names_the_option(tmp_path, capsys):
 def test_run_and_live_name_their_own_options_for_a_scene_folder_in_the_way(tmp_path, capsys):
     # a run directory's scene/ (or live's scene folder) holding something else, e.g. an earlier run's scene
     # made with other `synthetic` settings; before: "pass overwrite=True (--force)", which neither command has
-    from ogscene3d.viewer.cli import main as live_main
+    from ogscene3d.commands.live import main as live_main
 
     (tmp_path / "run" / "scene").mkdir(parents=True)
     (tmp_path / "run" / "scene" / "old.txt").write_text("x")

@@ -408,7 +408,7 @@ def test_shared_labelfusion_sample_end_to_end(shared_data, tmp_path, monkeypatch
     argv = ["run", "--data", str(seq), "--out", str(run), "--device", "cpu", "--no-progress"]
     for s in sets:
         argv += ["--set", s]
-    monkeypatch.setattr(cli, "COMMAND_MODULES", ["ogscene3d.mapping.run_cli", "ogscene3d.commands.eval"])
+    monkeypatch.setattr(cli, "COMMAND_MODULES", ["ogscene3d.commands.run", "ogscene3d.commands.eval"])
     assert cli.main(argv) == 0
     table = tmp_path / "classes.json"
     table.write_text(json.dumps({"0": "background", "8": "object 8", "22": "object 22"}))

@@ -92,7 +92,9 @@ def test_bad_frames_are_skipped_when_asked_and_resume_goes_on_after_them(tmp_pat
     assert "depth000001.png" in capsys.readouterr().err
     skip = ["--set", "data.on_bad_frame=skip"]
     assert main(["run", *common, *skip, "--max-frames", "3"]) == 0
-    assert "read 2 frames: 2 mapped" in capsys.readouterr().out
+    # the skipped frame is counted as read, and said (#31): before, "read 2 frames: 2 mapped"
+    assert "read 3 frames: 2 mapped, 1 skipped (data.on_bad_frame: skip)" in capsys.readouterr().out
+    assert json.loads((out / "timings.json").read_text())["counts"]["frames_skipped_bad"] == 1
     # the checkpoint records the dataset position, not the count of mapped frames: frame 3 alone is left
     assert main(["run", *common, *skip, "--resume"]) == 0
     assert "read 1 frames: 1 mapped" in capsys.readouterr().out

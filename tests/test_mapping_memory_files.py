@@ -247,7 +247,10 @@ def _legacy_checkpoint(m: Mapper, path) -> None:
         ),
         "mem_scores": np.array(json.dumps([{str(k): v for k, v in e.scores.items()} for e in mem])),
     }
-    m.map.save_npz(path, extra={**m._state_extra(), **inline})
+    state = m.state()
+    del state["mapper_recent"]  # not written then either
+    arrays = {**m.map.state_dict(), **state, **inline, "version": np.array(1)}  # the format then
+    np.savez(path, **arrays)
 
 
 def test_an_old_checkpoint_with_inline_views_loads_and_is_saved_in_files(tmp_path):

@@ -274,7 +274,7 @@ def test_no_record3d_device_is_a_clear_error(scene):
 
 
 def test_live_maps_a_realsense_recording_and_saves_the_map(tmp_path, scene):
-    from ogscene3d.viewer.cli import main
+    from ogscene3d.commands.live import main
 
     rec = _recording(tmp_path, scene)
     out = tmp_path / "run"
@@ -321,7 +321,7 @@ def test_sigterm_stops_a_live_camera_and_saves_the_map(tmp_path, scene, monkeypa
     import signal
 
     import ogscene3d.streams.base as streams
-    from ogscene3d.viewer.cli import main
+    from ogscene3d.commands.live import main
 
     camera = _StillCamera(scene[1][0])
     monkeypatch.setattr(streams, "open_stream", lambda source, max_frames=None, **kw: camera)

@@ -911,7 +911,7 @@ def test_live_session_reports_mapping_errors():
 
 
 def test_cli_argument_errors(tmp_path, capsys):
-    from ogscene3d.viewer.cli import main
+    from ogscene3d.commands.live import main
 
     assert main([]) == 2
     assert "nothing to show" in capsys.readouterr().err
@@ -952,7 +952,7 @@ def test_cli_browse_prints_the_bound_url_and_serves(tmp_path):
     port = busy.getsockname()[1]
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "ogscene3d.viewer.cli", str(run), "--port", str(port)],
+        [sys.executable, "-m", "ogscene3d.commands.live", str(run), "--port", str(port)],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
@@ -985,7 +985,7 @@ def test_cli_browse_prints_the_bound_url_and_serves(tmp_path):
 
 @pytest.mark.parametrize("port", ["70000", "-5", "http"])
 def test_cli_rejects_ports_outside_the_tcp_range(port, capsys):
-    from ogscene3d.viewer.cli import main
+    from ogscene3d.commands.live import main
 
     with pytest.raises(SystemExit) as exc:
         main(["run", "--port", port])
@@ -1039,7 +1039,7 @@ def test_cli_unbindable_host_is_a_clean_error_not_a_hang(tmp_path):
     """viser binds on its own thread; when that fails the main thread used to wait forever."""
     run = _write_run(tmp_path / "run", make_scene(10))
     proc = subprocess.run(
-        [sys.executable, "-m", "ogscene3d.viewer.cli", str(run), "--host", "192.0.2.1", "--port", "0"],
+        [sys.executable, "-m", "ogscene3d.commands.live", str(run), "--host", "192.0.2.1", "--port", "0"],
         capture_output=True,
         text=True,
         timeout=120,
@@ -1059,7 +1059,7 @@ def test_node_details_name_the_caption_source():
 
 
 def test_cli_rejects_bad_settings():
-    from ogscene3d.viewer.cli import _settings, build_parser
+    from ogscene3d.commands.live import _settings, build_parser
 
     args = build_parser().parse_args(["x", "--max-splats", "5"])
     assert _settings(args).max_splats == 5
@@ -1070,7 +1070,7 @@ def test_cli_rejects_bad_settings():
 
 def test_cli_screenshot_without_chromium_is_a_clear_error(monkeypatch, tmp_path, capsys):
     import ogscene3d.viewer.headless as headless
-    from ogscene3d.viewer.cli import main
+    from ogscene3d.commands.live import main
 
     monkeypatch.setattr(headless, "find_chromium", lambda: None)
     run = _write_run(tmp_path / "run", make_scene(10))

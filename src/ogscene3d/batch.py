@@ -234,9 +234,9 @@ def map_scene(
     import torch
 
     from .config import load_config
-    from .datasets import configured_scene, open_dataset
+    from .datasets import configured_scene
+    from .mapping.engine import MappingEngine, open_frames, run_directory
     from .mapping.mapper import Mapper
-    from .mapping.source import dataset_source, record_data, remove_run_temps, start_run_dir
 
     t_start = time.perf_counter()
     ov = [*overrides, *spec.overrides]
@@ -244,47 +244,29 @@ def map_scene(
         ov.append(f"device={device}")
     cfg = load_config(config, ov)
     run_dir = Path(out_root) / spec.name
-    if spec.synthetic_seed is not None:
-        s = cfg.synthetic
-        s.seed = spec.synthetic_seed
-        data = configured_scene(run_dir / "scene", s, remedy="give a new --out, or remove that folder")
-    else:
-        data = Path(str(spec.data))
-    # Recorded in config.yaml: where the frames came from (and where `eval` looks for ground truth).
-    record_data(cfg, data, spec.segments)
-    ds = open_dataset(data, config=cfg.data)
-    if len(ds) == 0:
-        raise DataError(f"{data}: the dataset has no frames")
-
-    mapper = Mapper(cfg, cfg.device)
-    remove_run_temps(run_dir)
-    # a scene stopped by a bad frame resumes with `run --resume --out`
-    run_record = start_run_dir(run_dir, cfg)
-    mapper.set_checkpoint_dir(run_dir)
-    mapper.source = {**dataset_source(cfg, ds), **run_record}
-    dev = mapper.device
-    if dev.type == "cuda":
-        torch.cuda.reset_peak_memory_stats(dev)
-    frames: Any = iter(ds)  # bad frames raise, or are skipped with a warning (data.on_bad_frame)
-    if progress:
-        from tqdm import tqdm
-
-        frames = tqdm(frames, desc=spec.name, unit="frame", total=len(ds))
-    t0 = time.perf_counter()
-    try:
-        for frame in frames:
-            mapper.process(frame)
-    except DataError:
-        if mapper.keyframe_count:  # the scene's map so far survives a bad frame (`ogscene3d run --resume`)
-            mapper.save_checkpoint(run_dir / "map.npz")
-        raise
-    if mapper.keyframe_count == 0:
-        raise DataError(f"{data}: none of its frames could be mapped (see the warnings above)")
-    mapper.finalize()
-    if dev.type == "cuda":
-        torch.cuda.synchronize(dev)
-    map_seconds = time.perf_counter() - t0
-    mapper.save(run_dir)
+    with run_directory(run_dir, "run-batch"):
+        if spec.synthetic_seed is not None:
+            s = cfg.synthetic
+            s.seed = spec.synthetic_seed
+            data = configured_scene(run_dir / "scene", s, remedy="give a new --out, or remove that folder")
+        else:
+            data = Path(str(spec.data))
+        # recorded in config.yaml: where the frames came from (and where `eval` looks for ground truth)
+        ds = open_frames(cfg, data, spec.segments)
+        mapper = Mapper(cfg, cfg.device)
+        # a scene stopped by a bad frame resumes with `run --resume --out`
+        engine = MappingEngine(mapper, run_dir, data)
+        engine.open(cfg, ds)
+        dev = mapper.device
+        if dev.type == "cuda":
+            torch.cuda.reset_peak_memory_stats(dev)
+        # bad frames raise, or are skipped with a warning (data.on_bad_frame)
+        with engine.stop.signals():
+            summary = engine.run(ds.frames(), total=len(ds), progress=progress, desc=spec.name)
+    if summary.status == "stopped":
+        # Ctrl-C / SIGTERM: this scene's map so far is saved (`run --resume --out`); the batch stops
+        raise KeyboardInterrupt(f"{run_dir}: stopped after {summary.read} frames")
+    map_seconds = summary.seconds  # the frame loop and the final pass (synchronised by the timed sections)
     counts = mapper.timings.counts
     frames = int(mapper.frames_seen)
     return {

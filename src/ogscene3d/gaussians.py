@@ -40,7 +40,9 @@ FIELDS: dict[str, tuple[tuple[int, ...], torch.dtype]] = {
     "origin_kf": ((), torch.int32),
 }
 _FLOAT_FIELDS = [k for k, (_, dt) in FIELDS.items() if dt.is_floating_point]
-NPZ_VERSION = 1
+#: The format of map.npz. 2: a mapper checkpoint holds every mapper array (``mapping/checkpoint.py``);
+#: 1: older files, which may lack those added over its life (upgraded on load).
+NPZ_VERSION = 2
 
 PLY_PROPERTIES: list[tuple[str, str]] = (
     [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
@@ -318,8 +320,14 @@ class GaussianMap:
             with np.load(p, allow_pickle=False) as z:
                 # only the map's arrays: a mapper checkpoint also holds its memory views (hundreds of MB)
                 state = {k: z[k] for k in z.files if k in FIELDS or k == "next_label"}
+                version = int(z["version"]) if "version" in z.files else 1
         except NPZ_READ_ERRORS as e:
             raise DataError(corrupt_npz_message(p, e)) from e
+        if version > NPZ_VERSION:
+            raise DataError(
+                f"{p}: written by a newer ogscene3d (map format {version}; this one reads up to "
+                f"{NPZ_VERSION}): update ogscene3d to read it"
+            )
         return cls.from_state_dict(state, device, what=str(p))
 
     def export_ply(self, path: str | Path) -> None:

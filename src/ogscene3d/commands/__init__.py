@@ -10,9 +10,9 @@ from __future__ import annotations
 
 #: Modules that register a subcommand, in the order they appear in ``ogscene3d --help``.
 COMMAND_MODULES: list[str] = [
-    "ogscene3d.mapping.run_cli",  # run (moves to ogscene3d.commands.run)
+    "ogscene3d.commands.run",  # run
     "ogscene3d.commands.eval",  # eval
-    "ogscene3d.viewer.cli",  # live (moves to ogscene3d.commands.live)
+    "ogscene3d.commands.live",  # live
     "ogscene3d.commands.synth",  # synth
     "ogscene3d.commands.segment",  # segment
     "ogscene3d.commands.track",  # track

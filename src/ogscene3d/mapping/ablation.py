@@ -11,6 +11,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from ..config import Config
+from .engine import MappingEngine, run_directory
 from .mapper import ABLATIONS, Mapper
 
 
@@ -21,13 +22,13 @@ def map_sequence(
     device: str | None = None,
     progress: Callable | None = None,
 ) -> Mapper:
-    """Map every frame of ``frames`` (an iterable of Frame), finalize and save to ``out_dir``."""
+    """Map every frame of ``frames`` (an iterable of Frame), finalize and save to ``out_dir`` (locked for
+    the run, as every run directory is: :mod:`ogscene3d.mapping.engine`)."""
     mapper = Mapper(config, device)
-    it = frames if progress is None else progress(frames)
-    for frame in it:
-        mapper.process(frame)
-    mapper.finalize()
-    mapper.save(out_dir)
+    with run_directory(out_dir, "ablation"):
+        MappingEngine(mapper, out_dir, getattr(frames, "root", "")).run(
+            frames if progress is None else progress(frames)
+        )
     return mapper
 
 

@@ -19,6 +19,12 @@ Per keyframe:
    inconsistent Gaussians and the refinement relabels them in the same keyframe;
 9. scene-graph observation/update when ``config.graph.enabled`` (failures there never stop mapping).
 
+``process`` reads as these stages, each a method and one timed section of ``timings``: ``_admit`` (the
+frame's checks, tracking and pose-jump test; where the frame starts to count as read, the rule a resume
+depends on), ``_render_check`` (2), ``_init`` (3), ``_local`` (4), ``_add`` (5), ``_optimize`` (6),
+``_memory`` (7), ``_scheduled_passes`` (8: ``_longterm``, ``_refine``), ``_graph_update`` (9) and
+``_checkpoint`` (``mapping.checkpoint_every``).
+
 Every frame's pose (the dataset's, or the tracker's under ``tracking.poses: odometry``) is first compared
 with the last accepted frame's: a jump beyond ``mapping.max_pose_step`` / ``max_pose_step_deg`` warns, leaves
 the frame out or stops the run (``mapping.on_pose_jump``, ``pose_jump.py``).
@@ -36,8 +42,9 @@ import math
 import time
 from collections import deque
 from contextlib import contextmanager
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -47,7 +54,8 @@ from ..config import Config, check_config, choices, save_config
 from ..device import resolve_device
 from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame, implausible_median_depth
-from ..gaussians import NPZ_READ_ERRORS, GaussianMap, corrupt_npz_message
+from ..gaussians import GaussianMap, corrupt_npz_message
+from .checkpoint import CheckpointArrays, read_checkpoint
 from .init import make_probes
 from .keyframes import KeyframeSelector
 from .local import (
@@ -154,10 +162,38 @@ class Timings:
         return "\n".join(rows)
 
 
-
 def _ran_at(keyframe_count: int, every: int) -> bool:
     """Whether a step scheduled every ``every`` keyframes (0 = never) runs at keyframe ``keyframe_count``."""
     return every > 0 and keyframe_count % every == 0
+
+
+class SaveError(OGSceneError, OSError):
+    """A write of :meth:`Mapper.save` failed: ``failed`` (a file name in the run directory), ``written``
+    (the names written before it), ``cause`` (the OSError, e.g. ENOSPC)."""
+
+    def __init__(self, failed: str, written: list[str], cause: OSError) -> None:
+        self.failed, self.written, self.cause = failed, list(written), cause
+        self.reason = cause.strerror or str(cause)
+        done = ", ".join(written) if written else "nothing"
+        super().__init__(f"could not write {failed}: {self.reason} (written before it: {done})")
+
+
+@dataclass
+class _Keyframe:
+    """What the stages of one keyframe hand on to each other."""
+
+    index: int
+    frame: Frame
+    segments: np.ndarray | None
+    scores: dict[int, float]
+    names: dict[int, str]
+    alpha: torch.Tensor | None = None  # the map rendered at the keyframe's pose (None: empty map)
+    depth: torch.Tensor | None = None
+    probes: Any = None
+    labels: torch.Tensor | None = None  # per probe: scene label (-1: none) and confidence
+    conf: torch.Tensor | None = None
+    seg_to_label: tuple[np.ndarray, np.ndarray] | None = None  # segment ids -> their scene labels
+
 
 class Mapper:
     """Incremental semantic Gaussian mapper: ``process(frame)`` per frame, ``finalize()``, ``save(dir)``."""
@@ -328,33 +364,32 @@ class Mapper:
             self._tracker = Tracker(self.config.tracking, device=None, frame_step=self.config.data.stride)
         return self._tracker
 
-    def _render_check(self, frame: Frame) -> tuple[torch.Tensor | None, torch.Tensor | None]:
-        if len(self.map) == 0:
-            return None, None
-        from ..render import rasterization
-
-        gm = self.map
-        viewmat = torch.as_tensor(np.linalg.inv(frame.pose), dtype=torch.float32, device=self.device)[None]
-        K = torch.as_tensor(frame.K, dtype=torch.float32, device=self.device)[None]
-        with torch.no_grad():
-            depth, alpha, _ = rasterization(
-                gm.means,
-                gm.quats,
-                gm.scales,
-                gm.opacities,
-                gm.colors[:, :1],
-                viewmat,
-                K,
-                frame.width,
-                frame.height,
-                render_mode="ED",
-            )
-        return alpha[0, ..., 0], depth[0, ..., 0]
-
     def process(self, frame: Frame) -> bool:
         """Map one frame. Returns True when it was a keyframe (non-keyframes are only counted)."""
-        # checked before the frame counts as read, so that a resume after this error retries it (a segmenter's
-        # bad output is found later, at a keyframe, and a resume goes on after that frame)
+        if not self._admit(frame) or not self.keyframes(frame.pose):
+            return False
+        k = self._begin_keyframe(frame)
+        self._render_check(k)
+        self._init(k)
+        self._local(k)
+        self._add(k)
+        self._optimize(k)
+        self._memory(k)
+        self._scheduled_passes()
+        self._graph_update(k)
+        self._count_map()
+        self._checkpoint()
+        return True
+
+    # ------------------------------------------------------------------ stages of a frame
+    def _admit(self, frame: Frame) -> bool:
+        """Check, track and pose-check ``frame``, then count it as read. False: it is left out (untracked,
+        or a pose jump under ``on_pose_jump: skip``).
+
+        The resume rule: whatever can refuse a frame with an error runs before ``next_index`` moves past
+        it (a resume after that error retries the frame); from the line that sets ``next_index`` on, the
+        frame counts as read, and a checkpoint's resume goes on after it. A segmenter's bad output is
+        found later, at a keyframe, so a resume goes on after that frame."""
         if not np.all(np.isfinite(frame.depth)):
             raise DataError(f"frame {frame.index} ({frame.name or 'unnamed'}): depth contains NaN or inf")
         odometry = self.config.tracking.poses == "odometry"
@@ -364,129 +399,180 @@ class Mapper:
                 "poses or track them (--poses odometry, config tracking.poses: odometry)"
             )
         tracked = self._track(frame)
-        # may raise (mapping.on_pose_jump: error) before the frame counts as read: a resume retries it
-        jumped = tracked and self._pose_jumped(frame)
+        jumped = tracked and self._pose_jumped(frame)  # may raise (mapping.on_pose_jump: error)
+        # ---- from here on the frame counts as read
         self.next_index = frame.index + 1
         if odometry:
             self.trajectory.append(np.array(frame.pose, dtype=np.float64) if tracked else None)
         if not tracked or jumped:
             return False
         self._camera_up_sum -= np.asarray(frame.pose, dtype=np.float64)[:3, 1]
-        if not self._checked_depth_range and np.any(frame.depth > 0):
-            self._checked_depth_range = True
-            # a dataset's frame: the dataset has warned already, naming the setting to fix
-            median = None if frame.depth_scale_checked else implausible_median_depth(frame.depth)
-            if median is not None:
-                log.warning(
-                    "frame %d (%s): median depth %.3g m is implausible for an RGB-D camera; Frame.depth "
-                    "must be in metres (0 = invalid), or the map will be empty or wrong",
-                    frame.index,
-                    frame.name or "unnamed",
-                    median,
-                )
+        self._check_depth_range(frame)
         self.frames_seen += 1
         self.timings.add("frames")
-        if not self.keyframes(frame.pose):
-            return False
+        return True
+
+    def _check_depth_range(self, frame: Frame) -> None:
+        if self._checked_depth_range or not np.any(frame.depth > 0):
+            return
+        self._checked_depth_range = True
+        # a dataset's frame: the dataset has warned already, naming the setting to fix
+        median = None if frame.depth_scale_checked else implausible_median_depth(frame.depth)
+        if median is not None:
+            log.warning(
+                "frame %d (%s): median depth %.3g m is implausible for an RGB-D camera; Frame.depth "
+                "must be in metres (0 = invalid), or the map will be empty or wrong",
+                frame.index,
+                frame.name or "unnamed",
+                median,
+            )
+
+    def _begin_keyframe(self, frame: Frame) -> _Keyframe:
         segments, scores, names = self._segments(frame)
-        cfg = self.cfg
-        kf = self.keyframe_count
+        k = _Keyframe(self.keyframe_count, frame, segments, scores, names)
         self.keyframe_count += 1
         self.finalized = False
         self.timings.add("keyframes")
+        if not np.any(frame.depth > 0):
+            # a dead sensor or a wrong depth scale: nothing of this view can enter the map
+            log.warning(
+                "frame %d (%s): keyframe without a valid depth pixel (depth 0 everywhere): nothing of it is "
+                "mapped; check data.depth_scale and the depth images",
+                frame.index,
+                frame.name or "unnamed",
+            )
+            self.timings.add("keyframes_no_depth")
+        return k
+
+    def _render_check(self, k: _Keyframe) -> None:
+        """The map rendered at the keyframe's pose (alpha + expected depth): the pixels it explains."""
+        from ..render import rasterization
 
         with self.timings.section("render_check"):
-            alpha, depth = self._render_check(frame)
+            if len(self.map) == 0:
+                return
+            gm, frame = self.map, k.frame
+            viewmat = torch.as_tensor(np.linalg.inv(frame.pose), dtype=torch.float32, device=self.device)[
+                None
+            ]
+            K = torch.as_tensor(frame.K, dtype=torch.float32, device=self.device)[None]
+            with torch.no_grad():
+                depth, alpha, _ = rasterization(
+                    gm.means,
+                    gm.quats,
+                    gm.scales,
+                    gm.opacities,
+                    gm.colors[:, :1],
+                    viewmat,
+                    K,
+                    frame.width,
+                    frame.height,
+                    render_mode="ED",
+                )
+            k.alpha, k.depth = alpha[0, ..., 0], depth[0, ..., 0]
+
+    def _init(self, k: _Keyframe) -> None:
+        """Probes: grid-subsampled back-projected pixels per segment, those the map explains marked."""
+        cfg = self.cfg
         with self.timings.section("init"):
-            probes = make_probes(
-                frame,
-                segments,
-                scores,
+            k.probes = make_probes(
+                k.frame,
+                k.segments,
+                k.scores,
                 self.device,
                 step=max(1, round(math.sqrt(cfg.pixels_per_gaussian))),
                 score_range=tuple(self.config.segmentation.sam_score_range),
                 conf_range=tuple(self.config.segmentation.conf_range),
-                rendered_alpha=alpha,
-                rendered_depth=depth,
+                rendered_alpha=k.alpha,
+                rendered_depth=k.depth,
                 alpha_thresh=cfg.init_alpha_thresh,
                 depth_margin=cfg.init_depth_margin,
                 min_depth=self.config.data.min_depth,
                 max_depth=self.config.data.max_depth,
             )
-        seg_to_label = None
+
+    def _local(self, k: _Keyframe) -> None:
+        """Local 3D association (KNN, r(m)/p(m), the three cases), duplicate merging, Eq. 5, filling: the
+        scene label and confidence of every probe."""
+        cfg, probes = self.cfg, k.probes
         with self.timings.section("local"):
-            labels = torch.full((len(probes),), -1, dtype=torch.int32, device=self.device)
-            conf = torch.zeros(len(probes), dtype=torch.float32, device=self.device)
+            k.labels = torch.full((len(probes),), -1, dtype=torch.int32, device=self.device)
+            k.conf = torch.zeros(len(probes), dtype=torch.float32, device=self.device)
             S = int(probes.seg_ids.numel())
             in_seg = probes.seg >= 0
-            if S and bool(in_seg.any()):
-                sel = torch.nonzero(in_seg).squeeze(1)
-                res = associate_segments(
+            if not (S and bool(in_seg.any())):
+                return
+            sel = torch.nonzero(in_seg).squeeze(1)
+            res = associate_segments(
+                probes.means[sel],
+                probes.seg[sel],
+                probes.conf[sel],
+                S,
+                self.map.means,
+                self.map.labels,
+                self.map.confidences,
+                self.map.new_labels,
+                k=cfg.knn_k,
+                radius=cfg.knn_radius,
+                tau_valid=cfg.tau_valid,
+                tau_p=cfg.tau_p,
+                naive=self.naive,
+                novel_before_ambiguous=cfg.novel_before_ambiguous,
+                # a probe's log-scale is log(grid spacing at its depth): see init.make_probes
+                probe_radius=(
+                    torch.exp(probes.log_scales[sel]) * cfg.knn_radius_spacing
+                    if cfg.knn_radius_spacing > 0
+                    else None
+                ),
+                eq5=False,  # below, once the merge has turned some ambiguous segments into matched ones
+            )
+            if self._merging(k.segments):
+                self._merge_duplicates(k.frame, k.segments, k.scores, probes, res)
+            if not self.naive:
+                update_confidences(
+                    res,
+                    probes.conf[sel],
+                    self.map.labels,
+                    self.map.confidences,
+                    self._inner_probes(k.segments, probes.pix[sel]) if cfg.eq5_skip_edges else None,
+                )
+            if cfg.fill_unlabeled:
+                pconf = probes.conf[sel]
+                res.filled = fill_unlabeled(
                     probes.means[sel],
                     probes.seg[sel],
-                    probes.conf[sel],
-                    S,
+                    torch.ones_like(pconf) if self.naive else pconf,  # naive: every confidence is 1
+                    res.seg_labels,
                     self.map.means,
                     self.map.labels,
                     self.map.confidences,
-                    self.map.new_labels,
-                    k=cfg.knn_k,
-                    radius=cfg.knn_radius,
-                    tau_valid=cfg.tau_valid,
-                    tau_p=cfg.tau_p,
-                    naive=self.naive,
-                    novel_before_ambiguous=cfg.novel_before_ambiguous,
-                    # a probe's log-scale is log(grid spacing at its depth): see init.make_probes
-                    probe_radius=(
-                        torch.exp(probes.log_scales[sel]) * cfg.knn_radius_spacing
-                        if cfg.knn_radius_spacing > 0
-                        else None
-                    ),
-                    eq5=False,  # below, once the merge has turned some ambiguous segments into matched ones
+                    cfg.knn_radius,
                 )
-                if self._merging(segments):
-                    self._merge_duplicates(frame, segments, scores, probes, res)
-                if not self.naive:
-                    update_confidences(
-                        res,
-                        probes.conf[sel],
-                        self.map.labels,
-                        self.map.confidences,
-                        self._inner_probes(segments, probes.pix[sel]) if cfg.eq5_skip_edges else None,
-                    )
-                if cfg.fill_unlabeled:
-                    pconf = probes.conf[sel]
-                    res.filled = fill_unlabeled(
-                        probes.means[sel],
-                        probes.seg[sel],
-                        torch.ones_like(pconf) if self.naive else pconf,  # naive: every confidence is 1
-                        res.seg_labels,
-                        self.map.means,
-                        self.map.labels,
-                        self.map.confidences,
-                        cfg.knn_radius,
-                    )
-                labels[sel] = res.seg_labels[probes.seg[sel]]
-                seg_to_label = (probes.seg_ids.cpu().numpy(), res.seg_labels.cpu().numpy())
-                for name, v in res.counts().items():
-                    self.timings.add(f"segments_{name}", v)
-                conf = torch.where(labels >= 0, 1.0 if self.naive else probes.conf, conf)
+            k.labels[sel] = res.seg_labels[probes.seg[sel]]
+            k.seg_to_label = (probes.seg_ids.cpu().numpy(), res.seg_labels.cpu().numpy())
+            for name, v in res.counts().items():
+                self.timings.add(f"segments_{name}", v)
+            k.conf = torch.where(k.labels >= 0, 1.0 if self.naive else probes.conf, k.conf)
+
+    def _add(self, k: _Keyframe) -> None:
+        """The probes the map does not explain become Gaussians."""
+        cfg, probes = self.cfg, k.probes
         with self.timings.section("add"):
             new = probes.new
             self.map.append(
                 probes.means[new],
                 probes.colors[new],
                 probes.log_scales[new],
-                labels=labels[new],
-                confidences=conf[new],
+                labels=k.labels[new],
+                confidences=k.conf[new],
                 opacity_logits=math.log(cfg.init_opacity / (1 - cfg.init_opacity)),
-                origin_kf=kf,
+                origin_kf=k.index,
             )
             self.timings.add("gaussians_added", int(new.sum()))
 
-        entry = MemoryEntry(
-            kf, frame.rgb, frame.depth.astype(np.float32), frame.K, frame.pose, segments, scores
-        )
+    def _optimize(self, k: _Keyframe) -> None:
+        """Geometry/appearance optimisation over the keyframe and memory views, then pruning."""
+        cfg, frame = self.cfg, k.frame
         with self.timings.section("optimize"):
             views = [View.from_arrays(frame.rgb, frame.depth, frame.pose, frame.K, self.device)]
             pool = list(self.recent) + [e for e in self.memory.entries if e not in self.recent]
@@ -502,37 +588,50 @@ class Mapper:
             self.timings.add("gaussians_pruned", removed)
             if opt["iters"]:
                 self.timings.counts["last_loss"] = opt["loss_last"]
+
+    def _memory(self, k: _Keyframe) -> None:
+        """The keyframe joins the recent views, and the memory buffer when it passes its criteria."""
+        frame = k.frame
+        entry = MemoryEntry(
+            k.index, frame.rgb, frame.depth.astype(np.float32), frame.K, frame.pose, k.segments, k.scores
+        )
         self.recent.append(entry)
         with self.timings.section("memory"):
             if self.memory.consider(entry, self.device):
                 self.timings.add("memory_added")
 
-        if self.use_longterm and _ran_at(self.keyframe_count, cfg.longterm_every):
-            with self.timings.section("longterm"):
-                self._longterm()
-        if self.use_refine and _ran_at(self.keyframe_count, cfg.refine_every):
+    def _scheduled_passes(self) -> None:
+        """The long-term update, then the global refinement, at the keyframes of their schedules."""
+        if self.use_longterm and _ran_at(self.keyframe_count, self.cfg.longterm_every):
+            self._longterm()
+        if self.use_refine and _ran_at(self.keyframe_count, self.cfg.refine_every):
             self._refine()
+
+    def _graph_update(self, k: _Keyframe) -> None:
         if self.config.graph.enabled and not self._graph_failed:
             with self.timings.section("graph"):
-                self._graph_step(kf, frame, segments, seg_to_label, names)
+                self._graph_step(k.index, k.frame, k.segments, k.seg_to_label, k.names)
+
+    def _count_map(self) -> None:
+        """The map's size counters in ``timings`` (after each keyframe, and from the final map)."""
         self.timings.counts["gaussians"] = len(self.map)
         self.timings.counts["labels"] = int(torch.unique(self.map.labels[self.map.labels >= 0]).numel())
         self.timings.counts["memory_size"] = len(self.memory)
-        if (
-            cfg.checkpoint_every > 0
-            and self._checkpoint_dir is not None
-            and self.keyframe_count % cfg.checkpoint_every == 0
-        ):
-            with self.timings.section("checkpoint"):
-                try:
-                    self.save_checkpoint(self._checkpoint_dir / "map.npz")
-                except OSError as e:
-                    # a safety net: a full disk must not stop the mapping (the previous checkpoint stays)
-                    log.warning(
-                        "checkpoint not written (%s); mapping goes on, the next checkpoint tries again", e
-                    )
-                    self.timings.add("checkpoint_errors")
-        return True
+
+    def _checkpoint(self) -> None:
+        """``map.npz`` every ``checkpoint_every`` keyframes, into the checkpoint folder when one is set."""
+        every = self.cfg.checkpoint_every
+        if every <= 0 or self._checkpoint_dir is None or self.keyframe_count % every:
+            return
+        with self.timings.section("checkpoint"):
+            try:
+                self.save_checkpoint(self._checkpoint_dir / "map.npz")
+            except OSError as e:
+                # a safety net: a full disk must not stop the mapping (the previous checkpoint stays)
+                log.warning(
+                    "checkpoint not written (%s); mapping goes on, the next checkpoint tries again", e
+                )
+                self.timings.add("checkpoint_errors")
 
     def _inner_probes(self, segments: np.ndarray, pix: torch.Tensor) -> torch.Tensor:
         """[P] bool: probes whose pixel is off every segment boundary (they may make Eq. 5 updates)."""
@@ -603,20 +702,22 @@ class Mapper:
             self.timings.add("segments_merged", int(merged.numel()))
 
     def _longterm(self) -> None:
+        """The long-term Eq. 16 update over the next memory views of the round-robin."""
         cfg = self.cfg
-        for entry in self.memory.next_views(cfg.longterm_views):
-            st = longterm_view_update(
-                self.map,
-                entry,
-                k=cfg.longterm_knn_k,
-                radius=cfg.knn_radius,
-                pixel_step=cfg.longterm_pixel_step,
-                skip_edges=cfg.longterm_skip_edges,
-                same_class=cfg.longterm_same_class,
-            )
-            for k, v in st.as_dict().items():
-                if k != "mean_iou":
-                    self.timings.add(f"longterm_{k}", v)
+        with self.timings.section("longterm"):
+            for entry in self.memory.next_views(cfg.longterm_views):
+                st = longterm_view_update(
+                    self.map,
+                    entry,
+                    k=cfg.longterm_knn_k,
+                    radius=cfg.knn_radius,
+                    pixel_step=cfg.longterm_pixel_step,
+                    skip_edges=cfg.longterm_skip_edges,
+                    same_class=cfg.longterm_same_class,
+                )
+                for k, v in st.as_dict().items():
+                    if k != "mean_iou":
+                        self.timings.add(f"longterm_{k}", v)
 
     # ------------------------------------------------------------------ scene graph
     def _graph_step(
@@ -700,16 +801,13 @@ class Mapper:
         Beyond the paper, whose schedule simply stops with the stream: the keyframes since the last scheduled
         pass (up to ``longterm_every`` / ``refine_every`` - 1 of them) get their long-term update and
         refinement too. It runs even where the last keyframe's scheduled pass just did: the long-term step
-        then takes the next memory views of its round-robin, and a second refinement changes little. Measured
-        on the synthetic demo (60 keyframes, so both ran at the last one), skipping it there moved the scores
-        by less than their noise (3D HOV-SG 68.80 -> 68.71, ConceptGraphs 80.14 -> 80.11, 2D 70.62 -> 70.92),
-        so the simpler rule stays."""
+        then takes the next memory views of its round-robin, and a second refinement changes little
+        (measured: docs/deviations.md, "final pass"), so the simpler rule stays."""
         cfg = self.cfg
         if self.keyframe_count == 0:
             return
         if self.use_longterm:
-            with self.timings.section("longterm"):
-                self._longterm()
+            self._longterm()
         if self.use_refine:
             self._refine()
         with self.timings.section("prune"):
@@ -727,11 +825,14 @@ class Mapper:
                 except Exception as e:  # noqa: BLE001
                     log.warning("final scene-graph update failed: %s: %s", type(e).__name__, e)
                     self._graph_failed = True
-        self.timings.counts["gaussians"] = len(self.map)
+        self._count_map()  # the final map's: pruning and refinement change the counts of the last keyframe
         self.finalized = True
 
-    def _state_extra(self) -> dict[str, np.ndarray]:
-        extra = {
+    def state(self) -> dict[str, np.ndarray]:
+        """The mapper's state besides the Gaussians, as the arrays of a checkpoint (``checkpoint.py``): its
+        counters and random stream, and the ``state()`` of its parts."""
+        nan = np.full((4, 4), np.nan)
+        state = {
             "mapper_frames_seen": np.array(self.frames_seen),
             "mapper_next_index": np.array(self.next_index),
             "mapper_keyframe_count": np.array(self.keyframe_count),
@@ -742,24 +843,25 @@ class Mapper:
             "mapper_source": np.array(json.dumps(self.source)),
             # the module times of a run go on across resumes (ms per keyframe divides by all keyframes)
             "mapper_timings": np.array(json.dumps(self.timings.state())),
+            "mapper_trajectory": np.stack([nan if p is None else p for p in self.trajectory])
+            if self.trajectory
+            else np.zeros((0, 4, 4)),
+            "mapper_recent": np.array([e.keyframe for e in self.recent], dtype=np.int64),
         }
-        if self.trajectory:
-            nan = np.full((4, 4), np.nan)
-            extra["mapper_trajectory"] = np.stack([nan if p is None else p for p in self.trajectory])
-        extra.update(self.keyframes.state())
-        extra.update(self.pose_check.state())
+        state.update(self.keyframes.state())
+        state.update(self.pose_check.state())
         if self._tracker is not None:
-            extra.update(self._tracker.state())  # the odometry goes on in the same trajectory
+            state.update(self._tracker.state())  # the odometry goes on in the same trajectory
         if self._graph is not None and not self._graph_failed:
             # captions (possibly paid VLM calls), first_seen and the update schedule go on after a resume
-            extra["graph_state"] = np.array(json.dumps(self._graph.state()))
-        return extra
+            state["graph_state"] = np.array(json.dumps(self._graph.state()))
+        return state
 
     def save_checkpoint(self, path: str | Path) -> None:
         """Write ``map.npz``: the Gaussians plus the mapper state needed to resume (atomically), and the
         memory views it does not have on disk yet, each in its own file (``memory_files``)."""
         path = Path(path)
-        extra = self._state_extra()
+        extra = self.state()
         mem = self.memory.entries
         # the keyframes the next one is optimised with (opt_memory_frames) that are not in the memory
         recent = [e for e in self.recent if not any(e is m for m in mem)]
@@ -769,65 +871,45 @@ class Mapper:
         recent_files = [store_view(path, e) for e in recent]
         extra.update(manifest(mem, files))
         extra.update(manifest(recent, recent_files, prefix="recent"))
-        extra["mapper_recent"] = np.array([e.keyframe for e in self.recent], dtype=np.int64)
         self.map.save_npz(path, extra=extra)
         for f in remove_unreferenced(path, files + recent_files):
             log.debug("removed %s, a view no longer in the memory", f)
 
     def load_checkpoint(self, path: str | Path) -> None:
-        """Restore the map and mapper state from ``map.npz`` (written by ``save``/``save_checkpoint``)."""
+        """Restore the map and mapper state from ``map.npz`` (written by ``save``/``save_checkpoint``, by
+        this version or, upgraded by ``checkpoint.upgrade``, an older one)."""
         p = Path(path)
         self.map = GaussianMap.load_npz(p, self.device)
+        self.load_state(read_checkpoint(p, self.config.seed), p)
+
+    def load_state(self, state: CheckpointArrays, path: Path) -> None:
+        """Restore :meth:`state` (read from the checkpoint ``path`` by ``checkpoint.read_checkpoint``),
+        and the memory views its lists name (from their files beside ``path``)."""
+        p = path
         try:
-            with np.load(p, allow_pickle=False) as z:
-                self.frames_seen = int(z["mapper_frames_seen"])
-                # checkpoints from before the position was saved: frames_seen was used
-                self.next_index = (
-                    int(z["mapper_next_index"]) if "mapper_next_index" in z.files else self.frames_seen
-                )
-                self.keyframe_count = int(z["mapper_keyframe_count"])
-                # older checkpoints lack these: not finalized, no source, times from zero
-                self.finalized = bool(z["mapper_finalized"]) if "mapper_finalized" in z.files else False
-                if "mapper_rng" in z.files:
-                    self.rng.bit_generator.state = json.loads(str(z["mapper_rng"]))
-                self.source = json.loads(str(z["mapper_source"])) if "mapper_source" in z.files else {}
-                if "mapper_timings" in z.files:
-                    self.timings.load_state(json.loads(str(z["mapper_timings"])))
-                traj = z["mapper_trajectory"] if "mapper_trajectory" in z.files else np.zeros((0, 4, 4))
-                self.trajectory = [None if np.isnan(p).any() else p for p in traj]
-                self.keyframes.load_state({k: z[k] for k in ("kf_since_last", "kf_last_pose")})
-                self.pose_check.load_state({k: z[k] for k in z.files if k.startswith("posecheck_")})
-                self.memory.entries = []
-                cursor = int(z["mapper_memory_cursor"]) if "mapper_memory_cursor" in z.files else 0
-                views = read_manifest(z, p)
-                recent_views = read_manifest(z, p, "recent")
-                # older checkpoints lack it: the first keyframes after the resume pair with memory views only
-                recent = [int(k) for k in z["mapper_recent"]] if "mapper_recent" in z.files else []
-                if "mem_file" not in z.files and "mem_keyframe" in z.files:
-                    # a checkpoint from before the views had their own files: all of them inline
-                    scores = json.loads(str(z["mem_scores"]))
-                    # each z[...] reads (and decompresses) the whole array: once per array, not per view
-                    mem = {k: z[f"mem_{k}"] for k in ("rgb", "depth", "K", "pose", "segments")}
-                    for i, kf in enumerate(z["mem_keyframe"]):
-                        entry = MemoryEntry(
-                            int(kf),
-                            mem["rgb"][i].copy(),
-                            mem["depth"][i].copy(),
-                            mem["K"][i].copy(),
-                            mem["pose"][i].copy(),
-                            mem["segments"][i].copy(),
-                            {int(k): float(v) for k, v in scores[i].items()},
-                        )
-                        self.memory.restore(entry, self.device)
-                    del mem
-                tracker_state = {k: z[k] for k in z.files if k.startswith("trk_")}
-                graph_state = str(z["graph_state"]) if "graph_state" in z.files else None
+            self.frames_seen = int(state["mapper_frames_seen"])
+            self.next_index = int(state["mapper_next_index"])
+            self.keyframe_count = int(state["mapper_keyframe_count"])
+            self.finalized = bool(state["mapper_finalized"])
+            self.rng.bit_generator.state = json.loads(str(state["mapper_rng"]))
+            self.source = json.loads(str(state["mapper_source"]))
+            self.timings.load_state(json.loads(str(state["mapper_timings"])))
+            self.trajectory = [None if np.isnan(t).any() else t for t in state["mapper_trajectory"]]
+            self.keyframes.load_state(state)
+            self.pose_check.load_state(state)
+            cursor = int(state["mapper_memory_cursor"])
+            views = read_manifest(state, p)
+            recent_views = read_manifest(state, p, "recent")
+            recent = [int(k) for k in state["mapper_recent"]]
         except DataError:
             raise
         except KeyError as e:
             raise DataError(f"{p}: not a mapper checkpoint (missing {e})") from e
-        except NPZ_READ_ERRORS as e:  # a damaged array, read late
+        except (ValueError, TypeError) as e:  # a damaged array
             raise DataError(corrupt_npz_message(p, e)) from e
+        self.memory.entries = []
+        for entry in state.get("mem_inline", []):  # an older checkpoint's inline views (checkpoint.upgrade)
+            self.memory.restore(entry, self.device)
         # a smaller memory_max keeps the newest views: the older ones are not even read
         for record in views[max(0, len(views) - self.memory.max_size) :]:
             self.memory.restore(load_view(p, record), self.device)  # one file read per view
@@ -843,42 +925,54 @@ class Mapper:
                 entry = load_view(p, records[kf])
             if entry is not None:
                 self.recent.append(entry)
-        self._graph_failed = False
-        if self.config.graph.enabled:
-            # the graph built with the Mapper takes the checkpoint's state (its models are loaded once)
-            if self._graph is None or self._graph.num_updates or self._graph.nodes:
-                self._graph = self._new_graph()
-            if graph_state is not None:
-                try:
-                    self._graph.load_state(json.loads(graph_state), source=f"{p} (graph_state)")
-                except Exception as e:  # noqa: BLE001 - the graph is optional: the map resumes without it
-                    log.warning(
-                        "scene graph not restored (%s: %s): the next update builds it anew",
-                        type(e).__name__,
-                        e,
-                    )
-                    self._graph = self._new_graph()
-        self._tracker = None
-        if self.config.tracking.poses == "odometry":
-            if tracker_state:
-                try:
-                    self._get_tracker().load_state(tracker_state)
-                except (ValueError, OGSceneError) as e:
-                    raise DataError(f"{p}: cannot restore the tracker: {e}") from e
-            elif self.frames_seen:
-                log.warning(
-                    "%s holds no tracker state (written with dataset poses, or by an older version): "
-                    "odometry restarts at the next frame's own pose, or the identity where it has none",
-                    p,
-                )
+        self._load_graph_state(state.get("graph_state"), p)
+        self._load_tracker_state({k: v for k, v in state.items() if k.startswith("trk_")}, p)
         self.timings.counts["keyframes"] = self.keyframe_count
         self.timings.counts["frames"] = self.frames_seen
 
+    def _load_graph_state(self, graph_state: np.ndarray | None, p: Path) -> None:
+        self._graph_failed = False
+        if not self.config.graph.enabled:
+            return
+        # the graph built with the Mapper takes the checkpoint's state (its models are loaded once)
+        if self._graph is None or self._graph.num_updates or self._graph.nodes:
+            self._graph = self._new_graph()
+        if graph_state is None:
+            return
+        try:
+            self._graph.load_state(json.loads(str(graph_state)), source=f"{p} (graph_state)")
+        except Exception as e:  # noqa: BLE001 - the graph is optional: the map resumes without it
+            log.warning(
+                "scene graph not restored (%s: %s): the next update builds it anew", type(e).__name__, e
+            )
+            self._graph = self._new_graph()
+
+    def _load_tracker_state(self, tracker_state: dict[str, np.ndarray], p: Path) -> None:
+        self._tracker = None
+        if self.config.tracking.poses != "odometry":
+            return
+        if tracker_state:
+            try:
+                self._get_tracker().load_state(tracker_state)
+            except (ValueError, OGSceneError) as e:
+                raise DataError(f"{p}: cannot restore the tracker: {e}") from e
+        elif self.frames_seen:
+            log.warning(
+                "%s holds no tracker state (written with dataset poses, or by an older version): "
+                "odometry restarts at the next frame's own pose, or the identity where it has none",
+                p,
+            )
+
     def save(self, out_dir: str | Path) -> Path:
-        """Write the run directory: gaussians.ply, map.npz (with its memory views in map_memory/),
-        graph.json, timings.json, config.yaml, and under odometry traj.txt (the tracked poses, one row-major
-        c2w 4x4 per frame read). Saved outside a run that records its id (``source["run_id"]``), an earlier
-        run's ``run_id`` file there is removed."""
+        """Write the run directory: config.yaml and map.npz (with its memory views in map_memory/) first,
+        which is what a resume needs, then the exports: gaussians.ply, timings.json, under odometry traj.txt
+        (the tracked poses, one row-major c2w 4x4 per frame read) and graph.json. A save cut short (a full
+        disk) thus leaves a map that ``run --resume`` writes the exports from. Saved outside a run that
+        records its id (``source["run_id"]``), an earlier run's ``run_id`` file there is removed.
+
+        Raises:
+            SaveError: a write failed; it names the file and those written before it.
+        """
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         if "run_id" not in self.source:
@@ -888,22 +982,36 @@ class Mapper:
             # id left here would vouch for this config.yaml beside that run's map.npz should this save stop
             # before its map.npz, and --resume would go on with the old map and these settings
             (out / RUN_ID_FILE).unlink(missing_ok=True)
-        self.map.export_ply(out / "gaussians.ply")
-        save_config(self.config, out / "config.yaml")
+        steps: list[tuple[str, Any]] = [
+            ("config.yaml", lambda: save_config(self.config, out / "config.yaml")),
+            ("map.npz", lambda: self.save_checkpoint(out / "map.npz")),
+            ("gaussians.ply", lambda: self.map.export_ply(out / "gaussians.ply")),
+            ("timings.json", lambda: self._save_timings(out / "timings.json")),
+            ("traj.txt", lambda: self._save_trajectory(out / "traj.txt")),
+            ("graph.json", lambda: self._save_graph(out / "graph.json")),
+        ]
+        written: list[str] = []
+        for name, write in steps:
+            try:
+                write()
+            except OSError as e:
+                raise SaveError(name, written, e) from e
+            written.append(name)
+        return out
+
+    def _save_timings(self, path: Path) -> None:
         timings = self.timings.as_dict()
         timings["device"] = str(self.device)
         timings["ablation"] = self.cfg.ablation
-        atomic_write_text(out / "timings.json", json.dumps(timings, indent=2))
+        timings["finalized"] = self.finalized  # False: the map of a stopped run, which --resume goes on from
+        atomic_write_text(path, json.dumps(timings, indent=2))
+
+    def _save_trajectory(self, path: Path) -> None:
         from ..tracking import hold_last_good, trajectory_text
 
         filled = hold_last_good(self.trajectory)  # as `ogscene3d track` writes it: one pose per frame read
         if filled:
-            atomic_write_text(out / "traj.txt", trajectory_text(filled))
-        self._save_graph(out / "graph.json")
-        # last: a finalized checkpoint tells --resume there is nothing left to do, so the other outputs must
-        # be there by then
-        self.save_checkpoint(out / "map.npz")
-        return out
+            atomic_write_text(path, trajectory_text(filled))
 
     def _save_graph(self, path: Path) -> None:
         graph = None

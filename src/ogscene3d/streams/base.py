@@ -199,11 +199,13 @@ def open_stream(source: str, max_frames: int | None = None, **options: Any) -> C
     raise ConfigError(f"unknown --source {source!r}; expected {SOURCES}")
 
 
-def close_stream(frames: Any) -> None:
+def close_stream(frames: Any) -> bool:
     """Close ``frames`` when it is a camera stream (what a live session maps), so that the session's loop ends
-    and the map is finished and saved; anything else is left as it is."""
+    and the map is finished and saved; anything else is left as it is. -> whether a stream was closed."""
     if isinstance(frames, CameraStream):
         frames.close()
+        return True
+    return False
 
 
 def stream_for_live(

@@ -3,7 +3,9 @@
 The mapping thread never waits on the viewer: between two frames it asks
 :meth:`LiveViewer.wants_snapshot` (a rate limit, and whether a browser watches) and only then copies a
 decimated snapshot off the device. Pause and save come from the GUI through :class:`LiveSession`,
-which serialises them with mapping by one lock held during each ``process``/``finalize``.
+which serialises them with mapping by one lock held during each ``process``/``finalize``/save. The
+run itself (the frame loop, stop, save-on-error, final save) is that of
+:class:`~ogscene3d.mapping.engine.MappingEngine`, as for ``ogscene3d run``; the session is its hooks.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from ..mapping.engine import MappingEngine, RunSummary
 from .snapshot import snapshot_from_mapper
 
 log = logging.getLogger(__name__)
@@ -30,8 +33,10 @@ class LiveSession:
     ``frames``: an iterable of :class:`~ogscene3d.frame.Frame`. ``budget``: most Gaussians per
     snapshot. ``max_overhead``: the largest fraction of the mapping thread's time spent building
     snapshots (each one costs O(budget)); after a snapshot that took t seconds the next one waits at
-    least t / max_overhead. ``out_dir``: where the run is saved at the end of the stream (None: only
-    on request); it is also the default of the GUI's save box.
+    least t / max_overhead. ``out_dir``: where the run is saved at the end of the stream, or when it is
+    stopped (None: only on request); it is also the default of the GUI's save box. ``engine``: the run's
+    engine, opened by the caller on its run directory (default: a new one on ``mapper`` and ``out_dir``).
+    ``total``: the number of frames, when known (counts the frames a dataset skipped at the end).
     """
 
     def __init__(
@@ -44,6 +49,8 @@ class LiveSession:
         max_overhead: float = 0.1,
         out_dir: str | Path | None = None,
         finalize: bool = True,
+        engine: MappingEngine | None = None,
+        total: int | None = None,
     ) -> None:
         if budget < 1:
             raise ValueError(f"budget must be >= 1, got {budget}")
@@ -70,7 +77,12 @@ class LiveSession:
         self.status = "starting"
         self.error: BaseException | None = None
         self.saved_to: Path | None = None
+        self.summary: RunSummary | None = None
         self.seconds = 0.0
+        self.total = total
+        self.engine = engine if engine is not None else MappingEngine(mapper, self.out_dir)
+        self.engine.hooks = self
+        self.engine.guard = lambda: self._lock
         self._thread = threading.Thread(target=self._main, name="ogscene3d-mapping", daemon=True)
 
     # ------------------------------------------------------------------ MappingControl
@@ -138,36 +150,39 @@ class LiveSession:
         self.snapshots += 1
         self._next_snapshot = time.monotonic() + cost / self.max_overhead
 
+    # ------------------------------------------------------------------ engine hooks (mapping thread)
+    def before_frame(self) -> None:
+        while not self._run.is_set() and not self._stop.is_set():
+            self._run.wait(0.2)
+            self._publish()  # keep late joiners served while paused
+        if self._stop.is_set():
+            self.engine.stop.request()
+
+    def after_frame(self, frame: Any, is_keyframe: bool) -> None:
+        if frame.pose is not None:
+            self._poses.append(np.asarray(frame.pose, dtype=np.float64))
+        self._last_frame = frame
+        if is_keyframe:
+            self._map_rev += 1
+        self._publish()
+        if self._stop.is_set():
+            self.engine.stop.request()
+
+    def status_changed(self, text: str) -> None:
+        self.status = text
+
     def _main(self) -> None:
         t0 = time.perf_counter()
         try:
-            self.status = "mapping"
-            for frame in self.frames:
-                while not self._run.is_set() and not self._stop.is_set():
-                    self._run.wait(0.2)
-                    self._publish()  # keep late joiners served while paused
-                if self._stop.is_set():
-                    self.status = "stopped"
-                    break
-                with self._lock:
-                    is_kf = self.mapper.process(frame)
-                if frame.pose is not None:
-                    self._poses.append(np.asarray(frame.pose, dtype=np.float64))
-                self._last_frame = frame
-                if is_kf:
-                    self._map_rev += 1
-                self._publish()
-            else:
-                if self.finalize_at_end:
-                    self.status = "finalizing"
-                    with self._lock:
-                        self.mapper.finalize()
-                    self._map_rev += 1
-                self.status = "finished"
+            summary = self.engine.run(self.frames, total=self.total, finalize=self.finalize_at_end)
+            self.summary = summary
+            self._map_rev += 1
             self.seconds = time.perf_counter() - t0
-            if self.out_dir is not None and self.status == "finished":
-                self.saved_to = self.save(self.out_dir)
-                self.status = f"finished, saved to {self.saved_to}"
+            if summary.saved:
+                self.saved_to = self.engine.out
+                log.info("saved the run to %s", self.saved_to)
+            status = "stopped" if summary.status == "stopped" else "finished"
+            self.status = f"{status}, saved to {self.saved_to}" if summary.saved else status
         except Exception as e:  # noqa: BLE001 - shown in the GUI; the viewer keeps serving the map so far
             self.error = e
             self.status = f"error: {type(e).__name__}: {e}"

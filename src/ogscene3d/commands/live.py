@@ -59,7 +59,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", default=None, help="YAML config (e.g. configs/replica.yaml)")
     p.add_argument("--segments", default=None, help="folder of precomputed segments (<rgb stem>.png/.json)")
     p.add_argument("--device", default=None, help="mapping device: cpu, cuda or cuda:N")
-    p.add_argument("--max-frames", type=positive_int, default=None, help="map at most this many frames")
+    p.add_argument(
+        "--max-frames",
+        type=positive_int,
+        default=None,
+        help="map at most this many frames (--synthetic: the scene is generated with at most this many)",
+    )
     p.add_argument(
         "--out",
         default=None,
@@ -137,7 +142,7 @@ def _up_from_config(cfg) -> tuple[float, float, float]:
 
 
 def _settings(args):
-    from .scene import ViewerSettings
+    from ..viewer.scene import ViewerSettings
 
     try:
         return ViewerSettings(
@@ -163,7 +168,7 @@ def take_screenshot(
     ``timeout`` seconds have passed.
     """
     from ..atomic import atomic_write_bytes
-    from .headless import HeadlessBrowser, find_chromium
+    from ..viewer.headless import HeadlessBrowser, find_chromium
 
     if find_chromium() is None:
         raise ConfigError("--screenshot needs chromium (e.g. apt-get install chromium)")
@@ -185,7 +190,7 @@ def take_screenshot(
 
 def run(args: argparse.Namespace) -> int:
     """Entry point shared by ``ogscene3d-live`` and ``ogscene3d live``; returns the exit code."""
-    from .app import LiveViewer, check_bindable
+    from ..viewer.app import check_bindable
 
     if args.run_dir is not None and (args.data or args.synthetic or args.source):
         raise ConfigError(
@@ -195,6 +200,17 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("nothing to show: give RUN_DIR, --data DATASET, --synthetic or --source CAMERA")
     # before reading a run or building a mapper: a host/port the server cannot bind is an error now
     check_bindable(args.host, args.port)
+    if args.run_dir is not None or args.out is None:
+        return _serve(args)
+    from ..mapping.engine import run_directory
+
+    with run_directory(args.out, "live"):  # one writer per run directory, as for `ogscene3d run`
+        return _serve(args)
+
+
+def _serve(args: argparse.Namespace) -> int:
+    from ..mapping.engine import stopped_message
+    from ..viewer.app import LiveViewer
 
     stop = threading.Event()
     prev = signal.getsignal(signal.SIGTERM)
@@ -204,7 +220,7 @@ def run(args: argparse.Namespace) -> int:
     viewer = None
     try:
         if args.run_dir is not None:
-            from .runs import load_run
+            from ..viewer.runs import load_run
 
             snap, info = load_run(args.run_dir)
             up = args.up or (tuple(info.up) if info.up is not None else None)
@@ -238,38 +254,68 @@ def run(args: argparse.Namespace) -> int:
         if session is not None:
             from ..streams import close_stream
 
-            close_stream(session.frames)  # a camera's stream ends: the session finishes and saves its map
-            session.stop()
+            if close_stream(session.frames):
+                # a camera's stream ends here: the session maps what it has, finalizes and saves (a camera
+                # has no frames to resume from, so this is its normal end, not a stop)
+                session.join()
+            # no timeout: a stop saves the map so far (--out), which must not be cut short at exit
+            session.stop(timeout=None)
         if viewer is not None:
             viewer.close()
         if threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGTERM, prev)
     if session is not None and session.error is not None:
         print(f"ogscene3d-live: mapping failed: {session.status}", file=sys.stderr)
-        return 1
+        return 2 if isinstance(session.error, OGSceneError) else 1
+    if session is not None and session.summary is not None and session.summary.status == "stopped":
+        print(f"ogscene3d-live: {stopped_message(session.summary)}")
+        return 130
     return 0
 
 
-def _start_live(args: argparse.Namespace):
+def _synthetic_config() -> Path | None:
+    """The shipped ``synthetic.yaml`` (small images, few Gaussians): what ``--synthetic`` maps with when
+    no ``--config`` is given, as the README's demo does."""
+    from importlib import resources
+
+    packaged = resources.files("ogscene3d") / "configs" / "synthetic.yaml"
+    if packaged.is_file():
+        return Path(str(packaged))
+    checkout = Path(__file__).resolve().parents[3] / "configs" / "synthetic.yaml"  # an editable install
+    return checkout if checkout.is_file() else None
+
+
+def live_config(args: argparse.Namespace):
+    """The config live mapping runs with: ``--config`` (for ``--synthetic`` by default the shipped
+    ``synthetic.yaml``), ``--set`` and ``--device``."""
     from ..config import load_config
-    from ..datasets import configured_scene, open_dataset
-    from ..mapping.mapper import Mapper
-    from ..mapping.source import dataset_source, record_data
-    from .app import LiveViewer
-    from .live import LiveSession
 
     overrides = list(args.overrides)
     if args.device:
         overrides.append(f"device={args.device}")
-    cfg = load_config(args.config, overrides)
-    data = args.data
-    stream = None
-    if args.source:  # a live camera (ogscene3d.streams)
-        from ..streams import stream_for_live
+    config = args.config
+    if args.synthetic and config is None:
+        config = _synthetic_config()
+        if config is None:
+            log.warning("synthetic.yaml not found with the package: mapping with defaults (see --config)")
+        else:
+            log.info("mapping the synthetic scene with %s (--config to change)", config)
+    return load_config(config, overrides)
 
-        stream = stream_for_live(args.source, cfg, args.max_frames, overrides)
+
+def live_data(args: argparse.Namespace, cfg) -> str | Path:
+    """The dataset to map live: ``--data``, or the synthetic scene generated for ``--synthetic`` (only
+    the frames that ``--max-frames`` maps), or the config's ``data.path``."""
+    import copy
+
+    from ..datasets import configured_scene
+
+    data = args.data
     if args.synthetic:
-        s = cfg.synthetic
+        s = copy.copy(cfg.synthetic)
+        if args.max_frames is not None:
+            s.frames = min(s.frames, args.max_frames)
+        cache = args.synthetic_dir is None and args.out is None
         scene_dir = Path(
             args.synthetic_dir or (Path(args.out) / "scene" if args.out else "outputs/live-synthetic")
         )
@@ -278,21 +324,41 @@ def _start_live(args: argparse.Namespace):
             f"in {scene_dir}",
             flush=True,
         )
-        data = configured_scene(
-            scene_dir,
-            s,
-            progress=True,
-            remedy="give another --synthetic-dir, or remove that folder to generate the scene there again",
-        )
-    if stream is None:
-        if data is not None or cfg.data.path is not None:  # a saved run records its data, as `run` does
-            record_data(cfg, data if data is not None else cfg.data.path, args.segments)
-        ds = open_dataset(max_frames=args.max_frames, config=cfg.data)
-        if len(ds) == 0:
-            raise DataError(f"{data}: the dataset has no frames")
+        remedy = "give another --synthetic-dir, or remove that folder to generate the scene there again"
+        try:
+            data = configured_scene(scene_dir, s, progress=True, remedy=remedy)
+        except DataError:
+            if not (cache and (scene_dir / "scene.json").is_file()):
+                raise
+            # the default folder is this command's cache: a scene made there with other settings (another
+            # --max-frames) is made again
+            data = configured_scene(scene_dir, s, progress=True, overwrite=True)
+    if data is None:
+        data = cfg.data.path
+    if data is None:
+        raise ConfigError("nothing to map: give --data DATASET or --synthetic (the config sets no data.path)")
+    return data
+
+
+def _start_live(args: argparse.Namespace):
+    from ..mapping.engine import MappingEngine, open_frames
+    from ..mapping.mapper import Mapper
+    from ..viewer.app import LiveViewer
+    from ..viewer.live import LiveSession
+
+    cfg = live_config(args)
+    stream = ds = data = None
+    if args.source:  # a live camera (ogscene3d.streams): no dataset, so no frames to resume by
+        from ..streams import stream_for_live
+
+        stream = stream_for_live(args.source, cfg, args.max_frames, list(args.overrides))
+    else:
+        data = live_data(args, cfg)
+        # a saved run records its data, as `run` does
+        ds = open_frames(cfg, data, args.segments, args.max_frames)
     mapper = Mapper(cfg, cfg.device)
-    if stream is None:
-        mapper.source = dataset_source(cfg, ds)
+    engine = MappingEngine(mapper, args.out, data if stream is None else stream.name)
+    engine.open(cfg, ds)  # with --out: config.yaml and run_id, so that `run --resume` goes on from a stop
 
     up = args.up or _up_from_config(cfg)
     viewer = LiveViewer(
@@ -305,10 +371,12 @@ def _start_live(args: argparse.Namespace):
     )
     session = LiveSession(
         mapper,
-        stream if stream is not None else (ds[i] for i in range(len(ds))),
+        stream if stream is not None else ds.frames(),
         viewer,
         budget=max(args.max_points, args.max_splats),
         out_dir=args.out,
+        engine=engine,
+        total=len(ds) if ds is not None else None,
     )
     viewer.set_control(session)
     session.start()

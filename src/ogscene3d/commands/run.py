@@ -1,0 +1,127 @@
+"""``ogscene3d run``: map an RGB-D sequence (or the default synthetic scene) into a run directory.
+
+The options are parsed and the outcome printed here; the run itself is :mod:`ogscene3d.mapping.engine`'s
+(heavy modules are imported inside :func:`run` only, so that ``ogscene3d --help`` stays quick)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+import yaml
+
+from ..config import add_override_argument, load_config
+from ..errors import DataError
+
+log = logging.getLogger(__name__)
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser(
+        "run",
+        help="map an RGB-D sequence into semantic Gaussians and a scene graph",
+        description="Incremental semantic mapping (paper Sec. III). Writes gaussians.ply, map.npz (and "
+        "its memory views in map_memory/), graph.json, timings.json, config.yaml and run_id (the run's id, "
+        "which --resume checks map.npz against) to --out. Without "
+        "--data a synthetic scene is generated (in OUT/scene) from the config's `synthetic` section and "
+        "mapped.",
+    )
+    p.add_argument(
+        "--config", default=None, help="YAML config (e.g. configs/replica.yaml); defaults otherwise"
+    )
+    p.add_argument("--data", default=None, help="dataset folder (Replica, ScanNet, TUM, 7-Scenes, synthetic)")
+    p.add_argument("--segments", default=None, help="folder of precomputed segments (<rgb stem>.png/.json)")
+    p.add_argument("--out", required=True, help="run directory to write")
+    p.add_argument(
+        "--device", default=None, help="cpu, cuda or cuda:N (default: config, else CUDA if present)"
+    )
+    p.add_argument("--max-frames", type=int, default=None, help="map at most this many frames")
+    p.add_argument(
+        "--ablation",
+        default=None,
+        choices=["naive", "local", "local+global", "full"],
+        help="which semantic modules run (default: the config's, 'full')",
+    )
+    p.add_argument("--resume", action="store_true", help="continue from OUT/map.npz")
+    add_override_argument(p)
+    p.add_argument(
+        "--poses",
+        choices=("gt", "odometry"),
+        default=None,
+        help="camera poses: the dataset's (gt) or RGB-D odometry (odometry); default: config tracking.poses",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..datasets import configured_scene
+    from ..device import resolve_device
+    from ..mapping.engine import MappingEngine, open_frames, run_directory, stopped_message
+    from ..mapping.mapper import Mapper
+
+    overrides = list(args.overrides)
+    if args.ablation:
+        overrides.append(f"mapping.ablation={args.ablation}")
+    if args.device:
+        overrides.append(f"device={args.device}")
+    out = Path(args.out)
+    saved = out / "config.yaml"
+    base = args.config
+    if args.resume and base is None and saved.is_file():
+        base = saved  # a resumed run goes on with the settings (and the data) it started with
+        log.info("resuming with the run's own %s", saved)
+    cfg = load_config(base, overrides)
+    if args.poses:
+        cfg.tracking.poses = args.poses
+    resolve_device(cfg.device)  # an unusable device fails before a synthetic scene is generated
+    data = args.data or cfg.data.path or (_recorded_data_path(saved) if args.resume else None)
+    if data is None and args.resume:
+        raise DataError(f"{out}: --resume needs the run's dataset: pass --data (the run records none)")
+    with run_directory(out, "run"):
+        if data is None:
+            s = cfg.synthetic
+            log.info(
+                "no --data: generating the synthetic scene (seed %d, %d frames, %dx%d) in %s",
+                s.seed,
+                s.frames,
+                s.width,
+                s.height,
+                out / "scene",
+            )
+            data = configured_scene(
+                out / "scene",
+                s,
+                progress=not args.no_progress,
+                remedy="give a new --out, or remove that folder to generate the scene there again",
+            )
+        # --max-frames bounds this invocation only (a resume without it goes on to the end)
+        ds = open_frames(cfg, data, args.segments, args.max_frames)
+        engine = MappingEngine(Mapper(cfg, cfg.device), out, data)
+        start = engine.open(cfg, ds, resume=args.resume, bounded=args.max_frames is not None)
+        # bad frames raise, or are skipped with a warning under data.on_bad_frame: skip
+        with engine.stop.signals():
+            summary = engine.run(
+                ds.frames(start), total=max(0, len(ds) - start), progress=not args.no_progress
+            )
+    if summary.status == "stopped":
+        print(stopped_message(summary))
+        return 130
+    if summary.status == "up to date":
+        print(f"nothing to do: {out} has mapped every frame of {data} (--resume read no new frame)")
+        return 0
+    print(summary.line())
+    print(engine.mapper.timings.table())
+    return 0
+
+
+def _recorded_data_path(saved: Path) -> str | None:
+    """data.path from a run's config.yaml (None when absent or unreadable)."""
+    try:
+        loaded = yaml.safe_load(saved.read_text())
+    except (OSError, yaml.YAMLError):
+        return None
+    data = loaded.get("data") if isinstance(loaded, dict) else None
+    path = data.get("path") if isinstance(data, dict) else None
+    return path if isinstance(path, str) else None
