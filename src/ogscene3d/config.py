@@ -179,7 +179,6 @@ class CaptionerConfig:
     api_key_env: str = "OPENAI_API_KEY"
     timeout_s: float = 30.0
     max_retries: int = 2
-    backoff_s: float = 1.0  # first retry delay; doubles per retry
     max_tokens: int = 300
     concurrency: int = 4  # parallel per-node caption requests
 
@@ -192,7 +191,6 @@ class RelationsConfig:
     api_key_env: str = "OPENAI_API_KEY"
     timeout_s: float = 30.0
     max_retries: int = 2
-    backoff_s: float = 1.0
     max_tokens: int = 2000
     # geometric predictor (metres / ratios); also the LLM's per-pair fallback
     contact_tol: float = 0.05  # vertical gap still counted as contact ("on")
@@ -359,7 +357,6 @@ _POS = _float(0.0, lo_open=True)
 _LLM = {  # graph.captioner and graph.relations: the OpenAI-compatible client's settings
     "timeout_s": _POS,
     "max_retries": _int(0),
-    "backoff_s": _NONNEG,
     "max_tokens": _int(0, note="0 = no max_tokens in the request"),
 }
 
