@@ -25,6 +25,7 @@ _COMMAND_MODULES = [
     "ogscene3d.graph.graph_cli",  # graph
     "ogscene3d.batch",  # run-batch, eval-batch
     "ogscene3d.render_demo",  # render-demo
+    "ogscene3d.commands.models",  # models
 ]
 
 
