@@ -14,7 +14,8 @@ def add_parser(subparsers) -> None:
         help="export SAM / MobileSAM / CLIP / YOLO-World checkpoints to the ONNX files the mapper reads",
         description="Model tools. `models export` loads a checkpoint you downloaded with its official "
         "package (pip install 'ogscene3d[export]' and the package named in the error) and writes ONNX "
-        "files plus DIR/models.json; `ogscene3d run --models DIR` then uses them. Several exports may share one DIR.",
+        "files plus DIR/models.json; `ogscene3d run --models DIR` then uses them. Several exports may "
+        "share one DIR.",
     )
     sub = p.add_subparsers(dest="models_command", metavar="ACTION")
     e = sub.add_parser("export", help="export one model kind into DIR")
