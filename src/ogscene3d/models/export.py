@@ -153,6 +153,7 @@ def _export_sam(kind: str, checkpoint: Path, out: Path, opset: int) -> dict[str,
 
 
 def export_clip_encoders(
+    owner: Any,
     encode_image: Callable,
     encode_text: Callable,
     image_size: int,
@@ -162,14 +163,24 @@ def export_clip_encoders(
     with_attention_mask: bool = False,
 ) -> dict[str, Any]:
     """``clip_image.onnx`` (``pixel_values [N, 3, S, S]`` -> ``image_embeds``) and ``clip_text.onnx``
-    (``input_ids [N, L]`` (+ ``attention_mask``) -> ``text_embeds``) from a model's two encoders."""
+    (``input_ids [N, L]`` (+ ``attention_mask``) -> ``text_embeds``) from a model's two encoders.
+    ``owner``: the torch module the encoders belong to (held by the exported wrappers, so that its
+    weights are exported as parameters)."""
     import torch
 
     class _Image(torch.nn.Module):
+        def __init__(self) -> None:
+            super().__init__()
+            self.owner = owner
+
         def forward(self, pixel_values: torch.Tensor) -> torch.Tensor:
             return encode_image(pixel_values)
 
     class _Text(torch.nn.Module):
+        def __init__(self) -> None:
+            super().__init__()
+            self.owner = owner
+
         def forward(
             self, input_ids: torch.Tensor, attention_mask: torch.Tensor | None = None
         ) -> torch.Tensor:
@@ -216,6 +227,7 @@ def export_open_clip_model(model: Any, out: Path, opset: int = DEFAULT_OPSET) ->
     import open_clip
 
     entry = export_clip_encoders(
+        model,
         model.encode_image,
         model.encode_text,
         _image_size(model.visual.image_size),
@@ -254,6 +266,7 @@ def export_hf_clip_model(
     """Export a loaded Hugging Face ``CLIPModel``; copy the tokenizer files found in ``tokenizer_dir``."""
     cfg = model.config
     entry = export_clip_encoders(
+        model,
         lambda x: _features(model.get_image_features(pixel_values=x)),
         lambda ids, mask: _features(model.get_text_features(input_ids=ids, attention_mask=mask)),
         int(cfg.vision_config.image_size),
