@@ -200,7 +200,7 @@ def test_sam_export_runs_through_sam_onnx(tmp_path):
     masks, iou, low = sess.run(None, feeds)
     with torch.no_grad():
         ref = SamOnnxModel(sam, return_single_mask=False)(*(torch.from_numpy(v) for v in feeds.values()))
-    assert masks.shape == (2, 3, 48, 64) and iou.shape == (2, 3)
+    assert masks.shape == (2, 4, 48, 64) and iou.shape == (2, 4)  # the single-mask output, then 3
     np.testing.assert_allclose(iou, ref[1].numpy(), atol=1e-4)
     np.testing.assert_allclose(low, ref[2].numpy(), atol=1e-3)
     records = seg.generate(image)  # automatic mask generation through our loader

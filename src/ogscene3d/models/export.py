@@ -61,6 +61,20 @@ def _onnx_export(
     import torch
 
     path.parent.mkdir(parents=True, exist_ok=True)
+    # nn.MultiheadAttention's inference fast path (open_clip's text and vision towers) is a fused op with
+    # no ONNX export: trace the plain ops
+    fastpath = torch.backends.mha.get_fastpath_enabled()
+    torch.backends.mha.set_fastpath_enabled(False)
+    try:
+        _trace(module, args, path, input_names, output_names, dynamic_axes, opset)
+    finally:
+        torch.backends.mha.set_fastpath_enabled(fastpath)
+    return path
+
+
+def _trace(module, args, path, input_names, output_names, dynamic_axes, opset) -> None:
+    import torch
+
     with torch.no_grad():
         # the TorchScript exporter: the dynamo one needs onnxscript and cannot trace segment-anything's
         # data-dependent prompt embedding
@@ -76,7 +90,6 @@ def _onnx_export(
             dynamic_axes=dynamic_axes,
             dynamo=False,
         )
-    return path
 
 
 # ------------------------------------------------------------------------------------------------- SAM
