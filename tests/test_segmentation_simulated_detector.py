@@ -43,7 +43,7 @@ def test_perfect_detector_names_every_vocabulary_object_and_fuses_like_sam_detec
         np.testing.assert_array_equal(named[name], inst == iid)  # M_d wins its pixels
     # the chair's two grid pieces lie inside the detected chair: dropped; wall and floor kept unnamed
     assert len(np.unique(mf.ids[mf.ids > 0])) == 4 + 2
-    assert all(0.88 <= mf.scores[k] <= 0.99 for k in mf.names)
+    assert all(mf.scores[k] == 1.0 for k in mf.names)  # level "none": exact masks, score 1
 
 
 def test_detector_errors_miss_confuse_and_score_low_at_the_set_rates():
@@ -86,3 +86,32 @@ def test_output_is_seeded_per_frame_and_false_positives_take_a_surface():
         SimulatedDetector(CLASSES, noise="extreme")
     with pytest.raises(ValueError, match="vocabulary is empty"):
         SimulatedDetector({1: "floor"})
+
+
+def test_synthetic_scene_segments_carry_detector_names_and_the_graph_finds_them(tmp_path, capsys):
+    """The offline demo path: named simulated segments -> mapping -> graph nodes tagged with detector
+    classes -> `graph -q`."""
+    import json
+
+    from ogscene3d.cli import main
+    from ogscene3d.datasets.synthetic import make_synthetic_scene
+    from ogscene3d.segmentation.precomputed import read_segmentation
+
+    scene = make_synthetic_scene(tmp_path / "scene", seed=0, frames=4, width=80, height=60)
+    gt = json.loads((scene / "gt" / "instances.json").read_text())["instances"]
+    named: set[str] = set()
+    for i in range(4):
+        named |= set(read_segmentation(scene / "segments", f"frame{i:06d}").names.values())
+    classes = {v["class"] for v in gt.values()}
+    assert named and named <= classes - {"floor", "wall", "ceiling"}  # the scene's object classes only
+    out = tmp_path / "run"
+    args = ["run", "--data", str(scene), "--out", str(out), "--device", "cpu", "--no-progress",
+            "--set", "mapping.opt_iters=1", "--set", "mapping.knn_radius=0.06"]  # fmt: skip
+    assert main(args) == 0
+    nodes = json.loads((out / "graph.json").read_text())["nodes"]
+    tags = {n["tag"] for n in nodes if n["caption_source"] == "detector"}
+    assert tags and tags <= named
+    tag = sorted(tags)[0]
+    capsys.readouterr()
+    assert main(["graph", str(out), "-q", tag]) == 0
+    assert f"'{tag}' score" in capsys.readouterr().out

@@ -413,7 +413,10 @@ def _pose_lines(poses: np.ndarray) -> str:
 
 
 def _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise) -> dict:
+    from ..segmentation.simulated_detector import SIMULATED_DETECTOR_VERSION
+
     return {
+        "detector": SIMULATED_DETECTOR_VERSION,  # named segments: a scene made without them is made again
         "generator": "ogscene3d.synthetic",
         "version": GENERATOR_VERSION,
         "seed": int(seed),
@@ -453,7 +456,7 @@ def make_synthetic_scene(
     """
     from ..segmentation.precomputed import write_segments
     from ..segmentation.simulated import NOISE_LEVELS, SimulatedSegmenter
-    from ..segmentation.simulated_detector import SIMULATED_DETECTOR_VERSION, SimulatedDetector
+    from ..segmentation.simulated_detector import SimulatedDetector
 
     if frames < 1:
         raise ValueError(f"frames must be >= 1, got {frames}")
@@ -466,7 +469,6 @@ def make_synthetic_scene(
             raise ValueError(f"{name} must be a finite number >= 0, got {val}")
     out = Path(out_dir)
     params = _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise)
-    params["detector"] = SIMULATED_DETECTOR_VERSION  # named segments: a scene made without is redone
     marker = out / "scene.json"
     if marker.is_file():
         try:
@@ -494,7 +496,8 @@ def make_synthetic_scene(
     written_poses = perturb_poses(poses, pose_noise, noise_rng)
     renderer = MeshRenderer(room, device=device)
     segmenter = SimulatedSegmenter(noise, seed=seed)
-    detector = SimulatedDetector({o.instance_id: o.class_name for o in room.objects}, noise=noise, seed=seed)
+    detector = SimulatedDetector({o.instance_id: o.class_name for o in room.objects}, noise=noise, seed=seed,
+                                 min_area=NOISE_LEVELS[noise].min_area)  # fmt: skip
 
     cam = {"camera": {"w": width, "h": height, "fx": float(K[0, 0]), "fy": float(K[1, 1]),
                       "cx": float(K[0, 2]), "cy": float(K[1, 2]), "scale": REPLICA_DEPTH_SCALE}}  # fmt: skip

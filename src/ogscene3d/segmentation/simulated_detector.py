@@ -21,7 +21,8 @@ Errors, in this order (rates per :class:`DetectorNoise`):
 5. **false positives**: on average ``false_positive_rate`` boxes per frame around a random patch with a
    random vocabulary class and a low score;
 6. **box jitter**: box corners move by ``box_jitter`` of the box size (std); the box-prompted mask is
-   the ground-truth object inside the box (SAM's answer to a box prompt), scored ``U(0.88, 0.99)``.
+   the ground-truth object inside the box (SAM's answer to a box prompt), scored ``U(0.88, 0.99)`` (1 at
+   level "none", which detects every vocabulary object exactly).
 
 Then class-wise NMS (``nms_thresh``) as the ONNX detector runs it. Everything is seeded per frame.
 """
@@ -79,10 +80,19 @@ class DetectorNoise:
     box_jitter: float = 0.0  # std, fraction of the box's width / height
     min_pixels: int = 16  # visible object pixels below which nothing is detected
 
+    @property
+    def clean(self) -> bool:
+        """No error at all: every vocabulary object is detected exactly, its mask scored 1 (as the
+        simulated SAM's level "none" gives the ground truth with score 1)."""
+        return not any(
+            (self.miss_prob, self.miss_hard_prob, self.confuse_prob, self.low_score_prob, self.duplicate_prob,
+             self.false_positive_rate, self.box_jitter)
+        )  # fmt: skip
+
 
 #: Named levels, as the simulated SAM's (``synthetic.noise`` picks both).
 DETECTOR_NOISE_LEVELS: dict[str, DetectorNoise] = {
-    "none": DetectorNoise(),
+    "none": DetectorNoise(min_pixels=1),
     "low": DetectorNoise(
         miss_prob=0.05, miss_hard_prob=0.2, confuse_prob=0.05, low_score_prob=0.05, duplicate_prob=0.03,
         false_positive_rate=0.05, box_jitter=0.02,
@@ -216,7 +226,8 @@ class SimulatedDetector:
                 crop = window == ids[int(np.argmax(counts))]
             kept.append(int(k))
             records.append(
-                MaskRecord((rx0, ry0, rx1, ry1), crop, float(rng.uniform(0.88, 0.99)), name=names[k])
+                MaskRecord((rx0, ry0, rx1, ry1), crop, 1.0 if nz.clean else float(rng.uniform(0.88, 0.99)),
+                           name=names[k])  # fmt: skip
             )
         idx = np.asarray(kept, dtype=np.int64)
         dets = Detections(
