@@ -249,6 +249,7 @@ class ChatClient:
         self.calls = 0  # HTTP requests made (attempts), for timings/tests
         self._calls_lock = threading.Lock()
         self._sdk_client: Any = None
+        self._sdk_lock = threading.Lock()
 
     def __repr__(self) -> str:  # never shows the key (it is not stored anyway)
         return (
@@ -262,26 +263,31 @@ class ChatClient:
     def _sdk(self):
         """The ``openai.OpenAI`` client (built on first use). Its own key is a placeholder that is never
         sent: each request sets or omits ``Authorization`` itself, with the key read at that moment."""
-        if self._sdk_client is None:
-            try:
-                import httpx2
-                import openai
-            except ImportError as e:
-                raise ModelError(
-                    f"OpenAI-compatible endpoint {self.base_url}: the openai package is missing ({e}); "
-                    "pip install openai"
-                ) from None
-            self._sdk_client = openai.OpenAI(
-                base_url=self.base_url,
-                api_key="set-per-request",
-                timeout=self.timeout_s,
-                max_retries=self.max_retries,
-                http_client=httpx2.Client(transport=_transport(self), timeout=self.timeout_s),
-            )
-            import httpcore2  # noqa: F401  (its loggers exist once it is imported)
-
-            _guard_loggers()
+        with self._sdk_lock:  # the captioner's threads share one client
+            if self._sdk_client is None:
+                self._sdk_client = self._build_sdk()
         return self._sdk_client
+
+    def _build_sdk(self):
+        try:
+            import httpx2
+            import openai
+        except ImportError as e:
+            raise ModelError(
+                f"OpenAI-compatible endpoint {self.base_url}: the openai package is missing ({e}); "
+                "pip install openai (or pip install 'ogscene3d[llm]')"
+            ) from None
+        sdk = openai.OpenAI(
+            base_url=self.base_url,
+            api_key="set-per-request",
+            timeout=self.timeout_s,
+            max_retries=self.max_retries,
+            http_client=httpx2.Client(transport=_transport(self), timeout=self.timeout_s),
+        )
+        import httpcore2  # noqa: F401  (its loggers exist once it is imported)
+
+        _guard_loggers()
+        return sdk
 
     def _api_key(self) -> str:
         """The key from ``$api_key_env`` (read per request); warns once per endpoint when it is unset."""
