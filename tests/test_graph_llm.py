@@ -657,3 +657,12 @@ def test_query_embedding_without_a_model_names_its_key(caplog):
     with caplog.at_level(logging.WARNING, logger="ogscene3d.graph.scenegraph"):
         assert [m.id for m in g.query("sofa")] == [0]  # text matching still answers
     assert "graph.embedding_model" in caplog.text and "graph.captioner.model" not in caplog.text
+
+
+def test_missing_openai_package_names_what_to_install(monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "openai", None)
+    client = ChatClient("http://127.0.0.1:9/v1", "m", api_key_env="")
+    with pytest.raises(ModelError, match=r"pip install openai \(or pip install 'ogscene3d\[llm\]'\)"):
+        client.chat([{"role": "user", "content": "x"}])

@@ -323,6 +323,7 @@ class ChatClient:
         exceptions into :class:`ModelError` (:class:`EndpointUnreachable` / :class:`EndpointUnavailable`
         when every attempt failed that way), scrubbed of the key and not chained to the SDK's exception
         (whose response body may hold the echoed key)."""
+        sdk = self._sdk()  # first: a missing openai package is named here
         import openai
 
         url = f"{self.base_url}/{route}"
@@ -331,7 +332,7 @@ class ChatClient:
         gave_up = f"(gave up after {self.max_retries + 1} attempts)"
         error: ModelError
         try:
-            return call(self._sdk(), headers)
+            return call(sdk, headers)
         except openai.APITimeoutError:
             error = EndpointUnreachable(f"{url}: {self._timed_out()} {gave_up}")
         except openai.APIConnectionError as e:
