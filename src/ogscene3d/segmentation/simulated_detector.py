@@ -21,8 +21,9 @@ Errors, in this order (rates per :class:`DetectorNoise`):
 5. **false positives**: on average ``false_positive_rate`` boxes per frame around a random patch with a
    random vocabulary class and a low score;
 6. **box jitter**: box corners move by ``box_jitter`` of the box size (std); the box-prompted mask is
-   the ground-truth object inside the box (SAM's answer to a box prompt), scored ``U(0.88, 0.99)`` (1 at
-   level "none", which detects every vocabulary object exactly).
+   the ground-truth object inside the box (SAM's answer to a box prompt) with its boundary displaced by a
+   smooth random field of ``mask_boundary_px`` pixels, scored ``U(0.88, 0.99)`` (1 at level "none",
+   which detects every vocabulary object exactly).
 
 Then class-wise NMS (``nms_thresh``) as the ONNX detector runs it. Everything is seeded per frame.
 """
@@ -32,6 +33,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from .base import Segmentation
@@ -40,7 +42,7 @@ from .fusion import OpenSetResult, fuse_segmentations
 from .masks import MaskRecord, nms, paint_masks
 
 #: Changes when the simulation changes: synthetic scenes record it and are regenerated when it differs.
-SIMULATED_DETECTOR_VERSION = 1
+SIMULATED_DETECTOR_VERSION = 2
 
 #: Classes an open-vocabulary detector plausibly mixes up (used only when they are in the vocabulary).
 CONFUSABLE: dict[str, tuple[str, ...]] = {
@@ -78,6 +80,7 @@ class DetectorNoise:
     duplicate_prob: float = 0.0
     false_positive_rate: float = 0.0
     box_jitter: float = 0.0  # std, fraction of the box's width / height
+    mask_boundary_px: float = 0.0  # box-prompted masks' boundaries displaced by a smooth field (pixels)
     min_pixels: int = 16  # visible object pixels below which nothing is detected
 
     @property
@@ -86,7 +89,7 @@ class DetectorNoise:
         simulated SAM's level "none" gives the ground truth with score 1)."""
         return not any(
             (self.miss_prob, self.miss_hard_prob, self.confuse_prob, self.low_score_prob, self.duplicate_prob,
-             self.false_positive_rate, self.box_jitter)
+             self.false_positive_rate, self.box_jitter, self.mask_boundary_px)
         )  # fmt: skip
 
 
@@ -95,17 +98,30 @@ DETECTOR_NOISE_LEVELS: dict[str, DetectorNoise] = {
     "none": DetectorNoise(min_pixels=1),
     "low": DetectorNoise(
         miss_prob=0.05, miss_hard_prob=0.2, confuse_prob=0.05, low_score_prob=0.05, duplicate_prob=0.03,
-        false_positive_rate=0.05, box_jitter=0.02,
+        false_positive_rate=0.05, box_jitter=0.02, mask_boundary_px=0.5,
     ),
     "default": DetectorNoise(
         miss_prob=0.1, miss_hard_prob=0.35, confuse_prob=0.12, low_score_prob=0.1, duplicate_prob=0.08,
-        false_positive_rate=0.15, box_jitter=0.04,
+        false_positive_rate=0.15, box_jitter=0.04, mask_boundary_px=1.0,
     ),
     "high": DetectorNoise(
         miss_prob=0.25, miss_hard_prob=0.5, confuse_prob=0.25, low_score_prob=0.2, duplicate_prob=0.15,
-        false_positive_rate=0.4, box_jitter=0.08,
+        false_positive_rate=0.4, box_jitter=0.08, mask_boundary_px=2.0,
     ),
 }  # fmt: skip
+
+
+def _displace(mask: np.ndarray, amplitude: float, rng: np.random.Generator) -> np.ndarray:
+    """``mask`` with its boundary moved by a smooth random displacement field (SAM's masks are not
+    pixel-exact at object edges)."""
+    h, w = mask.shape
+    gh, gw = max(2, h // 8), max(2, w // 8)
+    field = cv2.resize(rng.normal(0.0, amplitude, (gh, gw, 2)).astype(np.float32), (w, h),
+                       interpolation=cv2.INTER_CUBIC)  # fmt: skip
+    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    moved = cv2.remap(mask.astype(np.uint8), gx + field[..., 0], gy + field[..., 1], cv2.INTER_NEAREST,
+                      borderMode=cv2.BORDER_CONSTANT, borderValue=0)  # fmt: skip
+    return moved.astype(bool)
 
 
 class SimulatedDetector:
@@ -224,10 +240,16 @@ class SimulatedDetector:
                 if ids.size == 0:
                     continue
                 crop = window == ids[int(np.argmax(counts))]
+            if nz.mask_boundary_px > 0:
+                crop = _displace(crop, nz.mask_boundary_px, rng)
             kept.append(int(k))
             records.append(
-                MaskRecord((rx0, ry0, rx1, ry1), crop, 1.0 if nz.clean else float(rng.uniform(0.88, 0.99)),
-                           name=names[k])  # fmt: skip
+                MaskRecord(
+                    (rx0, ry0, rx1, ry1),
+                    crop,
+                    1.0 if nz.clean else float(rng.uniform(0.88, 0.99)),
+                    name=names[k],
+                )  # fmt: skip
             )
         idx = np.asarray(kept, dtype=np.int64)
         dets = Detections(
