@@ -206,3 +206,43 @@ def test_sam_export_runs_through_sam_onnx(tmp_path):
     records = seg.generate(image)  # automatic mask generation through our loader
     assert all(r.crop.shape == (r.box[3] - r.box[1], r.box[2] - r.box[0]) for r in records)
     assert seg(rgb).ids.shape == (48, 64)
+
+
+# ------------------------------------------------------------------------------------- YOLO-World
+
+
+def test_yolo_world_export_runs_through_detector_onnx(tmp_path, monkeypatch):
+    torch = pytest.importorskip("torch")
+    ultralytics = pytest.importorskip("ultralytics")
+    from ogscene3d.models.export import export_yolo_world_model, set_world_classes
+    from ogscene3d.segmentation.detector_onnx import DetectorOnnx
+
+    monkeypatch.chdir(tmp_path)  # Ultralytics writes its export beside the model's name
+    torch.manual_seed(0)
+    model = ultralytics.YOLOWorld("yolov8s-worldv2.yaml")  # Ultralytics' own model, randomly initialised
+    classes = ["chair", "table", "lamp"]
+    # the vocabulary from given CLIP text embeddings (set_classes would download CLIP's text encoder)
+    emb = np.random.default_rng(0).normal(size=(3, int(model.model.txt_feats.shape[-1]))).astype(np.float32)
+    set_world_classes(model, classes, emb)
+    out = tmp_path / "models"
+    entry = export_yolo_world_model(model, classes, out, image_size=160)
+    update_manifest(out, "detector", {"kind": "yolo-world", **entry})
+    s = load_config(None, manifest_overrides(out)).segmentation
+    assert s.detector_classes == classes and s.detector_input_size == 160
+    det = DetectorOnnx(s.detector, s.detector_classes, score_thresh=0.0, input_size=s.detector_input_size)
+    rgb = np.random.default_rng(1).integers(0, 256, (120, 160, 3), dtype=np.uint8)
+    d = det(rgb)
+    assert len(d) > 0 and set(d.names) <= set(classes)
+    assert np.all(
+        (d.boxes[:, 0] >= 0) & (d.boxes[:, 2] <= 160) & (d.boxes[:, 1] >= 0) & (d.boxes[:, 3] <= 120)
+    )
+    # the ONNX graph answers as the torch model does on the same letterboxed input
+    import onnxruntime as ort
+
+    x, _, _ = det.preprocess(rgb)
+    sess = ort.InferenceSession(s.detector, providers=["CPUExecutionProvider"])
+    (onnx_out,) = sess.run(None, {sess.get_inputs()[0].name: x})
+    with torch.no_grad():
+        ref = model.model.eval()(torch.from_numpy(x))
+    ref = ref[0] if isinstance(ref, (list, tuple)) else ref  # eval mode: (predictions, raw outputs)
+    np.testing.assert_allclose(onnx_out, ref.numpy(), rtol=1e-3, atol=1e-3)

@@ -32,6 +32,12 @@ def add_parser(subparsers) -> None:
         "--classes", default=None, help="yolo-world: the vocabulary, comma-separated (chair,table,lamp)"
     )
     e.add_argument("--image-size", type=int, default=None, help="yolo-world: input size (default 640)")
+    e.add_argument(
+        "--text-embeddings",
+        default=None,
+        help="yolo-world: .npy [K, 512] of the classes' CLIP text embeddings, instead of set_classes (which "
+        "downloads CLIP)",
+    )
     e.add_argument("--opset", type=int, default=17, help="ONNX opset (default 17)")
     e.set_defaults(func=run_export)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
@@ -49,6 +55,7 @@ def run_export(args: argparse.Namespace) -> int:
         classes=classes,
         image_size=args.image_size,
         opset=args.opset,
+        text_embeddings=args.text_embeddings,
     )
     print(f"{args.kind} exported; manifest {path} (use it with: ogscene3d run --models {args.out})")
     return 0

@@ -14,7 +14,8 @@ folder the user fetched):
   ``get_text_features``; its ``tokenizer.json`` (or ``vocab.json`` + ``merges.txt``) is copied;
 * ``yolo-world``: Ultralytics ``YOLOWorld(CHECKPOINT).set_classes(VOCABULARY)`` then its
   ``export(format="onnx")``; ``set_classes`` runs CLIP's text encoder, which Ultralytics downloads on
-  first use, so this kind needs that download (or its cache) once.
+  first use, so this kind needs that download (or its cache) once, or the classes' CLIP text embeddings
+  given as a ``.npy`` (``--text-embeddings``).
 
 Every export writes ``models.json`` (:mod:`.manifest`), read by ``ogscene3d run --models DIR``.
 """
@@ -320,25 +321,73 @@ def _export_hf_clip(checkpoint: Path, out: Path, opset: int) -> dict[str, Any]:
 # ------------------------------------------------------------------------------------------ YOLO-World
 
 
+def set_world_classes(model: Any, classes: Sequence[str], text_embeddings: Any | None = None) -> None:
+    """Give an Ultralytics ``YOLOWorld`` its vocabulary: ``set_classes`` (CLIP's text encoder, which
+    Ultralytics downloads on first use), or, offline, the classes' CLIP text embeddings ``[K, D]``
+    computed elsewhere (normalised here, as ``set_classes`` does)."""
+    if text_embeddings is None:
+        model.set_classes(list(classes))
+        return
+    import numpy as np
+    import torch
+
+    emb = np.asarray(text_embeddings, dtype=np.float32)
+    world = model.model
+    dim = int(world.txt_feats.shape[-1])
+    if emb.shape != (len(classes), dim) or not np.all(np.isfinite(emb)):
+        raise ConfigError(
+            f"YOLO-World text embeddings must be finite [{len(classes)} classes, {dim}], got {emb.shape}"
+        )
+    world.txt_feats = torch.nn.functional.normalize(torch.from_numpy(emb)[None], dim=-1)
+    world.model[-1].nc = len(classes)
+    world.names = list(classes)
+
+
+def export_yolo_world_model(
+    model: Any, classes: Sequence[str], out: Path, image_size: int = 640, opset: int = DEFAULT_OPSET
+) -> dict[str, Any]:
+    """Ultralytics' own ONNX export of a ``YOLOWorld`` whose classes are set; ``detector.onnx`` in ``out``."""
+    produced = Path(model.export(format="onnx", imgsz=int(image_size), opset=int(opset)))
+    out.mkdir(parents=True, exist_ok=True)
+    shutil.move(str(produced), out / "detector.onnx")
+    return {"model": "detector.onnx", "classes": list(classes), "input_size": int(image_size)}
+
+
 def _export_yolo_world(
-    checkpoint: Path, classes: Sequence[str], out: Path, image_size: int | None, opset: int
+    checkpoint: Path,
+    classes: Sequence[str],
+    out: Path,
+    image_size: int | None,
+    opset: int,
+    text_embeddings: str | Path | None,
 ) -> dict[str, Any]:
     ultralytics = _need("ultralytics", "ultralytics", "yolo-world")
     if not classes:
         raise ConfigError("models export yolo-world needs --classes (the vocabulary, e.g. chair,table,lamp)")
-    size = int(image_size or 640)
+    emb = None
+    if text_embeddings is not None:
+        import numpy as np
+
+        try:
+            emb = np.load(text_embeddings)
+        except (OSError, ValueError) as e:
+            raise ConfigError(f"{text_embeddings}: cannot read the text embeddings (.npy): {e}") from None
     try:
         model = ultralytics.YOLOWorld(str(checkpoint))
-        model.set_classes(list(classes))
-        produced = Path(model.export(format="onnx", imgsz=size, opset=int(opset)))
+        set_world_classes(model, classes, emb)
+        return export_yolo_world_model(model, classes, out, int(image_size or 640), opset)
+    except ConfigError:
+        raise
     except Exception as e:
-        raise ModelError(
-            f"{checkpoint}: YOLO-World export failed ({type(e).__name__}: {e}); set_classes needs CLIP's "
-            "text encoder, which Ultralytics downloads on first use"
-        ) from None
-    out.mkdir(parents=True, exist_ok=True)
-    shutil.move(str(produced), out / "detector.onnx")
-    return {"model": "detector.onnx", "classes": list(classes), "input_size": size}
+        hint = (
+            ""
+            if emb is not None
+            else (
+                "; set_classes needs CLIP's text encoder, which Ultralytics downloads on first use (offline: "
+                "pass --text-embeddings)"
+            )
+        )
+        raise ModelError(f"{checkpoint}: YOLO-World export failed ({type(e).__name__}: {e}){hint}") from None
 
 
 # ---------------------------------------------------------------------------------------------- front
@@ -353,10 +402,12 @@ def export_models(
     classes: Sequence[str] | None = None,
     image_size: int | None = None,
     opset: int = DEFAULT_OPSET,
+    text_embeddings: str | Path | None = None,
 ) -> Path:
     """Export ``kind`` from ``checkpoint`` into ``out`` and record it in ``out/models.json``; returns the
     manifest's path. ``arch``: the open_clip model name; ``classes``: YOLO-World's vocabulary;
-    ``image_size``: YOLO-World's input size (640)."""
+    ``image_size``: YOLO-World's input size (640); ``text_embeddings``: a ``.npy`` of the classes' CLIP
+    text embeddings for YOLO-World instead of ``set_classes`` (which downloads CLIP)."""
     if kind not in KINDS:
         raise ConfigError(f"models export: unknown kind {kind!r}; expected one of {list(KINDS)}")
     ckpt = Path(checkpoint)
@@ -371,7 +422,10 @@ def export_models(
     elif kind == "hf-clip":
         section, entry = "clip", _export_hf_clip(ckpt, dest, opset)
     else:
-        section, entry = "detector", _export_yolo_world(ckpt, classes or [], dest, image_size, opset)
+        section, entry = (
+            "detector",
+            _export_yolo_world(ckpt, classes or [], dest, image_size, opset, text_embeddings),
+        )
     entry = {"kind": kind, "checkpoint": str(ckpt.resolve()), **({"arch": arch} if arch else {}), **entry}
     path = update_manifest(dest, section, entry)
     log.info(
