@@ -246,3 +246,9 @@ def test_yolo_world_export_runs_through_detector_onnx(tmp_path, monkeypatch):
         ref = model.model.eval()(torch.from_numpy(x))
     ref = ref[0] if isinstance(ref, (list, tuple)) else ref  # eval mode: (predictions, raw outputs)
     np.testing.assert_allclose(onnx_out, ref.numpy(), rtol=1e-3, atol=1e-3)
+
+
+def test_run_models_flag_reads_the_manifest(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert cli.main(["run", "--models", str(tmp_path), "--out", str(out), "--device", "cpu"]) == 2
+    assert "no models manifest; make one with `ogscene3d models export" in capsys.readouterr().err
