@@ -201,3 +201,11 @@ def test_clip_query_embedding(tmp_path):
     assert [n.id for n, _ in hits] == [0]  # text match and embedding agree
     hits = g.query_scored("green blue")  # no text match; embedding (0,1,1)/sqrt2 . (0,0,1) = 0.707
     assert [n.id for n, _ in hits] == [1] and hits[0][1] == pytest.approx(2**-0.5, abs=1e-5)
+
+
+def test_missing_tokenizers_package_names_what_to_install(tmp_path, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "tokenizers", None)  # import tokenizers -> ImportError
+    with pytest.raises(ModelError, match=r"pip install tokenizers \(or pip install 'ogscene3d\[clip\]'\)"):
+        ClipTokenizer.from_files(_write_bpe(tmp_path))

@@ -55,7 +55,8 @@ class FakeServer:
             def do_POST(self):
                 body = json.loads(self.rfile.read(int(self.headers["Content-Length"])))
                 server.requests.append({"path": self.path, "body": body})
-                server.headers.append(dict(self.headers))
+                # header names are case-insensitive: canonical case whatever the client sent
+                server.headers.append({k.title(): v for k, v in self.headers.items()})
                 status, text, delay = server.respond(body, len(server.requests))
                 if delay:
                     threading.Event().wait(delay)
@@ -108,7 +109,7 @@ def server_factory():
 
 
 def _client(server, **kw):
-    args = dict(api_key_env="OGS_TEST_KEY", timeout_s=2.0, max_retries=2, backoff_s=0.01)
+    args = dict(api_key_env="OGS_TEST_KEY", timeout_s=2.0, max_retries=2)
     args.update(kw)
     return ChatClient(server.base_url, "test-model", **args)
 
@@ -230,7 +231,7 @@ def test_connection_refused_is_bounded():
     s.bind(("127.0.0.1", 0))
     port = s.getsockname()[1]
     s.close()  # nothing listens there now
-    client = ChatClient(f"http://127.0.0.1:{port}/v1", "m", timeout_s=0.5, max_retries=1, backoff_s=0.01)
+    client = ChatClient(f"http://127.0.0.1:{port}/v1", "m", timeout_s=0.5, max_retries=1)
     with pytest.raises(ModelError, match="connection failed"):
         client.chat([{"role": "user", "content": "x"}])
     assert client.calls == 2
@@ -426,7 +427,7 @@ def test_timeout_bounds_the_whole_request_not_each_read(drip_headers):
     after timeout_s (the reply takes several seconds to arrive in full)."""
     srv = DripServer(step=0.05, drip_headers=drip_headers)
     try:
-        client = ChatClient(srv.base_url, "m", api_key_env="", timeout_s=0.5, max_retries=1, backoff_s=0.0)
+        client = ChatClient(srv.base_url, "m", api_key_env="", timeout_s=0.5, max_retries=1)
         t0 = time.monotonic()
         with pytest.raises(EndpointUnreachable, match="timed out after 0.5 s"):
             client.chat([{"role": "user", "content": "x"}])
@@ -458,7 +459,7 @@ def test_circuit_breaker_skips_the_rest_of_an_update_when_the_endpoint_is_down(c
     s.bind(("127.0.0.1", 0))
     port = s.getsockname()[1]
     s.close()  # nothing listens there: every request fails to connect
-    client = ChatClient(f"http://127.0.0.1:{port}/v1", "m", api_key_env="", max_retries=1, backoff_s=0.0)
+    client = ChatClient(f"http://127.0.0.1:{port}/v1", "m", api_key_env="", max_retries=1)
     g, arrays = _observed_graph(6, OpenAICaptioner(client, concurrency=1))
     with caplog.at_level(logging.WARNING):
         g.update(11, *arrays)
@@ -468,11 +469,78 @@ def test_circuit_breaker_skips_the_rest_of_an_update_when_the_endpoint_is_down(c
     assert all(n.caption_source == "heuristic" for n in g.nodes.values())
 
 
-def test_http_errors_do_not_trip_the_circuit_breaker(server_factory):
+def test_server_errors_trip_the_circuit_breaker(server_factory, caplog):
+    """HTTP 500 after the retries is a server that does not serve: three nodes in a row, then the rest of
+    the update is skipped instead of every node waiting out its own retries while mapping waits."""
     srv = server_factory(_caption_responder(fail_captions=True))
-    g, arrays = _observed_graph(5, OpenAICaptioner(_client(srv, max_retries=0), concurrency=1))
+    g, arrays = _observed_graph(6, OpenAICaptioner(_client(srv, max_retries=1), concurrency=1))
+    with caplog.at_level(logging.WARNING):
+        g.update(11, *arrays)
+    assert len(srv.requests) == 3 * 2  # three nodes (one retry each), then the rest skipped
+    skips = [r.message for r in caplog.records if "skipped the other" in r.message]
+    assert len(skips) == 1 and "3 caption request(s)" in skips[0]
+    assert all(n.caption_source == "heuristic" for n in g.nodes.values())
+
+
+def test_client_errors_do_not_trip_the_circuit_breaker(server_factory):
+    srv = server_factory(lambda body, n: (400, '{"error": "image too large"}', 0))
+    g, arrays = _observed_graph(5, OpenAICaptioner(_client(srv, max_retries=2), concurrency=1))
     g.update(11, *arrays)
-    assert len(srv.requests) == 5  # the server answers (HTTP 500): every node is asked
+    assert len(srv.requests) == 5  # a 4xx is that request's fault, not retried: every node is asked
+
+
+class EchoAuthServer:
+    """Answers every POST with HTTP 401 whose body and headers echo the request's Authorization header,
+    as some proxies do."""
+
+    def __init__(self):
+        class Handler(BaseHTTPRequestHandler):
+            def log_message(self, *args):
+                pass
+
+            def do_POST(self):
+                self.rfile.read(int(self.headers["Content-Length"]))
+                auth = self.headers.get("Authorization", "")
+                body = json.dumps({"error": f"invalid credentials: Authorization: {auth}"}).encode()
+                self.send_response(401, f"Unauthorized ({auth})")
+                self.send_header("Content-Type", "application/json")
+                self.send_header("X-Request-Id", auth)
+                self.send_header("WWW-Authenticate", auth)
+                self.send_header("Content-Length", str(len(body)))
+                self.end_headers()
+                self.wfile.write(body)
+
+        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.httpd.daemon_threads = True
+        threading.Thread(target=self.httpd.serve_forever, args=(0.05,), daemon=True).start()
+        self.base_url = f"http://127.0.0.1:{self.httpd.server_address[1]}/v1"
+
+    def close(self):
+        self.httpd.shutdown()
+        self.httpd.server_close()
+
+
+def test_key_echoed_by_a_401_reply_is_redacted_everywhere(monkeypatch, caplog, capsys):
+    monkeypatch.setenv("OGS_TEST_KEY", SECRET)
+    srv = EchoAuthServer()
+    try:
+        client = ChatClient(srv.base_url, "m", api_key_env="OGS_TEST_KEY", timeout_s=2.0, max_retries=1)
+        with caplog.at_level(logging.DEBUG):
+            with pytest.raises(ModelError, match=r"HTTP 401") as exc:
+                client.chat([{"role": "user", "content": "x"}])
+            g, arrays = _observed_graph(4, OpenAICaptioner(client, concurrency=2))
+            g.update(11, *arrays)  # the captioner logs each node's failure
+            rels = LLMRelations(client, GeometricRelations(RelationsConfig(), UP), UP).predict(_scene())
+    finally:
+        srv.close()
+    assert all(r.predictor == "geometric" for r in rels)
+    assert "[REDACTED]" in str(exc.value)  # the echo is reported, the key is not
+    chained = [exc.value.__cause__, exc.value.__context__]
+    assert all(c is None or SECRET not in repr(c) for c in chained)
+    out = capsys.readouterr()
+    texts = [str(exc.value), repr(exc.value), caplog.text, out.out, out.err]
+    texts += [logging.Formatter().format(r) for r in caplog.records]
+    assert "failed" in caplog.text and not any(SECRET in t for t in texts)
 
 
 def test_failed_captions_are_retried_at_the_next_update(server_factory):
@@ -589,3 +657,12 @@ def test_query_embedding_without_a_model_names_its_key(caplog):
     with caplog.at_level(logging.WARNING, logger="ogscene3d.graph.scenegraph"):
         assert [m.id for m in g.query("sofa")] == [0]  # text matching still answers
     assert "graph.embedding_model" in caplog.text and "graph.captioner.model" not in caplog.text
+
+
+def test_missing_openai_package_names_what_to_install(monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "openai", None)
+    client = ChatClient("http://127.0.0.1:9/v1", "m", api_key_env="")
+    with pytest.raises(ModelError, match=r"pip install openai \(or pip install 'ogscene3d\[llm\]'\)"):
+        client.chat([{"role": "user", "content": "x"}])

@@ -11,6 +11,7 @@ allowed range of a number and the check of a numeric list as field metadata, and
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import numbers
 import types
@@ -525,7 +526,6 @@ class CaptionerConfig:
     api_key_env: str = setting("OPENAI_API_KEY", _LLM_KEY_DOC)
     timeout_s: float = setting(30.0, "seconds per request", _POS)
     max_retries: int = setting(2, "retries of a failed request", _int(0))
-    backoff_s: float = setting(1.0, "first retry delay in seconds; doubles per retry", _NONNEG)
     max_tokens: int = setting(
         300, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request")
     )
@@ -544,7 +544,6 @@ class RelationsConfig:
     api_key_env: str = setting("OPENAI_API_KEY", _LLM_KEY_DOC)
     timeout_s: float = setting(30.0, "seconds per request", _POS)
     max_retries: int = setting(2, "retries of a failed request", _int(0))
-    backoff_s: float = setting(1.0, "first retry delay in seconds; doubles per retry", _NONNEG)
     max_tokens: int = setting(
         2000, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request")
     )
@@ -929,9 +928,21 @@ def _coerce(value: Any, tp: Any, key: str) -> Any:
     return value
 
 
+# Settings that were removed, which the config.yaml of a run made before still holds: dropped on reading
+# (with a note of what replaced them) so that such a run can still be resumed and evaluated.
+RETIRED: dict[str, str] = {
+    "graph.captioner.backoff_s": "the openai client's own retry backoff (it honours Retry-After)",
+    "graph.relations.backoff_s": "the openai client's own retry backoff (it honours Retry-After)",
+}
+
+
 def _build(cls: type, values: dict, prefix: str = "") -> Any:
     hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}
+    for name in [n for n in values if n not in names and f"{prefix}.{n}".lstrip(".") in RETIRED]:
+        key = f"{prefix}.{name}".lstrip(".")
+        logging.getLogger(__name__).info("config key %s is no longer used (now: %s)", key, RETIRED[key])
+        values = {k: v for k, v in values.items() if k != name}
     unknown = sorted(set(values) - names)
     if unknown:
         where = prefix or "top level"

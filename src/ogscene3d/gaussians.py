@@ -346,14 +346,11 @@ class GaussianMap:
             vert[f"rot_{i}"] = q[:, i]
         vert["label"] = self.labels.cpu().numpy()
         vert["confidence"] = self.confidences.detach().cpu().numpy()
-        header = ["ply", "format binary_little_endian 1.0", f"element vertex {n}"]
-        ply_types = {"<f4": "float", "<i4": "int"}
-        header += [f"property {ply_types[t]} {name}" for name, t in PLY_PROPERTIES]
-        header.append("end_header")
+        from plyfile import PlyData, PlyElement
+
+        ply = PlyData([PlyElement.describe(vert, "vertex")], text=False, byte_order="<")
         with atomic_path(path) as tmp:
-            with open(tmp, "wb") as f:
-                f.write(("\n".join(header) + "\n").encode("ascii"))
-                f.write(vert.tobytes())
+            ply.write(str(tmp))
 
     @classmethod
     def read_ply(cls, path: str | Path, device: str | torch.device = "cpu") -> GaussianMap:

@@ -21,4 +21,5 @@ COMMAND_MODULES: list[str] = [
     "ogscene3d.commands.render_demo",  # render-demo
     "ogscene3d.commands.config",  # config
     "ogscene3d.commands.export",  # export
+    "ogscene3d.commands.models",  # models export
 ]

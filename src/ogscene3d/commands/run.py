@@ -32,6 +32,9 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("--data", default=None, help="dataset folder (Replica, ScanNet, TUM, 7-Scenes, synthetic)")
     p.add_argument("--segments", default=None, help="folder of precomputed segments (<rgb stem>.png/.json)")
+    p.add_argument(
+        "--models", default=None, help="models folder from `ogscene3d models export` (its models.json)"
+    )
     p.add_argument("--out", required=True, help="run directory to write")
     p.add_argument(
         "--device", default=None, help="cpu, cuda or cuda:N (default: config, else CUDA if present)"
@@ -62,6 +65,10 @@ def run(args: argparse.Namespace) -> int:
     from ..mapping.mapper import Mapper
 
     overrides = list(args.overrides)
+    if args.models:  # the exported models' settings first: --set still overrides them
+        from ..models.manifest import manifest_overrides
+
+        overrides = manifest_overrides(args.models) + overrides
     if args.ablation:
         overrides.append(f"mapping.ablation={args.ablation}")
     if args.device:

@@ -14,8 +14,9 @@ Layout of a scene folder (the Replica NICE-SLAM layout plus ``gt/`` and ``segmen
     traj.txt                   one row-major 4x4 c2w per line (with pose noise if it was asked for)
     results/frame%06d.jpg      RGB (JPEG quality 95)
     results/depth%06d.png      uint16, metres = value / 6553.5, 0 = invalid (with depth noise if asked)
-    segments/frame%06d.png     simulated SAM segments in the precomputed format (uint16 ids, 0 = none)
-    segments/frame%06d.json    {"scores": {"<id>": float}}
+    segments/frame%06d.png     simulated SAM segments fused with a simulated detector's named masks
+                               (segmentation/simulated_detector.py), precomputed format (uint16 ids, 0 = none)
+    segments/frame%06d.json    {"scores": {"<id>": float}, "names": {"<id>": detector class}}
     gt/instance%06d.png        uint16 ground-truth instance id per pixel (0 = no surface)
     gt/traj.txt                the true poses (equal to traj.txt without pose noise)
     gt/instances.json          see below
@@ -412,7 +413,10 @@ def _pose_lines(poses: np.ndarray) -> str:
 
 
 def _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise) -> dict:
+    from ..segmentation.simulated_detector import SIMULATED_DETECTOR_VERSION
+
     return {
+        "detector": SIMULATED_DETECTOR_VERSION,  # named segments: a scene made without them is made again
         "generator": "ogscene3d.synthetic",
         "version": GENERATOR_VERSION,
         "seed": int(seed),
@@ -452,6 +456,7 @@ def make_synthetic_scene(
     """
     from ..segmentation.precomputed import write_segments
     from ..segmentation.simulated import NOISE_LEVELS, SimulatedSegmenter
+    from ..segmentation.simulated_detector import SimulatedDetector
 
     if frames < 1:
         raise ValueError(f"frames must be >= 1, got {frames}")
@@ -491,6 +496,8 @@ def make_synthetic_scene(
     written_poses = perturb_poses(poses, pose_noise, noise_rng)
     renderer = MeshRenderer(room, device=device)
     segmenter = SimulatedSegmenter(noise, seed=seed)
+    detector = SimulatedDetector({o.instance_id: o.class_name for o in room.objects}, noise=noise, seed=seed,
+                                 min_area=NOISE_LEVELS[noise].min_area)  # fmt: skip
 
     cam = {"camera": {"w": width, "h": height, "fx": float(K[0, 0]), "fy": float(K[1, 1]),
                       "cx": float(K[0, 2]), "cy": float(K[1, 2]), "scale": REPLICA_DEPTH_SCALE}}  # fmt: skip
@@ -531,7 +538,8 @@ def make_synthetic_scene(
         )
         _encode(out / "results" / f"depth{stem}.png", np.rint(depth * REPLICA_DEPTH_SCALE).astype(np.uint16))
         _encode(out / "gt" / f"instance{stem}.png", inst.astype(np.uint16))
-        write_segments(out / "segments", f"frame{stem}", seg.ids, seg.scores)
+        seg = detector(seg, inst, frame_index=i)  # fused with named detector masks, as sam+detector does
+        write_segments(out / "segments", f"frame{stem}", seg.ids, seg.scores, seg.names)
 
     write_points_ply(out / "gt" / "points.ply", pts, classes_of, observed)
     write_mesh_ply(out / "gt" / "mesh.ply", room, classes_of)

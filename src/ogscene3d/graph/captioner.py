@@ -3,8 +3,9 @@
 * :class:`OpenAICaptioner`: a VLM through the OpenAI-compatible chat-completions API. One request per node
   with its observation set O_i (context crop, then up to three masked views, as base64 JPEG data URLs)
   and the caption prompt; then ONE request that turns all new captions into short tags. A prose reply
-  (no JSON) is kept, marked ``"vlm-text"``; after a few requests in a row that cannot reach the endpoint,
-  the rest of the update's requests are skipped.
+  (no JSON) is kept, marked ``"vlm-text"``; after a few requests in a row that cannot reach the endpoint
+  or that it answers only with server errors (HTTP 5xx, 429) after the retries, the rest of the update's
+  requests are skipped.
 * :class:`HeuristicCaptioner`: offline; says only what geometry and colour support (floor / wall / ceiling
   from the node's plane normal, extent and height along the configured up vector; otherwise size, colour
   and flatness) and marks its captions as heuristic.
@@ -27,7 +28,13 @@ from typing import Protocol, runtime_checkable
 from ..config import CaptionerConfig
 from ..errors import ConfigError
 from .geometry import color_name, format_length
-from .openai_client import ChatClient, EndpointUnreachable, extract_json, image_data_url
+from .openai_client import (
+    ChatClient,
+    EndpointUnavailable,
+    EndpointUnreachable,
+    extract_json,
+    image_data_url,
+)
 from .types import CaptionRequest, Description
 
 log = logging.getLogger(__name__)
@@ -126,9 +133,11 @@ def tag_from_caption(caption: str) -> str:
 
 
 class _CircuitBreaker:
-    """Counts consecutive requests of one ``describe`` call that could not reach the endpoint (connection
-    failed or timed out); once ``limit`` of them came in a row, the remaining requests are skipped: with
-    the server down, each would otherwise wait out its own timeouts and retries."""
+    """Counts consecutive requests of one ``describe`` call that the endpoint did not serve (connection
+    failed, timed out, or only server errors such as HTTP 500/503/429 after the retries); once ``limit``
+    of them came in a row, the remaining requests are skipped: with the server down or failing, each
+    would otherwise wait out its own timeouts and retries while mapping waits. A client error (HTTP 4xx,
+    a malformed reply) is the request's own fault and does not count."""
 
     def __init__(self, limit: int) -> None:
         self.limit = limit
@@ -143,9 +152,9 @@ class _CircuitBreaker:
                 self.skipped += 1
             return not self.tripped
 
-    def record(self, unreachable: bool) -> None:
+    def record(self, unserved: bool) -> None:
         with self._lock:
-            self.failures = self.failures + 1 if unreachable else 0
+            self.failures = self.failures + 1 if unserved else 0
             self.tripped = self.tripped or self.failures >= self.limit
 
 
@@ -154,8 +163,9 @@ class OpenAICaptioner:
 
     Nodes without any stored observation are left out (no images, nothing for the VLM to see).
     Per-node requests run on up to ``concurrency`` threads; failures are logged and the node left out.
-    After ``max_consecutive_failures`` requests in a row that could not reach the endpoint, the rest of
-    the call's requests are skipped (one warning); the scene graph asks again at its next update.
+    After ``max_consecutive_failures`` requests in a row that the endpoint did not serve (unreachable, or
+    server errors after the retries), the rest of the call's requests are skipped (one warning); the
+    scene graph asks again at its next update.
     Captions from replies that are prose instead of the requested JSON get source ``"vlm-text"`` (warned
     once per captioner: a refusal would be kept as a caption too).
     """
@@ -184,7 +194,6 @@ class OpenAICaptioner:
             config.api_key_env,
             config.timeout_s,
             config.max_retries,
-            config.backoff_s,
         )
         return cls(client, config.max_tokens, config.concurrency)
 
@@ -202,7 +211,7 @@ class OpenAICaptioner:
         try:
             reply = self.client.chat(self.caption_messages(req), max_tokens=self.max_tokens)
         except Exception as e:
-            breaker.record(isinstance(e, EndpointUnreachable))
+            breaker.record(isinstance(e, (EndpointUnreachable, EndpointUnavailable)))
             log.warning(
                 "captioner: node %d: request failed (%s); it keeps its previous (or a heuristic) caption "
                 "until a later update",
@@ -246,7 +255,8 @@ class OpenAICaptioner:
             captions = [self._caption_one(r, breaker) for r in todo]
         if breaker.skipped:
             log.warning(
-                "captioner: %d requests in a row could not reach %s (connection failed or timed out); "
+                "captioner: %d requests in a row were not served by %s (connection failed, timed out or "
+                "server errors); "
                 "skipped the other %d caption request(s) of this update: those nodes keep their previous "
                 "(or a heuristic) caption and are asked for again at the next update",
                 breaker.limit,

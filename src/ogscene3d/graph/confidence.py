@@ -16,9 +16,10 @@ Model expectations (ONNX, exported e.g. from ``openai/clip-vit-base-patch32`` wi
   output: the projected image embedding ``[N, D]`` (an output whose name contains "embed" is preferred).
 * text model: an integer token-id input ``[N, L]`` (L read from the model, 77 when dynamic) and
   optionally an ``attention_mask``; output: the projected text embedding ``[N, D]``.
-* tokenizer: the CLIP byte-level BPE implemented below (:class:`ClipTokenizer`), loaded from the user's
-  vocabulary file: OpenAI's ``bpe_simple_vocab_16e6.txt(.gz)`` (``graph.confidence.clip_vocab``), or a
-  Hugging Face ``vocab.json`` with its ``merges.txt`` (``graph.confidence.clip_merges``). Sequences are
+* tokenizer: CLIP's byte-level BPE on Hugging Face ``tokenizers`` (:class:`ClipTokenizer`, extra
+  ``clip``), loaded from the user's vocabulary file: OpenAI's ``bpe_simple_vocab_16e6.txt(.gz)``
+  (``graph.confidence.clip_vocab``), a Hugging Face ``tokenizer.json``, or a Hugging Face ``vocab.json``
+  with its ``merges.txt`` (``graph.confidence.clip_merges``). Sequences are
   ``<|startoftext|> tokens <|endoftext|>`` padded with 0 (models pool at the end-of-text token, the
   largest id, via argmax, so the padding id does not matter).
 """
@@ -29,7 +30,6 @@ import gzip
 import html
 import json
 import logging
-import re
 from collections.abc import Sequence
 from functools import lru_cache
 from pathlib import Path
@@ -63,11 +63,14 @@ class MeanConfidence:
 
 
 # --------------------------------------------------------------------------------------------------
-# CLIP byte-level BPE tokenizer (the algorithm of OpenAI CLIP's simple_tokenizer; no ftfy dependency).
+# CLIP byte-level BPE tokenizer on Hugging Face ``tokenizers`` (the normaliser, pre-tokeniser and BPE model
+# of CLIP's fast tokenizer), read from the user's vocabulary files.
 
 
 @lru_cache
 def _bytes_to_unicode() -> dict[int, str]:
+    """CLIP's (GPT-2's) byte -> printable character table: the base of the vocabulary derived from
+    OpenAI's merges-only ``bpe_simple_vocab_16e6.txt``."""
     bs = (
         list(range(ord("!"), ord("~") + 1))
         + list(range(ord("¡"), ord("¬") + 1))
@@ -83,33 +86,69 @@ def _bytes_to_unicode() -> dict[int, str]:
     return dict(zip(bs, [chr(c) for c in cs]))
 
 
-# CLIP's pattern with \p{L} -> [^\W\d_] and \p{N} -> \d (Python's re has no Unicode property classes).
-_PAT = re.compile(
-    r"<\|startoftext\|>|<\|endoftext\|>|'s|'t|'re|'ve|'m|'ll|'d|[^\W\d_]+|\d|(?:[^\s\w]|_)+", re.IGNORECASE
+# CLIP's word pattern (simple_tokenizer.py), as Hugging Face's CLIP converter writes it
+_CLIP_SPLIT = (
+    r"""<\|startoftext\|>|<\|endoftext\|>|'s|'t|'re|'ve|'m|'ll|'d|[\p{L}]+|[\p{N}]|[^\s\p{L}\p{N}]+"""
 )
 
 
-class ClipTokenizer:
-    """CLIP BPE tokenizer. Build with :meth:`from_files`."""
+def _tokenizers():
+    try:
+        import tokenizers
+    except ImportError:
+        raise ModelError(
+            "the CLIP tokenizer needs the tokenizers package: pip install tokenizers "
+            "(or pip install 'ogscene3d[clip]')"
+        ) from None
+    return tokenizers
 
-    def __init__(self, encoder: dict[str, int], merges: list[tuple[str, str]]) -> None:
+
+class ClipTokenizer:
+    """CLIP BPE tokenizer (Hugging Face ``tokenizers``). Build with :meth:`from_files`."""
+
+    def __init__(self, encoder: dict[str, int], merges: list[tuple[str, str]], tokenizer=None) -> None:
+        """``tokenizer``: a ready ``tokenizers.Tokenizer`` (a ``tokenizer.json``); otherwise CLIP's is
+        built from ``encoder`` (token -> id) and ``merges``."""
         self.encoder = encoder
-        self.bpe_ranks = {m: i for i, m in enumerate(merges)}
-        self.byte_encoder = _bytes_to_unicode()
         try:
             self.sot = encoder["<|startoftext|>"]
             self.eot = encoder["<|endoftext|>"]
         except KeyError:
             raise ModelError("CLIP vocabulary lacks <|startoftext|> / <|endoftext|>") from None
-        self._cache: dict[str, list[str]] = {}
+        if tokenizer is None:
+            tk = _tokenizers()
+            from tokenizers import normalizers, pre_tokenizers
+            from tokenizers.models import BPE
+
+            tokenizer = tk.Tokenizer(
+                BPE(vocab=dict(encoder), merges=list(merges), end_of_word_suffix="</w>", fuse_unk=False)
+            )
+            tokenizer.normalizer = normalizers.Sequence(
+                [normalizers.NFC(), normalizers.Replace(tk.Regex(r"\s+"), " "), normalizers.Lowercase()]
+            )
+            tokenizer.pre_tokenizer = pre_tokenizers.Sequence(
+                [
+                    pre_tokenizers.Split(tk.Regex(_CLIP_SPLIT), behavior="removed", invert=True),
+                    pre_tokenizers.ByteLevel(add_prefix_space=False, use_regex=False),
+                ]
+            )
+        self.tokenizer = tokenizer
 
     @classmethod
     def from_files(cls, vocab: str | Path, merges: str | Path | None = None) -> ClipTokenizer:
-        """OpenAI ``bpe_simple_vocab_16e6.txt[.gz]`` (merges only; the vocabulary is derived from it), or
-        a Hugging Face ``vocab.json`` plus ``merges.txt`` (``merges`` argument, or next to vocab.json)."""
+        """OpenAI ``bpe_simple_vocab_16e6.txt[.gz]`` (merges only; the vocabulary is derived from it), a
+        Hugging Face ``tokenizer.json``, or a Hugging Face ``vocab.json`` plus ``merges.txt``
+        (``merges`` argument, or next to vocab.json)."""
         vocab = Path(vocab)
         if not vocab.is_file():
             raise ModelError(f"CLIP vocabulary file {str(vocab)!r} does not exist")
+        if vocab.name.endswith("tokenizer.json"):
+            tk = _tokenizers()
+            try:
+                tokenizer = tk.Tokenizer.from_file(str(vocab))
+            except Exception as e:
+                raise ModelError(f"cannot read CLIP tokenizer {str(vocab)!r}: {e}") from None
+            return cls(tokenizer.get_vocab(), [], tokenizer)
         if vocab.suffix == ".json":
             mpath = Path(merges) if merges else vocab.with_name("merges.txt")
             if not mpath.is_file():
@@ -130,36 +169,10 @@ class ClipTokenizer:
         words += ["<|startoftext|>", "<|endoftext|>"]
         return cls({w: i for i, w in enumerate(words)}, merge_list)
 
-    def _bpe(self, token: str) -> list[str]:
-        if token in self._cache:
-            return self._cache[token]
-        word = list(token[:-1]) + [token[-1] + "</w>"]
-        while len(word) > 1:
-            pairs = {(word[i], word[i + 1]) for i in range(len(word) - 1)}
-            best = min(pairs, key=lambda p: self.bpe_ranks.get(p, float("inf")))
-            if best not in self.bpe_ranks:
-                break
-            merged: list[str] = []
-            i = 0
-            while i < len(word):
-                if i < len(word) - 1 and (word[i], word[i + 1]) == best:
-                    merged.append(word[i] + word[i + 1])
-                    i += 2
-                else:
-                    merged.append(word[i])
-                    i += 1
-            word = merged
-        self._cache[token] = word
-        return word
-
     def encode(self, text: str) -> list[int]:
-        """Token ids of ``text`` without start/end tokens (unknown BPE pieces are skipped)."""
-        text = " ".join(html.unescape(html.unescape(text)).split()).lower()
-        ids: list[int] = []
-        for tok in _PAT.findall(text):
-            mapped = "".join(self.byte_encoder[b] for b in tok.encode("utf-8"))
-            ids.extend(self.encoder[p] for p in self._bpe(mapped) if p in self.encoder)
-        return ids
+        """Token ids of ``text`` without start/end tokens (CLIP's HTML unescaping first)."""
+        text = html.unescape(html.unescape(text)).strip()
+        return list(self.tokenizer.encode(text, add_special_tokens=False).ids)
 
     def __call__(self, texts: Sequence[str], context_length: int = 77) -> np.ndarray:
         """int64 [len(texts), context_length]: start, tokens (truncated), end, zero padding."""

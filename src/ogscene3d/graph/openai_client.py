@@ -1,31 +1,30 @@
-"""Minimal OpenAI-compatible HTTP client (chat completions and embeddings) on the standard library.
+"""OpenAI-compatible chat completions and embeddings through the official ``openai`` package.
 
 Works with OpenAI, vLLM, Ollama (``/v1``), LM Studio and any server speaking
-``POST {base_url}/chat/completions``.
-Every request has a timeout; transient failures (connection errors, timeouts, HTTP 408/429/5xx) are
-retried at most ``max_retries`` times with exponential backoff (honouring ``Retry-After`` up to
-``max_backoff_s``), so one call takes at most about ``(max_retries + 1) * timeout_s`` plus the backoff.
-``timeout_s`` bounds a whole attempt (connecting, sending, the status line, headers and body), not just
-each socket read: a server that trickles its reply byte by byte is cut off at the deadline.
+``POST {base_url}/chat/completions``. The SDK retries connection errors, timeouts and HTTP 408/409/429/5xx
+at most ``max_retries`` times with its exponential backoff (honouring ``Retry-After``). Each attempt is
+bounded by ``timeout_s`` in all (connecting, the status line, headers and body), not per socket read as
+the SDK's own timeout is: a server that trickles its reply byte by byte is cut off at the deadline, so one
+call takes at most about ``(max_retries + 1) * timeout_s`` plus the backoff.
 
-The API key is read from the environment variable named by ``api_key_env`` at request time; it is only
-ever placed in the ``Authorization`` header, never stored on the object, logged, or put in an error.
-A missing key is fine for local servers that do not check it, but is warned about once (naming the
-variable) and mentioned in HTTP 401/403 errors; ``api_key_env: ""`` means "no key" and is not warned about.
+The API key is read from the environment variable named by ``api_key_env`` at request time and only put
+in that request's ``Authorization`` header; it is never stored on the object. A server may echo it back
+(some proxies put the request headers into their 401 page): every error raised here and every record that
+this module, the SDK and its HTTP library log is scrubbed of the keys in use. A missing key is fine for
+local servers that do not check it, but is warned about once (naming the variable) and mentioned in HTTP
+401/403 errors; ``api_key_env: ""`` means "no key" and is not warned about.
 """
 
 from __future__ import annotations
 
 import base64
-import http.client
 import json
 import logging
 import os
 import re
 import socket
 import threading
-import time
-import urllib.error
+import urllib.parse
 import urllib.request
 from typing import Any
 
@@ -35,13 +34,67 @@ from ..errors import ModelError
 
 log = logging.getLogger(__name__)
 
-_RETRY_STATUS = {408, 409, 425, 429, 500, 502, 503, 504}
 _AUTH_STATUS = {401, 403}
+# retried by the SDK; still failing after the retries, the server is not serving (counts for the
+# captioner's circuit breaker like an unreachable one)
+_UNAVAILABLE_STATUS = {408, 409, 425, 429}
 
 # (variable, endpoint) pairs already warned about: the captioner, the relations LLM and the query
 # embeddings each have a client, and one warning per endpoint is enough.
 _warned_unset_keys: set[tuple[str, str]] = set()
 _warn_lock = threading.Lock()
+
+# keys sent so far in this process, scrubbed from errors and log records
+_secrets: set[str] = set()
+_secrets_lock = threading.Lock()
+REDACTED = "[REDACTED]"
+
+
+def redact(text: str) -> str:
+    """``text`` with every API key this process has sent replaced by ``[REDACTED]``."""
+    with _secrets_lock:
+        keys = sorted(_secrets, key=len, reverse=True)
+    for k in keys:
+        text = text.replace(k, REDACTED)
+    return text
+
+
+class _RedactFilter(logging.Filter):
+    """Scrubs API keys from a log record's message (formatted with its arguments)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if not _secrets:
+            return True
+        try:
+            message = record.getMessage()
+        except Exception:  # a malformed record: leave it to logging's own error report
+            return True
+        clean = redact(message)
+        if clean != message:
+            record.msg, record.args = clean, None
+        if record.exc_info and record.exc_info[1] is not None:
+            text = redact(logging.Formatter().formatException(record.exc_info))
+            record.exc_info, record.exc_text = None, text
+        return True
+
+
+_FILTER = _RedactFilter()
+_GUARDED_PACKAGES = ("ogscene3d", "openai", "httpx2", "httpcore2")
+
+
+def _guard_loggers() -> None:
+    """Puts the redacting filter on every logger of this package, the SDK and its HTTP library. A
+    logger's filters see only the records logged on that logger itself, not on its children, hence each
+    one; called once those packages are imported (they create their loggers at import)."""
+    for name, logger in list(logging.root.manager.loggerDict.items()):
+        if isinstance(logger, logging.Logger) and name.split(".")[0] in _GUARDED_PACKAGES:
+            logger.addFilter(_FILTER)  # a no-op where it is already there
+
+
+def _remember_key(key: str) -> None:
+    if key:
+        with _secrets_lock:
+            _secrets.add(key)
 
 
 class EndpointUnreachable(ModelError):
@@ -51,29 +104,23 @@ class EndpointUnreachable(ModelError):
     waiting out the timeout of each one."""
 
 
-class _Failure(Exception):
-    """One failed attempt: what to report, whether to retry, and whether the server answered at all."""
+class EndpointUnavailable(ModelError):
+    """The server answered every attempt, but only with a server-side failure (HTTP 5xx, 429, 408...).
 
-    def __init__(
-        self, message: str, retryable: bool = True, unreachable: bool = True, retry_after: float | None = None
-    ) -> None:
-        super().__init__(message)
-        self.message = message
-        self.retryable = retryable
-        self.unreachable = unreachable
-        self.retry_after = retry_after
+    For the captioner's circuit breaker this is as bad as no answer: each further request would wait
+    out the same retries."""
 
 
 class _Deadline:
     """Shuts the attempt's socket down once ``seconds`` have passed.
 
-    urllib's ``timeout`` bounds each socket read, so a server sending a byte every 0.1 s would never time
-    out; shutting the socket down from a timer wakes the blocked read and bounds the whole attempt.
+    The HTTP library's timeouts bound each socket read, so a server sending a byte every 0.1 s would
+    never time out; shutting the socket down from a timer wakes the blocked read and bounds the attempt.
     """
 
     def __init__(self, seconds: float) -> None:
         self.expired = False
-        self._sock: socket.socket | None = None
+        self._socks: list[socket.socket] = []
         self._lock = threading.Lock()
         self._timer = threading.Timer(seconds, self._expire)
         self._timer.daemon = True
@@ -82,15 +129,15 @@ class _Deadline:
     def watch(self, sock: socket.socket) -> None:
         """Called with each connection's socket as soon as it is connected."""
         with self._lock:
-            self._sock = sock
+            self._socks.append(sock)
             if self.expired:  # the deadline passed while connecting
                 _shutdown(sock)
 
     def _expire(self) -> None:
         with self._lock:
             self.expired = True
-            if self._sock is not None:
-                _shutdown(self._sock)
+            for s in self._socks:
+                _shutdown(s)
 
     def cancel(self) -> None:
         self._timer.cancel()
@@ -105,48 +152,67 @@ def _shutdown(sock: socket.socket) -> None:
         pass  # already closed: the attempt has finished
 
 
-class _DeadlineHandlerMixin:
-    """A urllib handler part that hands every new connection's socket to the attempt's deadline."""
-
-    deadline: _Deadline
-
-    def do_open(self, http_class, req, **kwargs):
-        deadline = self.deadline
-
-        class _Connection(http_class):  # type: ignore[misc, valid-type]
-            def connect(self) -> None:
-                super().connect()
-                deadline.watch(self.sock)
-
-        return super().do_open(_Connection, req, **kwargs)  # type: ignore[misc]
+def _env_proxy(base_url: str) -> str | None:
+    """The proxy the environment names for ``base_url`` (a custom transport does not read it itself)."""
+    parts = urllib.parse.urlsplit(base_url)
+    if parts.hostname and urllib.request.proxy_bypass(parts.hostname):
+        return None
+    return urllib.request.getproxies().get(parts.scheme)
 
 
-class _HTTPHandler(_DeadlineHandlerMixin, urllib.request.HTTPHandler):
-    pass
+def _transport(client: ChatClient):
+    """An httpx transport that counts attempts and bounds each one to ``client.timeout_s`` in all."""
+    import httpx2
 
+    class _AttemptTransport(httpx2.BaseTransport):
+        def __init__(self) -> None:
+            # no kept-alive connections: each attempt connects, so its socket is known to its deadline
+            self._inner = httpx2.HTTPTransport(
+                limits=httpx2.Limits(max_keepalive_connections=0), proxy=_env_proxy(client.base_url)
+            )
 
-class _HTTPSHandler(_DeadlineHandlerMixin, urllib.request.HTTPSHandler):
-    pass
+        def handle_request(self, request):
+            client._count_attempt()
+            deadline = _Deadline(client.timeout_s)
 
+            def trace(name: str, info: dict) -> None:
+                if name.endswith("connect_tcp.complete") and info.get("return_value") is not None:
+                    sock = info["return_value"].get_extra_info("socket")
+                    if sock is not None:
+                        deadline.watch(sock)
 
-def _opener(deadline: _Deadline) -> urllib.request.OpenerDirector:
-    """urllib's default opener (proxies from the environment included) with deadline-aware handlers."""
-    handlers = [_HTTPHandler(), _HTTPSHandler()]
-    for h in handlers:
-        h.deadline = deadline
-    return urllib.request.build_opener(*handlers)
+            request.extensions = {**request.extensions, "trace": trace}
+            timed_out = httpx2.ReadTimeout(client._timed_out(), request=request)
+            try:
+                response = self._inner.handle_request(request)
+                try:
+                    body = response.read()
+                finally:
+                    response.close()
+            except httpx2.TransportError:
+                if deadline.expired:
+                    raise timed_out from None
+                raise
+            finally:
+                deadline.cancel()
+            if deadline.expired:  # a body without Content-Length cut short looks complete
+                raise timed_out
+            return httpx2.Response(
+                response.status_code,
+                headers=response.headers,
+                content=body,
+                request=request,
+                extensions=response.extensions,
+            )
 
+        def close(self) -> None:
+            self._inner.close()
 
-def _retry_after(e: urllib.error.HTTPError) -> float | None:
-    ra = e.headers.get("Retry-After") if e.headers is not None else None
-    try:
-        return float(ra) if ra is not None else None
-    except ValueError:
-        return None  # an HTTP date: use the normal backoff
+    return _AttemptTransport()
 
 
 class ChatClient:
-    """OpenAI-compatible chat-completions / embeddings client.
+    """OpenAI-compatible chat-completions / embeddings client on the ``openai`` package.
 
     ``base_url`` is the API root including the version (e.g. ``http://127.0.0.1:8000/v1``).
     """
@@ -158,8 +224,6 @@ class ChatClient:
         api_key_env: str = "OPENAI_API_KEY",
         timeout_s: float = 30.0,
         max_retries: int = 2,
-        backoff_s: float = 1.0,
-        max_backoff_s: float = 8.0,
         model_setting: str = "graph.captioner.model / graph.relations.model",
     ) -> None:
         """``model_setting`` names the config key that gives ``model``, for the error when it is empty (the
@@ -172,24 +236,58 @@ class ChatClient:
             raise ModelError(
                 f"OpenAI-compatible endpoint {base_url}: no model name configured (set {model_setting})"
             )
-        if not timeout_s > 0 or max_retries < 0 or backoff_s < 0:
+        if not timeout_s > 0 or max_retries < 0:
             raise ModelError(
-                f"OpenAI-compatible endpoint: need timeout_s > 0, max_retries >= 0, backoff_s >= 0 "
-                f"(got {timeout_s}, {max_retries}, {backoff_s})"
+                f"OpenAI-compatible endpoint: need timeout_s > 0 and max_retries >= 0 "
+                f"(got {timeout_s}, {max_retries})"
             )
         self.base_url = base_url.rstrip("/")
         self.model = model
         self.api_key_env = api_key_env
         self.timeout_s = float(timeout_s)
         self.max_retries = int(max_retries)
-        self.backoff_s = float(backoff_s)
-        self.max_backoff_s = float(max_backoff_s)
         self.calls = 0  # HTTP requests made (attempts), for timings/tests
+        self._calls_lock = threading.Lock()
+        self._sdk_client: Any = None
+        self._sdk_lock = threading.Lock()
 
     def __repr__(self) -> str:  # never shows the key (it is not stored anyway)
         return (
             f"ChatClient(base_url={self.base_url!r}, model={self.model!r}, api_key_env={self.api_key_env!r})"
         )
+
+    def _count_attempt(self) -> None:
+        with self._calls_lock:
+            self.calls += 1
+
+    def _sdk(self):
+        """The ``openai.OpenAI`` client (built on first use). Its own key is a placeholder that is never
+        sent: each request sets or omits ``Authorization`` itself, with the key read at that moment."""
+        with self._sdk_lock:  # the captioner's threads share one client
+            if self._sdk_client is None:
+                self._sdk_client = self._build_sdk()
+        return self._sdk_client
+
+    def _build_sdk(self):
+        try:
+            import httpx2
+            import openai
+        except ImportError as e:
+            raise ModelError(
+                f"OpenAI-compatible endpoint {self.base_url}: the openai package is missing ({e}); "
+                "pip install openai (or pip install 'ogscene3d[llm]')"
+            ) from None
+        sdk = openai.OpenAI(
+            base_url=self.base_url,
+            api_key="set-per-request",
+            timeout=self.timeout_s,
+            max_retries=self.max_retries,
+            http_client=httpx2.Client(transport=_transport(self), timeout=self.timeout_s),
+        )
+        import httpcore2  # noqa: F401  (its loggers exist once it is imported)
+
+        _guard_loggers()
+        return sdk
 
     def _api_key(self) -> str:
         """The key from ``$api_key_env`` (read per request); warns once per endpoint when it is unset."""
@@ -208,6 +306,7 @@ class ChatClient:
                     self.base_url,
                     self.api_key_env,
                 )
+        _remember_key(key)
         return key
 
     def _key_hint(self, key: str) -> str:
@@ -219,78 +318,43 @@ class ChatClient:
     def _timed_out(self) -> str:
         return f"timed out after {self.timeout_s:g} s"
 
-    def _post(self, route: str, payload: dict) -> dict:
-        url = f"{self.base_url}/{route}"
-        body = json.dumps(payload).encode()
-        key = self._api_key()
-        last_error = "no attempt made"
-        unreachable = True  # no attempt got an HTTP answer
-        for attempt in range(self.max_retries + 1):
-            self.calls += 1
-            try:
-                raw = self._attempt(url, body, key)
-            except _Failure as f:
-                last_error, unreachable = f.message, unreachable and f.unreachable
-                if not f.retryable:
-                    raise ModelError(f"{url}: {last_error}") from None
-                retry_after = f.retry_after
-            else:
-                try:
-                    return json.loads(raw)
-                except (json.JSONDecodeError, UnicodeDecodeError) as e:
-                    raise ModelError(f"{url}: response is not JSON ({e})") from None
-            if attempt < self.max_retries:
-                delay = self.backoff_s * (2.0**attempt) if retry_after is None else retry_after
-                delay = min(delay, self.max_backoff_s)
-                log.warning(
-                    "%s: %s; retry %d/%d in %.1f s", url, last_error, attempt + 1, self.max_retries, delay
-                )
-                time.sleep(delay)
-        error = EndpointUnreachable if unreachable else ModelError
-        raise error(f"{url}: {last_error} (gave up after {self.max_retries + 1} attempts)")
+    def _request(self, route: str, call) -> Any:
+        """Runs ``call(sdk, extra_headers)`` (one SDK request, retries included) and turns the SDK's
+        exceptions into :class:`ModelError` (:class:`EndpointUnreachable` / :class:`EndpointUnavailable`
+        when every attempt failed that way), scrubbed of the key and not chained to the SDK's exception
+        (whose response body may hold the echoed key)."""
+        sdk = self._sdk()  # first: a missing openai package is named here
+        import openai
 
-    def _attempt(self, url: str, body: bytes, key: str) -> bytes:
-        """One POST within ``timeout_s`` in all; the raw response body, or :class:`_Failure`."""
-        headers = {"Content-Type": "application/json", "Accept": "application/json"}
-        if key:
-            headers["Authorization"] = f"Bearer {key}"
-        req = urllib.request.Request(url, data=body, headers=headers, method="POST")
-        deadline = _Deadline(self.timeout_s)
+        url = f"{self.base_url}/{route}"
+        key = self._api_key()
+        headers = {"Authorization": f"Bearer {key}" if key else openai.Omit()}
+        gave_up = f"(gave up after {self.max_retries + 1} attempts)"
+        error: ModelError
         try:
-            with _opener(deadline).open(req, timeout=self.timeout_s) as resp:
-                raw = resp.read()
-            if deadline.expired:  # a body without Content-Length cut short looks complete
-                raise _Failure(self._timed_out())
-            return raw
-        except urllib.error.HTTPError as e:
-            try:
-                detail = _short(e.read() if e.fp is not None else b"")
-            except (OSError, http.client.HTTPException):
-                detail = "(body unreadable)"
-            if deadline.expired:
-                raise _Failure(self._timed_out()) from None
-            message = f"HTTP {e.code} {e.reason}: {detail}"
-            if e.code in _AUTH_STATUS:
-                message += self._key_hint(key)
-            raise _Failure(
-                message, e.code in _RETRY_STATUS, unreachable=False, retry_after=_retry_after(e)
-            ) from None
-        except _Failure:
-            raise
-        except TimeoutError as e:
-            raise _Failure(f"{self._timed_out()} ({e})") from None
-        except urllib.error.URLError as e:
-            if deadline.expired:
-                raise _Failure(self._timed_out()) from None
-            raise _Failure(f"connection failed ({e.reason})") from None
-        except (OSError, http.client.HTTPException) as e:
-            if deadline.expired:
-                raise _Failure(self._timed_out()) from None
-            # an HTTPException is a broken answer (cut short, bad status line): the server is there
-            unreachable = isinstance(e, OSError)
-            raise _Failure(f"connection failed ({type(e).__name__}: {e})", unreachable=unreachable) from None
-        finally:
-            deadline.cancel()
+            return call(sdk, headers)
+        except openai.APITimeoutError:
+            error = EndpointUnreachable(f"{url}: {self._timed_out()} {gave_up}")
+        except openai.APIConnectionError as e:
+            cause = e.__cause__ or e.__context__
+            detail = f"{type(cause).__name__}: {cause}" if cause is not None else str(e)
+            error = EndpointUnreachable(f"{url}: connection failed ({detail}) {gave_up}")
+        except openai.APIStatusError as e:
+            status = e.status_code
+            message = f"{url}: HTTP {status} {_reason(e)}: {_short(_body_text(e))}"
+            if status in _AUTH_STATUS:
+                error = ModelError(message + self._key_hint(key))
+            elif status >= 500 or status in _UNAVAILABLE_STATUS:
+                error = EndpointUnavailable(f"{message} {gave_up}")
+            else:
+                error = ModelError(message)
+        except openai.APIResponseValidationError as e:
+            error = ModelError(f"{url}: unexpected response ({_short(str(e))})")
+        except openai.OpenAIError as e:
+            error = ModelError(f"{url}: {type(e).__name__}: {_short(str(e))}")
+        except (json.JSONDecodeError, UnicodeDecodeError) as e:
+            error = ModelError(f"{url}: response is not JSON ({e})")
+        raise type(error)(redact(str(error))) from None
 
     def chat(
         self,
@@ -299,15 +363,23 @@ class ChatClient:
         temperature: float = 0.0,
     ) -> str:
         """Send one chat completion and return the assistant's text. ModelError on failure."""
-        payload: dict[str, Any] = {"model": self.model, "messages": messages, "temperature": temperature}
-        if max_tokens:
-            payload["max_tokens"] = int(max_tokens)
-        data = self._post("chat/completions", payload)
+        extra: dict[str, Any] = {"max_tokens": int(max_tokens)} if max_tokens else {}
+
+        def call(sdk, headers):
+            return sdk.chat.completions.with_raw_response.create(
+                model=self.model,
+                messages=messages,
+                temperature=temperature,
+                extra_headers=headers,
+                **extra,
+            )
+
+        data = self._json(self._request("chat/completions", call), "chat/completions")
         try:
             content = data["choices"][0]["message"]["content"]
         except (KeyError, IndexError, TypeError):
             raise ModelError(
-                f"{self.base_url}/chat/completions: unexpected response layout {_short(data)}"
+                redact(f"{self.base_url}/chat/completions: unexpected response layout {_short(data)}")
             ) from None
         if isinstance(content, list):  # content parts
             content = "".join(p.get("text", "") for p in content if isinstance(p, dict))
@@ -317,19 +389,47 @@ class ChatClient:
 
     def embed(self, texts: list[str], model: str | None = None) -> np.ndarray:
         """Embeddings [len(texts), D] float32 from ``POST {base_url}/embeddings``. ModelError on failure."""
-        data = self._post("embeddings", {"model": model or self.model, "input": list(texts)})
+
+        def call(sdk, headers):
+            return sdk.embeddings.with_raw_response.create(
+                model=model or self.model, input=list(texts), encoding_format="float", extra_headers=headers
+            )
+
+        data = self._json(self._request("embeddings", call), "embeddings")
         try:
             items = sorted(data["data"], key=lambda d: d.get("index", 0))
             out = np.asarray([d["embedding"] for d in items], dtype=np.float32)
-        except (KeyError, TypeError, ValueError):
+        except (KeyError, TypeError, ValueError, AttributeError):
             raise ModelError(
-                f"{self.base_url}/embeddings: unexpected response layout {_short(data)}"
+                redact(f"{self.base_url}/embeddings: unexpected response layout {_short(data)}")
             ) from None
         if out.ndim != 2 or len(out) != len(texts) or not np.all(np.isfinite(out)):
             raise ModelError(
                 f"{self.base_url}/embeddings: expected {len(texts)} finite vectors, got {out.shape}"
             )
         return out
+
+    def _json(self, raw: Any, route: str) -> Any:
+        """The reply's JSON, read as sent: servers that are only OpenAI-like (a missing ``id`` or
+        ``object``) still work, and the layout is checked by the caller."""
+        try:
+            return json.loads(raw.http_response.content)
+        except (json.JSONDecodeError, UnicodeDecodeError) as e:
+            raise ModelError(f"{self.base_url}/{route}: response is not JSON ({e})") from None
+
+
+def _reason(e: Any) -> str:
+    try:
+        return e.response.reason_phrase
+    except Exception:
+        return ""
+
+
+def _body_text(e: Any) -> str:
+    try:
+        return e.response.text
+    except Exception:
+        return str(e.body)
 
 
 def _short(obj: Any, n: int = 200) -> str:

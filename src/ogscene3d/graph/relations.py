@@ -506,7 +506,6 @@ class LLMRelations:
             config.api_key_env,
             config.timeout_s,
             config.max_retries,
-            config.backoff_s,
         )
         return cls(client, GeometricRelations(config, up), up, config.max_tokens)
 

@@ -906,7 +906,6 @@ class SceneGraph:
                     cc.api_key_env,
                     cc.timeout_s,
                     cc.max_retries,
-                    cc.backoff_s,
                     model_setting="graph.embedding_model",
                 )
             else:

@@ -140,28 +140,30 @@ def box_iou_one_to_many(box: np.ndarray, boxes: np.ndarray) -> np.ndarray:
 def nms(
     boxes: np.ndarray, scores: np.ndarray, iou_thresh: float, classes: np.ndarray | None = None
 ) -> np.ndarray:
-    """Greedy non-maximum suppression; returns kept indices, best score first.
+    """Greedy non-maximum suppression (OpenCV's ``cv2.dnn.NMSBoxes``); kept indices, best score first.
 
-    ``classes``: when given, only boxes of the same class suppress each other (batched NMS, done by
-    offsetting each class's boxes far apart, as torchvision does).
+    A box is dropped when its IoU with a kept, better box exceeds ``iou_thresh``. ``classes``: when given,
+    only boxes of the same class suppress each other (``cv2.dnn.NMSBoxesBatched``).
     """
+    import cv2
+
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
     scores = np.asarray(scores, dtype=np.float64).reshape(-1)
     if boxes.shape[0] == 0:
         return np.zeros(0, dtype=np.int64)
-    if classes is not None:
-        span = float(boxes.max() - boxes.min()) + 1.0
-        boxes = boxes + (np.asarray(classes, dtype=np.float64) * span)[:, None]
+    xywh = np.concatenate([boxes[:, :2], boxes[:, 2:] - boxes[:, :2]], axis=1).tolist()
+    # OpenCV sees each box's rank (1 = worst): positive as it requires, exact in its float32 scores, and
+    # equal scores ordered by index; every box takes part (scores were thresholded before).
     order = np.argsort(-scores, kind="stable")
-    keep = []
-    while order.size:
-        i = order[0]
-        keep.append(i)
-        if order.size == 1:
-            break
-        ious = box_iou_one_to_many(boxes[i], boxes[order[1:]])
-        order = order[1:][ious <= iou_thresh]
-    return np.asarray(keep, dtype=np.int64)
+    rank = np.empty(len(scores), dtype=np.float64)
+    rank[order] = np.arange(len(scores), 0, -1)
+    if classes is None:
+        keep = cv2.dnn.NMSBoxes(xywh, rank.tolist(), 0.0, float(iou_thresh))
+    else:
+        ids = np.asarray(classes, dtype=np.int64).reshape(-1).tolist()
+        keep = cv2.dnn.NMSBoxesBatched(xywh, rank.tolist(), ids, 0.0, float(iou_thresh))
+    keep = np.asarray(keep, dtype=np.int64).reshape(-1)
+    return keep[np.argsort(-rank[keep])]  # best first, whatever order OpenCV returns them in
 
 
 def mask_nms(records: Sequence[MaskRecord], iou_thresh: float) -> list[MaskRecord]:
