@@ -320,7 +320,7 @@ def test_sigterm_stops_a_live_camera_and_saves_the_map(tmp_path, scene, monkeypa
     import os
     import signal
 
-    import ogscene3d.streams.base as streams
+    import ogscene3d.streams.sources as streams
     from ogscene3d.commands.live import main
 
     camera = _StillCamera(scene[1][0])

@@ -182,7 +182,10 @@ def test_two_browsers_keep_their_own_gui_state_and_the_legend_shows():
     try:
         viewer.publish(make_scene(100, objects=3))
         with HeadlessBrowser(viewer.url, WIDTH, HEIGHT) as first:
-            assert viewer.wait_until(lambda s: s["clients"] == 1 and s["nodes"] == 3, 45), first.log_tail()
+            # a browser counts as a client before its view is set up: wait for both
+            assert viewer.wait_until(
+                lambda s: s["clients"] == 1 and s["nodes"] == 3 and len(viewer.views) == 1, 45
+            ), first.log_tail()
             view1 = viewer.views[0]
             view1._dd_color.value = "Semantic label"
             view1._txt_query.value = "lamp"
@@ -192,7 +195,9 @@ def test_two_browsers_keep_their_own_gui_state_and_the_legend_shows():
                 time.sleep(0.5)
             assert "sofa (#0)" in text1 and "1 match" in text1, text1[-1500:]
             with HeadlessBrowser(viewer.url, WIDTH, HEIGHT) as second:
-                assert viewer.wait_until(lambda s: s["clients"] == 2, 45), second.log_tail()
+                assert viewer.wait_until(
+                    lambda s: s["clients"] == 2 and len(viewer.views) == 2, 45
+                ), second.log_tail()
                 view2 = viewer.views[1]
                 assert viewer.wait_until(lambda s: view2.layers.shown_gaussians == 300, 30)
                 deadline = time.monotonic() + 30

@@ -9,6 +9,7 @@ closed. When mapping is slower than the camera, the newest frame is taken and th
 
 from __future__ import annotations
 
-from .base import CameraStream, LatestFrame, close_stream, open_stream, stream_for_live
+from .base import CameraStream, LatestFrame, close_stream
+from .sources import open_stream, stream_for_live
 
 __all__ = ["CameraStream", "LatestFrame", "close_stream", "open_stream", "stream_for_live"]
