@@ -92,6 +92,11 @@ POINTS_PER_M2 = 1000.0
 MIN_POINTS_PER_INSTANCE = 300
 OBSERVED_TOLERANCE = 0.02  # metres, plus two pixel footprints (see ``observed_in_frame``)
 HFOV_DEG = 75.0
+SWEEP = 1.6 * np.pi  # radians the camera walks around the room (given enough frames, see _sweep)
+# the largest step between consecutive frames: well inside the mapper's default pose-jump limits
+# (mapping.max_pose_step 0.5 m, max_pose_step_deg 30), leaving room for the pitch and height wobble
+MAX_STEP_DEG = 20.0
+MAX_STEP_M = 0.35
 GENERATOR_VERSION = 2  # 2: gt/points.ply carries the per-point "observed" flag
 
 
@@ -116,9 +121,9 @@ def _look_rotation_zup(yaw: np.ndarray, pitch: np.ndarray) -> np.ndarray:
 def exploration_trajectory(room: Room, frames: int, seed: int) -> np.ndarray:
     """[frames, 4, 4] c2w poses (world frame) along an ellipse inside the room, looking across it.
 
-    The camera walks ~290 degrees around the room at about 1.45 m height, looking at the opposite
-    side with a slight lead in the walking direction and ~20 degrees down, so the walls and the
-    furniture come into view one after the other.
+    The camera walks ~290 degrees around the room (less for few frames, see ``_sweep``) at about 1.45 m
+    height, looking at the opposite side with a slight lead in the walking direction and ~20 degrees down,
+    so the walls and the furniture come into view one after the other.
     """
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x7EA]))
     W, D, _ = room.size
@@ -126,10 +131,10 @@ def exploration_trajectory(room: Room, frames: int, seed: int) -> np.ndarray:
     direction = 1.0 if rng.uniform() < 0.5 else -1.0
     height = rng.uniform(1.35, 1.55)
     s = np.linspace(0.0, 1.0, frames) if frames > 1 else np.zeros(1)
-    theta = theta0 + direction * 1.6 * np.pi * s
     boxes = [p.aabb for o in room.zup_objects if o.class_name not in STRUCTURAL_CLASSES for p in o.parts]
     for shrink in (1.0, 0.85, 0.7, 0.55, 0.4):
         ax, ay = max(W / 2 - 1.05, 0.3) * shrink, max(D / 2 - 1.05, 0.3) * shrink
+        theta = theta0 + direction * _sweep(frames, max(ax, ay)) * s
         pos = np.stack([ax * np.cos(theta), ay * np.sin(theta), height + 0.08 * np.sin(3.0 * np.pi * s)], -1)
         clear = all(
             not np.any(np.all((pos > lo - 0.3) & (pos < hi + 0.3), axis=1)) for lo, hi in boxes
@@ -145,6 +150,17 @@ def exploration_trajectory(room: Room, frames: int, seed: int) -> np.ndarray:
     poses[:, :3, :3] = WORLD_FROM_ZUP @ R
     poses[:, :3, 3] = pos @ WORLD_FROM_ZUP.T
     return poses
+
+
+def _sweep(frames: int, radius: float) -> float:
+    """The angle (radians) the camera walks around the room: :data:`SWEEP`, or less where ``frames`` are too
+    few for it, so that no step between consecutive frames exceeds :data:`MAX_STEP_DEG` of turn or
+    :data:`MAX_STEP_M` along an ellipse of largest semi-axis ``radius`` (the mapper's pose-jump check would
+    otherwise flag the generator's own sequence)."""
+    if frames < 2:
+        return SWEEP
+    step = min(np.deg2rad(MAX_STEP_DEG), 2.0 * np.arcsin(min(1.0, MAX_STEP_M / (2.0 * radius))))
+    return float(min(SWEEP, (frames - 1) * step))
 
 
 def perturb_poses(poses: np.ndarray, sigma: float, rng: np.random.Generator) -> np.ndarray:
