@@ -1,4 +1,4 @@
-r"""Are the default mapping settings sound on small images? Defaults vs ``configs/synthetic.yaml`` side by side.
+r"""Are the default mapping settings sound on small images? Defaults vs configs/synthetic.yaml side by side.
 
 One synthetic room (default 20 frames at 160x120) is generated once and mapped through the CLI
 (``ogscene3d run --data SCENE``) with each config; per config the script prints wall time, the share of

@@ -25,7 +25,7 @@ def test_warp_starts_without_the_driver_warning():
 
 def test_other_native_stderr_output_is_passed_on(capfd):
     with _without_driver_warning():
-        os.write(2, f"Warp CUDA warning: {NO_DRIVER_WARNING}. GPU execution will not be available.\n".encode())
+        os.write(2, f"Warp CUDA warning: {NO_DRIVER_WARNING}. GPU execution unavailable.\n".encode())
         os.write(2, b"Warp CUDA error: something else\n")
     err = capfd.readouterr().err
     assert NO_DRIVER_WARNING not in err
