@@ -9,6 +9,7 @@ out, as floaters) and the 3D mIoU (HOV-SG protocol, ``ogscene3d.eval.evaluate_ru
     python benchmarks/defaults.py                                  # defaults vs configs/synthetic.yaml
     python benchmarks/defaults.py --frames 20 --width 160 --height 120 --json out.json
     python benchmarks/defaults.py --config NAME=path.yaml --config NAME2=-   # '-' = the defaults
+    python benchmarks/defaults.py --config iters3=-,mapping.opt_iters=3      # a config plus overrides
 """
 
 from __future__ import annotations
@@ -89,7 +90,8 @@ def main() -> int:
         "--config",
         action="append",
         metavar="NAME=PATH",
-        help="a config to compare ('-' for the defaults); default: defaults and configs/synthetic.yaml",
+        help="a config to compare ('-' for the defaults), then ,KEY=VALUE overrides; default: the defaults "
+        "and configs/synthetic.yaml",
     )
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override for every run")
     ap.add_argument("--json", help="write the rows here")
@@ -103,9 +105,10 @@ def main() -> int:
             Path(tmp) / "scene", args.seed, args.frames, args.width, args.height, device="cpu"
         )
         for spec in configs:
-            name, _, path = spec.partition("=")
-            row = measure(scene, Path(tmp) / f"run_{len(rows)}", None if path in ("", "-") else path,
-                          args.device, args.set)
+            name, _, rest = spec.partition("=")
+            path, *extra = rest.split(",")
+            run_dir = Path(tmp) / f"run_{len(rows)}"
+            row = measure(scene, run_dir, None if path in ("", "-") else path, args.device, args.set + extra)
             rows.append({"config": name, **row})
             print(f"{name}: {row}", file=sys.stderr, flush=True)
     cols = [
