@@ -60,6 +60,7 @@ The segments in ``segments/`` are picked up automatically by :func:`open_dataset
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import logging
@@ -520,34 +521,37 @@ def make_synthetic_scene(
         classes_of[obj.instance_id] = classes[obj.class_name]
 
     steps: Iterator = iter(range(frames))
+    bars = contextlib.ExitStack()
     if progress is True:
-        from tqdm import tqdm
+        from ..progress import progress as progress_bar
 
-        steps = iter(tqdm(range(frames), desc="synth", unit="frame"))
+        steps = iter(bars.enter_context(progress_bar(range(frames), desc="synth", total=frames)))
     elif callable(progress):
         steps = iter(progress(range(frames)))
     max_depth = 65535.0 / REPLICA_DEPTH_SCALE
     pts = sample_surface_points(room, seed)
     observed = np.zeros(len(pts["xyz"]), dtype=bool)
-    for i in steps:
-        rgb, depth, inst = renderer.render(poses[i], K, width, height)
-        observed |= observed_in_frame(pts["xyz"], pts["instance"], poses[i], K, depth, inst)
-        valid = depth > 0
-        if depth_noise > 0:
-            depth = depth + noise_rng.normal(0.0, depth_noise, depth.shape).astype(np.float32)
-            depth[~valid] = 0.0
-            depth = np.maximum(depth, 0.0)
-        depth[depth > max_depth] = 0.0
-        seg = segmenter(rgb, depth, gt_instances=inst, frame_index=i)
-        stem = f"{i:06d}"
-        _encode(
-            out / "results" / f"frame{stem}.jpg",
-            cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR),
-            [cv2.IMWRITE_JPEG_QUALITY, 95],
-        )
-        _encode(out / "results" / f"depth{stem}.png", np.rint(depth * REPLICA_DEPTH_SCALE).astype(np.uint16))
-        _encode(out / "gt" / f"instance{stem}.png", inst.astype(np.uint16))
-        write_segments(out / "segments", f"frame{stem}", seg.ids, seg.scores)
+    with bars:  # the bar's log routing ends with the loop
+        for i in steps:
+            rgb, depth, inst = renderer.render(poses[i], K, width, height)
+            observed |= observed_in_frame(pts["xyz"], pts["instance"], poses[i], K, depth, inst)
+            valid = depth > 0
+            if depth_noise > 0:
+                depth = depth + noise_rng.normal(0.0, depth_noise, depth.shape).astype(np.float32)
+                depth[~valid] = 0.0
+                depth = np.maximum(depth, 0.0)
+            depth[depth > max_depth] = 0.0
+            seg = segmenter(rgb, depth, gt_instances=inst, frame_index=i)
+            stem = f"{i:06d}"
+            _encode(
+                out / "results" / f"frame{stem}.jpg",
+                cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR),
+                [cv2.IMWRITE_JPEG_QUALITY, 95],
+            )
+            raw_depth = np.rint(depth * REPLICA_DEPTH_SCALE).astype(np.uint16)
+            _encode(out / "results" / f"depth{stem}.png", raw_depth)
+            _encode(out / "gt" / f"instance{stem}.png", inst.astype(np.uint16))
+            write_segments(out / "segments", f"frame{stem}", seg.ids, seg.scores)
 
     write_points_ply(out / "gt" / "points.ply", pts, classes_of, observed)
     write_mesh_ply(out / "gt" / "mesh.ply", room, classes_of)
