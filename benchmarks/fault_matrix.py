@@ -427,7 +427,7 @@ def concurrent_writers(tmp: Path) -> tuple[str, bool | None]:
     ra = a.finish(600)
     refused = (ra == 0) != (rb == 0)
     loser = b if rb != 0 else a
-    named = any(w in loser.text.lower() for w in ("pid", "lock", "another run", "in use"))
+    named = refused and any(w in loser.text.lower() for w in ("pid", "lock", "another run", "in use"))
     return (
         f"exits {ra} and {rb}; refusal names the holder: {named}: {last_line(loser.text)}",
         refused and named,
