@@ -331,7 +331,7 @@ def test_missing_colour_file_is_named_or_skipped(tmp_path, caplog):
         open_dataset(scene)
     with caplog.at_level(logging.WARNING, logger="ogscene3d.datasets.base"):
         skip = open_dataset(scene, config=DataConfig(on_bad_frame="skip"))
-    assert [f.name for f in skip] == ["frame000000", "frame000002"]
+    assert [f.name for f in skip] == ["frame000000", "frame000002"] and skip.frames_left_out == 1
     assert any("frame000001.jpg" in r.getMessage() for r in caplog.records)
 
 

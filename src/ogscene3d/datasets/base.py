@@ -252,6 +252,9 @@ class RGBDDataset:
                 f"{self.root}: frame range start={config.start} stride={config.stride} selects none of "
                 f"{len(records)} frames"
             )
+        # frames of the selection left out when opened (files missing, under on_bad_frame: skip): a run's
+        # count of skipped frames starts from this; frames skipped while iterating come on top
+        self.frames_left_out = 0
         self.records = self._drop_incomplete(selected)
         if config.intrinsics is not None:
             if len(config.intrinsics) != 4:
@@ -312,6 +315,7 @@ class RGBDDataset:
         kept = [rec for rec in selected if id(rec) not in missing]
         if self.config.on_bad_frame == "skip" and kept:
             log.warning("%s; leaving those frames out (data.on_bad_frame: skip)", msg)
+            self.frames_left_out = len(missing)
             return kept
         if self.config.on_bad_frame == "skip":
             raise DataError(f"{msg}; no selected frame is left")
