@@ -77,11 +77,12 @@ def read_traj(path: Path) -> np.ndarray:
     :class:`DataError` naming the file and line."""
     poses, errors = read_traj_lines(path)
     if errors:
-        raise DataError(_bad_lines_message(errors))
+        raise DataError(bad_lines_message(errors))
     return poses
 
 
-def _bad_lines_message(errors: dict[int, str]) -> str:
+def bad_lines_message(errors: dict[int, str]) -> str:
+    """The first bad line's error, and how many more there are."""
     first = errors[min(errors)]
     return first if len(errors) == 1 else f"{first} (and {len(errors) - 1} more bad lines)"
 
@@ -126,7 +127,7 @@ class ReplicaDataset(RGBDDataset):
         if bad_lines and config.on_bad_frame != "skip":
             # found now rather than when mapping reaches the frame; under skip only those frames are left out
             raise DataError(
-                f"{_bad_lines_message(bad_lines)}; set data.on_bad_frame: skip to leave those frames out"
+                f"{bad_lines_message(bad_lines)}; set data.on_bad_frame: skip to leave those frames out"
             )
         if frames[-1][0] >= len(poses):
             raise DataError(
