@@ -289,7 +289,6 @@ def _img(name, img):
 @pytest.mark.parametrize(
     "damage, match",
     [
-        (_rm("frame000001.jpg"), None),  # fewer frames: not an error
         (_write("depth000001.png", b"not a png"), r"depth000001\.png: cannot decode"),
         (_write("frame000001.jpg", b""), r"frame000001\.jpg: rgb file is empty"),
         (_cut("depth000001.png", slice(0, 60)), r"depth000001\.png: depth PNG is truncated"),
@@ -310,9 +309,6 @@ def test_bad_frame_files(tmp_path, caplog, damage, match):
     scene = make_replica(tmp_path)
     damage(scene)
     ds = open_dataset(scene)
-    if match is None:
-        assert len(ds) == 2 and [f.name for f in ds] == ["frame000000", "frame000002"]
-        return
     assert len(ds) == 3  # lazy: opening never reads pixels
     ds[0]
     with pytest.raises(DataError, match=match):
@@ -324,6 +320,65 @@ def test_bad_frame_files(tmp_path, caplog, damage, match):
         names = [f.name for f in skip]
     assert names == ["frame000000", "frame000002"]
     assert any("frame000001" in r.getMessage() for r in caplog.records)
+
+
+def test_missing_colour_file_is_named_or_skipped(tmp_path, caplog):
+    """A frame whose colour image is missing (its depth image is there) is an error naming the file, or a
+    logged skip under data.on_bad_frame: skip; it used to vanish from the sequence without a word."""
+    scene = make_replica(tmp_path)
+    (scene / "results" / "frame000001.jpg").unlink()
+    with pytest.raises(DataError, match=r"1 of the 3 selected frames.*results/frame000001\.jpg.*bad_frame"):
+        open_dataset(scene)
+    with caplog.at_level(logging.WARNING, logger="ogscene3d.datasets.base"):
+        skip = open_dataset(scene, config=DataConfig(on_bad_frame="skip"))
+    assert [f.name for f in skip] == ["frame000000", "frame000002"] and skip.frames_left_out == 1
+    assert any("frame000001.jpg" in r.getMessage() for r in caplog.records)
+
+
+def test_sevenscenes_missing_colour_file_is_named(tmp_path):
+    root = tmp_path / "chess"
+    for i in range(3):
+        _png(root / f"frame-{i:06d}.color.png", _rgb(24, 32, i))
+        _png(root / f"frame-{i:06d}.depth.png", np.full((24, 32), 1200, np.uint16))
+        np.savetxt(root / f"frame-{i:06d}.pose.txt", _pose(i))
+    (root / "frame-000001.color.png").unlink()
+    with pytest.raises(DataError, match=r"frame-000001\.color\.png"):
+        open_dataset(root)
+    assert len(list(open_dataset(root, config=DataConfig(on_bad_frame="skip")))) == 2
+
+
+@pytest.mark.parametrize(
+    "row, match", [("1 0 0 x " * 4, "non-numeric pose"), ("1 0 0 0", "expected 16 numbers .* found 4")]
+)
+def test_bad_traj_line_fails_or_skips_that_frame(tmp_path, caplog, row, match):
+    """A line of traj.txt that holds no pose: a clear error naming the file and line, or under
+    data.on_bad_frame: skip that frame left out with a logged warning (the whole run used to stop)."""
+    scene = make_replica(tmp_path)
+    lines = (scene / "traj.txt").read_text().splitlines()
+    lines[1] = row
+    (scene / "traj.txt").write_text("\n".join(lines) + "\n")
+    with pytest.raises(DataError, match=rf"traj\.txt:2: {match}.*on_bad_frame: skip"):
+        open_dataset(scene)
+    skip = open_dataset(scene, config=DataConfig(on_bad_frame="skip"))
+    with pytest.raises(DataError, match=rf"traj\.txt:2: {match}"):
+        skip[1]
+    with caplog.at_level(logging.WARNING, logger="ogscene3d.datasets.base"):
+        names = [f.name for f in skip]
+    assert names == ["frame000000", "frame000002"]
+    assert any("traj.txt:2" in r.getMessage() and "frame000001" in r.getMessage() for r in caplog.records)
+
+
+@pytest.mark.parametrize("key, value", [("w", 64), ("h", 48)])
+def test_cam_params_size_is_checked_against_the_images(tmp_path, key, value):
+    scene = make_replica(tmp_path)
+    cam = json.loads((scene / "cam_params.json").read_text())
+    cam["camera"][key] = value
+    (scene / "cam_params.json").write_text(json.dumps(cam))
+    w, h = (value, 24) if key == "w" else (32, value)
+    with pytest.raises(DataError, match=rf"cam_params\.json: the camera is {w}x{h} .*images are 32x24"):
+        open_dataset(scene)
+    # data.intrinsics replaces the file's camera: its size is not used
+    assert len(open_dataset(scene, config=DataConfig(intrinsics=[20.0, 20.0, 16.0, 12.0]))) == 3
 
 
 @pytest.mark.parametrize("depth_scale, warned", [(6553.5, False), (6.5535, True), (6553500.0, True)])

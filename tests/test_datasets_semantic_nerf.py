@@ -223,6 +223,9 @@ def test_malformed_pose_line_names_file_and_line(tmp_path):
     (seq / "traj_w_c.txt").write_text("\n".join(lines) + "\n")
     with pytest.raises(DataError, match=r"traj_w_c.txt:2: expected 16 numbers"):
         open_dataset(seq)
+    # under skip only that frame is left out (the whole sequence used to be refused)
+    skip = open_dataset(seq, config=DataConfig(on_bad_frame="skip"))
+    assert [f.name for f in skip] == ["rgb_0", "rgb_2"]
 
 
 def test_missing_depth_is_reported_at_open(tmp_path):

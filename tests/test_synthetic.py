@@ -296,3 +296,21 @@ def test_synth_cli(tmp_path, capsys, monkeypatch):
     assert json.loads((tmp_path / "z" / "scene.json").read_text())["width"] == 32
     with pytest.raises(SystemExit):
         cli.main(["synth", "--out", str(tmp_path / "w"), "--size", "big"])
+
+
+@pytest.mark.parametrize("frames", [2, 3, 5, 8, 12, 20, 60])
+def test_trajectory_stays_within_the_mappers_pose_jump_check(frames):
+    """The generator's own sequence must not trip the mapper's default pose-jump check (--frames 8 walked
+    0.9 m and 41 deg per step)."""
+    from ogscene3d.config import MappingConfig
+    from ogscene3d.datasets.synthetic import exploration_trajectory
+    from ogscene3d.mapping.pose_jump import PoseJumpCheck
+
+    cfg = MappingConfig()
+    for seed in range(4):
+        poses = exploration_trajectory(build_room(seed), frames, seed)
+        check = PoseJumpCheck(cfg.max_pose_step, cfg.max_pose_step_deg, "error")
+        for i, pose in enumerate(poses):
+            jump = check.check(i, pose)
+            assert jump is None, f"seed {seed}, {frames} frames: {jump.describe()}"
+            check.accept(i, pose)

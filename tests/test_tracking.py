@@ -13,6 +13,7 @@ import argparse
 import json
 import logging
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -543,3 +544,24 @@ def test_poses_argument_and_trajectory_text() -> None:
     poses = synthetic_poses(3)
     rows = np.array([[float(v) for v in line.split()] for line in trajectory_text(poses).splitlines()])
     np.testing.assert_allclose(rows.reshape(-1, 4, 4), np.stack(poses), atol=1e-8)
+
+
+def test_track_shows_progress_and_logs_on_their_own_lines(synthetic: list[Frame], capsys) -> None:
+    """`ogscene3d track` ran for half a minute with no sign of life: a bar, with the tracker's warnings
+    (a skipped frame here) on lines of their own rather than glued onto it."""
+    handler = logging.StreamHandler(sys.stderr)
+    logging.getLogger().addHandler(handler)
+    try:
+        frames = synthetic[:4] + [garbage_frame(4)] + synthetic[5:6]
+        res = track_sequence(frames, TrackingConfig(), progress=True)
+    finally:
+        logging.getLogger().removeHandler(handler)
+    err = capsys.readouterr().err
+    assert res.valid.sum() >= 4
+    pieces = [s for s in err.replace("\r", "\n").split("\n") if s.strip()]
+    assert any(s.startswith("track: 100%") and "6/6" in s for s in pieces), err
+    skipped = [s for s in pieces if "tracking: frame 4 skipped" in s]
+    assert skipped and all(s.startswith("tracking: frame 4 skipped") for s in skipped)
+    # quiet unless asked for
+    track_sequence(synthetic[:2], TrackingConfig())
+    assert "track:" not in capsys.readouterr().err

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import os
+import sys
+import tempfile
 from collections.abc import Iterator
 
 import torch
@@ -41,13 +44,51 @@ def init_warp():
         wp.config.log_level = wp.LOG_WARNING
     else:
         wp.config.quiet = True
-    wp.init()
+    with _without_driver_warning():
+        wp.init()
     return wp
 
 
+# What Warp's native library prints (C stdio, past Python's logging and warnings) on every start without a
+# driver: on a CPU-only machine that is the expected state, not something to warn about. Asking for a CUDA
+# device without one is still a clear error (resolve_device, warp_device).
+NO_DRIVER_WARNING = "Could not find or load the NVIDIA CUDA driver"
+
+
+@contextlib.contextmanager
+def _without_driver_warning() -> Iterator[None]:
+    """Capture file descriptor 2 while Warp starts and pass on everything but :data:`NO_DRIVER_WARNING`."""
+    fd = 2  # the C side writes to descriptor 2, whatever sys.stderr has been replaced by
+    sys.stderr.flush()
+    with tempfile.TemporaryFile() as tmp:
+        saved = os.dup(fd)
+        os.dup2(tmp.fileno(), fd)
+        try:
+            yield
+        finally:
+            os.dup2(saved, fd)
+            os.close(saved)
+            tmp.seek(0)
+            text = tmp.read().decode(errors="replace")
+            kept = "".join(line for line in text.splitlines(True) if NO_DRIVER_WARNING not in line)
+            if kept:
+                sys.stderr.write(kept)
+                sys.stderr.flush()
+
+
 def warp_device(device: torch.device):
-    """The Warp device for a torch device (initialises Warp on first use)."""
-    return init_warp().device_from_torch(device)
+    """The Warp device for a torch device (initialises Warp on first use).
+
+    Raises:
+        ConfigError: a CUDA device is asked for and Warp cannot use CUDA (no driver, or a CPU-only Warp).
+    """
+    wp = init_warp()
+    if device.type == "cuda" and not wp.is_cuda_available():
+        raise ConfigError(
+            f"device {device} was asked for but Warp cannot use CUDA (no NVIDIA driver found, libcuda.so, or "
+            "a CPU-only warp-lang build); install the NVIDIA driver and a CUDA warp-lang, or use device='cpu'"
+        )
+    return wp.device_from_torch(device)
 
 
 @contextlib.contextmanager

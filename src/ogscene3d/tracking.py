@@ -79,7 +79,7 @@ from __future__ import annotations
 import logging
 import math
 import re
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence, Sized
 from dataclasses import dataclass
 from typing import Any
 
@@ -753,20 +753,44 @@ class Tracker:
         return None
 
 
+def track_frames(
+    tracker: Tracker, frames: Iterable[Frame], progress: bool = False, total: int | None = None
+) -> Iterator[tuple[Frame, np.ndarray | None, StepInfo]]:
+    """(frame, pose or None, step info) for each of ``frames`` in turn, tracked by ``tracker``.
+    ``progress``: a progress bar (odometry takes a second or more per frame on a CPU) with log lines routed
+    through it; ``total`` its length (default: ``len(frames)`` where there is one)."""
+    from .progress import progress as progress_bar
+
+    if total is None and isinstance(frames, Sized):
+        total = len(frames)
+    tracked = 0
+    with progress_bar(frames, desc="track", total=total, disable=not progress) as bar:
+        for frame in bar:
+            pose = tracker.step(frame)
+            assert tracker.last is not None
+            tracked += pose is not None
+            if progress:
+                bar.set_postfix(tracked=tracked, refresh=False)
+            yield frame, pose, tracker.last
+
+
 def track_sequence(
-    frames: Iterable[Frame], config: TrackingConfig | None = None, device: Any = "cpu", frame_step: int = 1
+    frames: Iterable[Frame],
+    config: TrackingConfig | None = None,
+    device: Any = "cpu",
+    frame_step: int = 1,
+    progress: bool = False,
 ) -> TrackResult:
-    """Track a whole sequence; see ``TrackResult`` for what skipped frames hold.
+    """Track a whole sequence; see ``TrackResult`` for what skipped frames hold. ``progress``: show a bar.
 
     Raises OGSceneError when ``frames`` is empty or no frame could be anchored (no usable depth anywhere).
     """
     tracker = Tracker(config, device, frame_step=frame_step)
     raw: list[np.ndarray | None] = []
     infos: list[StepInfo] = []
-    for frame in frames:
-        raw.append(tracker.step(frame))
-        assert tracker.last is not None
-        infos.append(tracker.last)
+    for _, pose, info in track_frames(tracker, frames, progress):
+        raw.append(pose)
+        infos.append(info)
     if not raw:
         raise OGSceneError("track: no frames given")
     poses = hold_last_good(raw)
@@ -791,7 +815,11 @@ def hold_last_good(poses: Sequence[np.ndarray | None]) -> list[np.ndarray]:
 
 
 def track(
-    frames: Iterable[Frame], config: TrackingConfig | None = None, device: Any = "cpu", frame_step: int = 1
+    frames: Iterable[Frame],
+    config: TrackingConfig | None = None,
+    device: Any = "cpu",
+    frame_step: int = 1,
+    progress: bool = False,
 ) -> list[np.ndarray]:
     """c2w float64 [4, 4] poses (OpenCV axes) for every frame, estimated by RGB-D odometry.
 
@@ -799,7 +827,7 @@ def track(
     A frame that could not be tracked holds the last good pose before it (see ``TrackResult``); use
     ``track_sequence`` to get the validity flags.
     """
-    return track_sequence(frames, config, device, frame_step).poses
+    return track_sequence(frames, config, device, frame_step, progress).poses
 
 
 def trajectory_text(poses: Iterable[np.ndarray]) -> str:

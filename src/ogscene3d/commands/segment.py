@@ -88,9 +88,8 @@ def write_frame_segments(out: Path, stem: str, seg: Segmentation) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
     from ..datasets import open_dataset
+    from ..progress import progress
     from ..segmentation.factory import make_segmenter
     from ..segmentation.precomputed import segments_paths
 
@@ -136,33 +135,32 @@ def run(args: argparse.Namespace) -> int:
         log.info("%d of %d frames already segmented in %s: skipping them", skipped, len(stems), out)
 
     done, bad, n_segments, t0 = 0, 0, 0, time.perf_counter()
-    bar = tqdm(todo, desc=f"segment ({sc.backend})", unit="frame", disable=args.no_progress)
-    for i in bar:
-        try:
-            frame = ds[i]
-        except DataError as e:
-            if cfg.data.on_bad_frame == "skip":
-                log.warning("skipping frame %d: %s", i, e)
-                bad += 1
+    with progress(todo, desc=f"segment ({sc.backend})", disable=args.no_progress) as bar:
+        for i in bar:
+            try:
+                frame = ds[i]
+            except DataError as e:
+                if cfg.data.on_bad_frame == "skip":
+                    log.warning("skipping frame %d: %s", i, e)
+                    bad += 1
+                    continue
+                raise
+            stem = stems[i] or frame.name or f"{frame.index:06d}"
+            if stems[i] is None and not args.overwrite and segments_paths(out, stem)[0].exists():
                 continue
-            raise
-        stem = stems[i] or frame.name or f"{frame.index:06d}"
-        if stems[i] is None and not args.overwrite and segments_paths(out, stem)[0].exists():
-            continue
-        if sc.backend == "simulated":
-            if frame.gt_instances is None:
-                raise DataError(
-                    f"{args.data}: backend 'simulated' needs ground-truth instance maps, which only "
-                    "synthetic scenes have; use sam, sam+detector or classical"
-                )
-            seg = segmenter.segment_frame(frame)
-        else:
-            seg = segmenter(frame.rgb, frame.depth)
-        write_frame_segments(out, stem, seg)
-        done += 1
-        n_segments += len(seg.scores)
-        bar.set_postfix(segments=len(seg.scores))
-    bar.close()
+            if sc.backend == "simulated":
+                if frame.gt_instances is None:
+                    raise DataError(
+                        f"{args.data}: backend 'simulated' needs ground-truth instance maps, which only "
+                        "synthetic scenes have; use sam, sam+detector or classical"
+                    )
+                seg = segmenter.segment_frame(frame)
+            else:
+                seg = segmenter(frame.rgb, frame.depth)
+            write_frame_segments(out, stem, seg)
+            done += 1
+            n_segments += len(seg.scores)
+            bar.set_postfix(segments=len(seg.scores))
     dt = time.perf_counter() - t0
     if done:
         log.info(

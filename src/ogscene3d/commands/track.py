@@ -26,6 +26,7 @@ def add_parser(subparsers: Any) -> None:
         "--device", default=None, help="cpu, cuda or cuda:N (default: config, else CUDA if usable)"
     )
     p.add_argument("--max-frames", type=int, default=None, help="track at most this many frames")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_override_argument(p, "tracking.max_width=320")
     p.set_defaults(func=run)
 
@@ -41,7 +42,7 @@ def run(args: Any) -> int:
     from ..config import load_config
     from ..datasets import open_dataset
     from ..eval.trajectory import ate
-    from ..tracking import Tracker, hold_last_good, trajectory_text, validate_tracking_config
+    from ..tracking import Tracker, hold_last_good, track_frames, trajectory_text, validate_tracking_config
 
     cfg = load_config(args.config, args.overrides)
     validate_tracking_config(cfg.tracking)
@@ -60,11 +61,9 @@ def run(args: Any) -> int:
     given: list[np.ndarray | None] = []
     rows: list[dict[str, Any]] = []
     t0 = time.perf_counter()
-    for frame in ds:
+    for frame, pose, info in track_frames(tracker, ds, progress=not args.no_progress):
         given.append(frame.pose)
-        poses.append(tracker.step(frame))
-        info = tracker.last
-        assert info is not None
+        poses.append(pose)
         rows.append(
             {
                 "index": frame.index,

@@ -195,6 +195,7 @@ class FrameRecord:
     pose: np.ndarray | None = None
     pose_source: str = ""
     pose_path: Path | None = None
+    pose_error: str | None = None  # why the layout's pose of this frame could not be read (file:line ...)
     timestamp: float = 0.0
     extras: dict[str, Path] = field(default_factory=dict)
 
@@ -251,6 +252,9 @@ class RGBDDataset:
                 f"{self.root}: frame range start={config.start} stride={config.stride} selects none of "
                 f"{len(records)} frames"
             )
+        # frames of the selection left out when opened (files missing, under on_bad_frame: skip): a run's
+        # count of skipped frames starts from this; frames skipped while iterating come on top
+        self.frames_left_out = 0
         self.records = self._drop_incomplete(selected)
         if config.intrinsics is not None:
             if len(config.intrinsics) != 4:
@@ -311,6 +315,7 @@ class RGBDDataset:
         kept = [rec for rec in selected if id(rec) not in missing]
         if self.config.on_bad_frame == "skip" and kept:
             log.warning("%s; leaving those frames out (data.on_bad_frame: skip)", msg)
+            self.frames_left_out = len(missing)
             return kept
         if self.config.on_bad_frame == "skip":
             raise DataError(f"{msg}; no selected frame is left")
@@ -490,6 +495,27 @@ class RGBDDataset:
             )
         return True
 
+    def check_image_size(self, size: tuple[int, int], source: Path) -> None:
+        """Check the (width, height) that ``source`` (a camera file) gives against the images: the first
+        frame whose depth image reads (a bad frame is the frames' business, not the camera file's).
+
+        Raises:
+            DataError: the sizes differ, naming ``source``, both sizes and the image; the intrinsics in
+                ``source`` are then most likely another image size's.
+        """
+        for rec in self.records:
+            try:
+                h, w = read_depth_raw(rec.depth_path).shape
+            except DataError:
+                continue
+            if (w, h) != tuple(size):
+                raise DataError(
+                    f"{source}: the camera is {size[0]}x{size[1]} (w x h), but the images are {w}x{h} "
+                    f"({self._relative(rec.depth_path)}); fix w and h (and the intrinsics, most likely "
+                    "another image size's), or give data.intrinsics = [fx, fy, cx, cy] for these images"
+                )
+            return
+
     def _check_principal_point(self, shape: tuple[int, int], path: Path) -> None:
         """Warn once when K's principal point is far from the centre of the first frame's depth image: K is
         then most likely another image size's (e.g. a colour camera's K with depth of a smaller size, which
@@ -548,6 +574,8 @@ def numbered_files(folder: Path, suffixes: tuple[str, ...] = (".png",), prefix: 
 def _read_pose(rec: FrameRecord) -> np.ndarray | None:
     """The frame's c2w pose, checked (a finite rigid 4x4; DataError naming its source otherwise), or None
     when the layout gives the frame none."""
+    if rec.pose_error is not None:
+        raise DataError(rec.pose_error)
     raw = read_matrix(rec.pose_path, (4, 4), "pose") if rec.pose_path is not None else rec.pose
     if raw is None:
         return None

@@ -42,33 +42,62 @@ def read_cam_params(path: Path) -> tuple[np.ndarray, float | None, tuple[int, in
     return K, scale, size
 
 
-def read_traj(path: Path) -> np.ndarray:
-    """[N, 4, 4] camera-to-world poses from a NICE-SLAM ``traj.txt`` (16 numbers per line)."""
+def read_traj_lines(path: Path) -> tuple[np.ndarray, dict[int, str]]:
+    """[N, 4, 4] camera-to-world poses from a NICE-SLAM ``traj.txt`` (16 numbers per line, blank lines
+    left out) and {pose index: error} for the lines that hold no pose (their poses are NaN), so that a
+    reader can fail or skip just those frames. Each error names the file and line."""
     if not path.is_file():
         raise DataError(f"{path}: trajectory file is missing")
-    poses = []
-    for k, line in enumerate(path.read_text().splitlines()):
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise DataError(f"{path}: cannot read the trajectory file ({e})") from e
+    poses, errors = [], {}
+    for k, line in enumerate(text.splitlines()):
         if not line.strip():
             continue
         try:
             vals = np.array(line.split(), dtype=np.float64)
         except ValueError as e:
-            raise DataError(f"{path}:{k + 1}: non-numeric pose ({e})") from e
+            errors[len(poses)] = f"{path}:{k + 1}: non-numeric pose ({e})"
+            vals = np.full(16, np.nan)
         if vals.size != 16:
-            raise DataError(f"{path}:{k + 1}: expected 16 numbers (a row-major 4x4 pose), found {vals.size}")
+            errors[len(poses)] = (
+                f"{path}:{k + 1}: expected 16 numbers (a row-major 4x4 pose), found {vals.size}"
+            )
+            vals = np.full(16, np.nan)
         poses.append(vals.reshape(4, 4))
     if not poses:
         raise DataError(f"{path}: trajectory file holds no poses")
-    return np.stack(poses)
+    return np.stack(poses), errors
+
+
+def read_traj(path: Path) -> np.ndarray:
+    """[N, 4, 4] camera-to-world poses from a NICE-SLAM ``traj.txt``; the first bad line is a
+    :class:`DataError` naming the file and line."""
+    poses, errors = read_traj_lines(path)
+    if errors:
+        raise DataError(bad_lines_message(errors))
+    return poses
+
+
+def bad_lines_message(errors: dict[int, str]) -> str:
+    """The first bad line's error, and how many more there are."""
+    first = errors[min(errors)]
+    return first if len(errors) == 1 else f"{first} (and {len(errors) - 1} more bad lines)"
 
 
 def list_replica_frames(results: Path) -> list[tuple[int, Path, Path]]:
-    """(frame number, rgb path, depth path) sorted by number, for ``results/frame*`` images."""
-    rgbs = [p for p in results.glob("frame*") if p.suffix.lower() in _RGB_SUFFIXES]
-    out = []
-    for p in rgbs:
-        n = frame_number(p.stem)
-        out.append((n, p, results / f"depth{p.stem[len('frame') :]}.png"))
+    """(frame number, rgb path, depth path) sorted by number, for the ``results/frame*`` images and the
+    ``results/depth*.png`` images. A depth image without its colour image gets the colour file's expected
+    name (the other frames' suffix), which the base class then reports as missing rather than the frame
+    disappearing without a word."""
+    rgbs = {frame_number(p.stem): p for p in results.glob("frame*") if p.suffix.lower() in _RGB_SUFFIXES}
+    suffix = next(iter(rgbs.values())).suffix if rgbs else ".jpg"
+    out = [(n, p, results / f"depth{p.stem[len('frame') :]}.png") for n, p in rgbs.items()]
+    for d in results.glob("depth*.png"):
+        if d.stem[len("depth") :].isdigit() and frame_number(d.stem) not in rgbs:
+            out.append((frame_number(d.stem), results / f"frame{d.stem[len('depth') :]}{suffix}", d))
     out.sort(key=lambda t: t[0])
     return out
 
@@ -94,16 +123,21 @@ class ReplicaDataset(RGBDDataset):
         if not frames:
             raise DataError(f"{results}: no frame*.jpg / frame*.png images")
         traj_path = root / "traj.txt"
-        poses = read_traj(traj_path)
+        poses, bad_lines = read_traj_lines(traj_path)
+        if bad_lines and config.on_bad_frame != "skip":
+            # found now rather than when mapping reaches the frame; under skip only those frames are left out
+            raise DataError(
+                f"{bad_lines_message(bad_lines)}; set data.on_bad_frame: skip to leave those frames out"
+            )
         if frames[-1][0] >= len(poses):
             raise DataError(
                 f"{traj_path}: {len(poses)} poses, but results/ holds frame number {frames[-1][0]} "
                 f"({frames[-1][1].name})"
             )
-        K = None
+        K, size = None, None
         cam = find_cam_params(root)
         if cam is not None:
-            K, scale, _ = read_cam_params(cam)
+            K, scale, size = read_cam_params(cam)
             if scale is not None:
                 self.depth_scale_default = scale
         records = [
@@ -113,6 +147,7 @@ class ReplicaDataset(RGBDDataset):
                 depth_path=depth,
                 pose=poses[n],
                 pose_source=f"{traj_path}:{n + 1}",
+                pose_error=bad_lines.get(n),
                 timestamp=float(n),
             )
             for n, rgb, depth in frames
@@ -123,3 +158,6 @@ class ReplicaDataset(RGBDDataset):
                 "give data.intrinsics = [fx, fy, cx, cy]"
             )
         super().__init__(root, records, K, config, segments_dir)
+        if size is not None and config.intrinsics is None:
+            assert cam is not None
+            self.check_image_size(size, cam)

@@ -48,7 +48,7 @@ import numpy as np
 from ..config import DataConfig
 from ..errors import DataError
 from .base import FrameRecord, K_from_values, RGBDDataset, numbered_files, read_depth_raw, read_label_png
-from .replica import read_traj
+from .replica import bad_lines_message, read_traj_lines
 
 log = logging.getLogger(__name__)
 
@@ -171,7 +171,11 @@ class SemanticNeRFDataset(RGBDDataset):
         labels = numbered_files(root / CLASS_DIR, prefix="semantic_class_")
         traj = trajectory_file(root)
         assert traj is not None  # root is a sequence
-        poses = read_traj(traj)
+        poses, bad_lines = read_traj_lines(traj)
+        if bad_lines and config.on_bad_frame != "skip":
+            raise DataError(
+                f"{bad_lines_message(bad_lines)}; set data.on_bad_frame: skip to leave those frames out"
+            )
         last = max(rgbs)
         if last >= len(poses):
             raise DataError(
@@ -185,6 +189,7 @@ class SemanticNeRFDataset(RGBDDataset):
                 # a missing depth file gets the name it should have, which the base class reports
                 depth_path=depths.get(n, root / "depth" / f"depth_{n}.png"),
                 pose=poses[n],
+                pose_error=bad_lines.get(n),
                 pose_source=f"{traj}:{n + 1}",
                 timestamp=float(n),
                 extras={"label": labels[n]} if n in labels else {},

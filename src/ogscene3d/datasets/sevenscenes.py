@@ -41,6 +41,18 @@ def _color_files(folder: Path) -> list[Path]:
     return sorted(p for p in folder.glob("frame-*.color.*") if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
 
 
+def _frame_color_files(folder: Path) -> list[Path]:
+    """The colour file of every frame in ``folder``, by frame name: a depth image without its colour image
+    gets the colour file's expected name (the other frames' suffix), which the base class then reports as
+    missing rather than the frame disappearing without a word."""
+    colors = {p.name.split(".")[0]: p for p in _color_files(folder)}
+    suffix = next(iter(colors.values())).suffix if colors else ".png"
+    for d in folder.glob("frame-*.depth.png"):
+        base = d.name.split(".")[0]
+        colors.setdefault(base, folder / f"{base}.color{suffix}")
+    return [colors[b] for b in sorted(colors)]
+
+
 def _sequence_dirs(root: Path) -> list[Path]:
     if _color_files(root):
         return [root]
@@ -72,7 +84,7 @@ class SevenScenesDataset(RGBDDataset):
         records = []
         for seq in _sequence_dirs(root):
             has_poses = any(seq.glob("frame-*.pose.txt"))  # a sequence without any pose file needs tracking
-            for rgb in _color_files(seq):
+            for rgb in _frame_color_files(seq):
                 base = rgb.name.split(".")[0]  # frame-000000
                 records.append(
                     FrameRecord(

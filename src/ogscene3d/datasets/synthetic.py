@@ -61,6 +61,7 @@ The segments in ``segments/`` are picked up automatically by :func:`open_dataset
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import logging
@@ -93,6 +94,11 @@ POINTS_PER_M2 = 1000.0
 MIN_POINTS_PER_INSTANCE = 300
 OBSERVED_TOLERANCE = 0.02  # metres, plus two pixel footprints (see ``observed_in_frame``)
 HFOV_DEG = 75.0
+SWEEP = 1.6 * np.pi  # radians the camera walks around the room (given enough frames, see _sweep)
+# the largest step between consecutive frames: well inside the mapper's default pose-jump limits
+# (mapping.max_pose_step 0.5 m, max_pose_step_deg 30), leaving room for the pitch and height wobble
+MAX_STEP_DEG = 20.0
+MAX_STEP_M = 0.35
 GENERATOR_VERSION = 2  # 2: gt/points.ply carries the per-point "observed" flag
 
 
@@ -117,9 +123,9 @@ def _look_rotation_zup(yaw: np.ndarray, pitch: np.ndarray) -> np.ndarray:
 def exploration_trajectory(room: Room, frames: int, seed: int) -> np.ndarray:
     """[frames, 4, 4] c2w poses (world frame) along an ellipse inside the room, looking across it.
 
-    The camera walks ~290 degrees around the room at about 1.45 m height, looking at the opposite
-    side with a slight lead in the walking direction and ~20 degrees down, so the walls and the
-    furniture come into view one after the other.
+    The camera walks ~290 degrees around the room (less for few frames, see ``_sweep``) at about 1.45 m
+    height, looking at the opposite side with a slight lead in the walking direction and ~20 degrees down,
+    so the walls and the furniture come into view one after the other.
     """
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x7EA]))
     W, D, _ = room.size
@@ -127,10 +133,10 @@ def exploration_trajectory(room: Room, frames: int, seed: int) -> np.ndarray:
     direction = 1.0 if rng.uniform() < 0.5 else -1.0
     height = rng.uniform(1.35, 1.55)
     s = np.linspace(0.0, 1.0, frames) if frames > 1 else np.zeros(1)
-    theta = theta0 + direction * 1.6 * np.pi * s
     boxes = [p.aabb for o in room.zup_objects if o.class_name not in STRUCTURAL_CLASSES for p in o.parts]
     for shrink in (1.0, 0.85, 0.7, 0.55, 0.4):
         ax, ay = max(W / 2 - 1.05, 0.3) * shrink, max(D / 2 - 1.05, 0.3) * shrink
+        theta = theta0 + direction * _sweep(frames, max(ax, ay)) * s
         pos = np.stack([ax * np.cos(theta), ay * np.sin(theta), height + 0.08 * np.sin(3.0 * np.pi * s)], -1)
         clear = all(
             not np.any(np.all((pos > lo - 0.3) & (pos < hi + 0.3), axis=1)) for lo, hi in boxes
@@ -146,6 +152,17 @@ def exploration_trajectory(room: Room, frames: int, seed: int) -> np.ndarray:
     poses[:, :3, :3] = WORLD_FROM_ZUP @ R
     poses[:, :3, 3] = pos @ WORLD_FROM_ZUP.T
     return poses
+
+
+def _sweep(frames: int, radius: float) -> float:
+    """The angle (radians) the camera walks around the room: :data:`SWEEP`, or less where ``frames`` are too
+    few for it, so that no step between consecutive frames exceeds :data:`MAX_STEP_DEG` of turn or
+    :data:`MAX_STEP_M` along an ellipse of largest semi-axis ``radius`` (the mapper's pose-jump check would
+    otherwise flag the generator's own sequence)."""
+    if frames < 2:
+        return SWEEP
+    step = min(np.deg2rad(MAX_STEP_DEG), 2.0 * np.arcsin(min(1.0, MAX_STEP_M / (2.0 * radius))))
+    return float(min(SWEEP, (frames - 1) * step))
 
 
 def perturb_poses(poses: np.ndarray, sigma: float, rng: np.random.Generator) -> np.ndarray:
@@ -511,35 +528,38 @@ def make_synthetic_scene(
         classes_of[obj.instance_id] = classes[obj.class_name]
 
     steps: Iterator = iter(range(frames))
+    bars = contextlib.ExitStack()
     if progress is True:
-        from tqdm import tqdm
+        from ..progress import progress as progress_bar
 
-        steps = iter(tqdm(range(frames), desc="synth", unit="frame"))
+        steps = iter(bars.enter_context(progress_bar(range(frames), desc="synth", total=frames)))
     elif callable(progress):
         steps = iter(progress(range(frames)))
     max_depth = 65535.0 / REPLICA_DEPTH_SCALE
     pts = sample_surface_points(room, seed)
     observed = np.zeros(len(pts["xyz"]), dtype=bool)
-    for i in steps:
-        rgb, depth, inst = renderer.render(poses[i], K, width, height)
-        observed |= observed_in_frame(pts["xyz"], pts["instance"], poses[i], K, depth, inst)
-        valid = depth > 0
-        if depth_noise > 0:
-            depth = depth + noise_rng.normal(0.0, depth_noise, depth.shape).astype(np.float32)
-            depth[~valid] = 0.0
-            depth = np.maximum(depth, 0.0)
-        depth[depth > max_depth] = 0.0
-        seg = segmenter(rgb, depth, gt_instances=inst, frame_index=i)
-        stem = f"{i:06d}"
-        _encode(
-            out / "results" / f"frame{stem}.jpg",
-            cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR),
-            [cv2.IMWRITE_JPEG_QUALITY, 95],
-        )
-        _encode(out / "results" / f"depth{stem}.png", np.rint(depth * REPLICA_DEPTH_SCALE).astype(np.uint16))
-        _encode(out / "gt" / f"instance{stem}.png", inst.astype(np.uint16))
-        seg = detector(seg, inst, frame_index=i)  # fused with named detector masks, as sam+detector does
-        write_segments(out / "segments", f"frame{stem}", seg.ids, seg.scores, seg.names)
+    with bars:  # the bar's log routing ends with the loop
+        for i in steps:
+            rgb, depth, inst = renderer.render(poses[i], K, width, height)
+            observed |= observed_in_frame(pts["xyz"], pts["instance"], poses[i], K, depth, inst)
+            valid = depth > 0
+            if depth_noise > 0:
+                depth = depth + noise_rng.normal(0.0, depth_noise, depth.shape).astype(np.float32)
+                depth[~valid] = 0.0
+                depth = np.maximum(depth, 0.0)
+            depth[depth > max_depth] = 0.0
+            seg = segmenter(rgb, depth, gt_instances=inst, frame_index=i)
+            stem = f"{i:06d}"
+            _encode(
+                out / "results" / f"frame{stem}.jpg",
+                cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR),
+                [cv2.IMWRITE_JPEG_QUALITY, 95],
+            )
+            raw_depth = np.rint(depth * REPLICA_DEPTH_SCALE).astype(np.uint16)
+            _encode(out / "results" / f"depth{stem}.png", raw_depth)
+            _encode(out / "gt" / f"instance{stem}.png", inst.astype(np.uint16))
+            seg = detector(seg, inst, frame_index=i)  # fused with named detector masks, as sam+detector does
+            write_segments(out / "segments", f"frame{stem}", seg.ids, seg.scores, seg.names)
 
     write_points_ply(out / "gt" / "points.ply", pts, classes_of, observed)
     write_mesh_ply(out / "gt" / "mesh.ply", room, classes_of)

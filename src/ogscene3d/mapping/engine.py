@@ -360,16 +360,15 @@ class MappingEngine:
         """Map ``frames`` (positions ``start`` on), then finish and save the run; see the class doc."""
         mapper = self.mapper
         seen0, counts0 = mapper.frames_seen, _counts(mapper)
-        it: Any = frames
-        if progress:
-            from tqdm import tqdm
+        from ..progress import progress as progress_bar
 
-            it = tqdm(frames, desc=desc, unit="frame", total=total)
         t0 = time.perf_counter()
         self._status("mapping")
         self._given, self._last_index = 0, None
         try:
-            self._loop(it)
+            # log lines go through the bar while it is open, instead of being glued onto it
+            with progress_bar(frames, desc=desc, total=total, disable=not progress) as it:
+                self._loop(it)
         except DataError as e:
             # the bad frames skipped up to the last frame mapped count in the map saved now
             self._summary(self._given, self._last_index, seen0, counts0, None)

@@ -1,0 +1,69 @@
+"""Logging while a progress bar runs: each message on a line of its own, not glued onto the bar."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import re
+import sys
+
+from ogscene3d.progress import progress
+
+log = logging.getLogger("ogscene3d.test_progress")
+
+
+def _segments(text: str) -> list[str]:
+    """What a terminal would show on separate lines (a carriage return starts the line over)."""
+    return [s for s in re.split(r"[\r\n]", text) if s.strip()]
+
+
+@contextlib.contextmanager
+def console_logging():
+    """A console handler on the root logger, as the CLI's logging.basicConfig installs, on the stderr that
+    capsys has in place while the test runs (not yet while fixtures are set up)."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    root = logging.getLogger()
+    root.addHandler(handler)
+    try:
+        yield handler
+    finally:
+        root.removeHandler(handler)
+
+
+def test_warnings_logged_inside_a_bar_get_their_own_line(capsys):
+    with console_logging() as handler:
+        with progress(range(3), desc="mapping", total=3) as frames:
+            for i in frames:
+                log.warning("falling back to the classical segmenter (%d)", i)
+                frames.set_postfix(kf=i)
+        # the handler is the console's again once the bar is closed
+        assert handler in logging.getLogger().handlers
+    err = capsys.readouterr().err
+    lines = _segments(err)
+    messages = [s for s in lines if "falling back" in s]
+    assert len(messages) == 3
+    for s in messages:
+        assert s.startswith("WARNING ogscene3d.test_progress: falling back"), repr(s)
+        assert "mapping:" not in s
+    assert any("mapping: 100%" in s for s in lines)
+
+
+def test_without_logging_setup_warnings_still_show_on_their_own_line(capsys, monkeypatch):
+    root = logging.getLogger()
+    monkeypatch.setattr(root, "handlers", [])
+    with progress(range(2), desc="track") as frames:
+        for _ in frames:
+            log.warning("frame skipped")
+            log.info("not shown: below the last-resort level")
+    err = capsys.readouterr().err
+    messages = [s for s in _segments(err) if "frame skipped" in s]
+    assert messages == ["frame skipped", "frame skipped"]
+    assert "not shown" not in err
+    assert root.handlers == []
+
+
+def test_disabled_bar_passes_the_items_through(capsys):
+    with progress(iter([1, 2]), desc="x", disable=True) as items:
+        assert list(items) == [1, 2]
+    assert "x:" not in capsys.readouterr().err
