@@ -365,3 +365,14 @@ def test_live_synthetic_uses_the_synthetic_config_and_renders_only_the_mapped_fr
     args = build_parser().parse_args(["--synthetic", "--config", str(tmp_path / "missing.yaml")])
     with pytest.raises(Exception, match="missing.yaml"):
         live_config(args)
+
+
+def test_frames_the_dataset_leaves_out_at_open_count_as_skipped(tmp_path, capsys):
+    # a frame whose colour file is missing is left out when the dataset opens (data.on_bad_frame: skip),
+    # before the frame loop: the summary and timings.json count it with the other skipped frames
+    scene = _replica_scene(tmp_path / "scene", frames=4)
+    (scene / "results" / "frame000002.jpg").unlink()
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out), "--set", "data.on_bad_frame=skip"]) == 0
+    assert "read 4 frames: 3 mapped, 1 skipped (data.on_bad_frame: skip)" in capsys.readouterr().out
+    assert json.loads((out / "timings.json").read_text())["counts"]["frames_skipped_bad"] == 1

@@ -282,6 +282,7 @@ class MappingEngine:
         self.start = 0
         self.resumed = False
         self.bounded = False  # the frames end before the whole sequence's (--max-frames)
+        self.left_out = 0  # frames the dataset left out as it opened (see open)
         self.stop = StopRequest()
         self._given = 0  # frames given to the mapper by this run() so far
         self._last_index: int | None = None  # the position of the last one
@@ -292,6 +293,9 @@ class MappingEngine:
         after checking that it maps these frames with these settings; then record the run in ``OUT``.
         ``bounded``: ``ds`` was cut short (``--max-frames``). -> the dataset position to go on from."""
         mapper, out = self.mapper, self.out
+        # frames the dataset left out as it opened (a missing file, under data.on_bad_frame: skip) never reach
+        # the frame loop: they count with the skipped ones, once (a resume opens the dataset again)
+        self.left_out = 0 if resume else int(getattr(ds, "frames_left_out", 0) or 0)
         # a live camera (ds None) has no frames to name: its map cannot be resumed against them
         source = dataset_source(cfg, ds) if ds is not None else {}
         self.bounded = bounded
@@ -452,7 +456,8 @@ class MappingEngine:
             through = (last_index + 1 - self.start) if last_index is not None else given
         else:
             through = total
-        skipped = max(0, through - given)
+        skipped = max(0, through - given) + self.left_out
+        self.left_out = 0  # counted now, in this summary and in the timings
         if skipped and hasattr(mapper, "timings") and hasattr(mapper.timings, "add"):
             mapper.timings.add("frames_skipped_bad", skipped)  # in timings.json, across resumes
 
