@@ -376,3 +376,16 @@ def test_frames_the_dataset_leaves_out_at_open_count_as_skipped(tmp_path, capsys
     assert main(["run", *_common(scene, out), "--set", "data.on_bad_frame=skip"]) == 0
     assert "read 4 frames: 3 mapped, 1 skipped (data.on_bad_frame: skip)" in capsys.readouterr().out
     assert json.loads((out / "timings.json").read_text())["counts"]["frames_skipped_bad"] == 1
+
+
+def test_run_says_which_config_to_use_for_small_images(tmp_path, caplog):
+    # the paper's optimisation budget on small images is slow and moves the Gaussians off the surfaces
+    # (docs/defaults.md): `run` names the config to use, and stays quiet with that config's budget
+    scene = _replica_scene(tmp_path / "scene", frames=2)
+    with caplog.at_level("WARNING"):
+        assert main(["run", *_common(scene, tmp_path / "a"), "--set", "mapping.opt_iters=10"]) == 0
+    assert "use --config synthetic" in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        assert main(["run", *_common(scene, tmp_path / "b"), "--set", "mapping.opt_iters=3"]) == 0
+    assert "use --config synthetic" not in caplog.text

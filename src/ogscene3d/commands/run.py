@@ -105,6 +105,7 @@ def run(args: argparse.Namespace) -> int:
             )
         # --max-frames bounds this invocation only (a resume without it goes on to the end)
         ds = open_frames(cfg, data, args.segments, args.max_frames)
+        _warn_small_images(cfg, ds)
         engine = MappingEngine(Mapper(cfg, cfg.device), out, data)
         start = engine.open(cfg, ds, resume=args.resume, bounded=args.max_frames is not None)
         # bad frames raise, or are skipped with a warning under data.on_bad_frame: skip
@@ -132,3 +133,28 @@ def _recorded_data_path(saved: Path) -> str | None:
     data = loaded.get("data") if isinstance(loaded, dict) else None
     path = data.get("path") if isinstance(data, dict) else None
     return path if isinstance(path, str) else None
+
+
+# The most a Gaussian centre may drift per keyframe (mapping.lr_means x mapping.opt_iters) before small
+# images' maps suffer: configs/synthetic.yaml's budget; docs/defaults.md has the measurements.
+SMALL_IMAGE_WIDTH = 320
+SMALL_IMAGE_DRIFT = 3e-4
+
+
+def _warn_small_images(cfg, ds) -> None:
+    """Say which config to use when the paper's optimisation budget meets small images (slow, and it moves
+    the Gaussians off the surfaces there)."""
+    import numpy as np
+
+    width = 2.0 * float(np.asarray(ds.K)[0, 2])  # the principal point is near the image centre
+    drift = cfg.mapping.lr_means * cfg.mapping.opt_iters
+    if width <= SMALL_IMAGE_WIDTH and drift > SMALL_IMAGE_DRIFT * 1.001:
+        log.warning(
+            "images about %d px wide with mapping.opt_iters=%d and mapping.lr_means=%g: slow, and the "
+            "Gaussians drift off the surfaces; for images up to %d px wide use --config synthetic (see "
+            "docs/defaults.md)",
+            round(width),
+            cfg.mapping.opt_iters,
+            cfg.mapping.lr_means,
+            SMALL_IMAGE_WIDTH,
+        )
