@@ -389,3 +389,15 @@ def test_run_says_which_config_to_use_for_small_images(tmp_path, caplog):
     with caplog.at_level("WARNING"):
         assert main(["run", *_common(scene, tmp_path / "b"), "--set", "mapping.opt_iters=3"]) == 0
     assert "use --config synthetic" not in caplog.text
+
+
+def test_a_resume_bounded_at_a_finished_maps_end_says_so(tmp_path, capsys):
+    # the map was finished at --max-frames 2: a resume bounded there reads nothing, and must not claim the
+    # map covers every frame of the sequence
+    scene = _replica_scene(tmp_path / "scene", frames=3)
+    out = tmp_path / "run"
+    assert main(["run", *_common(scene, out), "--max-frames", "2"]) == 0
+    capsys.readouterr()
+    assert main(["run", *_common(scene, out), "--resume", "--max-frames", "2"]) == 0
+    said = capsys.readouterr().out
+    assert "--max-frames 2 ends at or before frame 2" in said and "every frame" not in said

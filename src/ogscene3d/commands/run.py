@@ -117,7 +117,14 @@ def run(args: argparse.Namespace) -> int:
         print(stopped_message(summary))
         return 130
     if summary.status == "up to date":
-        print(f"nothing to do: {out} has mapped every frame of {data} (--resume read no new frame)")
+        if args.max_frames is not None:
+            # the map may not have reached the end of the sequence: only this bound stopped it reading on
+            print(
+                f"nothing to do: --max-frames {args.max_frames} ends at or before frame {start}, where the "
+                f"map in {out} already is; leave --max-frames out, or raise it, to map the frames after it"
+            )
+        else:
+            print(f"nothing to do: {out} has mapped every frame of {data} (--resume read no new frame)")
         return 0
     print(summary.line())
     print(engine.mapper.timings.table())
