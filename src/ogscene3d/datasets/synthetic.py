@@ -490,7 +490,8 @@ def make_synthetic_scene(
     noise_rng = np.random.default_rng(np.random.SeedSequence([seed, 0xD0152]))
     written_poses = perturb_poses(poses, pose_noise, noise_rng)
     renderer = MeshRenderer(room, device=device)
-    segmenter = SimulatedSegmenter(noise, seed=seed)
+    # i26: support relations let the simulated SAM merge an object with what it stands or hangs on
+    segmenter = SimulatedSegmenter(noise, seed=seed, support={o.instance_id: o.support for o in room.objects})
 
     cam = {"camera": {"w": width, "h": height, "fx": float(K[0, 0]), "fy": float(K[1, 1]),
                       "cx": float(K[0, 2]), "cy": float(K[1, 2]), "scale": REPLICA_DEPTH_SCALE}}  # fmt: skip
