@@ -48,6 +48,7 @@ from ..device import resolve_device
 from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame, implausible_median_depth
 from ..gaussians import NPZ_READ_ERRORS, GaussianMap, corrupt_npz_message
+from .evidence import SegmentEvidence
 from .init import make_probes
 from .keyframes import KeyframeSelector
 from .local import (
@@ -187,6 +188,7 @@ class Mapper:
         self.next_index = 0
         self.keyframe_count = 0
         self.rng = np.random.default_rng(config.seed)
+        self.evidence = SegmentEvidence(self.device)  # i26: multi-view co-segmentation evidence
         # built now, so that a mistake in the graph's settings (captioner, relations, confidence model)
         # stops the run before its first frame instead of disabling the graph hours into it
         self._graph = self._new_graph() if config.graph.enabled else None
@@ -397,6 +399,7 @@ class Mapper:
 
         with self.timings.section("render_check"):
             alpha, depth = self._render_check(frame)
+        self._observe_evidence(frame, segments)  # i26
         with self.timings.section("init"):
             probes = make_probes(
                 frame,
@@ -602,8 +605,23 @@ class Mapper:
             self.timings.add("labels_merged", len(mapping))
             self.timings.add("segments_merged", int(merged.numel()))
 
+    def _observe_evidence(self, frame: Frame, segments: np.ndarray | None) -> None:
+        """i26: the keyframe's co-segmentation evidence (``evidence.py``), on the map before association."""
+        if not (self.use_refine and (self.cfg.evidence_split or self.cfg.evidence_merge)):
+            return
+        with self.timings.section("evidence"):
+            self.evidence.observe(
+                self.map, segments, frame.pose, frame.K, frame.depth,
+                margin=self.cfg.init_depth_margin, min_group=self.cfg.evidence_min_group,
+            )  # fmt: skip
+
     def _longterm(self) -> None:
         cfg = self.cfg
+        if cfg.evidence_split:  # i26: before Eq. 16, whose P_conf then renders the lowered confidences
+            n = self.evidence.lower_confidences(
+                self.map, min_views=cfg.evidence_min_views, split_ratio=cfg.evidence_split_ratio
+            )
+            self.timings.add("evidence_lowered", n)
         for entry in self.memory.next_views(cfg.longterm_views):
             st = longterm_view_update(
                 self.map,
@@ -679,6 +697,16 @@ class Mapper:
     def _refine(self) -> None:
         """Global 3D refinement (Algorithm 1), with its relabelling counts added to the timings."""
         cfg = self.cfg
+        if cfg.evidence_split or cfg.evidence_merge:  # i26: before Algorithm 1
+            with self.timings.section("evidence"):
+                ev = self.evidence.split_and_merge(
+                    self.map, split=cfg.evidence_split, merge=cfg.evidence_merge,
+                    min_views=cfg.evidence_min_views, split_ratio=cfg.evidence_split_ratio,
+                    merge_ratio=cfg.evidence_merge_ratio, tau_low=cfg.tau_low, r_search=cfg.r_search,
+                    graph_k=cfg.refine_graph_k, min_group=cfg.evidence_min_group,
+                )  # fmt: skip
+            for k, v in ev.items():
+                self.timings.add(f"evidence_{k}", v)
         with self.timings.section("refine"):
             st = global_refinement(
                 self.map.means,
