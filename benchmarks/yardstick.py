@@ -11,11 +11,15 @@ MaskClustering (Yan et al., CVPR 2024) does, and so tells how much instance accu
   are contained in the same one, counted over at least ``MIN_VIEWS`` such frames. A view that merges a vase
   with its cabinet contains both in one mask; the views that segment them apart contain them in two, so the
   pair stays apart unless most views merge them.
-* As MaskClustering, the merging is iterative with falling thresholds (0.9 ... 0.5): at each, clusters whose
+* As MaskClustering, the merging is iterative with falling thresholds (0.9, 0.8, 0.7): at each, clusters whose
   consensus reaches it are joined (connected components), and seen / contained are recomputed for the new
   clusters from the union of their points.
 
-The result is a labelled point set (the masks' points with their cluster id), scored like a map.
+The result is a labelled point set, scored like a map: the masks' points are pooled in ``VOXEL`` voxels,
+and a voxel goes to the smallest cluster that holds it in at least ``CLAIM`` of the frames whose masks cover
+it (else to the cluster that holds it most often). Views that absorbed a cup into the table cover the cup's
+voxels with the table's cluster, the others with the cup's: the more specific claim wins, as an object
+nested in its support is smaller than the support.
 
     python benchmarks/yardstick.py SCENE_DIR        # prints instance mIoU and class mIoU
 """
@@ -30,11 +34,16 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-THRESHOLDS = (0.9, 0.8, 0.7, 0.6, 0.5)
+# MaskClustering goes down to 0.5; under SAM-like absorption (a small object inside its support's mask in
+# half of the views) the lower levels merged every small object with its support: on synthetic seed 0,
+# 52 clusters and instance mIoU 35.4 against 67 and 40.0 when stopping at 0.7
+THRESHOLDS = (0.9, 0.8, 0.7)
 SEEN_FRACTION = 0.3
 CONTAIN = 0.8
 MIN_VIEWS = 2
 MIN_MASK_POINTS = 3
+VOXEL = 0.03  # metres
+CLAIM = 0.3
 
 
 def _frames(scene: str | Path) -> list:
@@ -148,8 +157,35 @@ def consensus_edges(cont: np.ndarray, threshold: float, chunk: int = 64) -> np.n
     return np.concatenate(edges) if edges else np.zeros((0, 2), np.int64)
 
 
+def assign_voxels(
+    points: np.ndarray, point_cluster: np.ndarray, point_frame: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Voxel centres [V,3] and their cluster [V] (see the module docstring: the most specific claim)."""
+    key3 = np.floor(points / VOXEL).astype(np.int64)
+    vox, vidx = np.unique(key3, axis=0, return_inverse=True)
+    vidx = vidx.reshape(-1)
+    nv, nc = len(vox), int(point_cluster.max()) + 1
+    nf = int(point_frame.max()) + 1
+    # distinct frames per voxel, and per (voxel, cluster)
+    vf = np.unique(vidx * nf + point_frame)
+    frames_per_voxel = np.bincount(vf // nf, minlength=nv)
+    vcf = np.unique((vidx * nc + point_cluster) * nf + point_frame)
+    vc, n = np.unique(vcf // nf, return_counts=True)
+    v, c = vc // nc, vc % nc
+    ratio = n / frames_per_voxel[v]
+    size = np.bincount(point_cluster, minlength=nc)
+    # per voxel: claims (ratio >= CLAIM) first, then the smallest cluster; without a claim the largest ratio
+    claim = ratio >= CLAIM
+    order = np.lexsort((np.where(claim, size[c], -ratio), ~claim, v))
+    first = np.ones(order.size, bool)
+    first[1:] = v[order][1:] != v[order][:-1]
+    out = np.full(nv, -1, np.int64)
+    out[v[order][first]] = c[order][first]
+    return (vox + 0.5) * VOXEL, out
+
+
 def view_consensus(frames: list, step: int = 2) -> tuple[np.ndarray, np.ndarray]:
-    """Cluster every frame's masks at once; returns the masks' points [P,3] and their cluster id [P]."""
+    """Cluster every frame's masks at once; returns labelled voxel centres [V,3] and their cluster [V]."""
     points, owner, masks = mask_points(frames, step)
     if not masks:
         return points, owner
@@ -161,7 +197,8 @@ def view_consensus(frames: list, step: int = 2) -> tuple[np.ndarray, np.ndarray]
         # a cluster's container is a mask; two clusters agree when the same mask holds both
         comp = _components(n, consensus_edges(cont, thr))
         _, cluster = np.unique(comp[cluster], return_inverse=True)
-    return points, cluster[owner]
+    frame_of_mask = np.array([f for f, _ in masks], dtype=np.int64)
+    return assign_voxels(points, cluster[owner], frame_of_mask[owner])
 
 
 def main(argv: list[str] | None = None) -> int:

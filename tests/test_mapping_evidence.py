@@ -116,3 +116,22 @@ def test_labels_mostly_in_one_segment_merge(device):
         assert out["merged_labels"] == (1 if k == 2 else 0)
     assert torch.unique(gm.labels[~vase]).numel() == 1
     assert torch.all(gm.labels[vase] == 2)
+
+
+def test_veto_undoes_a_relabel_between_labels_seen_apart(device):
+    """A small object (label 2) always in its own segment keeps its label when Alg. 1 gives it the
+    surrounding label 0; a relabel between labels never seen together in a view stands."""
+    gm, vase = plane_map(device)
+    gm.labels[vase] = 2
+    ev = SegmentEvidence(gm.device)
+    for _ in range(3):
+        ev.observe(gm, segments_with_vase(), POSE, K, DEPTH)
+    before = (gm.labels.clone(), gm.confidences.clone())
+    gm.labels[vase] = 0  # what the individual refinement did
+    gm.confidences[vase] = 0.5
+    far = torch.nonzero(~vase).squeeze(1)[:5]
+    gm.labels[far] = 7  # a label the evidence knows nothing about
+    n = ev.veto(gm, *before, min_views=3, apart_ratio=0.3)
+    assert n == int(vase.sum())
+    assert torch.all(gm.labels[vase] == 2) and torch.all(gm.confidences[vase] == 0.9)
+    assert torch.all(gm.labels[far] == 7)

@@ -178,6 +178,8 @@ class MappingConfig:
     evidence_split_ratio: float = 0.5  # float in (0, 1]: share of split views that marks a Gaussian
     evidence_merge_ratio: float = 0.7  # float in (0, 1]: share of one-segment views that merges two labels
     evidence_min_group: int = 3  # int >= 1: Gaussians a separate part needs (per view, and to be split off)
+    evidence_veto: bool = True  # bool: undo Alg. 1 relabellings between labels that most views show apart
+    evidence_apart_ratio: float = 0.3  # float in [0, 1]: labels in one segment in fewer views are apart
 
 
 @dataclass

@@ -26,6 +26,11 @@ incrementally:
   (conf < tau_low) with split evidence are split off their label, each spatially connected group of at least
   ``min_group`` of them (same label, r_search) becoming a new label at confidence 0.5 (``evidence_split``).
   Algorithm 1 then re-decides what is left low.
+* **veto** (after Alg. 1, ``evidence_veto``): a relabelling by Alg. 1 from label a to label b is undone when
+  at least ``min_views`` views held both labels mostly in one segment each and fewer than ``apart_ratio`` of
+  them in the same one: the views say a and b are different objects. Without it a small object whose
+  confidence fell (low SAM scores of its corrupted views, Eq. 5 decreases at its boundary) took the label of
+  the wall or the table around it, its only high-confidence neighbour.
 
 A SAM that cuts a wall or a chair at random places puts a given Gaussian in a minority piece only in a few
 views, far below ``split_ratio``; a support merge that SAM makes in a quarter of the views leaves the pair
@@ -226,3 +231,29 @@ class SegmentEvidence:
         self.stats.split_labels += out["split_labels"]
         self.stats.split_gaussians += out["split_gaussians"]
         return out
+
+    def veto(
+        self,
+        gm,
+        labels_before: torch.Tensor,
+        conf_before: torch.Tensor,
+        *,
+        min_views: int = 3,
+        apart_ratio: float = 0.3,
+    ) -> int:
+        """Undo relabellings (``labels_before`` -> ``gm.labels``) between labels that the views show apart
+        (in place, confidences restored from ``conf_before``). Returns how many Gaussians were restored."""
+        n = self.pair_views.shape[0]
+        changed = (gm.labels != labels_before) & (labels_before >= 0) & (gm.labels >= 0)
+        rows = torch.nonzero(changed).squeeze(1)
+        if rows.numel() == 0 or n == 0:
+            return 0
+        a, b = labels_before[rows].long(), gm.labels[rows].long()
+        ok = (a < n) & (b < n)
+        rows, a, b = rows[ok], a[ok], b[ok]
+        v, t = self.pair_views[a, b], self.pair_together[a, b]
+        apart = (v >= min_views) & (t < apart_ratio * v)
+        back = rows[apart]
+        gm.labels[back] = labels_before[back]
+        gm.confidences[back] = conf_before[back]
+        return int(back.numel())

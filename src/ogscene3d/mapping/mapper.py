@@ -707,6 +707,7 @@ class Mapper:
                 )  # fmt: skip
             for k, v in ev.items():
                 self.timings.add(f"evidence_{k}", v)
+        before = (self.map.labels.clone(), self.map.confidences.clone()) if cfg.evidence_veto else None  # i26
         with self.timings.section("refine"):
             st = global_refinement(
                 self.map.means,
@@ -721,6 +722,12 @@ class Mapper:
             )
         for k, v in st.as_dict().items():
             self.timings.add(f"refine_{k}", v)
+        if before is not None:  # i26
+            with self.timings.section("evidence"):
+                n = self.evidence.veto(
+                    self.map, *before, min_views=cfg.evidence_min_views, apart_ratio=cfg.evidence_apart_ratio
+                )
+            self.timings.add("evidence_vetoed", n)
 
     def finalize(self) -> None:
         """End of stream: one last long-term pass and refinement (per the ablation), then pruning.
