@@ -1,7 +1,7 @@
 """CPU time per keyframe of the mapper's semantic modules, this tree against a base revision, side by side.
 
     python benchmarks/semantic_ab.py prepare 23b0e14 .ab/base          # lay out the base revision's package
-    python benchmarks/mapping_semantic_ab.py .ab/base SCENE --rounds 2 --device cpu
+    python benchmarks/mapping_semantic_ab.py .ab/base SCENE --rounds 2 --device cpu [--set KEY=VALUE ...]
 
 Maps the synthetic scene SCENE (``ogscene3d synth``) with the full system (``mapping.ablation: full``, the
 scene graph off) in fresh processes, this tree and the base (``PYTHONPATH=DIR``) in turn for ``--rounds``
@@ -33,17 +33,19 @@ import json, sys
 from ogscene3d.config import load_config
 from ogscene3d.mapping.ablation import map_sequence
 from ogscene3d.datasets import open_dataset
-cfg = load_config(sys.argv[1], ["mapping.ablation=full", "graph.enabled=false"])
+cfg = load_config(sys.argv[1], ["mapping.ablation=full", "graph.enabled=false", *sys.argv[5:]])
 m = map_sequence(cfg, open_dataset(sys.argv[2], config=cfg.data), sys.argv[3], sys.argv[4])
 """
 
 
-def _run(tree: str, baseline: Path | None, scene: Path, device: str, config: Path) -> dict[str, float]:
+def _run(
+    tree: str, baseline: Path | None, scene: Path, device: str, config: Path, overrides: list[str]
+) -> dict[str, float]:
     env = dict(os.environ)
     if baseline is not None:
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(baseline.resolve()), env.get("PYTHONPATH")]))
     with tempfile.TemporaryDirectory() as tmp:
-        cmd = [sys.executable, "-c", _MAP, str(config), str(scene), tmp, device]
+        cmd = [sys.executable, "-c", _MAP, str(config), str(scene), tmp, device, *overrides]
         proc = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True)
         if proc.returncode:
             raise SystemExit(f"mapping failed for {tree} (exit {proc.returncode}):\n{proc.stderr[-2000:]}")
@@ -62,6 +64,7 @@ def main() -> None:
     ap.add_argument("--rounds", type=positive_int, default=2)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--config", type=Path, default=ROOT / "configs" / "synthetic.yaml")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     args = ap.parse_args()
     if not (args.base / "ogscene3d").is_dir():
         raise SystemExit(
@@ -72,8 +75,9 @@ def main() -> None:
     )
     rows: dict[str, list[dict[str, float]]] = {"this tree": [], rev: []}
     for _ in range(args.rounds):
-        rows["this tree"].append(_run("this tree", None, args.scene, args.device, args.config))
-        rows[rev].append(_run(rev, args.base, args.scene, args.device, args.config))
+        here = _run("this tree", None, args.scene, args.device, args.config, args.overrides)
+        rows["this tree"].append(here)
+        rows[rev].append(_run(rev, args.base, args.scene, args.device, args.config, args.overrides))
     med = {
         t: {k: statistics.median(r[k] for r in rs) for k in (*SEMANTIC, "semantic")} for t, rs in rows.items()
     }
