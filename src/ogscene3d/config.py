@@ -453,6 +453,12 @@ RANGES: dict[str, Range] = {
     "mapping.longterm_knn_k": _int(1),
     "mapping.merge_contain": _UNIT,
     "mapping.merge_min_score": _UNIT,
+    # i26: mapping/evidence.py
+    "mapping.evidence_min_views": _int(1),
+    "mapping.evidence_split_ratio": _float(0.0, 1.0, lo_open=True),
+    "mapping.evidence_merge_ratio": _float(0.0, 1.0, lo_open=True),
+    "mapping.evidence_min_group": _int(1),
+    "mapping.evidence_apart_ratio": _UNIT,
     "graph.init_keyframes": _int(1),
     "graph.update_every": _int(1),
     "graph.tau_update": _UNIT,
