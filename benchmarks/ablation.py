@@ -267,6 +267,27 @@ def score_seed(scene: Path, seed_out: Path, ablations: list[str], res: dict, yar
     return rows
 
 
+def report_partial(path: Path, out: Path) -> int:
+    """The tables and plot of the seeds a stopped run finished (``ablation_partial.json``)."""
+    raw = json.loads(path.read_text())
+    per_seed = {int(k): v for k, v in raw.items()}
+    if not per_seed:
+        raise SystemExit(f"{path}: no finished seed")
+    first = next(iter(per_seed.values()))
+    rows = [r for r in (*ABLATIONS, YARDSTICK) if r in first]
+    summary = summarize(per_seed, rows)
+    print(f"{len(per_seed)} seeds finished ({', '.join(map(str, per_seed))}), from {path}; in %")
+    print("per seed (inst mIoU / class mIoU / recovered after a wrong first view):")
+    print(format_per_seed(per_seed, rows))
+    print("mean ± sample std over seeds:")
+    print(format_summary(summary))
+    out.mkdir(parents=True, exist_ok=True)
+    img = plot_summary(summary, f"Ablation, {len(per_seed)} seeds", str(path))
+    png = write_png(out / "ablation.png", img)
+    print(f"wrote {png}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", default="0,1,2", help="e.g. 0,1,2 or 0-4 (default 0,1,2)")
@@ -290,7 +311,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-yardstick", action="store_true", help="skip the offline view-consensus yardstick")
     ap.add_argument("--device", default=None, help="cpu, cuda (default: config, else CUDA if present)")
     ap.add_argument("--out", type=Path, default=Path("ablation_out"), help="runs, scenes, JSON and PNG")
+    ap.add_argument(
+        "--from-partial",
+        type=Path,
+        default=None,
+        metavar="JSON",
+        help="only report the seeds an earlier run finished (its ablation_partial.json)",
+    )
     args = ap.parse_args(argv)
+    if args.from_partial is not None:
+        return report_partial(args.from_partial, args.out)
 
     if args.device is not None:
         resolve_device(args.device)  # no CUDA GPU for --device cuda: say so before any scene is made
