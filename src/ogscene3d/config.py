@@ -51,7 +51,7 @@ class SyntheticConfig:
     frames: int = 60
     width: int = 160
     height: int = 120
-    noise: str = "default"  # none | low | default | high
+    noise: str = "default"  # none | low | default | high (SAM-like) | legacy-low | legacy-default | ...-high
     depth_noise: float = 0.0  # std in metres
     pose_noise: float = 0.0  # std of translation in metres
 
@@ -92,7 +92,7 @@ class SegmentationConfig:
     classical_depth_weight: float = 300.0  # ΔE per unit of relative depth discontinuity
     classical_normal_weight: float = 100.0  # ΔE per unit of (1 - cos) between neighbouring normals
     # simulated SAM from ground-truth instances (synthetic scenes only)
-    simulated_noise: str = "default"  # none | low | default | high
+    simulated_noise: str = "default"  # as synthetic.noise (segmentation/simulated.py NOISE_LEVELS)
     simulated_seed: int = 0
 
 
