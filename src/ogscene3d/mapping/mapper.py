@@ -607,12 +607,13 @@ class Mapper:
 
     def _observe_evidence(self, frame: Frame, segments: np.ndarray | None) -> None:
         """i26: the keyframe's co-segmentation evidence (``evidence.py``), on the map before association."""
-        if not (self.use_refine and (self.cfg.evidence_split or self.cfg.evidence_merge)):
+        cfg = self.cfg
+        if not (self.use_refine and (cfg.evidence_split or cfg.evidence_merge or cfg.evidence_veto)):
             return
         with self.timings.section("evidence"):
             self.evidence.observe(
                 self.map, segments, frame.pose, frame.K, frame.depth,
-                margin=self.cfg.init_depth_margin, min_group=self.cfg.evidence_min_group,
+                margin=cfg.init_depth_margin, min_group=cfg.evidence_min_group,
             )  # fmt: skip
 
     def _longterm(self) -> None:
