@@ -181,7 +181,9 @@ DatasetKind = Literal[
     "auto", "replica", "semantic_nerf", "scannet", "tum", "sevenscenes", "labelfusion", "synthetic", "rosbag",
     "record3d",
 ]
-NoiseLevel = Literal["none", "low", "default", "high"]
+# low / default / high err like SAM (objects absorbed into their support, merged with it, cut in two); the
+# legacy-* levels are the earlier simulation (small objects dropped, only small objects merged)
+NoiseLevel = Literal["none", "low", "default", "high", "legacy-low", "legacy-default", "legacy-high"]
 ExecutionProvider = Literal["auto", "cpu", "cuda"]
 _LLM_KEY_DOC = "environment variable holding the endpoint's API key (the key itself never goes in a config)"
 
@@ -502,6 +504,35 @@ class MappingConfig:
         0.8, "share of each label's visible extent the segment must contain", _UNIT
     )
     merge_min_score: float = setting(0.95, "SAM score a merging segment needs at least", _UNIT)
+    # multi-view co-segmentation evidence (mapping/evidence.py), beyond the paper; evidence_split,
+    # evidence_merge and evidence_veto all false = the paper's long-term step and Algorithm 1 (with the
+    # extensions above). docs/consistency.md has each rule's measured effect.
+    evidence_split: bool = setting(
+        True,
+        "long-term lowers the confidence of Gaussians that most views show as a separate part of their "
+        "label; refinement splits such low-confidence parts off as new labels",
+    )
+    evidence_merge: bool = setting(True, "refinement merges labels that most views show in one segment")
+    evidence_min_views: int = setting(
+        3, "views a Gaussian or a label pair needs before the evidence decides on it", _int(1)
+    )
+    evidence_split_ratio: float = setting(
+        0.5,
+        "share of views showing a Gaussian as a separate part that marks it",
+        _float(0.0, 1.0, lo_open=True),
+    )
+    evidence_merge_ratio: float = setting(
+        0.7, "share of one-segment views that merges two labels", _float(0.0, 1.0, lo_open=True)
+    )
+    evidence_min_group: int = setting(
+        3, "Gaussians a separate part needs (per view, and to be split off)", _int(1)
+    )
+    evidence_veto: bool = setting(
+        True, "undo Algorithm 1 relabellings between labels that most views show apart"
+    )
+    evidence_apart_ratio: float = setting(
+        0.3, "labels seen in one segment in fewer than this share of their views are apart", _UNIT
+    )
 
     def cross_check(self) -> str | None:
         if not self.tau_low <= self.tau_high:

@@ -83,6 +83,8 @@ class GaussianMap:
         self._data: dict[str, torch.Tensor] = {
             k: torch.zeros((cap, *shape), dtype=dt, device=self.device) for k, (shape, dt) in FIELDS.items()
         }
+        # i26: auxiliary per-Gaussian float values (mapping/evidence.py), not saved: name -> value of new rows
+        self._aux: dict[str, float] = {}
 
     # ------------------------------------------------------------------ access
     def __len__(self) -> int:
@@ -148,6 +150,16 @@ class GaussianMap:
     def field(self, name: str) -> torch.Tensor:
         if name not in FIELDS:
             raise KeyError(f"unknown Gaussian field {name!r}; known: {sorted(FIELDS)}")
+        return self._view(name)
+
+    def aux(self, name: str, fill: float = 0.0) -> torch.Tensor:
+        """[N] float32 auxiliary per-Gaussian values that follow appends, pruning and growth like the fields
+        (new Gaussians start at ``fill``), created on first use; not written to files (i26)."""
+        if name in FIELDS:
+            raise KeyError(f"{name!r} is a Gaussian field, not an auxiliary value")
+        if name not in self._data:
+            self._data[name] = torch.full((self.capacity,), float(fill), device=self.device)
+            self._aux[name] = float(fill)
         return self._view(name)
 
     def new_labels(self, count: int) -> torch.Tensor:
@@ -228,6 +240,8 @@ class GaussianMap:
         self._reserve(start + m)
         for k, v in rows.items():
             self._data[k][start : start + m] = v
+        for k, fill in self._aux.items():
+            self._data[k][start : start + m] = fill
         self._n = start + m
         return slice(start, start + m)
 

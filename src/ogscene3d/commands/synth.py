@@ -27,7 +27,12 @@ def add_parser(subparsers) -> None:
     p.add_argument("--seed", type=int, default=None, help="scene, trajectory and noise seed")
     p.add_argument("--frames", type=int, default=None, help="number of frames")
     p.add_argument("--size", type=image_size(8), default=None, metavar="WxH", help="image size, e.g. 160x120")
-    p.add_argument("--noise", default=None, choices=["none", "low", "default", "high"], help="segment noise")
+    p.add_argument(
+        "--noise",
+        default=None,
+        choices=["none", "low", "default", "high", "legacy-low", "legacy-default", "legacy-high"],
+        help="simulated-SAM level (docs/consistency.md)",
+    )
     p.add_argument("--depth-noise", type=float, default=None, help="depth noise std in metres")
     p.add_argument("--pose-noise", type=float, default=None, help="pose translation noise std in metres")
     p.add_argument("--device", default="cpu", help="Warp device for ray casting (cpu, cuda, cuda:0)")

@@ -774,8 +774,28 @@ def build_room(seed: int = 0) -> Room:
             and rng.uniform() < 0.7
         ):
             _place_small(b, str(rng.choice(["cup", "book"])), obj, obj.top_surfaces[0])
+    _light_switches(b, ids, W, D, seed)
 
     return _finish(b, (W, D, H), light)
+
+
+def _light_switches(b: _Builder, ids: dict[str, int], W: float, D: float, seed: int) -> None:
+    """One or two light switches on the walls: objects a few pixels wide from across the room, that SAM
+    tends to absorb into the wall. Drawn from their own random stream, so that adding them moved no other
+    object of a seed's room."""
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x5A17C]))
+    sides = ["+x", "-x", "+y", "-y"]
+    for _ in range(int(rng.integers(1, 3))):
+        for _ in range(30):
+            side = sides[rng.integers(4)]
+            p, n, half_len, yaw = _wall_frame(side, W, D)
+            t_axis = np.array([-n[1], n[0], 0.0])
+            w, h, thick = 0.09, 0.13, 0.015
+            along = rng.uniform(-half_len + 0.3, half_len - 0.3)
+            c = p + n * thick / 2 + t_axis * along + [0, 0, rng.uniform(1.05, 1.3)]
+            part = make_part("box", c, b.color((0.95, 0.95, 0.93), 0.02), size=_rot_size([thick, w, h], yaw))
+            if b.try_add("light switch", [part], ids[side], "attached to", margin=0.05) is not None:
+                break
 
 
 def _relations(b: _Builder) -> list[tuple[int, str, int]]:

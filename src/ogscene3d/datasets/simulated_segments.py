@@ -16,7 +16,9 @@ def simulate_scene_segments(
     from .loader import open_dataset
 
     ds = open_dataset(scene_dir, kind="synthetic")
-    seg = SimulatedSegmenter(noise, seed)
+    # what each object stands or hangs on: SAM-like noise merges an object with its support in some views
+    support = {k: v["support"] for k, v in ds.gt["instances"].items() if v.get("support") is not None}
+    seg = SimulatedSegmenter(noise, seed, support)
     out = Path(out_dir)
     for frame in ds:
         s = seg(frame.rgb, frame.depth, gt_instances=frame.gt_instances, frame_index=frame.index)

@@ -512,8 +512,11 @@ def make_synthetic_scene(
     noise_rng = np.random.default_rng(np.random.SeedSequence([seed, 0xD0152]))
     written_poses = perturb_poses(poses, pose_noise, noise_rng)
     renderer = MeshRenderer(room, device=device)
-    segmenter = SimulatedSegmenter(noise, seed=seed)
-    detector = SimulatedDetector({o.instance_id: o.class_name for o in room.objects}, noise=noise, seed=seed,
+    # support relations let the simulated SAM merge an object with what it stands or hangs on
+    segmenter = SimulatedSegmenter(noise, seed=seed, support={o.instance_id: o.support for o in room.objects})
+    # the detector errs at the matching level (the legacy SAM levels change only how SAM errs)
+    detector = SimulatedDetector({o.instance_id: o.class_name for o in room.objects},
+                                 noise=noise.removeprefix("legacy-"), seed=seed,
                                  min_area=NOISE_LEVELS[noise].min_area)  # fmt: skip
 
     cam = {"camera": {"w": width, "h": height, "fx": float(K[0, 0]), "fy": float(K[1, 1]),

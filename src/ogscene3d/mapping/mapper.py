@@ -56,6 +56,7 @@ from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame, implausible_median_depth
 from ..gaussians import GaussianMap, corrupt_npz_message
 from .checkpoint import CheckpointArrays, read_checkpoint
+from .evidence import SegmentEvidence
 from .init import make_probes
 from .keyframes import KeyframeSelector
 from .local import (
@@ -223,6 +224,7 @@ class Mapper:
         self.next_index = 0
         self.keyframe_count = 0
         self.rng = np.random.default_rng(config.seed)
+        self.evidence = SegmentEvidence(self.device)  # multi-view co-segmentation evidence (evidence.py)
         # built now, so that a mistake in the graph's settings (captioner, relations, confidence model)
         # stops the run before its first frame instead of disabling the graph hours into it
         self._graph = self._new_graph() if config.graph.enabled else None
@@ -370,6 +372,7 @@ class Mapper:
             return False
         k = self._begin_keyframe(frame)
         self._render_check(k)
+        self._observe_evidence(k)
         self._init(k)
         self._local(k)
         self._add(k)
@@ -701,9 +704,25 @@ class Mapper:
             self.timings.add("labels_merged", len(mapping))
             self.timings.add("segments_merged", int(merged.numel()))
 
+    def _observe_evidence(self, k: _Keyframe) -> None:
+        """The keyframe's co-segmentation evidence (``evidence.py``), on the map before association."""
+        cfg, frame = self.cfg, k.frame
+        if not (self.use_refine and (cfg.evidence_split or cfg.evidence_merge or cfg.evidence_veto)):
+            return
+        with self.timings.section("evidence"):
+            self.evidence.observe(
+                self.map, k.segments, frame.pose, frame.K, frame.depth,
+                margin=cfg.init_depth_margin, min_group=cfg.evidence_min_group,
+            )  # fmt: skip
+
     def _longterm(self) -> None:
         """The long-term Eq. 16 update over the next memory views of the round-robin."""
         cfg = self.cfg
+        if cfg.evidence_split:  # before Eq. 16, whose P_conf then renders the lowered confidences
+            n = self.evidence.lower_confidences(
+                self.map, min_views=cfg.evidence_min_views, split_ratio=cfg.evidence_split_ratio
+            )
+            self.timings.add("evidence_lowered", n)
         with self.timings.section("longterm"):
             for entry in self.memory.next_views(cfg.longterm_views):
                 st = longterm_view_update(
@@ -780,6 +799,18 @@ class Mapper:
     def _refine(self) -> None:
         """Global 3D refinement (Algorithm 1), with its relabelling counts added to the timings."""
         cfg = self.cfg
+        if cfg.evidence_split or cfg.evidence_merge:  # before Algorithm 1
+            with self.timings.section("evidence"):
+                ev = self.evidence.split_and_merge(
+                    self.map, split=cfg.evidence_split, merge=cfg.evidence_merge,
+                    min_views=cfg.evidence_min_views, split_ratio=cfg.evidence_split_ratio,
+                    merge_ratio=cfg.evidence_merge_ratio, tau_low=cfg.tau_low, r_search=cfg.r_search,
+                    graph_k=cfg.refine_graph_k, min_group=cfg.evidence_min_group,
+                )  # fmt: skip
+            for k, v in ev.items():
+                self.timings.add(f"evidence_{k}", v)
+        # the veto undoes Alg. 1 relabellings between labels the views show apart: it needs the labels before
+        before = (self.map.labels.clone(), self.map.confidences.clone()) if cfg.evidence_veto else None
         with self.timings.section("refine"):
             st = global_refinement(
                 self.map.means,
@@ -794,6 +825,12 @@ class Mapper:
             )
         for k, v in st.as_dict().items():
             self.timings.add(f"refine_{k}", v)
+        if before is not None:
+            with self.timings.section("evidence"):
+                n = self.evidence.veto(
+                    self.map, *before, min_views=cfg.evidence_min_views, apart_ratio=cfg.evidence_apart_ratio
+                )
+            self.timings.add("evidence_vetoed", n)
 
     def finalize(self) -> None:
         """End of stream: one last long-term pass and refinement (per the ablation), then pruning.

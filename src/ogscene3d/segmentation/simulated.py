@@ -6,10 +6,20 @@ ablations. Starting from the per-pixel instance ids it applies, in this order:
 1. **missed objects**: every instance is dropped with ``drop_prob``; small ones (area below
    ``small_area`` of the image) and far ones (mean valid depth beyond ``far_depth`` m) additionally
    with ``miss_small_prob``;
+1b. **absorbed objects** (the SAM-like levels): a small or far instance is, with ``absorb_prob``,
+   painted into the segment of the surface behind or under it instead of getting its own: its support
+   (``support``: instance -> the instance it rests on or hangs on) when that touches it in the image,
+   else the touching instance with the longest shared border among those farther from the camera (else
+   any touching one). SAM does not leave such pixels empty: a light switch comes back as part of the wall;
+1c. **support merges** (SAM-like): an instance below ``support_merge_area`` of the image that touches its
+   support in the image is merged with it with ``support_merge_prob`` ("the cabinet with the vase on
+   it", "the shelf with its books"), independently in every frame, so most views still show it apart;
 2. **merging**: a pair of touching small instances (both below ``merge_area``) becomes one segment
    with ``merge_prob`` (SAM often returns "the books", not each book);
 3. **over-segmentation**: a large region (above ``large_area``: walls, floor) is cut into 2 to
-   ``max_pieces`` pieces with ``split_prob`` (nearest-seed cells in the image plane);
+   ``max_pieces`` pieces with ``split_prob`` (nearest-seed cells in the image plane); with
+   ``object_split_prob`` (SAM-like) a medium region (``object_split_area`` to ``large_area``: a chair,
+   a cabinet, a door) is cut in two the same way;
 4. **boundary noise**: boundaries are displaced by a smooth random field of ``boundary_px`` pixels
    amplitude, and boundary pixels are left unsegmented with ``unlabeled_boundary``;
 5. **spurious segments**: on average ``spurious_rate`` random elliptic segments (shadows, texture);
@@ -17,13 +27,21 @@ ablations. Starting from the per-pixel instance ids it applies, in this order:
 
 Ids are a fresh random permutation every frame (as SAM's, never consistent across frames). Scores
 imitate SAM's predicted IoU after its 0.88 threshold: U(0.95, 1) for clean segments and
-U(0.88, 0.95) for corrupted ones (split, merged, spurious, or with > 10 % of their pixels changed).
+U(0.88, 0.95) for corrupted ones (split, merged, spurious, or with > 10 % of their pixels changed; a
+segment that absorbed other instances counts as corrupted when they make up more than 10 % of it, so a
+wall that swallowed a light switch keeps a high score, as SAM's would).
 Level "none" returns the ground truth, permuted, with score 1.
+
+Levels: "low", "default", "high" are SAM-like (absorption, support merges and object cuts on top of the
+errors above); "legacy-low", "legacy-default", "legacy-high" are the earlier levels, which drop small and
+far objects instead of absorbing them and never merge an object with its support (documented in
+docs/consistency.md).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -46,18 +64,24 @@ class NoiseLevel:
     unlabeled_boundary: float = 0.0
     spurious_rate: float = 0.0
     min_area: int = 4  # pixels
+    # SAM-like errors (0 in the legacy levels)
+    absorb_prob: float = 0.0  # a small/far instance joins the segment behind/under it
+    support_merge_prob: float = 0.0  # an instance merged with its support in this frame
+    support_merge_area: float = 0.06  # fraction of the image: larger instances are never merged
+    object_split_prob: float = 0.0  # a medium region (object_split_area .. large_area) cut in two
+    object_split_area: float = 0.01
 
     @property
     def clean(self) -> bool:
         """No corruption at all: the segments are the ground truth (renumbered), with score 1."""
         return not any(
             (self.drop_prob, self.miss_small_prob, self.merge_prob, self.split_prob, self.boundary_px,
-             self.unlabeled_boundary, self.spurious_rate, self.min_area)
+             self.unlabeled_boundary, self.spurious_rate, self.min_area, self.absorb_prob,
+             self.support_merge_prob, self.object_split_prob)
         )  # fmt: skip
 
 
-NOISE_LEVELS: dict[str, NoiseLevel] = {
-    "none": NoiseLevel(min_area=0),
+LEGACY_LEVELS: dict[str, NoiseLevel] = {
     "low": NoiseLevel(
         drop_prob=0.02, miss_small_prob=0.2, merge_prob=0.1, split_prob=0.2, boundary_px=0.5,
         unlabeled_boundary=0.1, spurious_rate=0.2,
@@ -72,6 +96,24 @@ NOISE_LEVELS: dict[str, NoiseLevel] = {
     ),
 }  # fmt: skip
 
+# SAM-like: the legacy level's boundary noise, spurious segments and wall/floor cuts, but a small or far
+# object is absorbed by the surface behind it (not left out), some views merge an object with its support,
+# and objects are cut in two as well.
+_SAM_LIKE = {
+    "low": dict(absorb_prob=0.3, support_merge_prob=0.15, object_split_prob=0.1),
+    "default": dict(absorb_prob=0.5, support_merge_prob=0.25, object_split_prob=0.15),
+    "high": dict(absorb_prob=0.7, support_merge_prob=0.4, object_split_prob=0.3),
+}
+
+NOISE_LEVELS: dict[str, NoiseLevel] = {
+    "none": NoiseLevel(min_area=0),
+    **{
+        name: replace(LEGACY_LEVELS[name], miss_small_prob=0.0, **extra)  # absorbed, not missed
+        for name, extra in _SAM_LIKE.items()
+    },
+    **{f"legacy-{name}": level for name, level in LEGACY_LEVELS.items()},
+}
+
 
 def _touching_pairs(labels: np.ndarray) -> np.ndarray:
     """Unique unordered pairs [P, 2] of different nonzero labels that are 4-neighbours."""
@@ -82,6 +124,92 @@ def _touching_pairs(labels: np.ndarray) -> np.ndarray:
         return np.zeros((0, 2), dtype=np.int64)
     pairs = np.sort(np.stack([a[keep], b[keep]], 1), axis=1)
     return np.unique(pairs, axis=0)
+
+
+def _touching_counts(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Ordered pairs [P, 2] (a, b) of different nonzero 4-neighbour labels (both orders) and the length of
+    their shared border in pixel edges [P]."""
+    a = np.concatenate([labels[:, :-1].ravel(), labels[:-1, :].ravel()])
+    b = np.concatenate([labels[:, 1:].ravel(), labels[1:, :].ravel()])
+    keep = (a != b) & (a > 0) & (b > 0)
+    if not np.any(keep):
+        return np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=np.int64)
+    both = np.concatenate([np.stack([a[keep], b[keep]], 1), np.stack([b[keep], a[keep]], 1)])
+    return np.unique(both, axis=0, return_counts=True)
+
+
+def _find(lut: np.ndarray, a: int) -> int:
+    while lut[a] != a:
+        a = int(lut[a])
+    return a
+
+
+def _absorb_and_merge(
+    inst: np.ndarray,
+    lut: np.ndarray,
+    hard: np.ndarray,
+    mean_depth: np.ndarray | None,
+    area: np.ndarray,
+    support: Mapping[int, int] | None,
+    level: NoiseLevel,
+    rng: np.random.Generator,
+) -> set[int]:
+    """Steps 1b and 1c on the id table ``lut`` (in place: an absorbed or merged instance points to the
+    instance that takes it). Returns the instances whose segment grew."""
+    grown: set[int] = set()
+    pairs, border = _touching_counts(lut[inst])
+    if len(pairs) == 0:
+        return grown
+    npx = float(inst.size)
+    sup = support or {}
+    nbrs: dict[int, list[tuple[int, int]]] = {}
+    for (a, b), n in zip(pairs.tolist(), border.tolist()):
+        nbrs.setdefault(a, []).append((b, n))
+    for a in sorted(nbrs):
+        if lut[a] != a:
+            continue
+        touching = dict(nbrs[a])
+        s = sup.get(a)
+        target = None
+        if hard[a] and level.absorb_prob > 0 and rng.uniform() < level.absorb_prob:
+            if s is not None and s in touching:
+                target = s
+            else:
+                behind = [
+                    (n, b)
+                    for b, n in touching.items()
+                    if mean_depth is None or mean_depth[b] >= mean_depth[a] - 0.05
+                ]
+                target = max(behind or [(n, b) for b, n in touching.items()])[1]
+        elif (
+            s is not None
+            and s in touching
+            and area[a] < level.support_merge_area * npx
+            and level.support_merge_prob > 0
+            and rng.uniform() < level.support_merge_prob
+        ):
+            target = s
+        if target is None:
+            continue
+        root = _find(lut, int(target))
+        if root != a and root > 0:
+            lut[lut == a] = root
+            grown.add(root)
+    return grown
+
+
+def _cut(labels: np.ndarray, s: int, k: int, next_id: int, rng: np.random.Generator) -> list[int]:
+    """Cut region ``s`` of ``labels`` (in place) into ``k`` nearest-seed cells; returns the ids used."""
+    ys, xs = np.nonzero(labels == s)
+    seeds = rng.choice(len(ys), size=k, replace=False)
+    w = rng.uniform(0.5, 2.0, size=(k, 2))  # anisotropic cells: long strips as well as blobs
+    d2 = (w[None, :, 0] * (ys[:, None] - ys[seeds][None]) ** 2) + (
+        w[None, :, 1] * (xs[:, None] - xs[seeds][None]) ** 2
+    )
+    piece = np.argmin(d2, axis=1)
+    new_ids = np.concatenate([[s], np.arange(next_id, next_id + k - 1)])
+    labels[ys, xs] = new_ids[piece]
+    return [int(v) for v in new_ids]
 
 
 def _boundary_mask(labels: np.ndarray) -> np.ndarray:
@@ -100,8 +228,13 @@ def simulate_segments(
     depth: np.ndarray | None,
     level: NoiseLevel,
     rng: np.random.Generator,
+    support: Mapping[int, int] | None = None,
 ) -> Segmentation:
-    """One frame of simulated SAM output from an int instance map [H, W] (0 = no surface)."""
+    """One frame of simulated SAM output from an int instance map [H, W] (0 = no surface).
+
+    ``support``: instance id -> the instance it rests on or hangs on (the synthetic room's support
+    relation); without it an absorbed instance goes to the touching surface behind it, and no support
+    merges happen."""
     inst = np.asarray(instances)
     if inst.ndim != 2:
         raise ValueError(f"gt_instances must be a 2D id map, got shape {inst.shape}")
@@ -120,19 +253,25 @@ def simulate_segments(
 
     # 1. missed instances
     lut = np.arange(n_ids, dtype=np.int64)
+    grown: set[int] = set()
     if len(present):
         far = np.zeros(n_ids, dtype=bool)
-        if depth is not None and level.far_depth > 0:
+        mean_d = None
+        if depth is not None:
             d = np.asarray(depth, dtype=np.float64)
             valid = (d > 0) & np.isfinite(d)
             cnt = np.bincount(inst[valid], minlength=n_ids)
             mean_d = np.bincount(inst[valid], weights=d[valid], minlength=n_ids) / np.maximum(cnt, 1)
-            far = (mean_d > level.far_depth) & (cnt > 0)
+            if level.far_depth > 0:
+                far = (mean_d > level.far_depth) & (cnt > 0)
         hard = (area < level.small_area * npx) | far
         p_miss = level.drop_prob + np.where(hard, level.miss_small_prob, 0.0)
         missed = rng.uniform(size=n_ids) < p_miss
         missed[0] = False
         lut[missed] = 0
+        # 1b, 1c. absorbed into the surface behind, merged with the support
+        if level.absorb_prob > 0 or level.support_merge_prob > 0:
+            grown = _absorb_and_merge(inst, lut, hard, mean_d, area, support, level, rng)
 
     # 2. merging of touching small instances (union-find over the few candidate pairs)
     if level.merge_prob > 0:
@@ -149,25 +288,28 @@ def simulate_segments(
                     lut[lut == rb] = ra
                     corrupted.add(int(ra))
     labels = lut[inst]
+    if grown:
+        # an absorbing segment is corrupted when what it took makes up more than 10 % of it
+        own = np.bincount(inst[labels == inst], minlength=n_ids)
+        total = np.bincount(labels.ravel(), minlength=n_ids)
+        corrupted.update(g for g in grown if total[g] - own[g] > 0.1 * total[g])
 
-    # 3. over-segmentation of large regions
+    # 3. over-segmentation of large regions (and, SAM-like, of medium ones: objects cut in two)
     next_id = n_ids
-    if level.split_prob > 0:
+    if level.split_prob > 0 or level.object_split_prob > 0:
         seg_area = np.bincount(labels.ravel(), minlength=n_ids)
-        for s in np.nonzero(seg_area > level.large_area * npx)[0]:
-            if s == 0 or rng.uniform() >= level.split_prob:
+        # without object cuts only large regions draw a number: the legacy levels' random stream is kept
+        lo = level.large_area
+        if level.object_split_prob > 0:
+            lo = min(lo, level.object_split_area)
+        for s in np.nonzero(seg_area > lo * npx)[0]:
+            if s == 0:
                 continue
-            ys, xs = np.nonzero(labels == s)
-            k = int(rng.integers(2, level.max_pieces + 1))
-            seeds = rng.choice(len(ys), size=k, replace=False)
-            w = rng.uniform(0.5, 2.0, size=(k, 2))  # anisotropic cells: long strips as well as blobs
-            d2 = (w[None, :, 0] * (ys[:, None] - ys[seeds][None]) ** 2) + (
-                w[None, :, 1] * (xs[:, None] - xs[seeds][None]) ** 2
-            )
-            piece = np.argmin(d2, axis=1)
-            new_ids = np.concatenate([[s], np.arange(next_id, next_id + k - 1)])
-            labels[ys, xs] = new_ids[piece]
-            corrupted.update(int(v) for v in new_ids)
+            large = seg_area[s] > level.large_area * npx
+            if rng.uniform() >= (level.split_prob if large else level.object_split_prob):
+                continue
+            k = int(rng.integers(2, level.max_pieces + 1)) if large else 2
+            corrupted.update(_cut(labels, int(s), k, next_id, rng))
             next_id += k - 1
     before = labels.copy()
 
@@ -225,18 +367,22 @@ def simulate_segments(
 class SimulatedSegmenter:
     """Segmenter protocol over ground truth: ``seg(rgb, depth, gt_instances=...)``.
 
-    ``noise``: a level name (none | low | default | high) or a :class:`NoiseLevel`. The output of a
+    ``noise``: a level name (see ``NOISE_LEVELS``) or a :class:`NoiseLevel`. ``support``: instance id ->
+    the instance it rests on or hangs on (a synthetic room's, for support merges). The output of a
     frame depends only on (seed, frame_index, inputs); without ``frame_index`` an internal call
     counter is used, so a fixed call order is reproducible too.
     """
 
-    def __init__(self, noise: str | NoiseLevel = "default", seed: int = 0) -> None:
+    def __init__(
+        self, noise: str | NoiseLevel = "default", seed: int = 0, support: Mapping[int, int] | None = None
+    ) -> None:
         if isinstance(noise, str):
             if noise not in NOISE_LEVELS:
                 raise ValueError(f"unknown noise level {noise!r}; expected one of {sorted(NOISE_LEVELS)}")
             noise = NOISE_LEVELS[noise]
         self.level = noise
         self.seed = int(seed)
+        self.support = {int(k): int(v) for k, v in (support or {}).items() if v is not None}
         self._calls = 0
 
     def __call__(
@@ -259,7 +405,7 @@ class SimulatedSegmenter:
         index = self._calls if frame_index is None else int(frame_index)
         self._calls += 1
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, 0x5A4, index]))
-        return simulate_segments(gt_instances, depth, self.level, rng)
+        return simulate_segments(gt_instances, depth, self.level, rng, self.support)
 
     def segment_frame(self, frame) -> Segmentation:
         """Segment an :class:`~ogscene3d.frame.Frame` that carries ``gt_instances``."""

@@ -1,0 +1,259 @@
+"""Multi-view co-segmentation evidence (beyond the paper; ``mapping.evidence_split`` / ``evidence_merge``).
+
+The paper fixes a Gaussian's label at first sight: a later view's segment that matches the map takes the
+label the map already has (case ii), so when the first view merged a vase with the cabinet it stands on, or
+absorbed a light switch into the wall, every later, cleaner view of the vase or the switch only confirms the
+wrong label, and the long-term step's consistency test (the majority rendered label inside each stored
+segment, Eq. 16) agrees with it too. What the later views do show is that the label's region falls into two
+segments, and that one part of it is always in a segment of its own. This module collects that evidence at
+every keyframe, as view-consensus mask clustering does offline (MaskClustering, CVPR 2024), and decides
+incrementally:
+
+* **observe** (every keyframe, on the map as it stands before the keyframe's association): the labelled
+  Gaussians are projected into the frame (visible where the observed depth agrees, ``merge.visible_pixels``);
+  those on a segment boundary are left out. For each label L, its visible Gaussians are counted per segment;
+  the segment with the most of them is L's *main* segment in this view. A Gaussian in the main segment gets
+  a "together" view; one in another segment that is itself mostly L (at least half of its visible Gaussians,
+  and ``min_group`` of them) gets a "split" view: the view shows it as a separate part of L. Gaussians in a
+  segment that belongs to another label give no vote (a boundary spill, or a plainly wrong label: that is the
+  long-term step's Eq. 16 test). Per label pair, the views where both labels lie mostly (>= 0.8) in one
+  segment count, and those where it is the same segment count as "together".
+* **lower_confidences** (with the long-term step, ``evidence_split``): a Gaussian judged in at least
+  ``min_views`` views, in a split in at least ``split_ratio`` of them, loses that ratio of its confidence
+  (Eq. 16's decrease with P_2D-3D = the ratio and P_conf = 0): its stored views disagree with its label.
+* **split_and_merge** (with the global refinement, before Alg. 1): labels that at least ``merge_ratio`` of
+  at least ``min_views`` views show in one segment are merged (``evidence_merge``); low-confidence Gaussians
+  (conf < tau_low) with split evidence are split off their label, each spatially connected group of at least
+  ``min_group`` of them (same label, r_search) becoming a new label at confidence 0.5 (``evidence_split``).
+  Algorithm 1 then re-decides what is left low.
+* **veto** (after Alg. 1, ``evidence_veto``): a relabelling by Alg. 1 from label a to label b is undone when
+  at least ``min_views`` views held both labels mostly in one segment each and fewer than ``apart_ratio`` of
+  them in the same one: the views say a and b are different objects. Without it a small object whose
+  confidence fell (low SAM scores of its corrupted views, Eq. 5 decreases at its boundary) took the label of
+  the wall or the table around it, its only high-confidence neighbour.
+
+A SAM that cuts a wall or a chair at random places puts a given Gaussian in a minority piece only in a few
+views, far below ``split_ratio``; a support merge that SAM makes in a quarter of the views leaves the pair
+apart. Evidence is not saved in checkpoints: a resumed run collects it anew.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from .longterm import label_edges
+from .merge import merge_labels, visible_pixels
+from .refine import connected_clusters
+
+CONTAIN = 0.8  # a label lies "in one segment" of a view when this share of its visible Gaussians does
+
+
+@dataclass
+class EvidenceStats:
+    views: int = 0
+    judged: int = 0
+    split_votes: int = 0
+    lowered: int = 0
+    split_labels: int = 0
+    split_gaussians: int = 0
+    merged_labels: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return dict(self.__dict__)
+
+
+class SegmentEvidence:
+    """Per-Gaussian split evidence (auxiliary values of the GaussianMap) and per-label-pair co-segmentation
+    counts, collected view by view."""
+
+    def __init__(self, device: torch.device) -> None:
+        self.device = device
+        self.pair_views = torch.zeros((0, 0), device=device)
+        self.pair_together = torch.zeros((0, 0), device=device)
+        self.stats = EvidenceStats()
+
+    def _grow(self, n: int) -> None:
+        old = self.pair_views.shape[0]
+        if n <= old:
+            return
+        size = max(n, 2 * old, 64)
+        for name in ("pair_views", "pair_together"):
+            t = torch.zeros((size, size), device=self.device)
+            t[:old, :old] = getattr(self, name)
+            setattr(self, name, t)
+
+    def observe(
+        self,
+        gm,
+        segments: np.ndarray | None,
+        pose: np.ndarray,
+        K: np.ndarray,
+        depth: np.ndarray,
+        *,
+        margin: float = 0.1,
+        min_group: int = 3,
+    ) -> None:
+        """Add one view's evidence (see the module docstring). ``gm``: the GaussianMap; ``segments`` [H,W]
+        int ids (0 = none); ``pose`` c2w, ``K``, ``depth`` the view's (metres)."""
+        if segments is None or len(gm) == 0:
+            return
+        dev = gm.device
+        pick = torch.nonzero(gm.labels >= 0).squeeze(1)
+        if pick.numel() == 0:
+            return
+        seg = torch.as_tensor(np.ascontiguousarray(segments), device=dev).long()
+        pix = visible_pixels(
+            gm.means[pick],
+            torch.as_tensor(pose, dtype=torch.float32, device=dev),
+            torch.as_tensor(K, dtype=torch.float32, device=dev),
+            torch.as_tensor(np.ascontiguousarray(depth), dtype=torch.float32, device=dev),
+            margin,
+        )
+        vis = pix >= 0
+        g, p = pick[vis], pix[vis]
+        s = seg.reshape(-1)[p]
+        ok = (s > 0) & ~label_edges(seg).reshape(-1)[p]
+        g, s = g[ok], s[ok]
+        if g.numel() == 0:
+            return
+        self.stats.views += 1
+        lab = gm.labels[g].long()
+        S = int(s.max()) + 1
+        key = lab * S + s
+        uniq, inv, cnt = torch.unique(key, return_inverse=True, return_counts=True)
+        ul, us = uniq // S, uniq % S
+        # the main segment of each label: its entry with the most Gaussians (ties: the smaller segment id)
+        order = torch.argsort(-cnt, stable=True)
+        order = order[torch.argsort(ul[order], stable=True)]
+        first = torch.ones_like(order, dtype=torch.bool)
+        first[1:] = ul[order][1:] != ul[order][:-1]
+        is_main = torch.zeros_like(first)
+        is_main[order[first]] = True
+        n_seg = torch.zeros(S, device=dev).index_add_(0, us, cnt.float())
+        n_lab = torch.zeros(int(ul.max()) + 1, device=dev).index_add_(0, ul, cnt.float())
+        main_big = torch.zeros(int(ul.max()) + 1, dtype=torch.bool, device=dev)
+        main_big[ul[is_main]] = cnt[is_main] >= min_group
+        split = ~is_main & (cnt.float() >= 0.5 * n_seg[us]) & (cnt >= min_group) & main_big[ul]
+        together = is_main & main_big[ul]
+        judged = (split | together)[inv]
+        views, votes = gm.aux("evidence_views"), gm.aux("evidence_split")
+        views.index_add_(0, g[judged], torch.ones(int(judged.sum()), device=dev))
+        sv = split[inv]
+        votes.index_add_(0, g[sv], torch.ones(int(sv.sum()), device=dev))
+        self.stats.judged += int(judged.sum())
+        self.stats.split_votes += int(sv.sum())
+
+        # label pairs: the labels that lie mostly in one segment, and which segment that is
+        share = cnt[is_main].float() / n_lab[ul[is_main]]
+        contained = share >= CONTAIN
+        labs, mains = ul[is_main][contained], us[is_main][contained]
+        if labs.numel() < 2:
+            return
+        self._grow(int(gm.next_label))
+        ii, jj = labs[:, None].expand(-1, labs.numel()), labs[None, :].expand(labs.numel(), -1)
+        same = (mains[:, None] == mains[None, :]).float()
+        self.pair_views.index_put_((ii.reshape(-1), jj.reshape(-1)), torch.ones(ii.numel(), device=dev), True)
+        self.pair_together.index_put_((ii.reshape(-1), jj.reshape(-1)), same.reshape(-1), True)
+
+    def split_ratio(self, gm, min_views: int) -> torch.Tensor:
+        """[N] the share of a Gaussian's judged views that showed it as a separate part of its label (0 with
+        fewer than ``min_views`` judged views)."""
+        views, votes = gm.aux("evidence_views"), gm.aux("evidence_split")
+        return torch.where(views >= min_views, votes / views.clamp(min=1), torch.zeros_like(views))
+
+    def lower_confidences(self, gm, *, min_views: int = 3, split_ratio: float = 0.5) -> int:
+        """Eq. 16's decrease for Gaussians with split evidence (in place); returns how many."""
+        r = self.split_ratio(gm, min_views)
+        low = (r >= split_ratio) & (gm.labels >= 0)
+        conf = gm.confidences
+        conf[low] = (conf[low] - r[low] * conf[low]).clamp(0.0, 1.0)
+        n = int(low.sum())
+        self.stats.lowered += n
+        return n
+
+    def split_and_merge(
+        self,
+        gm,
+        *,
+        split: bool = True,
+        merge: bool = True,
+        min_views: int = 3,
+        split_ratio: float = 0.5,
+        merge_ratio: float = 0.7,
+        tau_low: float = 0.3,
+        r_search: float = 0.1,
+        graph_k: int = 8,
+        min_group: int = 3,
+    ) -> dict[str, int]:
+        """Merge labels that most views show in one segment, then split low-confidence parts with split
+        evidence off their labels (in place on ``gm.labels`` / ``gm.confidences``). Returns counts."""
+        out = {"merged_labels": 0, "split_labels": 0, "split_gaussians": 0}
+        if merge and self.pair_views.numel():
+            v, t = self.pair_views, self.pair_together
+            hit = (v >= min_views) & (t >= merge_ratio * v)
+            hit.fill_diagonal_(False)
+            pairs = torch.nonzero(torch.triu(hit, diagonal=1))
+            present = torch.zeros(v.shape[0], dtype=torch.bool, device=v.device)
+            lab = gm.labels[gm.labels >= 0].long()
+            present[lab[lab < v.shape[0]]] = True
+            pairs = pairs[present[pairs[:, 0]] & present[pairs[:, 1]]]
+            mapping = merge_labels(gm.labels, pairs)
+            if mapping:
+                gone = torch.tensor(list(mapping), dtype=torch.long, device=v.device)
+                for m in (self.pair_views, self.pair_together):
+                    m[gone] = 0
+                    m[:, gone] = 0
+                out["merged_labels"] = len(mapping)
+        if split:
+            r = self.split_ratio(gm, min_views)
+            low = (r >= split_ratio) & (gm.confidences < tau_low) & (gm.labels >= 0)
+            cand = torch.nonzero(low).squeeze(1)
+            if cand.numel() >= min_group:
+                comp = connected_clusters(gm.means[cand], gm.labels[cand], r_search, graph_k)
+                size = torch.bincount(comp[comp >= 0])
+                big = torch.nonzero(size >= min_group).squeeze(1)
+                if big.numel():
+                    lut = torch.full((size.numel(),), -1, dtype=torch.int64, device=gm.device)
+                    lut[big] = gm.new_labels(int(big.numel())).long()
+                    new = lut[comp.clamp(min=0)]
+                    take = (comp >= 0) & (new >= 0)
+                    rows = cand[take]
+                    gm.labels[rows] = new[take].to(gm.labels.dtype)
+                    gm.confidences[rows] = 0.5
+                    gm.aux("evidence_views")[rows] = 0.0
+                    gm.aux("evidence_split")[rows] = 0.0
+                    out["split_labels"] = int(big.numel())
+                    out["split_gaussians"] = int(rows.numel())
+        self.stats.merged_labels += out["merged_labels"]
+        self.stats.split_labels += out["split_labels"]
+        self.stats.split_gaussians += out["split_gaussians"]
+        return out
+
+    def veto(
+        self,
+        gm,
+        labels_before: torch.Tensor,
+        conf_before: torch.Tensor,
+        *,
+        min_views: int = 3,
+        apart_ratio: float = 0.3,
+    ) -> int:
+        """Undo relabellings (``labels_before`` -> ``gm.labels``) between labels that the views show apart
+        (in place, confidences restored from ``conf_before``). Returns how many Gaussians were restored."""
+        n = self.pair_views.shape[0]
+        changed = (gm.labels != labels_before) & (labels_before >= 0) & (gm.labels >= 0)
+        rows = torch.nonzero(changed).squeeze(1)
+        if rows.numel() == 0 or n == 0:
+            return 0
+        a, b = labels_before[rows].long(), gm.labels[rows].long()
+        ok = (a < n) & (b < n)
+        rows, a, b = rows[ok], a[ok], b[ok]
+        v, t = self.pair_views[a, b], self.pair_together[a, b]
+        apart = (v >= min_views) & (t < apart_ratio * v)
+        back = rows[apart]
+        gm.labels[back] = labels_before[back]
+        gm.confidences[back] = conf_before[back]
+        return int(back.numel())
