@@ -169,16 +169,17 @@ class MappingConfig:
     merge_duplicates: bool = True
     merge_contain: float = 0.8
     merge_min_score: float = 0.95
-    # --- i26: multi-view co-segmentation evidence (mapping/evidence.py), beyond the paper; both false = the
-    # paper's long-term step and Algorithm 1 (with the extensions above)
+    # --- i26: multi-view co-segmentation evidence (mapping/evidence.py), beyond the paper; all three false =
+    # the paper's long-term step and Algorithm 1 (with the extensions above). Merge and veto are off by
+    # default: over 10 synthetic seeds they did not help (docs/consistency.md)
     evidence_split: bool = True  # bool: long-term lowers the confidence of Gaussians that most views show as
     #   a separate part of their label; refinement splits such low-confidence parts off as new labels
-    evidence_merge: bool = True  # bool: refinement merges labels that most views show in one segment
+    evidence_merge: bool = False  # bool: refinement merges labels that most views show in one segment
     evidence_min_views: int = 3  # int >= 1: views a Gaussian / a label pair needs before it is decided
     evidence_split_ratio: float = 0.5  # float in (0, 1]: share of split views that marks a Gaussian
     evidence_merge_ratio: float = 0.7  # float in (0, 1]: share of one-segment views that merges two labels
     evidence_min_group: int = 3  # int >= 1: Gaussians a separate part needs (per view, and to be split off)
-    evidence_veto: bool = True  # bool: undo Alg. 1 relabellings between labels that most views show apart
+    evidence_veto: bool = False  # bool: undo Alg. 1 relabellings between labels that most views show apart
     evidence_apart_ratio: float = 0.3  # float in [0, 1]: labels in one segment in fewer views are apart
 
 
