@@ -506,13 +506,14 @@ class MappingConfig:
     merge_min_score: float = setting(0.95, "SAM score a merging segment needs at least", _UNIT)
     # multi-view co-segmentation evidence (mapping/evidence.py), beyond the paper; evidence_split,
     # evidence_merge and evidence_veto all false = the paper's long-term step and Algorithm 1 (with the
-    # extensions above). docs/consistency.md has each rule's measured effect.
+    # extensions above). Merge and veto are off by default: over the synthetic seeds only the split rule
+    # helped. docs/consistency.md has each rule's measured effect.
     evidence_split: bool = setting(
         True,
         "long-term lowers the confidence of Gaussians that most views show as a separate part of their "
         "label; refinement splits such low-confidence parts off as new labels",
     )
-    evidence_merge: bool = setting(True, "refinement merges labels that most views show in one segment")
+    evidence_merge: bool = setting(False, "refinement merges labels that most views show in one segment")
     evidence_min_views: int = setting(
         3, "views a Gaussian or a label pair needs before the evidence decides on it", _int(1)
     )
@@ -528,7 +529,7 @@ class MappingConfig:
         3, "Gaussians a separate part needs (per view, and to be split off)", _int(1)
     )
     evidence_veto: bool = setting(
-        True, "undo Algorithm 1 relabellings between labels that most views show apart"
+        False, "undo Algorithm 1 relabellings between labels that most views show apart"
     )
     evidence_apart_ratio: float = setting(
         0.3, "labels seen in one segment in fewer than this share of their views are apart", _UNIT
