@@ -1,6 +1,7 @@
-"""Dependencies run one way: no import cycle between the package's modules, counting imports at module
-level and inside functions alike (an import moved into a function hides a cycle from Python, not from the
-design). ``if TYPE_CHECKING:`` blocks do not count: they never run."""
+"""Dependencies run one way: no import cycle between the package's modules, nor between its subpackages
+(``datasets``, ``eval``, ``mapping``, ...; each top-level module is a node of its own), counting imports at
+module level and inside functions alike (an import moved into a function hides a cycle from Python, not from
+the design). ``if TYPE_CHECKING:`` blocks do not count: they never run."""
 
 from __future__ import annotations
 
@@ -152,3 +153,59 @@ def test_the_walker_sees_function_level_imports_and_skips_type_checking():
 def test_no_import_cycle_between_modules():
     found = cycles(import_graph())
     assert not found, "import cycles: " + "; ".join(" <-> ".join(c) for c in found)
+
+
+def package_of(module: str) -> str:
+    """The node ``module`` belongs to in the graph between packages: its subpackage of ``ogscene3d``
+    (``ogscene3d.mapping.source`` -> ``ogscene3d.mapping``), or itself for a top-level module."""
+    return ".".join(module.split(".")[:2])
+
+
+def package_graph(graph: dict[str, set[str]]) -> dict[str, set[str]]:
+    """``graph`` (module -> modules) collapsed onto :func:`package_of` (imports inside a package dropped)."""
+    out: dict[str, set[str]] = {}
+    for mod, targets in graph.items():
+        src = package_of(mod)
+        out.setdefault(src, set()).update(package_of(t) for t in targets if package_of(t) != src)
+    for targets in list(out.values()):
+        for t in targets:
+            out.setdefault(t, set())
+    return out
+
+
+def _package_edges(graph: dict[str, set[str]], packages: list[str]) -> list[str]:
+    """The module imports that make up a cycle between ``packages``, as ``a -> b`` lines."""
+    members = set(packages)
+    return sorted(
+        f"{mod} -> {t}"
+        for mod, targets in graph.items()
+        for t in targets
+        if package_of(mod) in members and package_of(t) in members and package_of(t) != package_of(mod)
+    )
+
+
+def test_the_package_graph_collapses_modules_onto_subpackages():
+    graph = {
+        "ogscene3d.eval.views": {"ogscene3d.mapping.source", "ogscene3d.eval.readers"},
+        "ogscene3d.eval.readers": set(),
+        "ogscene3d.mapping.ablation": {"ogscene3d.eval.run_eval"},
+        "ogscene3d.mapping.source": {"ogscene3d.config"},
+        "ogscene3d.eval.run_eval": set(),
+        "ogscene3d.config": set(),
+    }
+    assert not cycles(graph)  # no cycle between modules ...
+    packages = package_graph(graph)
+    assert packages["ogscene3d.config"] == set()
+    assert cycles(packages) == [["ogscene3d.eval", "ogscene3d.mapping"]]  # ... but one between packages
+    assert _package_edges(graph, ["ogscene3d.eval", "ogscene3d.mapping"]) == [
+        "ogscene3d.eval.views -> ogscene3d.mapping.source",
+        "ogscene3d.mapping.ablation -> ogscene3d.eval.run_eval",
+    ]
+
+
+def test_no_import_cycle_between_subpackages():
+    graph = import_graph()
+    found = cycles(package_graph(graph))
+    assert not found, "import cycles between packages: " + "; ".join(
+        " <-> ".join(c) + " (" + ", ".join(_package_edges(graph, c)) + ")" for c in found
+    )

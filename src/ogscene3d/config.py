@@ -373,7 +373,7 @@ class MappingConfig:
         0.5,
         "pose-jump check (mapping/pose_jump.py): the most a camera may move between two consecutive "
         "frames of the folder in metres, times data.stride and the selected frames since the last "
-        "accepted one; about twice the largest steps of the sample data (docs/deviations.md)",
+        "accepted one; about twice the largest steps of the sample data (docs/results.md)",
         _float(0.0, note="0 = no limit"),
     )
     max_pose_step_deg: float = setting(
@@ -711,7 +711,7 @@ class TrackingConfig:
         0.25, "fraction of pixels with a valid correspondence below which a step fails", _UNIT
     )
     max_inlier_rmse: float = setting(
-        0.02, "Open3D residual above which a step fails (typical good steps: docs/deviations.md)", _POS
+        0.02, "Open3D residual above which a step fails (typical good steps: docs/results.md)", _POS
     )
     keyframe_fitness: float = setting(
         0.7, "overlap with the keyframe below which the frame becomes one", _UNIT

@@ -14,9 +14,9 @@ Algorithm (``Tracker.step``):
 * Objective (``method``): "auto" (default) uses point-to-plane when the keyframe's geometry constrains all
   six degrees of freedom (``geometric_conditioning`` >= ``min_conditioning``) and hybrid where it does not
   (a single wall, a corridor), or when point-to-plane finds no acceptable result. Point-to-plane is the
-  default because it was the most accurate on every sample here (Replica 0.26 mm vs 3.9 mm ATE for hybrid,
-  7-Scenes 5.3 cm vs 9-10 cm; the photometric term pulls a converged estimate by millimetres at these
-  resolutions), while the texture term is what makes planar views trackable at all.
+  default because it was the most accurate on every sample here (docs/results.md, "Odometry": the
+  photometric term pulls a converged estimate off at these resolutions), while the texture term is what
+  makes planar views trackable at all.
 * Dense odometry starts from the motion prior (constant velocity). An objective can converge to a wrong
   local minimum that still has a high overlap, but then with a clearly larger residual; so unless the
   result looks like the recent good ones (overlap >= ``keyframe_fitness`` and residual <= 1.5x the median
@@ -24,8 +24,8 @@ Algorithm (``Tracker.step``):
   (``feature_init``: ORB features with depth matched to the keyframe's, a rigid 3-point RANSAC over their
   3D positions) and, if nothing passed yet, from the last good pose. Among the results that pass the checks
   below and have nearly the best overlap, the lowest residual wins. The feature guess is what keeps large
-  inter-frame motions tracked (7-Scenes every 20th frame: 8 of the first 15 frames tracked without it, all
-  50 with it).
+  inter-frame motions tracked (7-Scenes every 20th frame loses frames without it: docs/results.md,
+  "Odometry").
 * The frame becomes the new keyframe when its overlap with the keyframe (Open3D's fitness, the fraction of
   pixels with an inlier correspondence) drops below ``keyframe_fitness``, when it is further than
   ``keyframe_translation`` / ``keyframe_rotation_deg`` from the keyframe, or after ``keyframe_every`` frames.
@@ -68,10 +68,8 @@ A command that maps offers ``--poses`` with ``add_poses_argument(parser)`` and t
 ``if args.poses: cfg.tracking.poses = args.poses``. ``ogscene3d track --data DIR --out OUT`` writes
 ``OUT/traj.txt`` and ``OUT/tracking.json`` (per-frame status, ATE against the dataset's poses if any).
 
-Measured (CPU, default settings, ATE RMSE after SE(3) alignment): Replica room0 frames 0-19 at 300x170:
-0.26 mm over a 24 cm path; 7-Scenes redkitchen every 20th frame at 320x240 (2-26 cm and up to 14 degrees
-between samples): 50/50 frames tracked, 5.3 cm over a 6.8 m path; an ``ogscene3d synth`` scene (60
-frames, 160x120, 5.2 m): 8.9 mm.
+Accuracy on the sample sequences (ATE after SE(3) alignment, ``ogscene3d track``): docs/results.md,
+"Odometry".
 """
 
 from __future__ import annotations
@@ -641,8 +639,8 @@ class Tracker:
         recent = [r for m, r in self._recent_rmse if m == method]
         if self._since_good > 1 and self._recent_rmse and cfg.max_residual_ratio > 0:
             # Re-acquiring after skipped frames: no motion prior, often little overlap. A wrong alignment
-            # shows up as a residual far above the recent good ones (measured 1.4-3.4x for good steps on
-            # the samples here, >= 5x for wrong ones). Residual scales differ between objectives, so a
+            # shows up as a residual far above the recent good ones (good and wrong steps' ratios on the
+            # samples: docs/results.md, "Odometry"). Residual scales differ between objectives, so a
             # result from an objective with no recent history cannot be validated and is not trusted.
             if not recent:
                 return self._skip(

@@ -106,8 +106,8 @@ class ReplicaDataset(RGBDDataset):
     kind = "replica"
     depth_scale_default = 6553.5
     # Replica's renders agree with cam_params.json read with ogscene3d's pixel centres (+0.5): between
-    # frames of NICE-SLAM's room0, depth reprojects with a median error of 0.042 mm as read, 0.050 mm with
-    # cx or cy shifted by half a pixel either way (benchmarks/pixel_centers.py)
+    # frames of NICE-SLAM's room0, depth reprojects best as read, worse with cx or cy shifted by half a
+    # pixel either way (docs/results.md, "Dataset checks"; benchmarks/pixel_centers.py)
     pixel_centers_default = "half"
 
     @staticmethod

@@ -9,9 +9,9 @@ concatenated in name order); the intrinsics file in the folder or in the first s
 Known limitation: 7-Scenes' depth is NOT registered to its colour. Depth, poses and the 585 intrinsics are
 the Kinect's depth camera's; the colour comes from its other camera (focal length about 525-535 px, a few
 cm beside it), whose calibration the dataset does not publish. Read pixel by pixel, colour (and so the
-segments) lands up to about 30 px off toward the image borders: on the redkitchen sample the median
-distance from depth edges to colour edges is 4.5 px as read and 2.1 px once colour is scaled by 0.91 about
-the centre and shifted by (-6, -2) px. No correction is applied (relocalisation works register depth with
+segments) lands off the depth, most toward the image borders; scaling colour about the centre and shifting
+it brings depth and colour edges closer but not together (measured on the redkitchen sample:
+docs/results.md, "Dataset checks"). No correction is applied (relocalisation works register depth with
 an approximate calibration or use depth rendered from the 3D models instead); the reader warns when it
 reads the 585 depth camera.
 

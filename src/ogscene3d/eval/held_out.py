@@ -80,7 +80,7 @@ def pick_frames(num_frames: int, num_views: int) -> list[int]:
 def _mapped_count(run_dir: Path, selection: Any, data: Any) -> tuple[int, str]:
     """How many frames of ``selection`` (the run's, opened now) the run read, from ``map.npz``; the whole
     selection without one."""
-    from ..mapping.source import frame_names, sequence_change
+    from ..datasets.identity import frame_names, sequence_change
 
     num_selected = len(selection)
     ckpt = run_dir / "map.npz"

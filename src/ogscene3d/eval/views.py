@@ -97,7 +97,7 @@ def open_view_dataset(scene_dir: str | Path, run_dir: str | Path | None = None) 
     cfg.path = str(scene_dir)
     ds = open_dataset(config=cfg)
     if run_dir is not None:
-        from ..mapping.source import mapped_intrinsics, matching_pixel_centers
+        from ..datasets.identity import mapped_intrinsics, matching_pixel_centers
 
         mapped_K = mapped_intrinsics(Path(run_dir) / "map.npz")
         if mapped_K is not None and not np.allclose(mapped_K, np.asarray(ds.K).reshape(-1), atol=1e-3):

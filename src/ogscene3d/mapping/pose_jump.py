@@ -10,10 +10,9 @@ ones, or a strided run's next frame, may have moved proportionally further. The 
 have to cover sample folders that hold every n-th frame already (7-Scenes here), which the loader cannot
 tell from a 1:1 recording.
 
-Defaults 0.5 m and 30 deg per step, about twice the largest steps measured here: 7-Scenes redkitchen every
-20th frame 0.26 m / 13.6 deg, LabelFusion shelf 0.08 m / 12.6 deg, Replica room0 (consecutive) 0.016 m /
-0.75 deg, the synthetic demo scene (60 frames) 0.10 m / 5.0 deg. A hand-held camera at 30 fps would have
-to move at 15 m/s or turn at 900 deg/s to reach them.
+Defaults 0.5 m and 30 deg per step, about twice the largest steps of the sample sequences here (7-Scenes
+every 20th frame; the steps of each sample: docs/results.md, "Dataset checks"). A hand-held camera at 30 fps
+would have to move at 15 m/s or turn at 900 deg/s to reach them.
 
 ``mapping.on_pose_jump`` decides what follows: ``warn`` maps the frame (it becomes the new reference),
 ``skip`` leaves it out (the reference stays the last accepted frame), ``error`` stops the run with a

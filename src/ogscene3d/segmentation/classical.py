@@ -9,9 +9,9 @@ the merge criterion w(e) <= min(Int(A) + k/|A|, Int(B) + k/|B|) (Int = largest e
 minimum spanning tree). Instead of the sequential Kruskal loop over sorted edges (a Python loop over
 every edge), the edges are cut into 512 weight-ordered buckets and each bucket is merged in parallel
 Boruvka rounds, fully vectorised in numpy (``graph_segment``); on 320x240 frames this gives the same
-partition as the exact sequential algorithm (Rand index 1.0 on Replica and 7-Scenes frames; the tests
-compare against an exact reference). Components smaller than ``min_size`` and strips at most 2 px wide
-are then merged into their cheapest neighbour.
+partition as the exact sequential algorithm (measured on Replica and 7-Scenes frames: docs/results.md,
+"Dataset checks"; the tests compare against an exact reference). Components smaller than ``min_size`` and
+strips at most 2 px wide are then merged into their cheapest neighbour.
 
 Edge weight between neighbouring pixels p, q (in CIELAB ΔE units):
 
