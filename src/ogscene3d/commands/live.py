@@ -158,6 +158,12 @@ def _serve_forever(viewer, stop: threading.Event, session=None, exit_when_done: 
             break
 
 
+_CLOSE_NOTIFICATIONS = (
+    "document.querySelectorAll('.mantine-Notification-root button, .mantine-Notification-closeButton')"
+    ".forEach(b => b.click())"
+)
+
+
 def take_screenshot(
     viewer, out: str | Path, size: tuple[int, int] = (1280, 800), wait: float = 8.0, timeout: float = 180.0
 ) -> Path:
@@ -178,6 +184,9 @@ def take_screenshot(
         if not viewer.wait_until(lambda s: s["clients"] > 0 and s["pushes"] > before, timeout=60):
             raise OGSceneError(f"the headless browser did not connect: {browser.log_tail()}")
         time.sleep(wait)
+        # headless chromium draws with software WebGL, and viser says so in a notification over the view:
+        # close it, the picture is of the map
+        browser.call("Runtime.evaluate", {"expression": _CLOSE_NOTIFICATIONS})
         png, previous = browser.screenshot(), b""
         while png != previous and time.monotonic() < deadline:
             time.sleep(1.0)
