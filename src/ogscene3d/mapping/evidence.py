@@ -1,4 +1,5 @@
-"""Multi-view co-segmentation evidence (beyond the paper; ``mapping.evidence_split`` / ``evidence_merge``).
+"""Multi-view co-segmentation evidence (beyond the paper; ``mapping.evidence_split`` on by default,
+``evidence_merge`` and ``evidence_veto`` off: measured in docs/consistency.md).
 
 The paper fixes a Gaussian's label at first sight: a later view's segment that matches the map takes the
 label the map already has (case ii), so when the first view merged a vase with the cabinet it stands on, or
