@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 from ..cli_types import image_size
-from ..config import add_override_argument, load_config
+from ..config import add_override_argument, choices, load_config
 from ..errors import ConfigError, OGSceneError
 
 log = logging.getLogger(__name__)
@@ -30,7 +30,7 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--noise",
         default=None,
-        choices=["none", "low", "default", "high", "legacy-low", "legacy-default", "legacy-high"],
+        choices=choices("synthetic.noise"),
         help="simulated-SAM level (docs/consistency.md)",
     )
     p.add_argument("--depth-noise", type=float, default=None, help="depth noise std in metres")
