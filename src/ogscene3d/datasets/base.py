@@ -376,22 +376,47 @@ class RGBDDataset:
         depth = decode_depth(raw, self.depth_format, self.depth_scale)
         if self.invalid_raw is not None:
             depth[raw == self.invalid_raw] = 0.0
+        return self._frame(
+            i,
+            rec,
+            depth,
+            rec.depth_path,
+            lambda: read_rgb(rec.rgb_path),
+            sizes=f"{rec.rgb_path}: rgb is {{rgb}}, depth {rec.depth_path.name} is {{depth}}",
+            name=rec.rgb_path.stem,
+        )
+
+    def _frame(
+        self,
+        i: int,
+        rec: FrameRecord,
+        depth: np.ndarray,
+        where: Path,
+        read_rgb_image: Callable[[], np.ndarray],
+        sizes: str,
+        name: str,
+    ) -> Frame:
+        """The frame of ``rec`` from its depth in metres (``where``: named in the depth checks' warnings) and
+        its colour, read by ``read_rgb_image`` after the depth checks: depth range, min/max depth, colour at
+        the depth size (``sizes``: the mismatch message, with ``{rgb}`` and ``{depth}`` as WxH), pose,
+        segments, ground truth. Every layout's reader ends here."""
         if not self._depth_checked:
-            self._depth_checked = self._check_depth_range(depth, rec.depth_path)
+            self._depth_checked = self._check_depth_range(depth, where)
         if not self._size_checked:
             self._size_checked = True
-            self._check_principal_point(depth.shape, rec.depth_path)
+            self._check_principal_point(depth.shape, where)
         if self.min_depth > 0:
             depth[depth < self.min_depth] = 0.0
         if self.max_depth > 0:
             depth[depth > self.max_depth] = 0.0
-        rgb = read_rgb(rec.rgb_path)
+        rgb = read_rgb_image()
         rgb_shape = rgb.shape[:2]
-        if rgb.shape[:2] != depth.shape:
+        if rgb_shape != depth.shape:
             if not self.resize_rgb_to_depth:
                 raise DataError(
-                    f"{rec.rgb_path}: rgb is {rgb.shape[1]}x{rgb.shape[0]}, depth {rec.depth_path.name} is "
-                    f"{depth.shape[1]}x{depth.shape[0]}"
+                    sizes.format(
+                        rgb=f"{rgb.shape[1]}x{rgb.shape[0]}", depth=f"{depth.shape[1]}x{depth.shape[0]}"
+                    )
                 )
             rgb = cv2.resize(rgb, (depth.shape[1], depth.shape[0]), interpolation=cv2.INTER_AREA)
         pose = _read_pose(rec)
@@ -403,12 +428,12 @@ class RGBDDataset:
         gt_instances, gt_classes = self._load_gt(rec, depth.shape)
         return Frame(
             index=i,
-            rgb=rgb,
+            rgb=np.ascontiguousarray(rgb),
             depth=depth,
             K=self.K,
             pose=pose,
             timestamp=rec.timestamp,
-            name=rec.rgb_path.stem,
+            name=name,
             segments=segments,
             segment_scores=scores,
             segment_names=names,

@@ -9,13 +9,11 @@ implements :meth:`DecodedDataset._read_arrays`; selection, depth checks, poses, 
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from ..camera import Camera
-from ..errors import DataError
 from ..frame import Frame
-from .base import FrameRecord, RGBDDataset, _read_pose
+from .base import FrameRecord, RGBDDataset
 
 
 class DecodedDataset(RGBDDataset):
@@ -44,41 +42,7 @@ class DecodedDataset(RGBDDataset):
         depth = np.where(np.isfinite(depth), depth, 0.0).astype(np.float32)
         depth[depth < 0] = 0.0
         where = self.root / rec.name
-        if not self._depth_checked:
-            self._depth_checked = self._check_depth_range(depth, where)
-        if not self._size_checked:
-            self._size_checked = True
-            self._check_principal_point(depth.shape, where)
-        if self.min_depth > 0:
-            depth[depth < self.min_depth] = 0.0
-        if self.max_depth > 0:
-            depth[depth > self.max_depth] = 0.0
-        if not rgb.flags.writeable:  # a view of a message's buffer: the frame owns its pixels
-            rgb = rgb.copy()
-        rgb_shape = rgb.shape[:2]
-        if rgb_shape != depth.shape:
-            if not self.resize_rgb_to_depth:
-                raise DataError(
-                    f"{where}: rgb is {rgb.shape[1]}x{rgb.shape[0]}, "
-                    f"depth is {depth.shape[1]}x{depth.shape[0]}"
-                )
-            rgb = cv2.resize(rgb, (depth.shape[1], depth.shape[0]), interpolation=cv2.INTER_AREA)
-        pose = _read_pose(rec)
-        segments, scores, names = None, {}, {}
-        if self.segments_dir is not None:
-            seg = self._read_segments(rec, depth.shape, rgb_shape)
-            if seg is not None:
-                segments, scores, names = seg.ids, seg.scores, seg.names
-        return Frame(
-            index=i,
-            rgb=np.ascontiguousarray(rgb),
-            depth=depth,
-            K=self.K,
-            pose=pose,
-            timestamp=rec.timestamp,
-            name=rec.name,
-            segments=segments,
-            segment_scores=scores,
-            segment_names=names,
-            depth_scale_checked=True,
-        )
+        # a view of a message's buffer: the frame owns its pixels
+        colour = rgb if rgb.flags.writeable else rgb.copy()
+        sizes = f"{where}: rgb is {{rgb}}, depth is {{depth}}"
+        return self._frame(i, rec, depth, where, lambda: colour, sizes=sizes, name=rec.name)
