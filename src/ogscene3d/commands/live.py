@@ -219,7 +219,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _serve(args: argparse.Namespace) -> int:
     from ..mapping.engine import stopped_message
-    from ..viewer.app import LiveViewer
 
     stop = threading.Event()
     prev = signal.getsignal(signal.SIGTERM)
@@ -233,14 +232,7 @@ def _serve(args: argparse.Namespace) -> int:
 
             snap, info = load_run(args.run_dir)
             up = args.up or (tuple(info.up) if info.up is not None else None)
-            viewer = LiveViewer(
-                args.host,
-                args.port,
-                settings=_settings(args),
-                up=up,
-                max_rate_hz=args.rate,
-                title=f"ogscene3d: {info.path.name}",
-            )
+            viewer = _viewer(args, up, info.path.name)
             viewer.publish(snap)
             print(
                 f"ogscene3d-live: browsing {info.path} ({snap.total_gaussians} Gaussians, "
@@ -349,10 +341,23 @@ def live_data(args: argparse.Namespace, cfg) -> str | Path:
     return data
 
 
+def _viewer(args: argparse.Namespace, up, name: str):
+    """The browser viewer the options describe, titled after ``name`` (a run, a dataset or a camera)."""
+    from ..viewer.app import LiveViewer
+
+    return LiveViewer(
+        args.host,
+        args.port,
+        settings=_settings(args),
+        up=up,
+        max_rate_hz=args.rate,
+        title=f"ogscene3d: {name}",
+    )
+
+
 def _start_live(args: argparse.Namespace):
     from ..mapping.engine import MappingEngine, open_frames
     from ..mapping.mapper import Mapper
-    from ..viewer.app import LiveViewer
     from ..viewer.live import LiveSession
 
     cfg = live_config(args)
@@ -370,14 +375,7 @@ def _start_live(args: argparse.Namespace):
     engine.open(cfg, ds)  # with --out: config.yaml and run_id, so that `run --resume` goes on from a stop
 
     up = args.up or _up_from_config(cfg)
-    viewer = LiveViewer(
-        args.host,
-        args.port,
-        settings=_settings(args),
-        up=up,
-        max_rate_hz=args.rate,
-        title=f"ogscene3d: {stream.name if stream is not None else Path(str(data)).name}",
-    )
+    viewer = _viewer(args, up, stream.name if stream is not None else Path(str(data)).name)
     session = LiveSession(
         mapper,
         stream if stream is not None else ds.frames(),
