@@ -90,6 +90,14 @@ def test_room_has_no_interpenetration_and_valid_relations(seed):
     assert all(ids[s].class_name in ("cup", "book") for s, _ in on_small)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_every_room_has_a_lamp_one_sees_standing(seed):
+    # the ceiling lamp is mostly above the camera: a named demo needs a lamp standing in view (issue 29)
+    room = build_room(seed)
+    standing = [o for o in room.zup_objects if o.class_name == "lamp" and o.support_relation == "on"]
+    assert standing, f"seed {seed}: no standing lamp"
+
+
 def test_same_seed_same_room_other_seed_other_room():
     a, b, c = build_room(5), build_room(5), build_room(6)
     assert np.array_equal(a.vertices, b.vertices) and a.relations == b.relations

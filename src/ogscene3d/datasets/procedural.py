@@ -775,6 +775,7 @@ def build_room(seed: int = 0) -> Room:
         ):
             _place_small(b, str(rng.choice(["cup", "book"])), obj, obj.top_surfaces[0])
     _light_switches(b, ids, W, D, seed)
+    _floor_lamp(b, ids, W, D)
 
     return _finish(b, (W, D, H), light)
 
@@ -796,6 +797,29 @@ def _light_switches(b: _Builder, ids: dict[str, int], W: float, D: float, seed: 
             part = make_part("box", c, b.color((0.95, 0.95, 0.93), 0.02), size=_rot_size([thick, w, h], yaw))
             if b.try_add("light switch", [part], ids[side], "attached to", margin=0.05) is not None:
                 break
+
+
+def _floor_lamp(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
+    """A floor lamp by a wall when no lamp stands anywhere: the ceiling lamp is mostly above the camera, and
+    a room's named objects should include a lamp one sees. Placed last, so that it moved no other object of
+    a seed's room."""
+    if any(o.class_name == "lamp" and o.support_relation == "on" for o in b.objects):
+        return
+    rng = b.rng
+    sides = ["+x", "-x", "+y", "-y"]
+    shade = b.color((0.95, 0.9, 0.75), 0.04)
+    metal = b.color((0.25, 0.25, 0.25), 0.03)
+    for _ in range(40):
+        p, n, half_len, _ = _wall_frame(sides[rng.integers(4)], W, D)
+        t_axis = np.array([-n[1], n[0], 0.0])
+        c = p + n * 0.3 + t_axis * rng.uniform(-half_len + 0.4, half_len - 0.4)
+        parts = [
+            make_part("cylinder", c, metal, radius=0.16, height=0.03),
+            make_part("cylinder", c + [0, 0, 0.03], metal, radius=0.015, height=1.3),
+            make_part("cylinder", c + [0, 0, 1.25], shade, radius=0.24, radius_top=0.15, height=0.32),
+        ]
+        if b.try_add("lamp", parts, ids["floor"], "on", margin=0.1) is not None:
+            return
 
 
 def _relations(b: _Builder) -> list[tuple[int, str, int]]:
