@@ -11,7 +11,7 @@ from pathlib import Path
 
 import yaml
 
-from ..config import add_override_argument, load_config
+from ..config import add_override_argument, add_poses_argument, choices, load_config
 from ..errors import DataError
 
 log = logging.getLogger(__name__)
@@ -43,17 +43,12 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--ablation",
         default=None,
-        choices=["naive", "local", "local+global", "full"],
+        choices=choices("mapping.ablation"),
         help="which semantic modules run (default: the config's, 'full')",
     )
     p.add_argument("--resume", action="store_true", help="continue from OUT/map.npz")
     add_override_argument(p)
-    p.add_argument(
-        "--poses",
-        choices=("gt", "odometry"),
-        default=None,
-        help="camera poses: the dataset's (gt) or RGB-D odometry (odometry); default: config tracking.poses",
-    )
+    add_poses_argument(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
