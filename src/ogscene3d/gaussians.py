@@ -83,7 +83,7 @@ class GaussianMap:
         self._data: dict[str, torch.Tensor] = {
             k: torch.zeros((cap, *shape), dtype=dt, device=self.device) for k, (shape, dt) in FIELDS.items()
         }
-        # i26: auxiliary per-Gaussian float values (mapping/evidence.py), not saved: name -> value of new rows
+        # auxiliary per-Gaussian float values (mapping/evidence.py), not saved: name -> value of new rows
         self._aux: dict[str, float] = {}
 
     # ------------------------------------------------------------------ access
@@ -154,7 +154,7 @@ class GaussianMap:
 
     def aux(self, name: str, fill: float = 0.0) -> torch.Tensor:
         """[N] float32 auxiliary per-Gaussian values that follow appends, pruning and growth like the fields
-        (new Gaussians start at ``fill``), created on first use; not written to files (i26)."""
+        (new Gaussians start at ``fill``), created on first use; not written to files."""
         if name in FIELDS:
             raise KeyError(f"{name!r} is a Gaussian field, not an auxiliary value")
         if name not in self._data:
