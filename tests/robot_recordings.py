@@ -46,6 +46,18 @@ class BagSpec:
     distortion: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
 
 
+def small_scene(root: Path) -> tuple[Path, list, np.ndarray]:
+    """A 4-frame 64x48 synthetic scene in ``root``: (its folder, its frames, K in the OpenCV convention
+    (pixel (0, 0) at its centre) that ROS calibrations, librealsense and Record3D use)."""
+    from ogscene3d.datasets import make_synthetic_scene, open_dataset
+
+    folder = make_synthetic_scene(root, 1, 4, 64, 48)
+    ds = open_dataset(folder)
+    K = ds.K.astype(np.float64).copy()
+    K[:2, 2] -= 0.5
+    return folder, list(ds), K
+
+
 def _quat(R: np.ndarray) -> np.ndarray:
     return Rotation.from_matrix(R).as_quat()  # x, y, z, w
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from ogscene3d.config import DataConfig, load_config
-from ogscene3d.datasets import make_synthetic_scene, open_dataset
+from ogscene3d.datasets import open_dataset
 from ogscene3d.datasets.record3d import arkit_to_opencv, lzfse_module
 from ogscene3d.errors import ConfigError, DataError
 from ogscene3d.mapping.mapper import Mapper
@@ -19,16 +19,12 @@ try:
 except ConfigError:
     pytest.skip("no LZFSE bindings (pip install lzfse)", allow_module_level=True)
 
-from robot_recordings import write_r3d  # noqa: E402
+from robot_recordings import small_scene, write_r3d  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
-    root = make_synthetic_scene(tmp_path_factory.mktemp("scene") / "s", 1, 4, 64, 48)
-    ds = open_dataset(root)
-    K = ds.K.astype(np.float64).copy()
-    K[:2, 2] -= 0.5
-    return root, list(ds), K
+    return small_scene(tmp_path_factory.mktemp("scene") / "s")
 
 
 def _r3d(tmp_path, scene, name="cap.r3d", **kw):

@@ -12,10 +12,10 @@ import pytest
 
 pytest.importorskip("rosbags")
 
-from robot_recordings import BagSpec, write_bag  # noqa: E402
+from robot_recordings import BagSpec, small_scene, write_bag  # noqa: E402
 
 from ogscene3d.config import DataConfig, load_config  # noqa: E402
-from ogscene3d.datasets import make_synthetic_scene, open_dataset  # noqa: E402
+from ogscene3d.datasets import open_dataset  # noqa: E402
 from ogscene3d.datasets.rosbag_tf import Track  # noqa: E402
 from ogscene3d.errors import ConfigError, DataError  # noqa: E402
 from ogscene3d.mapping.mapper import Mapper  # noqa: E402
@@ -26,11 +26,7 @@ SUFFIX = {"ros1": ".bag", "mcap-file": ".mcap", "sqlite3": "", "mcap": ""}
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
     """(scene folder, its frames, K in the OpenCV convention ROS calibrations use)."""
-    root = make_synthetic_scene(tmp_path_factory.mktemp("scene") / "s", 1, 4, 64, 48)
-    ds = open_dataset(root)
-    K = ds.K.astype(np.float64).copy()
-    K[:2, 2] -= 0.5
-    return root, list(ds), K
+    return small_scene(tmp_path_factory.mktemp("scene") / "s")
 
 
 def _bag(tmp_path: Path, scene, **spec) -> Path:

@@ -10,9 +10,10 @@ import types
 
 import numpy as np
 import pytest
+from robot_recordings import small_scene
 from scipy.ndimage import maximum_filter, minimum_filter
 
-from ogscene3d.datasets import make_synthetic_scene, open_dataset
+from ogscene3d.datasets import open_dataset
 from ogscene3d.errors import ConfigError, DataError
 from ogscene3d.streams import CameraStream, LatestFrame, open_stream
 from ogscene3d.streams.realsense import RealSenseStream
@@ -21,11 +22,7 @@ from ogscene3d.streams.record3d import Record3DUSBStream
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
-    root = make_synthetic_scene(tmp_path_factory.mktemp("scene") / "s", 1, 4, 64, 48)
-    ds = open_dataset(root)
-    K = ds.K.astype(np.float64).copy()
-    K[:2, 2] -= 0.5
-    return root, list(ds), K
+    return small_scene(tmp_path_factory.mktemp("scene") / "s")
 
 
 # ---------------------------------------------------------------------------------------- hand-over
