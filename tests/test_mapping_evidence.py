@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from ogscene3d.gaussians import GaussianMap
-from ogscene3d.mapping.evidence import SegmentEvidence
+from ogscene3d.mapping.evidence import SegmentEvidence, spill_pixels
 
 W, H = 64, 48
 K = np.array([[50.0, 0, 32.0], [0, 50.0, 24.0], [0, 0, 1]], np.float32)
@@ -88,18 +88,71 @@ def test_lower_then_split_off_as_new_label(device):
     split = ev.split_ratio(gm, 3) >= 0.5
     assert n == int(split.sum()) > 0
     assert torch.all(gm.confidences[split] < 0.3) and torch.all(gm.confidences[~split] == 0.9)
-    out = ev.split_and_merge(gm, merge=False, min_views=3, tau_low=0.3, r_search=0.08)
+    out = ev.split_and_merge(gm, merge=False, min_views=3, split_below=0.3, r_search=0.08)
     assert out["split_labels"] == 1 and out["split_gaussians"] == int(split.sum())
     new = gm.labels[split]
     assert torch.all(new == new[0]) and int(new[0]) == 1  # one new label for the connected part
     assert torch.all(gm.labels[~split] == 0)
     assert torch.all(gm.confidences[split] == 0.5)
-    # without low confidence (no long-term step) nothing is split
+    # split_below = tau_low: without low confidence (no long-term step) nothing is split; the default
+    # (1.0) lets the views decide whatever the confidence
     gm2, _ = plane_map(device)
     ev2 = SegmentEvidence(gm2.device)
     for _ in range(3):
         ev2.observe(gm2, segments_with_vase(), POSE, K, DEPTH)
-    assert ev2.split_and_merge(gm2, merge=False, min_views=3, tau_low=0.3)["split_labels"] == 0
+    assert ev2.split_and_merge(gm2, merge=False, min_views=3, split_below=0.3)["split_labels"] == 0
+    out = ev2.split_and_merge(gm2, merge=False, min_views=3, r_search=0.08)
+    assert out["split_labels"] == 1 and out["split_gaussians"] == int(split.sum())
+    assert torch.all(gm2.confidences[split] == 0.5) and torch.all(gm2.labels[~split] == 0)
+
+
+def test_spill_pixels_leave_small_segments_whole(device):
+    """Boundary pixels are left out of big segments only: a segment of a few pixels is nearly all boundary."""
+    seg = torch.ones((H, W), dtype=torch.int64, device=device)
+    seg[10:13, 10:13] = 2  # 3x3: one inner pixel
+    seg[20:40, 30:60] = 3
+    out = spill_pixels(seg).cpu()
+    assert not out[10:13, 10:13].any()
+    assert out[20, 35] and out[39, 40] and not out[30, 45]  # 3's border is left out, its inside kept
+    assert out[9, 11] and out[13, 11]  # 1's pixels next to the small segment are 1's boundary
+    assert not out[0, 0]
+
+
+def test_a_small_object_gets_split_evidence(device):
+    """A light switch of 3x3 pixels, absorbed into the wall's label, is judged from its few boundary pixels
+    (before small segments kept their boundary it got no evidence at all)."""
+    gm, _ = plane_map(device)
+    seg = np.ones((H, W), np.int32)
+    seg[20:23, 30:33] = 2
+    u = torch.floor(K[0, 0] * gm.means[:, 0] / 2.0 + K[0, 2])
+    v = torch.floor(K[1, 1] * gm.means[:, 1] / 2.0 + K[1, 2])
+    switch = (u >= 30) & (u < 33) & (v >= 20) & (v < 23)
+    assert int(switch.sum()) >= 3
+    ev = SegmentEvidence(gm.device)
+    for _ in range(3):
+        ev.observe(gm, seg, POSE, K, DEPTH)
+    r = ev.split_ratio(gm, min_views=3)
+    assert torch.all(r[switch] == 1.0) and torch.all(r[~switch] == 0.0)
+
+
+def test_protected_labels_are_owners_and_the_unjudged(device):
+    """A label that holds its segment alone in min_views views is an object (protected); one that is always
+    a small part of another label's segment is not; one not judged in min_views views is kept for now."""
+    gm, vase = plane_map(device)
+    gm.labels[vase] = 2  # the vase: its own segment in every view
+    x = gm.means[:, 0]
+    frag = (~vase) & (x > -0.2) & (x < -0.05) & (gm.means[:, 1] > 0.3)
+    gm.labels[frag] = 4  # a fragment of the cabinet front, inside the cabinet's segment
+    ev = SegmentEvidence(gm.device)
+    for k in range(3):
+        ev.observe(gm, segments_with_vase(), POSE, K, DEPTH)
+        if k == 1:
+            assert ev.protected_labels(6, min_views=3).tolist() == [True] * 6  # nothing judged 3 times yet
+    prot = ev.protected_labels(6, min_views=3).tolist()
+    assert prot[2] and not prot[4]
+    assert prot[0]  # the cabinet holds its segment (the fragment is a small share of it)
+    assert prot[1] and prot[3] and prot[5]  # never seen: not judged
+    assert ev.protected_labels(70, min_views=3)[69]  # labels newer than the counters
 
 
 def test_labels_mostly_in_one_segment_merge(device):

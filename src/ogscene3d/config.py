@@ -505,15 +505,25 @@ class MappingConfig:
     )
     merge_min_score: float = setting(0.95, "SAM score a merging segment needs at least", _UNIT)
     # multi-view co-segmentation evidence (mapping/evidence.py), beyond the paper; evidence_split,
-    # evidence_merge and evidence_veto all false = the paper's long-term step and Algorithm 1 (with the
-    # extensions above). Merge and veto are off by default: over the synthetic seeds only the split rule
-    # helped. docs/consistency.md has each rule's measured effect.
+    # evidence_merge, evidence_protect and evidence_veto all false = the paper's long-term step and
+    # Algorithm 1 (with the extensions above). docs/consistency.md has each rule's measured effect.
     evidence_split: bool = setting(
         True,
-        "long-term lowers the confidence of Gaussians that most views show as a separate part of their "
-        "label; refinement splits such low-confidence parts off as new labels",
+        "refinement splits parts that most views show apart from their label off as new labels; long-term "
+        "lowers their confidence",
     )
-    evidence_merge: bool = setting(False, "refinement merges labels that most views show in one segment")
+    evidence_split_conf: float = setting(
+        1.0,
+        "confidence under which a part with split evidence is split (1 = any: the views decide; tau_low = "
+        "only once the long-term step has lowered it)",
+        _float(0.0, 1.0, lo_open=True),
+    )
+    evidence_merge: bool = setting(True, "refinement merges labels that nearly all views show in one segment")
+    evidence_protect: bool = setting(
+        True,
+        "Algorithm 1 leaves alone the labels that owned a segment in evidence_min_views views, and those "
+        "not yet judged in as many",
+    )
     evidence_min_views: int = setting(
         3, "views a Gaussian or a label pair needs before the evidence decides on it", _int(1)
     )
@@ -523,7 +533,7 @@ class MappingConfig:
         _float(0.0, 1.0, lo_open=True),
     )
     evidence_merge_ratio: float = setting(
-        0.7, "share of one-segment views that merges two labels", _float(0.0, 1.0, lo_open=True)
+        0.9, "share of one-segment views that merges two labels", _float(0.0, 1.0, lo_open=True)
     )
     evidence_min_group: int = setting(
         3, "Gaussians a separate part needs (per view, and to be split off)", _int(1)

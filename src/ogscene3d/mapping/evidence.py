@@ -49,6 +49,7 @@ from .longterm import label_edges
 from .merge import merge_labels, visible_pixels
 from .refine import connected_clusters
 
+OWN = 0.8  # a label owns a view's segment when it holds this share of the segment's visible Gaussians
 CONTAIN = 0.8  # a label lies "in one segment" of a view when this share of its visible Gaussians does
 
 
@@ -66,6 +67,19 @@ class EvidenceStats:
         return dict(self.__dict__)
 
 
+def spill_pixels(seg: torch.Tensor) -> torch.Tensor:
+    """[H,W] bool: the boundary pixels of the segments ``seg`` [H,W] (ids >= 0) whose interior holds at least
+    half of their pixels. A Gaussian at an object's edge may project just across it (a spill); a small
+    segment (a book, a light switch: a few pixels across) is nearly all boundary, and leaving that out would
+    leave the objects the evidence exists for unjudged."""
+    edge = label_edges(seg)
+    flat = seg.reshape(-1).clamp(min=0)
+    area = torch.bincount(flat)
+    inner = torch.bincount(flat[~edge.reshape(-1)], minlength=area.numel())
+    big = 2 * inner >= area
+    return edge & big[flat].reshape(seg.shape)
+
+
 class SegmentEvidence:
     """Per-Gaussian split evidence (auxiliary values of the GaussianMap) and per-label-pair co-segmentation
     counts, collected view by view."""
@@ -74,6 +88,8 @@ class SegmentEvidence:
         self.device = device
         self.pair_views = torch.zeros((0, 0), device=device)
         self.pair_together = torch.zeros((0, 0), device=device)
+        self.label_seen = torch.zeros(0, device=device)
+        self.label_owned = torch.zeros(0, device=device)
         self.stats = EvidenceStats()
 
     def _grow(self, n: int) -> None:
@@ -84,6 +100,10 @@ class SegmentEvidence:
         for name in ("pair_views", "pair_together"):
             t = torch.zeros((size, size), device=self.device)
             t[:old, :old] = getattr(self, name)
+            setattr(self, name, t)
+        for name in ("label_seen", "label_owned"):
+            t = torch.zeros(size, device=self.device)
+            t[:old] = getattr(self, name)
             setattr(self, name, t)
 
     def observe(
@@ -116,7 +136,7 @@ class SegmentEvidence:
         vis = pix >= 0
         g, p = pick[vis], pix[vis]
         s = seg.reshape(-1)[p]
-        ok = (s > 0) & ~label_edges(seg).reshape(-1)[p]
+        ok = (s > 0) & ~spill_pixels(seg).reshape(-1)[p]
         g, s = g[ok], s[ok]
         if g.numel() == 0:
             return
@@ -147,17 +167,34 @@ class SegmentEvidence:
         self.stats.judged += int(judged.sum())
         self.stats.split_votes += int(sv.sum())
 
+        # ownership: a label whose main segment holds little else in this view is an object SAM found
+        self._grow(int(gm.next_label))
+        ml, mc, ms = ul[is_main], cnt[is_main], us[is_main]
+        big = mc >= min_group
+        self.label_seen.index_add_(0, ml[big], torch.ones(int(big.sum()), device=dev))
+        pure = big & (mc.float() >= OWN * n_seg[ms])
+        self.label_owned.index_add_(0, ml[pure], torch.ones(int(pure.sum()), device=dev))
+
         # label pairs: the labels that lie mostly in one segment, and which segment that is
         share = cnt[is_main].float() / n_lab[ul[is_main]]
         contained = share >= CONTAIN
         labs, mains = ul[is_main][contained], us[is_main][contained]
         if labs.numel() < 2:
             return
-        self._grow(int(gm.next_label))
         ii, jj = labs[:, None].expand(-1, labs.numel()), labs[None, :].expand(labs.numel(), -1)
         same = (mains[:, None] == mains[None, :]).float()
         self.pair_views.index_put_((ii.reshape(-1), jj.reshape(-1)), torch.ones(ii.numel(), device=dev), True)
         self.pair_together.index_put_((ii.reshape(-1), jj.reshape(-1)), same.reshape(-1), True)
+
+    def protected_labels(self, n_labels: int, min_views: int) -> torch.Tensor:
+        """[n_labels] bool: the labels Algorithm 1 leaves alone (``mapping.evidence_protect``): those that owned
+        a segment (held nearly all of it, ``OWN``) in at least ``min_views`` views, objects that SAM found on
+        their own, and those judged in fewer than ``min_views`` views, which the evidence cannot tell yet from
+        a fragment (a small object's label starts at its low SAM score and is all low confidence)."""
+        out = torch.ones(n_labels, dtype=torch.bool, device=self.device)
+        m = min(n_labels, self.label_owned.numel())
+        out[:m] = (self.label_owned[:m] >= min_views) | (self.label_seen[:m] < min_views)
+        return out
 
     def split_ratio(self, gm, min_views: int) -> torch.Tensor:
         """[N] the share of a Gaussian's judged views that showed it as a separate part of its label (0 with
@@ -183,8 +220,8 @@ class SegmentEvidence:
         merge: bool = True,
         min_views: int = 3,
         split_ratio: float = 0.5,
-        merge_ratio: float = 0.7,
-        tau_low: float = 0.3,
+        merge_ratio: float = 0.9,
+        split_below: float = 1.0,
         r_search: float = 0.1,
         graph_k: int = 8,
         min_group: int = 3,
@@ -210,7 +247,7 @@ class SegmentEvidence:
                 out["merged_labels"] = len(mapping)
         if split:
             r = self.split_ratio(gm, min_views)
-            low = (r >= split_ratio) & (gm.confidences < tau_low) & (gm.labels >= 0)
+            low = (r >= split_ratio) & (gm.confidences < split_below) & (gm.labels >= 0)
             cand = torch.nonzero(low).squeeze(1)
             if cand.numel() >= min_group:
                 comp = connected_clusters(gm.means[cand], gm.labels[cand], r_search, graph_k)

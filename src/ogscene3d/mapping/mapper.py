@@ -163,6 +163,11 @@ class Timings:
         return "\n".join(rows)
 
 
+def _uses_evidence(cfg) -> bool:
+    """Whether any rule of ``mapping/evidence.py`` is on (the evidence is collected only then)."""
+    return cfg.evidence_split or cfg.evidence_merge or cfg.evidence_veto or cfg.evidence_protect
+
+
 def _ran_at(keyframe_count: int, every: int) -> bool:
     """Whether a step scheduled every ``every`` keyframes (0 = never) runs at keyframe ``keyframe_count``."""
     return every > 0 and keyframe_count % every == 0
@@ -707,7 +712,7 @@ class Mapper:
     def _observe_evidence(self, k: _Keyframe) -> None:
         """The keyframe's co-segmentation evidence (``evidence.py``), on the map before association."""
         cfg, frame = self.cfg, k.frame
-        if not (self.use_refine and (cfg.evidence_split or cfg.evidence_merge or cfg.evidence_veto)):
+        if not (self.use_refine and _uses_evidence(cfg)):
             return
         with self.timings.section("evidence"):
             self.evidence.observe(
@@ -804,13 +809,18 @@ class Mapper:
                 ev = self.evidence.split_and_merge(
                     self.map, split=cfg.evidence_split, merge=cfg.evidence_merge,
                     min_views=cfg.evidence_min_views, split_ratio=cfg.evidence_split_ratio,
-                    merge_ratio=cfg.evidence_merge_ratio, tau_low=cfg.tau_low, r_search=cfg.r_search,
+                    merge_ratio=cfg.evidence_merge_ratio, split_below=cfg.evidence_split_conf, r_search=cfg.r_search,
                     graph_k=cfg.refine_graph_k, min_group=cfg.evidence_min_group,
                 )  # fmt: skip
             for k, v in ev.items():
                 self.timings.add(f"evidence_{k}", v)
         # the veto undoes Alg. 1 relabellings between labels the views show apart: it needs the labels before
         before = (self.map.labels.clone(), self.map.confidences.clone()) if cfg.evidence_veto else None
+        protected = (
+            self.evidence.protected_labels(int(self.map.next_label), cfg.evidence_min_views)
+            if cfg.evidence_protect
+            else None
+        )
         with self.timings.section("refine"):
             st = global_refinement(
                 self.map.means,
@@ -822,6 +832,7 @@ class Mapper:
                 cluster_radius=cfg.refine_cluster_radius,
                 graph_k=cfg.refine_graph_k,
                 include_unlabeled=cfg.refine_unlabeled,
+                protected=protected,
             )
         for k, v in st.as_dict().items():
             self.timings.add(f"refine_{k}", v)

@@ -59,6 +59,18 @@ def connected_clusters(
     return out
 
 
+def _of_labels(labels: torch.Tensor, protected: torch.Tensor | None) -> torch.Tensor:
+    """[N] bool: Gaussians whose label is marked in ``protected`` [L] (none when it is None; labels beyond
+    L are not marked)."""
+    out = torch.zeros(labels.shape[0], dtype=torch.bool, device=labels.device)
+    if protected is None or protected.numel() == 0:
+        return out
+    lab = labels.long()
+    ok = (lab >= 0) & (lab < protected.numel())
+    out[ok] = protected.to(labels.device)[lab[ok]]
+    return out
+
+
 @dataclass
 class RefineStats:
     clusters: int = 0
@@ -82,16 +94,20 @@ def global_refinement(
     cluster_radius: float = 0.3,
     graph_k: int = 8,
     include_unlabeled: bool = False,
+    protected: torch.Tensor | None = None,
 ) -> RefineStats:
     """Algorithm 1 on the map's tensors; ``labels`` [N] int32 and ``conf`` [N] are modified in place.
     ``include_unlabeled``: whether unlabeled Gaussians (label -1, confidence 0) take part in the individual
-    refinement."""
+    refinement. ``protected`` [L] bool per label (beyond the paper, ``mapping.evidence_protect``): the
+    Gaussians of a protected label keep it at both levels, though they may still give their label to others
+    (``evidence.SegmentEvidence.protected_labels`` says which labels the views show to be objects)."""
     stats = RefineStats()
     n = means.shape[0]
     if n == 0:
         return stats
     dev = means.device
     processed = torch.zeros(n, dtype=torch.bool, device=dev)
+    kept = _of_labels(labels, protected)
 
     # ---- cluster level
     cluster = connected_clusters(means, labels, r_search, graph_k)
@@ -111,7 +127,9 @@ def global_refinement(
             qc = cluster[q][found]
             nl = labels[high[idx[found, 0]]]
             s_new, cnt, _, _ = group_top2(qc, nl, num_c)
+            # a cluster is one label's, so a protected label's clusters are kept whole
             relabel = low & (cnt > 0)
+            relabel[cluster[kept]] = False
             members = inc & relabel[cluster.clamp(min=0)]
             labels[members] = s_new[cluster[members]].to(labels.dtype)
             processed |= members
@@ -120,7 +138,7 @@ def global_refinement(
 
     # ---- individual level (uses the labels after the cluster level)
     high = torch.nonzero((conf > tau_high) & (labels >= 0)).squeeze(1)
-    cand = ~processed & (conf < tau_low)
+    cand = ~processed & (conf < tau_low) & ~kept
     if not include_unlabeled:
         cand &= labels >= 0
     q = torch.nonzero(cand).squeeze(1)
