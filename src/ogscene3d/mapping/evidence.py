@@ -187,10 +187,10 @@ class SegmentEvidence:
         self.pair_together.index_put_((ii.reshape(-1), jj.reshape(-1)), same.reshape(-1), True)
 
     def protected_labels(self, n_labels: int, min_views: int) -> torch.Tensor:
-        """[n_labels] bool: the labels Algorithm 1 leaves alone (``mapping.evidence_protect``): those that owned
-        a segment (held nearly all of it, ``OWN``) in at least ``min_views`` views, objects that SAM found on
-        their own, and those judged in fewer than ``min_views`` views, which the evidence cannot tell yet from
-        a fragment (a small object's label starts at its low SAM score and is all low confidence)."""
+        """[n_labels] bool: the labels Algorithm 1 leaves alone (``mapping.evidence_protect``): those that
+        owned a segment (held nearly all of it, ``OWN``) in at least ``min_views`` views, objects that SAM
+        found on their own, and those judged in fewer than ``min_views`` views, which the evidence cannot tell
+        yet from a fragment (a small object's label starts at its low SAM score and is all low confidence)."""
         out = torch.ones(n_labels, dtype=torch.bool, device=self.device)
         m = min(n_labels, self.label_owned.numel())
         out[:m] = (self.label_owned[:m] >= min_views) | (self.label_seen[:m] < min_views)

@@ -809,8 +809,8 @@ class Mapper:
                 ev = self.evidence.split_and_merge(
                     self.map, split=cfg.evidence_split, merge=cfg.evidence_merge,
                     min_views=cfg.evidence_min_views, split_ratio=cfg.evidence_split_ratio,
-                    merge_ratio=cfg.evidence_merge_ratio, split_below=cfg.evidence_split_conf, r_search=cfg.r_search,
-                    graph_k=cfg.refine_graph_k, min_group=cfg.evidence_min_group,
+                    merge_ratio=cfg.evidence_merge_ratio, split_below=cfg.evidence_split_conf,
+                    r_search=cfg.r_search, graph_k=cfg.refine_graph_k, min_group=cfg.evidence_min_group,
                 )  # fmt: skip
             for k, v in ev.items():
                 self.timings.add(f"evidence_{k}", v)
