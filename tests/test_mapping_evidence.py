@@ -150,6 +150,7 @@ def test_protected_labels_are_owners_and_the_unjudged(device):
             assert ev.protected_labels(6, min_views=3).tolist() == [True] * 6  # nothing judged 3 times yet
     prot = ev.protected_labels(6, min_views=3).tolist()
     assert prot[2] and not prot[4]
+    assert not ev.protected_labels(6, min_views=3, min_owned=4)[2]  # owned in 3 views only
     assert prot[0]  # the cabinet holds its segment (the fragment is a small share of it)
     assert prot[1] and prot[3] and prot[5]  # never seen: not judged
     assert ev.protected_labels(70, min_views=3)[69]  # labels newer than the counters

@@ -518,11 +518,18 @@ class MappingConfig:
         "only once the long-term step has lowered it)",
         _float(0.0, 1.0, lo_open=True),
     )
+    evidence_revisit: bool = setting(
+        True,
+        "the long-term step adds its memory views' evidence again, judged against the map as it is then",
+    )
     evidence_merge: bool = setting(True, "refinement merges labels that nearly all views show in one segment")
     evidence_protect: bool = setting(
         True,
-        "Algorithm 1 leaves alone the labels that owned a segment in evidence_min_views views, and those "
-        "not yet judged in as many",
+        "Algorithm 1 leaves alone the labels that owned a segment in evidence_protect_views views, and "
+        "those not yet judged in evidence_min_views",
+    )
+    evidence_protect_views: int = setting(
+        1, "views in which a label must own (nearly fill) a segment to be protected", _int(1)
     )
     evidence_min_views: int = setting(
         3, "views a Gaussian or a label pair needs before the evidence decides on it", _int(1)

@@ -186,14 +186,17 @@ class SegmentEvidence:
         self.pair_views.index_put_((ii.reshape(-1), jj.reshape(-1)), torch.ones(ii.numel(), device=dev), True)
         self.pair_together.index_put_((ii.reshape(-1), jj.reshape(-1)), same.reshape(-1), True)
 
-    def protected_labels(self, n_labels: int, min_views: int) -> torch.Tensor:
+    def protected_labels(self, n_labels: int, min_views: int, min_owned: int = 1) -> torch.Tensor:
         """[n_labels] bool: the labels Algorithm 1 leaves alone (``mapping.evidence_protect``): those that
-        owned a segment (held nearly all of it, ``OWN``) in at least ``min_views`` views, objects that SAM
-        found on their own, and those judged in fewer than ``min_views`` views, which the evidence cannot tell
-        yet from a fragment (a small object's label starts at its low SAM score and is all low confidence)."""
+        owned a segment (held nearly all of it, ``OWN``) in at least ``min_owned`` views since they were made,
+        objects that SAM found on their own again, and those judged in fewer than ``min_views`` views, which
+        the evidence cannot tell yet from a fragment (a small object's label starts at its low SAM score and
+        is all low confidence). One view is enough: a light switch that SAM absorbs into the wall in most
+        views still owns its segment in some, and a fragment of a surface (a spurious or cut segment) does not
+        come back as a segment of its own."""
         out = torch.ones(n_labels, dtype=torch.bool, device=self.device)
         m = min(n_labels, self.label_owned.numel())
-        out[:m] = (self.label_owned[:m] >= min_views) | (self.label_seen[:m] < min_views)
+        out[:m] = (self.label_owned[:m] >= min_owned) | (self.label_seen[:m] < min_views)
         return out
 
     def split_ratio(self, gm, min_views: int) -> torch.Tensor:

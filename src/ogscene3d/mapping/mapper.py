@@ -728,8 +728,18 @@ class Mapper:
                 self.map, min_views=cfg.evidence_min_views, split_ratio=cfg.evidence_split_ratio
             )
             self.timings.add("evidence_lowered", n)
+        views = self.memory.next_views(cfg.longterm_views)
+        if cfg.evidence_revisit and self.use_refine and _uses_evidence(cfg):
+            # the stored views judged again, against the map as it is now: the Gaussians added since a view
+            # was a keyframe have had no word from it
+            with self.timings.section("evidence"):
+                for entry in views:
+                    self.evidence.observe(
+                        self.map, entry.segments, entry.pose, entry.K, entry.depth,
+                        margin=cfg.init_depth_margin, min_group=cfg.evidence_min_group,
+                    )  # fmt: skip
         with self.timings.section("longterm"):
-            for entry in self.memory.next_views(cfg.longterm_views):
+            for entry in views:
                 st = longterm_view_update(
                     self.map,
                     entry,
@@ -817,7 +827,9 @@ class Mapper:
         # the veto undoes Alg. 1 relabellings between labels the views show apart: it needs the labels before
         before = (self.map.labels.clone(), self.map.confidences.clone()) if cfg.evidence_veto else None
         protected = (
-            self.evidence.protected_labels(int(self.map.next_label), cfg.evidence_min_views)
+            self.evidence.protected_labels(
+                int(self.map.next_label), cfg.evidence_min_views, cfg.evidence_protect_views
+            )
             if cfg.evidence_protect
             else None
         )
