@@ -189,3 +189,27 @@ def test_veto_undoes_a_relabel_between_labels_seen_apart(device):
     assert n == int(vase.sum())
     assert torch.all(gm.labels[vase] == 2) and torch.all(gm.confidences[vase] == 0.9)
     assert torch.all(gm.labels[far] == 7)
+
+
+def test_a_revisited_view_votes_only_for_gaussians_made_since(device):
+    """The long-term step judges its memory views again: the Gaussians the view judged before get no second
+    vote however often it is revisited, the ones made since get one, once; label counts are left alone."""
+    gm, vase = plane_map(device)
+    ev = SegmentEvidence(gm.device)
+    stamp = ev.observe(gm, segments_with_vase(), POSE, K, DEPTH)
+    views = gm.aux("evidence_views").clone()
+    seen = ev.label_seen.clone()
+    again = ev.observe(gm, segments_with_vase(), POSE, K, DEPTH, since=stamp)
+    assert torch.equal(gm.aux("evidence_views"), views) and torch.equal(ev.label_seen, seen)
+    n = len(gm)
+    xs = torch.linspace(0.45, 0.75, 8)
+    new = torch.stack([xs, torch.full((8,), -0.42), torch.full((8,), 2.0)], 1)  # inside the cabinet front
+    gm.append(
+        new, torch.full((8, 3), 0.5), torch.full((8,), -3.0),
+        labels=torch.zeros(8, dtype=torch.int32), confidences=torch.full((8,), 0.9),
+    )  # fmt: skip
+    later = ev.observe(gm, segments_with_vase(), POSE, K, DEPTH, since=again)
+    v = gm.aux("evidence_views")
+    assert torch.equal(v[:n], views[:n]) and torch.all(v[n:] == 1)
+    ev.observe(gm, segments_with_vase(), POSE, K, DEPTH, since=later)
+    assert torch.all(gm.aux("evidence_views")[n:] == 1)

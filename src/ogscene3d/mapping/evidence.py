@@ -1,5 +1,5 @@
-"""Multi-view co-segmentation evidence (beyond the paper; ``mapping.evidence_split`` on by default,
-``evidence_merge`` and ``evidence_veto`` off: measured in docs/consistency.md).
+"""Multi-view co-segmentation evidence (beyond the paper; the ``mapping.evidence_*`` switches, each rule's
+measured effect in docs/consistency.md).
 
 The paper fixes a Gaussian's label at first sight: a later view's segment that matches the map takes the
 label the map already has (case ii), so when the first view merged a vase with the cabinet it stands on, or
@@ -10,32 +10,41 @@ segments, and that one part of it is always in a segment of its own. This module
 every keyframe, as view-consensus mask clustering does offline (MaskClustering, CVPR 2024), and decides
 incrementally:
 
-* **observe** (every keyframe, on the map as it stands before the keyframe's association): the labelled
-  Gaussians are projected into the frame (visible where the observed depth agrees, ``merge.visible_pixels``);
-  those on a segment boundary are left out. For each label L, its visible Gaussians are counted per segment;
-  the segment with the most of them is L's *main* segment in this view. A Gaussian in the main segment gets
-  a "together" view; one in another segment that is itself mostly L (at least half of its visible Gaussians,
-  and ``min_group`` of them) gets a "split" view: the view shows it as a separate part of L. Gaussians in a
-  segment that belongs to another label give no vote (a boundary spill, or a plainly wrong label: that is the
-  long-term step's Eq. 16 test). Per label pair, the views where both labels lie mostly (>= 0.8) in one
-  segment count, and those where it is the same segment count as "together".
+* **observe** (every keyframe, on the map as it stands before the keyframe's association; and, with
+  ``evidence_revisit``, the long-term step's memory views again, against the map as it is then: Gaussians
+  made after a view was a keyframe had no word from it): the labelled Gaussians are projected into the frame
+  (visible where the observed depth agrees, ``merge.visible_pixels``); those on the boundary of a segment
+  whose interior holds most of it are left out (``spill_pixels``: a small segment, a book or a switch a few
+  pixels across, is nearly all boundary and is kept whole). For each label L, its visible Gaussians are
+  counted per segment; the segment with the most of them is L's *main* segment in this view. A Gaussian in
+  the main segment gets a "together" view; one in another segment that is itself mostly L (at least half of
+  its visible Gaussians, and ``min_group`` of them) gets a "split" view: the view shows it as a separate part
+  of L. Gaussians in a segment that belongs to another label give no vote (a boundary spill, or a plainly
+  wrong label: that is the long-term step's Eq. 16 test). Per label, the views where it was judged count,
+  and those where it *owned* its main segment (held ``OWN`` of the segment's visible Gaussians). Per label
+  pair, the views where both labels lie mostly (``CONTAIN``) in one segment count, and those where it is the
+  same segment count as "together".
 * **lower_confidences** (with the long-term step, ``evidence_split``): a Gaussian judged in at least
   ``min_views`` views, in a split in at least ``split_ratio`` of them, loses that ratio of its confidence
   (Eq. 16's decrease with P_2D-3D = the ratio and P_conf = 0): its stored views disagree with its label.
 * **split_and_merge** (with the global refinement, before Alg. 1): labels that at least ``merge_ratio`` of
-  at least ``min_views`` views show in one segment are merged (``evidence_merge``); low-confidence Gaussians
-  (conf < tau_low) with split evidence are split off their label, each spatially connected group of at least
-  ``min_group`` of them (same label, r_search) becoming a new label at confidence 0.5 (``evidence_split``).
-  Algorithm 1 then re-decides what is left low.
-* **veto** (after Alg. 1, ``evidence_veto``): a relabelling by Alg. 1 from label a to label b is undone when
-  at least ``min_views`` views held both labels mostly in one segment each and fewer than ``apart_ratio`` of
-  them in the same one: the views say a and b are different objects. Without it a small object whose
-  confidence fell (low SAM scores of its corrupted views, Eq. 5 decreases at its boundary) took the label of
-  the wall or the table around it, its only high-confidence neighbour.
+  at least ``min_views`` views show in one segment are merged (``evidence_merge``); Gaussians with split
+  evidence and a confidence under ``split_below`` (``mapping.evidence_split_conf``: 1 by default, the views
+  decide; ``tau_low`` waits for the long-term step's decrease) are split off their label, each spatially
+  connected group of at least ``min_group`` of them (same label, r_search) becoming a new label at
+  confidence 0.5 (``evidence_split``). Algorithm 1 then re-decides what is left low.
+* **protected_labels** (for Alg. 1, ``evidence_protect``): labels that owned a segment in a view since they
+  were made, and labels not yet judged in ``min_views`` views, keep their Gaussians through Alg. 1. Without
+  it a small object whose confidence is low (its low SAM score at birth, Eq. 5 decreases in the views that
+  absorbed it) took the label of the wall or the table around it, its only high-confidence neighbour.
+* **veto** (after Alg. 1, ``evidence_veto``, off): a relabelling by Alg. 1 from label a to label b is undone
+  when at least ``min_views`` views held both labels mostly in one segment each and fewer than
+  ``apart_ratio`` of them in the same one.
 
 A SAM that cuts a wall or a chair at random places puts a given Gaussian in a minority piece only in a few
-views, far below ``split_ratio``; a support merge that SAM makes in a quarter of the views leaves the pair
-apart. Evidence is not saved in checkpoints: a resumed run collects it anew.
+views, far below ``split_ratio``, and a fragment of a surface does not come back as a segment of its own; a
+support merge that SAM makes in a quarter of the views leaves the pair apart (merging needs ``merge_ratio``,
+0.9, of the views). Evidence is not saved in checkpoints: a resumed run collects it anew.
 """
 
 from __future__ import annotations
@@ -49,6 +58,7 @@ from .longterm import label_edges
 from .merge import merge_labels, visible_pixels
 from .refine import connected_clusters
 
+UNSTAMPED = 3.0e38  # evidence_born of a Gaussian no view has judged yet
 OWN = 0.8  # a label owns a view's segment when it holds this share of the segment's visible Gaussians
 CONTAIN = 0.8  # a label lies "in one segment" of a view when this share of its visible Gaussians does
 
@@ -90,6 +100,7 @@ class SegmentEvidence:
         self.pair_together = torch.zeros((0, 0), device=device)
         self.label_seen = torch.zeros(0, device=device)
         self.label_owned = torch.zeros(0, device=device)
+        self.clock = 0  # judgements so far: the stamps of observe
         self.stats = EvidenceStats()
 
     def _grow(self, n: int) -> None:
@@ -116,15 +127,25 @@ class SegmentEvidence:
         *,
         margin: float = 0.1,
         min_group: int = 3,
-    ) -> None:
+        since: int | None = None,
+    ) -> int | None:
         """Add one view's evidence (see the module docstring). ``gm``: the GaussianMap; ``segments`` [H,W]
-        int ids (0 = none); ``pose`` c2w, ``K``, ``depth`` the view's (metres)."""
+        int ids (0 = none); ``pose`` c2w, ``K``, ``depth`` the view's (metres).
+
+        A view judged again (the long-term step's memory views) passes ``since``, the stamp this method
+        returned when it last judged that view: only the Gaussians first stamped after it (made since) get
+        votes, and the per-label and per-pair counts are left alone, so that no view counts twice for any
+        Gaussian or label however often it is revisited. Returns this judgement's stamp (None when nothing
+        was judged: pass the earlier stamp again)."""
         if segments is None or len(gm) == 0:
-            return
+            return None
         dev = gm.device
+        self.clock += 1
+        born = gm.aux("evidence_born", UNSTAMPED)
+        born[born == UNSTAMPED] = float(self.clock)  # the Gaussians this view is the first to see
         pick = torch.nonzero(gm.labels >= 0).squeeze(1)
         if pick.numel() == 0:
-            return
+            return self.clock
         seg = torch.as_tensor(np.ascontiguousarray(segments), device=dev).long()
         pix = visible_pixels(
             gm.means[pick],
@@ -139,7 +160,7 @@ class SegmentEvidence:
         ok = (s > 0) & ~spill_pixels(seg).reshape(-1)[p]
         g, s = g[ok], s[ok]
         if g.numel() == 0:
-            return
+            return self.clock
         self.stats.views += 1
         lab = gm.labels[g].long()
         S = int(s.max()) + 1
@@ -160,13 +181,17 @@ class SegmentEvidence:
         split = ~is_main & (cnt.float() >= 0.5 * n_seg[us]) & (cnt >= min_group) & main_big[ul]
         together = is_main & main_big[ul]
         judged = (split | together)[inv]
+        fresh = torch.ones_like(judged) if since is None else born[g] > float(since)
+        judged &= fresh
         views, votes = gm.aux("evidence_views"), gm.aux("evidence_split")
         views.index_add_(0, g[judged], torch.ones(int(judged.sum()), device=dev))
-        sv = split[inv]
+        sv = split[inv] & fresh
         votes.index_add_(0, g[sv], torch.ones(int(sv.sum()), device=dev))
         self.stats.judged += int(judged.sum())
         self.stats.split_votes += int(sv.sum())
 
+        if since is not None:
+            return self.clock
         # ownership: a label whose main segment holds little else in this view is an object SAM found
         self._grow(int(gm.next_label))
         ml, mc, ms = ul[is_main], cnt[is_main], us[is_main]
@@ -180,11 +205,12 @@ class SegmentEvidence:
         contained = share >= CONTAIN
         labs, mains = ul[is_main][contained], us[is_main][contained]
         if labs.numel() < 2:
-            return
+            return self.clock
         ii, jj = labs[:, None].expand(-1, labs.numel()), labs[None, :].expand(labs.numel(), -1)
         same = (mains[:, None] == mains[None, :]).float()
         self.pair_views.index_put_((ii.reshape(-1), jj.reshape(-1)), torch.ones(ii.numel(), device=dev), True)
         self.pair_together.index_put_((ii.reshape(-1), jj.reshape(-1)), same.reshape(-1), True)
+        return self.clock
 
     def protected_labels(self, n_labels: int, min_views: int, min_owned: int = 1) -> torch.Tensor:
         """[n_labels] bool: the labels Algorithm 1 leaves alone (``mapping.evidence_protect``): those that

@@ -230,6 +230,7 @@ class Mapper:
         self.keyframe_count = 0
         self.rng = np.random.default_rng(config.seed)
         self.evidence = SegmentEvidence(self.device)  # multi-view co-segmentation evidence (evidence.py)
+        self._judged: dict[int, int] = {}  # keyframe index -> the evidence stamp of its last judgement
         # built now, so that a mistake in the graph's settings (captioner, relations, confidence model)
         # stops the run before its first frame instead of disabling the graph hours into it
         self._graph = self._new_graph() if config.graph.enabled else None
@@ -715,10 +716,12 @@ class Mapper:
         if not (self.use_refine and _uses_evidence(cfg)):
             return
         with self.timings.section("evidence"):
-            self.evidence.observe(
+            stamp = self.evidence.observe(
                 self.map, k.segments, frame.pose, frame.K, frame.depth,
                 margin=cfg.init_depth_margin, min_group=cfg.evidence_min_group,
             )  # fmt: skip
+        if stamp is not None:
+            self._judged[k.index] = stamp
 
     def _longterm(self) -> None:
         """The long-term Eq. 16 update over the next memory views of the round-robin."""
@@ -734,10 +737,13 @@ class Mapper:
             # was a keyframe have had no word from it
             with self.timings.section("evidence"):
                 for entry in views:
-                    self.evidence.observe(
+                    stamp = self.evidence.observe(
                         self.map, entry.segments, entry.pose, entry.K, entry.depth,
                         margin=cfg.init_depth_margin, min_group=cfg.evidence_min_group,
+                        since=self._judged.get(entry.keyframe, 0),
                     )  # fmt: skip
+                    if stamp is not None:
+                        self._judged[entry.keyframe] = stamp
         with self.timings.section("longterm"):
             for entry in views:
                 st = longterm_view_update(

@@ -20,6 +20,11 @@ confidence is 0, with ``include_unlabeled`` / ``mapping.refine_unlabeled``, off 
 unlabelled Gaussians do not exist at confidence 0) takes the label of the nearest Gaussian with
 conf > tau_high within r_search and conf := 0.5.
 
+Beyond the paper (``mapping.evidence_protect``, on by default): the mapper passes the labels that the views
+show to be objects (``evidence.SegmentEvidence.protected_labels``), whose Gaussians keep their label at both
+levels. Under SAM-like segments a small object's confidence is low from its birth (a low SAM score) and falls
+in the views that absorb it into its support, so Algorithm 1 gave it the table's or the wall's label.
+
 Schedule (``mapper.py``): every ``mapping.refine_every`` = 6 keyframes, right after the long-term update,
 as Sec. IV-A.4 states ("performed every 6 keyframes"); Sec. III-B.3's "intervals determined by cumulative
 camera motion" is read as that, keyframes being selected by camera motion where ``keyframe_translation`` /
