@@ -213,11 +213,14 @@ def plot_summary(
             for v in st["values"]:
                 if v is not None:
                     cv2.circle(img, (cx, ypix(100 * v)), 3, (40, 40, 40), -1, cv2.LINE_AA)
+            # the mean above the bar's error bar and every seed's dot, on white: readable over the dots
+            top = min([hi_, *(ypix(100 * v) - 3 for v in st["values"] if v is not None)])
             label = f"{100 * st['mean']:.1f}"
-            (tw, _), _ = cv2.getTextSize(label, font, 0.38, 1)
-            cv2.putText(
-                img, label, (cx - tw // 2, max(y0 - 2, hi_ - 6)), font, 0.38, (0, 0, 0), 1, cv2.LINE_AA
-            )
+            (tw, th), _ = cv2.getTextSize(label, font, 0.38, 1)
+            ty = max(y0 - 2, top - 6)
+            white = (255, 255, 255)
+            cv2.rectangle(img, (cx - tw // 2 - 2, ty - th - 2), (cx + tw // 2 + 2, ty + 2), white, -1)
+            cv2.putText(img, label, (cx - tw // 2, ty), font, 0.38, (0, 0, 0), 1, cv2.LINE_AA)
         (tw, _), _ = cv2.getTextSize(name, font, 0.55, 1)
         cv2.putText(
             img, name, (int(gx + group_w * 0.4 - tw / 2), y1 + 24), font, 0.55, (0, 0, 0), 1, cv2.LINE_AA
