@@ -196,10 +196,10 @@ def test_a_revisited_view_votes_only_for_gaussians_made_since(device):
     vote however often it is revisited, the ones made since get one, once; label counts are left alone."""
     gm, vase = plane_map(device)
     ev = SegmentEvidence(gm.device)
-    stamp = ev.observe(gm, segments_with_vase(), POSE, K, DEPTH)
+    ev.observe(gm, segments_with_vase(), POSE, K, DEPTH, view=4)
     views = gm.aux("evidence_views").clone()
     seen = ev.label_seen.clone()
-    again = ev.observe(gm, segments_with_vase(), POSE, K, DEPTH, since=stamp)
+    ev.observe(gm, segments_with_vase(), POSE, K, DEPTH, view=4, revisit=True)
     assert torch.equal(gm.aux("evidence_views"), views) and torch.equal(ev.label_seen, seen)
     n = len(gm)
     xs = torch.linspace(0.45, 0.75, 8)
@@ -208,8 +208,8 @@ def test_a_revisited_view_votes_only_for_gaussians_made_since(device):
         new, torch.full((8, 3), 0.5), torch.full((8,), -3.0),
         labels=torch.zeros(8, dtype=torch.int32), confidences=torch.full((8,), 0.9),
     )  # fmt: skip
-    later = ev.observe(gm, segments_with_vase(), POSE, K, DEPTH, since=again)
+    ev.observe(gm, segments_with_vase(), POSE, K, DEPTH, view=4, revisit=True)
     v = gm.aux("evidence_views")
     assert torch.equal(v[:n], views[:n]) and torch.all(v[n:] == 1)
-    ev.observe(gm, segments_with_vase(), POSE, K, DEPTH, since=later)
+    ev.observe(gm, segments_with_vase(), POSE, K, DEPTH, view=4, revisit=True)
     assert torch.all(gm.aux("evidence_views")[n:] == 1)

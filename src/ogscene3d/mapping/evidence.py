@@ -101,6 +101,7 @@ class SegmentEvidence:
         self.label_seen = torch.zeros(0, device=device)
         self.label_owned = torch.zeros(0, device=device)
         self.clock = 0  # judgements so far: the stamps of observe
+        self._judged: dict[int, int] = {}  # view (keyframe index) -> the stamp of its last judgement
         self.stats = EvidenceStats()
 
     def _grow(self, n: int) -> None:
@@ -127,25 +128,28 @@ class SegmentEvidence:
         *,
         margin: float = 0.1,
         min_group: int = 3,
-        since: int | None = None,
-    ) -> int | None:
+        view: int | None = None,
+        revisit: bool = False,
+    ) -> None:
         """Add one view's evidence (see the module docstring). ``gm``: the GaussianMap; ``segments`` [H,W]
-        int ids (0 = none); ``pose`` c2w, ``K``, ``depth`` the view's (metres).
+        int ids (0 = none); ``pose`` c2w, ``K``, ``depth`` the view's (metres); ``view`` its key (the
+        keyframe index), under which its judgement is remembered.
 
-        A view judged again (the long-term step's memory views) passes ``since``, the stamp this method
-        returned when it last judged that view: only the Gaussians first stamped after it (made since) get
-        votes, and the per-label and per-pair counts are left alone, so that no view counts twice for any
-        Gaussian or label however often it is revisited. Returns this judgement's stamp (None when nothing
-        was judged: pass the earlier stamp again)."""
+        A view judged again (``revisit``, the long-term step's memory views) gives votes only to the
+        Gaussians first stamped after its last judgement (made since), and leaves the per-label and per-pair
+        counts alone, so that no view counts twice for any Gaussian or label however often it is revisited."""
         if segments is None or len(gm) == 0:
-            return None
+            return
+        since = self._judged.get(view, 0) if revisit else None
         dev = gm.device
         self.clock += 1
+        if view is not None:
+            self._judged[view] = self.clock
         born = gm.aux("evidence_born", UNSTAMPED)
         born[born == UNSTAMPED] = float(self.clock)  # the Gaussians this view is the first to see
         pick = torch.nonzero(gm.labels >= 0).squeeze(1)
         if pick.numel() == 0:
-            return self.clock
+            return
         seg = torch.as_tensor(np.ascontiguousarray(segments), device=dev).long()
         pix = visible_pixels(
             gm.means[pick],
@@ -160,7 +164,7 @@ class SegmentEvidence:
         ok = (s > 0) & ~spill_pixels(seg).reshape(-1)[p]
         g, s = g[ok], s[ok]
         if g.numel() == 0:
-            return self.clock
+            return
         self.stats.views += 1
         lab = gm.labels[g].long()
         S = int(s.max()) + 1
@@ -190,8 +194,8 @@ class SegmentEvidence:
         self.stats.judged += int(judged.sum())
         self.stats.split_votes += int(sv.sum())
 
-        if since is not None:
-            return self.clock
+        if revisit:
+            return
         # ownership: a label whose main segment holds little else in this view is an object SAM found
         self._grow(int(gm.next_label))
         ml, mc, ms = ul[is_main], cnt[is_main], us[is_main]
@@ -205,12 +209,11 @@ class SegmentEvidence:
         contained = share >= CONTAIN
         labs, mains = ul[is_main][contained], us[is_main][contained]
         if labs.numel() < 2:
-            return self.clock
+            return
         ii, jj = labs[:, None].expand(-1, labs.numel()), labs[None, :].expand(labs.numel(), -1)
         same = (mains[:, None] == mains[None, :]).float()
         self.pair_views.index_put_((ii.reshape(-1), jj.reshape(-1)), torch.ones(ii.numel(), device=dev), True)
         self.pair_together.index_put_((ii.reshape(-1), jj.reshape(-1)), same.reshape(-1), True)
-        return self.clock
 
     def protected_labels(self, n_labels: int, min_views: int, min_owned: int = 1) -> torch.Tensor:
         """[n_labels] bool: the labels Algorithm 1 leaves alone (``mapping.evidence_protect``): those that

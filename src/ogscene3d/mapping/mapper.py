@@ -163,11 +163,6 @@ class Timings:
         return "\n".join(rows)
 
 
-def _uses_evidence(cfg) -> bool:
-    """Whether any rule of ``mapping/evidence.py`` is on (the evidence is collected only then)."""
-    return cfg.evidence_split or cfg.evidence_merge or cfg.evidence_veto or cfg.evidence_protect
-
-
 def _ran_at(keyframe_count: int, every: int) -> bool:
     """Whether a step scheduled every ``every`` keyframes (0 = never) runs at keyframe ``keyframe_count``."""
     return every > 0 and keyframe_count % every == 0
@@ -230,7 +225,6 @@ class Mapper:
         self.keyframe_count = 0
         self.rng = np.random.default_rng(config.seed)
         self.evidence = SegmentEvidence(self.device)  # multi-view co-segmentation evidence (evidence.py)
-        self._judged: dict[int, int] = {}  # keyframe index -> the evidence stamp of its last judgement
         # built now, so that a mistake in the graph's settings (captioner, relations, confidence model)
         # stops the run before its first frame instead of disabling the graph hours into it
         self._graph = self._new_graph() if config.graph.enabled else None
@@ -710,18 +704,26 @@ class Mapper:
             self.timings.add("labels_merged", len(mapping))
             self.timings.add("segments_merged", int(merged.numel()))
 
-    def _observe_evidence(self, k: _Keyframe) -> None:
-        """The keyframe's co-segmentation evidence (``evidence.py``), on the map before association."""
-        cfg, frame = self.cfg, k.frame
-        if not (self.use_refine and _uses_evidence(cfg)):
-            return
+    def _collects_evidence(self) -> bool:
+        """Whether the co-segmentation evidence is collected: where the refinement runs and a rule of
+        ``evidence.py`` is on."""
+        cfg = self.cfg
+        rules = cfg.evidence_split or cfg.evidence_merge or cfg.evidence_veto or cfg.evidence_protect
+        return self.use_refine and rules
+
+    def _judge(self, view: int, segments: np.ndarray | None, source, revisit: bool = False) -> None:
+        """One view's co-segmentation evidence (``evidence.py``); ``source``: its Frame or MemoryEntry."""
+        cfg = self.cfg
         with self.timings.section("evidence"):
-            stamp = self.evidence.observe(
-                self.map, k.segments, frame.pose, frame.K, frame.depth,
-                margin=cfg.init_depth_margin, min_group=cfg.evidence_min_group,
+            self.evidence.observe(
+                self.map, segments, source.pose, source.K, source.depth,
+                margin=cfg.init_depth_margin, min_group=cfg.evidence_min_group, view=view, revisit=revisit,
             )  # fmt: skip
-        if stamp is not None:
-            self._judged[k.index] = stamp
+
+    def _observe_evidence(self, k: _Keyframe) -> None:
+        """The keyframe's co-segmentation evidence, on the map before association."""
+        if self._collects_evidence():
+            self._judge(k.index, k.segments, k.frame)
 
     def _longterm(self) -> None:
         """The long-term Eq. 16 update over the next memory views of the round-robin."""
@@ -732,18 +734,11 @@ class Mapper:
             )
             self.timings.add("evidence_lowered", n)
         views = self.memory.next_views(cfg.longterm_views)
-        if cfg.evidence_revisit and self.use_refine and _uses_evidence(cfg):
+        if cfg.evidence_revisit and self._collects_evidence():
             # the stored views judged again, against the map as it is now: the Gaussians added since a view
             # was a keyframe have had no word from it
-            with self.timings.section("evidence"):
-                for entry in views:
-                    stamp = self.evidence.observe(
-                        self.map, entry.segments, entry.pose, entry.K, entry.depth,
-                        margin=cfg.init_depth_margin, min_group=cfg.evidence_min_group,
-                        since=self._judged.get(entry.keyframe, 0),
-                    )  # fmt: skip
-                    if stamp is not None:
-                        self._judged[entry.keyframe] = stamp
+            for entry in views:
+                self._judge(entry.keyframe, entry.segments, entry, revisit=True)
         with self.timings.section("longterm"):
             for entry in views:
                 st = longterm_view_update(
