@@ -4,15 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-
-def _unit_interval(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}") from e
-    if not 0.0 <= v <= 1.0:
-        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {v}")
-    return v
+from ..cli_types import unit_interval
 
 
 def add_parser(subparsers) -> None:
@@ -37,7 +29,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--no-graphml", action="store_true", help="skip graph.graphml (which needs networkx)")
     p.add_argument(
         "--min-opacity",
-        type=_unit_interval,
+        type=unit_interval,
         default=0.0,
         help="leave out Gaussians less opaque than this (0-1, default 0: all)",
     )

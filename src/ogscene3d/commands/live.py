@@ -17,31 +17,11 @@ import threading
 import time
 from pathlib import Path
 
-from ..cli_types import image_size, positive_int
+from ..cli_types import image_size, port, positive_float, positive_int
 from ..config import add_override_argument
 from ..errors import ConfigError, DataError, OGSceneError
 
 log = logging.getLogger(__name__)
-
-
-def _positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from e
-    if not v > 0 or v == float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text}")
-    return v
-
-
-def _port(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"expected a port number, got {text!r}") from e
-    if not 0 <= v <= 65535:
-        raise argparse.ArgumentTypeError(f"port must be from 0 to 65535 (0: any free port), got {v}")
-    return v
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -81,11 +61,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--port",
-        type=_port,
+        type=port,
         default=8080,
         help="port to try first (the next free one is used if busy; 0: any free port)",
     )
-    p.add_argument("--rate", type=_positive_float, default=4.0, help="maximum viewer updates per second")
+    p.add_argument("--rate", type=positive_float, default=4.0, help="maximum viewer updates per second")
     p.add_argument("--max-splats", type=positive_int, default=200_000, help="most Gaussians drawn as splats")
     p.add_argument(
         "--max-points", type=positive_int, default=1_000_000, help="most Gaussians drawn as points"
@@ -122,7 +102,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="screenshot size",
     )
     p.add_argument(
-        "--screenshot-wait", type=_positive_float, default=8.0, help="seconds to let the browser draw first"
+        "--screenshot-wait", type=positive_float, default=8.0, help="seconds to let the browser draw first"
     )
 
 
