@@ -33,3 +33,24 @@ def shared_data() -> Path:
 
 
 sys.path.insert(0, str(ROOT / "tests"))
+
+
+@pytest.fixture
+def stop_after_frame(monkeypatch):
+    """``stop_after_frame(index, send)``: Mapper.process calls ``send()`` (a Ctrl-C, a SIGTERM) right after
+    mapping frame ``index``; returns the unpatched process, for a test that goes on without the stop."""
+    from ogscene3d.mapping.mapper import Mapper
+
+    process = Mapper.process
+
+    def patch(index: int, send):
+        def stopped(self, frame):
+            kept = process(self, frame)
+            if frame.index == index:
+                send()
+            return kept
+
+        monkeypatch.setattr(Mapper, "process", stopped)
+        return process
+
+    return patch

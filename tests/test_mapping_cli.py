@@ -238,22 +238,15 @@ def test_odometry_run_writes_its_trajectory_and_fails_when_nothing_tracks(tmp_pa
     )
 
 
-def test_ctrl_c_stops_after_the_frame_and_saves_the_map(tmp_path, capsys, monkeypatch):
+def test_ctrl_c_stops_after_the_frame_and_saves_the_map(tmp_path, capsys, monkeypatch, stop_after_frame):
     import signal
 
     from ogscene3d.mapping.mapper import Mapper
 
     scene = _replica_scene(tmp_path / "scene", frames=4)
     out = tmp_path / "run"
-    process = Mapper.process
-
-    def interrupted_at_frame_1(self, frame):
-        kept = process(self, frame)
-        if frame.index == 1:
-            signal.raise_signal(signal.SIGINT)  # Ctrl-C while frame 1 is being mapped
-        return kept
-
-    monkeypatch.setattr(Mapper, "process", interrupted_at_frame_1)
+    # Ctrl-C while frame 1 is being mapped
+    process = stop_after_frame(1, lambda: signal.raise_signal(signal.SIGINT))
     assert main(["run", *_common(scene, out)]) == 130
     assert "stopped after 2 frames; the map so far is in" in capsys.readouterr().out
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handlers restored

@@ -117,22 +117,14 @@ def test_a_run_refused_before_its_first_write_leaves_no_empty_folder(tmp_path, c
 # ------------------------------------------------------------------------------------------- stops
 
 
-def test_a_stopped_run_leaves_what_eval_and_the_viewer_read(tmp_path, capsys, monkeypatch):
+def test_a_stopped_run_leaves_what_eval_and_the_viewer_read(tmp_path, capsys, monkeypatch, stop_after_frame):
     from ogscene3d.eval import read_run
     from ogscene3d.mapping.mapper import Mapper
     from ogscene3d.viewer.runs import load_run
 
     scene = _replica_scene(tmp_path / "scene", frames=4)
     out = tmp_path / "run"
-    process = Mapper.process
-
-    def interrupted_at_frame_1(self, frame):
-        kept = process(self, frame)
-        if frame.index == 1:
-            signal.raise_signal(signal.SIGTERM)
-        return kept
-
-    monkeypatch.setattr(Mapper, "process", interrupted_at_frame_1)
+    process = stop_after_frame(1, lambda: signal.raise_signal(signal.SIGTERM))
     assert main(["run", *_common(scene, out)]) == 130
     assert "--resume --out" in capsys.readouterr().out
     for name in ("map.npz", "gaussians.ply", "graph.json", "timings.json", "config.yaml"):
@@ -147,23 +139,19 @@ def test_a_stopped_run_leaves_what_eval_and_the_viewer_read(tmp_path, capsys, mo
     assert "read 2 frames: 2 mapped (4 keyframes in all)" in capsys.readouterr().out
 
 
-def test_live_mapping_saves_the_map_on_sigterm(tmp_path, capsys, monkeypatch):
+def test_live_mapping_saves_the_map_on_sigterm(tmp_path, capsys, monkeypatch, stop_after_frame):
     """Before: the map was saved only once mapping finished; a stop exited 0 with no folder."""
     from ogscene3d.commands.live import main as live_main
     from ogscene3d.mapping.mapper import Mapper
 
     scene = _replica_scene(tmp_path / "scene", frames=4)
     out = tmp_path / "live"
-    process = Mapper.process
 
-    def terminated_at_frame_1(self, frame):
-        kept = process(self, frame)
-        if frame.index == 1:
-            os.kill(os.getpid(), signal.SIGTERM)  # handled by the main thread, which stops the session
-            time.sleep(1.0)
-        return kept
+    def terminate():
+        os.kill(os.getpid(), signal.SIGTERM)  # handled by the main thread, which stops the session
+        time.sleep(1.0)
 
-    monkeypatch.setattr(Mapper, "process", terminated_at_frame_1)
+    process = stop_after_frame(1, terminate)
     args = ["--data", str(scene), "--segments", str(scene / "segs"), "--out", str(out), "--port", "0",
             "--device", "cpu", "--set", "graph.enabled=false", "--set", "mapping.opt_iters=1"]  # fmt: skip
     assert live_main(args) == 130
@@ -177,20 +165,11 @@ def test_live_mapping_saves_the_map_on_sigterm(tmp_path, capsys, monkeypatch):
     assert "read 2 frames: 2 mapped (4 keyframes in all)" in capsys.readouterr().out
 
 
-def test_a_stopped_batch_scene_keeps_its_map_and_stops_the_batch(tmp_path, monkeypatch):
+def test_a_stopped_batch_scene_keeps_its_map_and_stops_the_batch(tmp_path, stop_after_frame):
     from ogscene3d.batch import SceneSpec, map_scene
-    from ogscene3d.mapping.mapper import Mapper
 
     scene = _replica_scene(tmp_path / "scene", frames=4)
-    process = Mapper.process
-
-    def interrupted_at_frame_1(self, frame):
-        kept = process(self, frame)
-        if frame.index == 1:
-            signal.raise_signal(signal.SIGINT)
-        return kept
-
-    monkeypatch.setattr(Mapper, "process", interrupted_at_frame_1)
+    stop_after_frame(1, lambda: signal.raise_signal(signal.SIGINT))
     spec = SceneSpec("a", data=str(scene), segments=str(scene / "segs"))
     ov = ["graph.enabled=false", "mapping.opt_iters=1", "mapping.knn_radius=0.1"]
     with pytest.raises(KeyboardInterrupt, match="stopped after 2 frames"):
