@@ -360,16 +360,24 @@ def _run_args(scene: Path, out: Path, *extra: str, progress: bool = False) -> li
     return args if progress else [*args, "--no-progress"]
 
 
+def _signal_mid_run(out: Path, sig: int) -> tuple[Watch, int | None, str | None]:
+    """Start a slow ``run`` into ``out``, send ``sig`` once keyframe 2 is reported and wait for the exit:
+    (the watch, its exit code, a failure message when keyframe 2 never came)."""
+    # a slower run so that the signal lands mid-way: more optimisation steps per keyframe
+    w = Watch(popen(_run_args(SCENES["long"], out, "--set", "mapping.opt_iters=6", progress=True)))
+    if not w.wait_for("kf=2", 240):
+        w.finish(5)
+        return w, None, f"never reached keyframe 2: {last_line(w.text)}"
+    w.proc.send_signal(sig)
+    return w, w.finish(120), None
+
+
 def interrupt_run(sig: int) -> Callable[[Path], tuple[str, bool | None]]:
     def check(tmp: Path) -> tuple[str, bool | None]:
         out = tmp / "run"
-        # a slower run so that the signal lands mid-way: more optimisation steps per keyframe
-        w = Watch(popen(_run_args(SCENES["long"], out, "--set", "mapping.opt_iters=6", progress=True)))
-        if not w.wait_for("kf=2", 240):
-            w.finish(5)
-            return f"never reached keyframe 2: {last_line(w.text)}", False
-        w.proc.send_signal(sig)
-        rc = w.finish(120)
+        w, rc, failed = _signal_mid_run(out, sig)
+        if failed:
+            return failed, False
         saved = (out / "map.npz").is_file()
         ok = saved and not traceback_in(w.text) and "--resume" in w.text
         return f"exit {rc}, map.npz saved: {saved}: {last_line(w.text)}", ok
@@ -399,12 +407,9 @@ def interrupt_live(sig: int) -> Callable[[Path], tuple[str, bool | None]]:
 
 def stop_then_eval(tmp: Path) -> tuple[str, bool | None]:
     out = tmp / "run"
-    w = Watch(popen(_run_args(SCENES["long"], out, "--set", "mapping.opt_iters=6", progress=True)))
-    if not w.wait_for("kf=2", 240):
-        w.finish(5)
-        return f"never reached keyframe 2: {last_line(w.text)}", False
-    w.proc.send_signal(signal.SIGINT)
-    w.finish(120)
+    _, _, failed = _signal_mid_run(out, signal.SIGINT)
+    if failed:
+        return failed, False
     ev = cli(["eval", str(out), "--gt", str(SCENES["long"]), "--no-plots"])
     view = subprocess.run(
         [PY, "-c", f"from ogscene3d.viewer.runs import load_run; load_run({str(out)!r})"],

@@ -44,6 +44,23 @@ def test_containment_decides_which_pairs_merge(device):
     )
 
 
+def test_min_part_keeps_a_detail_the_segment_took_in_apart(device):
+    # segment 0 holds all of label 5 (4 pixels: a chair far in front of a wall) and all of label 6 (60)
+    rendered = torch.full((8, 8), 6, dtype=torch.int64)
+    rendered[:2, :2] = 5
+    seg = torch.zeros((8, 8), dtype=torch.int64)
+    args = (seg.to(device), rendered.to(device), torch.tensor([0], device=device))
+    tops = (torch.tensor([6], device=device), torch.tensor([5], device=device))
+    assert duplicate_label_pairs(*args, *tops, 0.8, 0.0).cpu().tolist() == [[6, 5]]
+    assert duplicate_label_pairs(*args, *tops, 0.8, 0.05).cpu().tolist() == [[6, 5]]  # 4 / 64 = 6 %
+    assert duplicate_label_pairs(*args, *tops, 0.8, 0.1).shape == (0, 2)
+    # unlabelled items (-1) do not count towards the segment's share
+    rendered[2:, :] = -1
+    cpu_tops = (tops[0].cpu(), tops[1].cpu())
+    # 4 of 16 labelled items
+    assert duplicate_label_pairs(seg, rendered, torch.tensor([0]), *cpu_tops, 0.8, 0.1).tolist() == [[6, 5]]
+
+
 def test_visible_pixels_drop_occluded_and_outside_gaussians(device):
     depth = torch.full((H, W), 2.0)
     depth[0, 0] = 0.0  # no depth there
@@ -170,3 +187,38 @@ def test_a_merged_segment_gets_the_eq5_update_of_a_matched_one(device):
     torch.testing.assert_close(conf[left], want[left])  # the merged segment: left unchanged before the fix
     torch.testing.assert_close(conf[~left], want[~left])  # the segment matched in the first place
     assert m.timings.as_dict()["counts"]["segments_conf_updates"] == n0
+
+
+def _wall_view(i: int, seg: np.ndarray, z_cam: float) -> Frame:
+    """The wall at world z = 2 seen head-on from (0, 0, z_cam), one grey colour."""
+    return Frame(
+        i,
+        np.full((H, W, 3), 128, np.uint8),
+        np.full((H, W), 2.0 - z_cam, np.float32),
+        K,
+        np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, z_cam], [0, 0, 0, 1]], np.float64),
+        name=f"f{i}",
+        segments=seg.astype(np.int32),
+        segment_scores={int(s): 0.97 for s in np.unique(seg[seg > 0])},
+    )
+
+
+def test_merge_novel_joins_a_cut_surface_seen_further(device):
+    """Frame 0 sees a patch of the wall cut in two (labels A, B); frame 1, from 6 m further back, sees the
+    whole wall as one confident segment of which the patch is a few percent (p < tau_p: novel). By default
+    the wall gets a third label; with ``mapping.merge_novel`` the segment shows A and B whole, each a large
+    part of what is mapped in it, so they merge and the new wall takes the merged label."""
+    for novel in (False, True):
+        m = _mapper(device, f"mapping.merge_novel={str(novel).lower()}", "mapping.merge_min_part=0.1",
+                    "mapping.max_pose_step=0", "mapping.prune_scale=0")  # fmt: skip
+        m.process(_wall_view(0, _halves(), 0.0))
+        assert torch.unique(m.map.labels).numel() == 2
+        m.process(_wall_view(1, np.ones((H, W), np.int32), -6.0))
+        c = m.timings.as_dict()["counts"]
+        n_labels = torch.unique(m.map.labels[m.map.labels >= 0]).numel()
+        if novel:
+            assert c["labels_merged"] == 1 and c["segments_merged"] == 1
+            assert n_labels == 1
+        else:
+            assert "labels_merged" not in c and c["segments_novel"] == 3  # 2 in frame 0
+            assert n_labels == 3

@@ -504,6 +504,17 @@ class MappingConfig:
         0.8, "share of each label's visible extent the segment must contain", _UNIT
     )
     merge_min_score: float = setting(0.95, "SAM score a merging segment needs at least", _UNIT)
+    merge_min_part: float = setting(
+        0.1,
+        "share of a merging segment's mapped Gaussians that each of the two labels must hold (less: a detail "
+        "the mask took in, not half of one object)",
+        _UNIT,
+    )
+    merge_novel: bool = setting(
+        True,
+        "duplicate merging also judges a would-be novel segment (p < tau_p) over two mapped labels (r >= "
+        "tau_valid): a surface seen further, cut in two in an earlier view",
+    )
     # multi-view co-segmentation evidence (mapping/evidence.py), beyond the paper; evidence_split,
     # evidence_merge, evidence_protect and evidence_veto all false = the paper's long-term step and
     # Algorithm 1 (with the extensions above). docs/consistency.md has each rule's measured effect.

@@ -62,6 +62,7 @@ from .keyframes import KeyframeSelector
 from .local import (
     CASE_AMBIGUOUS,
     CASE_MATCHED,
+    CASE_NOVEL,
     associate_segments,
     coherence,
     fill_unlabeled,
@@ -660,7 +661,10 @@ class Mapper:
         score = torch.tensor(
             [scores.get(int(i), 1.0) for i in seg_ids.tolist()], dtype=torch.float32, device=self.device
         )
-        amb = torch.nonzero((res.seg_case == CASE_AMBIGUOUS) & (score >= cfg.merge_min_score)).squeeze(1)
+        cand = res.seg_case == CASE_AMBIGUOUS
+        if cfg.merge_novel:  # a novel segment over two mapped labels (r >= tau_valid) may join them too
+            cand |= (res.seg_case == CASE_NOVEL) & (res.r >= cfg.tau_valid)
+        amb = torch.nonzero(cand & (score >= cfg.merge_min_score)).squeeze(1)
         if amb.numel() == 0:
             return
         with self.timings.section("merge"):
@@ -669,8 +673,7 @@ class Mapper:
             lut = torch.full((top,), -1, dtype=torch.int64, device=self.device)
             lut[seg_ids] = torch.arange(seg_ids.numel(), device=self.device)
             seg_index = lut[ids.clamp(min=0)].masked_fill(ids <= 0, -1).reshape(-1)
-            involved = torch.cat([res.top_label[amb], res.second_label[amb]])
-            pick = torch.nonzero(torch.isin(self.map.labels.long(), involved[involved >= 0])).squeeze(1)
+            pick = torch.nonzero(self.map.labels >= 0).squeeze(1)  # all: min_part counts the segment's labels
             pix = visible_pixels(
                 self.map.means[pick],
                 torch.as_tensor(frame.pose, dtype=torch.float32, device=self.device),
@@ -686,6 +689,7 @@ class Mapper:
                 res.top_label,
                 res.second_label,
                 cfg.merge_contain,
+                cfg.merge_min_part,
             )
             mapping = merge_labels(self.map.labels, pairs)
             if not mapping:

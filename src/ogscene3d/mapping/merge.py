@@ -14,7 +14,16 @@ fraction of them whose pixel lies in m. When both labels lie almost entirely ins
 segment (each containment >= ``tau_contain``, SAM score >= ``min_score``), the segment sees one object
 that carries two labels, and the labels are merged (the one with more Gaussians keeps its id). A
 segment that spills over onto a neighbouring object fails the containment test for that object's label;
-two small objects that SAM fused are usually scored low, and the score gate keeps them apart. Counting
+two small objects that SAM fused are usually scored low, and the score gate keeps them apart. A small
+object that the mask took in (a far chair absorbed into the wall behind it, a plant into the floor) lies
+whole inside it too, at a high score when it is a small part of the mask; each label must therefore hold at
+least ``min_part`` (``mapping.merge_min_part``, 0.1) of the mapped Gaussians inside the segment, as both
+halves of one object do.
+
+With ``mapping.merge_novel`` the test also judges a would-be novel segment (p < tau_p, case iii tested
+first) whose few matches fall on two labels (r >= tau_valid): a wall or floor that the first view cut in
+two, seen again further back, where the mapped part is a few percent of the segment. Without it each such
+view started a third label on the surface. Counting
 Gaussians rather than rendering a label map keeps the check to one projection of the two labels'
 Gaussians, and independent of the confidences that weight a semantic render.
 """
@@ -52,6 +61,7 @@ def duplicate_label_pairs(
     top1: torch.Tensor,
     top2: torch.Tensor,
     tau_contain: float = 0.8,
+    min_part: float = 0.0,
 ) -> torch.Tensor:
     """Label pairs [P,2] (l1, l2) that a candidate segment shows to be one object.
 
@@ -59,40 +69,54 @@ def duplicate_label_pairs(
     the pixels of a rendered label map. seg_index [M] int: the segment index at each item (-1 outside every
     segment); item_labels [M] int: the item's scene label (-1 none); candidates [C]: segment indices to
     test, with their two most frequent matched labels top1[c], top2[c] (both >= 0). A pair is returned
-    when, for both labels, at least ``tau_contain`` of the label's items lie inside the segment.
+    when, for both labels, at least ``tau_contain`` of the label's items lie inside the segment, and (with
+    ``min_part`` > 0) they make up at least ``min_part`` of the labelled items in the segment each: a minor
+    share is a detail the mask took in (a chair far in front of the wall, absorbed into the wall's segment),
+    not half of an object that carries two labels.
     """
     dev = seg_index.device
     empty = torch.zeros((0, 2), dtype=torch.int64, device=dev)
     if candidates.numel() == 0:
         return empty
-    seg = seg_index.reshape(-1).long()
-    ren = item_labels.reshape(-1).long()
     l1 = top1[candidates].long()
     l2 = top2[candidates].long()
     ok = (l1 >= 0) & (l2 >= 0) & (l1 != l2)
     if not bool(ok.any()):
         return empty
     cand, l1, l2 = candidates[ok].long(), l1[ok], l2[ok]
-    # visible extent |S = l| of the few labels involved, and the joint counts |S = l, seg = m|
-    labels = torch.unique(torch.cat([l1, l2]))
-    nl = labels.numel()
-    pos = torch.searchsorted(labels, ren.clamp(min=0)).clamp(max=nl - 1)
-    hit = (ren >= 0) & (labels[pos] == ren)
-    extent = torch.bincount(pos[hit], minlength=nl)
+    n1, e1 = _counts_in(seg_index, item_labels, cand, l1)
+    n2, e2 = _counts_in(seg_index, item_labels, cand, l2)
+    keep = (n1 >= tau_contain * e1) & (n2 >= tau_contain * e2) & (e1 > 0) & (e2 > 0)
+    if min_part > 0:
+        seg = seg_index.reshape(-1).long()
+        inside = seg[(seg >= 0) & (item_labels.reshape(-1) >= 0)]
+        total = torch.bincount(inside, minlength=int(cand.max()) + 1)[cand].float()
+        keep &= (n1 >= min_part * total) & (n2 >= min_part * total)
+    return torch.stack([l1[keep], l2[keep]], 1)
+
+
+def _counts_in(
+    seg_index: torch.Tensor, item_labels: torch.Tensor, segs: torch.Tensor, labels: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per c: the items of label ``labels[c]`` in segment ``segs[c]``, and all of that label's items
+    ([C] float each). ``seg_index`` [M] and ``item_labels`` [M] as in ``duplicate_label_pairs``."""
+    dev = seg_index.device
+    seg = seg_index.reshape(-1).long()
+    ren = item_labels.reshape(-1).long()
+    want = torch.unique(labels.long())
+    nl = want.numel()
+    pos = torch.searchsorted(want, ren.clamp(min=0)).clamp(max=nl - 1)
+    hit = (ren >= 0) & (want[pos] == ren)
+    extent = torch.bincount(pos[hit], minlength=nl).float()
     both = hit & (seg >= 0)
     keys, counts = torch.unique(seg[both] * nl + pos[both], return_counts=True)
-
-    def inside(lab: torch.Tensor) -> torch.Tensor:
-        li = torch.searchsorted(labels, lab)
-        want = cand * nl + li
-        if keys.numel() == 0:
-            return torch.zeros(want.shape, device=dev)
-        j = torch.searchsorted(keys, want).clamp(max=keys.numel() - 1)
-        n = torch.where(keys[j] == want, counts[j], torch.zeros_like(counts[j]))
-        return n.float() / extent[li].clamp(min=1).float()
-
-    keep = (inside(l1) >= tau_contain) & (inside(l2) >= tau_contain)
-    return torch.stack([l1[keep], l2[keep]], 1)
+    li = torch.searchsorted(want, labels.long())
+    key = segs.long() * nl + li
+    if keys.numel() == 0:
+        return torch.zeros(key.shape, device=dev), extent[li]
+    j = torch.searchsorted(keys, key).clamp(max=keys.numel() - 1)
+    n = torch.where(keys[j] == key, counts[j], torch.zeros_like(counts[j]))
+    return n.float(), extent[li]
 
 
 def merge_labels(labels: torch.Tensor, pairs: torch.Tensor) -> dict[int, int]:
