@@ -180,7 +180,7 @@ def plot_summary(
     dots; uint8 RGB [H, W, 3] drawn with OpenCV (written with ``ogscene3d.eval.plots.write_png``)."""
     img = np.full((height, width, 3), 255, np.uint8)
     font = cv2.FONT_HERSHEY_SIMPLEX
-    left, right, top, bottom = 70, 20, 70, 60
+    left, right, top, bottom = 70, 20, 86, 60  # room above 100 for a mean whose seed reached it
     x0, x1, y0, y1 = left, width - right, top, height - bottom
     colors = [(66, 133, 244), (52, 168, 83), (251, 188, 5)]  # RGB per metric
     vmax = 100.0
@@ -217,7 +217,7 @@ def plot_summary(
             top = min([hi_, *(ypix(100 * v) - 3 for v in st["values"] if v is not None)])
             label = f"{100 * st['mean']:.1f}"
             (tw, th), _ = cv2.getTextSize(label, font, 0.38, 1)
-            ty = max(y0 - 2, top - 6)
+            ty = max(62 + th, top - 6)  # under the subtitle
             white = (255, 255, 255)
             cv2.rectangle(img, (cx - tw // 2 - 2, ty - th - 2), (cx + tw // 2 + 2, ty + 2), white, -1)
             cv2.putText(img, label, (cx - tw // 2, ty), font, 0.38, (0, 0, 0), 1, cv2.LINE_AA)

@@ -7,7 +7,7 @@ import torch
 from ogscene3d.config import load_config
 from ogscene3d.frame import Frame
 from ogscene3d.mapping.mapper import Mapper
-from ogscene3d.mapping.merge import duplicate_label_pairs, merge_labels, visible_pixels
+from ogscene3d.mapping.merge import duplicate_label_pairs, label_containment, merge_labels, visible_pixels
 
 W, H, F = 32, 24, 24.0
 K = np.array([[F, 0, W / 2], [0, F, H / 2], [0, 0, 1]], dtype=np.float32)
@@ -28,6 +28,8 @@ def test_containment_decides_which_pairs_merge(device):
         top2.to(device), tau_contain=0.8,
     )  # fmt: skip
     assert pairs.cpu().tolist() == [[5, 6]]
+    share = label_containment(seg, rendered, torch.tensor([0, 1, 1]), torch.tensor([5, 7, 6]))
+    assert share.tolist() == [1.0, 3 / 8, 0.0]
     # a label that spills out of the segment does not merge
     rendered[0, 12] = 5
     rendered[:4, 8] = 5  # label 5 now has 32 + 5 pixels, 5 of them outside segment 0 (86% inside)
@@ -222,3 +224,31 @@ def test_merge_novel_joins_a_cut_surface_seen_further(device):
         else:
             assert "labels_merged" not in c and c["segments_novel"] == 3  # 2 in frame 0
             assert n_labels == 3
+
+
+def test_merge_novel_extends_the_one_label_a_segment_holds_whole(device):
+    """Frame 0 maps a patch of the wall as one label; from 6 m further back the patch is a few percent of
+    a confident segment (p < tau_p) whose matches all fall on that label: with ``mapping.merge_novel`` the
+    segment takes it. Cut down the middle, neither half holds the patch whole (each about half of it), and
+    both halves stay novel."""
+    whole = np.ones((H, W), np.int32)
+    for novel in (False, True):
+        m = _mapper(device, f"mapping.merge_novel={str(novel).lower()}", "mapping.max_pose_step=0",
+                    "mapping.prune_scale=0")  # fmt: skip
+        m.process(_wall_view(0, whole, 0.0))
+        m.process(_wall_view(1, whole, -6.0))
+        c = m.timings.as_dict()["counts"]
+        n_labels = torch.unique(m.map.labels[m.map.labels >= 0]).numel()
+        assert (n_labels, c.get("segments_extended", 0)) == ((1, 1) if novel else (2, 0))
+    m = _mapper(device, "mapping.max_pose_step=0", "mapping.prune_scale=0")
+    m.process(_wall_view(0, whole, 0.0))
+    m.process(_wall_view(1, _halves(), -6.0))
+    assert m.timings.as_dict()["counts"].get("segments_extended", 0) == 0
+    assert torch.unique(m.map.labels[m.map.labels >= 0]).numel() == 3
+    # a segment below mapping.merge_min_score does not take the label either
+    m = _mapper(device, "mapping.max_pose_step=0", "mapping.prune_scale=0")
+    m.process(_wall_view(0, whole, 0.0))
+    low = _wall_view(1, whole, -6.0)
+    low.segment_scores = {1: 0.9}
+    m.process(low)
+    assert torch.unique(m.map.labels[m.map.labels >= 0]).numel() == 2

@@ -70,7 +70,7 @@ from .local import (
 )
 from .longterm import MemoryBuffer, MemoryEntry, label_edges, longterm_view_update
 from .memory_files import load_view, manifest, read_manifest, remove_unreferenced, store_view
-from .merge import duplicate_label_pairs, merge_labels, relabel, visible_pixels
+from .merge import duplicate_label_pairs, label_containment, merge_labels, relabel, visible_pixels
 from .optimize import View, optimize_map
 from .pose_jump import PoseJumpCheck, PoseJumpError
 from .refine import global_refinement
@@ -654,18 +654,24 @@ class Mapper:
         self, frame: Frame, segments: np.ndarray, scores: dict[int, float], probes, res
     ) -> None:
         """Merge scene labels that one confident ambiguous segment shows to be one object (``merge.py``);
-        the segment then takes the merged label (case ii), and this keyframe's segment labels follow. Runs
-        before Eq. 5, so that the merged segments' matches get their confidence update too."""
+        the segment then takes the merged label (case ii), and this keyframe's segment labels follow. With
+        ``merge_novel`` a would-be novel segment is judged too: over two labels it may merge them, and over
+        one label that it holds whole it takes that label. Runs before Eq. 5, so that the merged segments'
+        matches get their confidence update too."""
         cfg = self.cfg
         seg_ids = probes.seg_ids
         score = torch.tensor(
             [scores.get(int(i), 1.0) for i in seg_ids.tolist()], dtype=torch.float32, device=self.device
         )
-        cand = res.seg_case == CASE_AMBIGUOUS
-        if cfg.merge_novel:  # a novel segment over two mapped labels (r >= tau_valid) may join them too
-            cand |= (res.seg_case == CASE_NOVEL) & (res.r >= cfg.tau_valid)
-        amb = torch.nonzero(cand & (score >= cfg.merge_min_score)).squeeze(1)
-        if amb.numel() == 0:
+        confident = score >= cfg.merge_min_score
+        novel = (res.seg_case == CASE_NOVEL) & confident & bool(cfg.merge_novel)
+        # ambiguous segments, and novel ones whose few matches fall on two labels, may merge those; a novel
+        # one whose matches fall on one label may hold it whole
+        amb = torch.nonzero(
+            (res.seg_case == CASE_AMBIGUOUS) & confident | novel & (res.r >= cfg.tau_valid)
+        ).squeeze(1)
+        ext = torch.nonzero(novel & (res.r < cfg.tau_valid) & (res.top_label >= 0)).squeeze(1)
+        if amb.numel() == 0 and ext.numel() == 0:
             return
         with self.timings.section("merge"):
             ids = torch.as_tensor(np.asarray(segments), dtype=torch.int64, device=self.device)
@@ -682,9 +688,18 @@ class Mapper:
                 cfg.init_depth_margin,
             )
             vis = pix >= 0
+            items, item_labels = seg_index[pix[vis]], self.map.labels[pick[vis]]
+            if ext.numel():
+                # it shows more of that object (a small one seen closer, whose few probes missed its
+                # Gaussians): the segment takes its label instead of a new one
+                held = label_containment(items, item_labels, ext, res.top_label[ext])
+                grow = ext[held >= cfg.merge_contain]
+                res.seg_labels[grow] = res.top_label[grow].to(torch.int32)
+                res.seg_case[grow] = CASE_MATCHED
+                self.timings.add("segments_extended", int(grow.numel()))
             pairs = duplicate_label_pairs(
-                seg_index[pix[vis]],
-                self.map.labels[pick[vis]],
+                items,
+                item_labels,
                 amb,
                 res.top_label,
                 res.second_label,

@@ -23,7 +23,10 @@ halves of one object do.
 With ``mapping.merge_novel`` the test also judges a would-be novel segment (p < tau_p, case iii tested
 first) whose few matches fall on two labels (r >= tau_valid): a wall or floor that the first view cut in
 two, seen again further back, where the mapped part is a few percent of the segment. Without it each such
-view started a third label on the surface. Counting
+view started a third label on the surface. A confident novel segment whose matches fall on one label
+(r < tau_valid) and that holds that label's whole visible extent (``label_containment``) takes the label: a
+small object (a clock) seen closer, whose few probes mostly missed its Gaussians, or a floor seen further.
+Counting
 Gaussians rather than rendering a label map keeps the check to one projection of the two labels'
 Gaussians, and independent of the confidences that weight a semantic render.
 """
@@ -93,6 +96,15 @@ def duplicate_label_pairs(
         total = torch.bincount(inside, minlength=int(cand.max()) + 1)[cand].float()
         keep &= (n1 >= min_part * total) & (n2 >= min_part * total)
     return torch.stack([l1[keep], l2[keep]], 1)
+
+
+def label_containment(
+    seg_index: torch.Tensor, item_labels: torch.Tensor, segs: torch.Tensor, labels: torch.Tensor
+) -> torch.Tensor:
+    """[C] the share of label ``labels[c]``'s items that lie in segment ``segs[c]`` (0 for a label without
+    items). ``seg_index`` [M] and ``item_labels`` [M] as in ``duplicate_label_pairs``."""
+    n, extent = _counts_in(seg_index, item_labels, segs, labels)
+    return n / extent.clamp(min=1)
 
 
 def _counts_in(
