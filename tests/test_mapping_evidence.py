@@ -67,6 +67,30 @@ def test_a_part_always_in_its_own_segment_gets_split_evidence(device):
     assert ev.split_ratio(gm, min_views=4).max() == 0  # not enough views yet
 
 
+def test_quick_split_needs_two_unanimous_views_or_one_confident_one(device):
+    """A book first seen in the last keyframes: fewer than min_views views decide with ``quick`` when all
+    of them showed the part apart, and there were two, or one came from a segment scored ``confident``."""
+    for scores, views, decided in (
+        ({1: 0.97, 2: 0.9}, 1, False),  # one view, the vase's segment scored low (a cut, say)
+        ({1: 0.97, 2: 0.97}, 1, True),  # one confident view
+        ({1: 0.97, 2: 0.9}, 2, True),  # two views, both apart
+    ):
+        gm, vase = plane_map(device)
+        ev = SegmentEvidence(gm.device)
+        for _ in range(views):
+            ev.observe(gm, segments_with_vase(), POSE, K, DEPTH, scores=scores, confident=0.95)
+        assert ev.split_ratio(gm, min_views=3).max() == 0  # the default: three views
+        r = ev.split_ratio(gm, min_views=3, quick=True)
+        assert bool((r[vase] == 1.0).any()) == decided
+        assert torch.all(r[~vase] == 0.0)
+    # a view that showed it together with its label keeps it undecided
+    gm, vase = plane_map(device)
+    ev = SegmentEvidence(gm.device)
+    ev.observe(gm, segments_with_vase(), POSE, K, DEPTH, scores={1: 0.97, 2: 0.97})
+    ev.observe(gm, np.ones((H, W), np.int32), POSE, K, DEPTH, scores={1: 0.97})
+    assert ev.split_ratio(gm, min_views=3, quick=True).max() == 0
+
+
 def test_random_cuts_give_no_split(device):
     """A SAM cut that moves from view to view puts a Gaussian in a minority piece in a few views only."""
     gm, _ = plane_map(device)

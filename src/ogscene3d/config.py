@@ -546,6 +546,14 @@ class MappingConfig:
     evidence_min_views: int = setting(
         3, "views a Gaussian or a label pair needs before the evidence decides on it", _int(1)
     )
+    evidence_quick_split: bool = setting(
+        True,
+        "a Gaussian judged in fewer than evidence_min_views views is split when all of them showed it apart "
+        "and there were two, or one was a segment scored evidence_confident_score or more",
+    )
+    evidence_confident_score: float = setting(
+        0.95, "SAM score of a segment whose one view is enough for a quick split", _UNIT
+    )
     evidence_split_ratio: float = setting(
         0.5,
         "share of views showing a Gaussian as a separate part that marks it",

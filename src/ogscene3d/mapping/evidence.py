@@ -27,6 +27,10 @@ incrementally:
 * **lower_confidences** (with the long-term step, ``evidence_split``): a Gaussian judged in at least
   ``min_views`` views, in a split in at least ``split_ratio`` of them, loses that ratio of its confidence
   (Eq. 16's decrease with P_2D-3D = the ratio and P_conf = 0): its stored views disagree with its label.
+* **quick splits** (``evidence_quick_split``): a Gaussian judged in fewer than ``min_views`` views is
+  decided when every one of them showed it apart and there were two, or one of them was a segment SAM
+  scored at least ``evidence_confident_score``. A book first seen in the last keyframes has no third view;
+  one clean, confident view of it on its own says more than a random cut, which SAM scores low.
 * **split_and_merge** (with the global refinement, before Alg. 1): labels that at least ``merge_ratio`` of
   at least ``min_views`` views show in one segment are merged (``evidence_merge``); Gaussians with split
   evidence and a confidence under ``split_below`` (``mapping.evidence_split_conf``: 1 by default, the views
@@ -130,10 +134,13 @@ class SegmentEvidence:
         min_group: int = 3,
         view: int | None = None,
         revisit: bool = False,
+        scores: dict[int, float] | None = None,
+        confident: float = 0.95,
     ) -> None:
         """Add one view's evidence (see the module docstring). ``gm``: the GaussianMap; ``segments`` [H,W]
         int ids (0 = none); ``pose`` c2w, ``K``, ``depth`` the view's (metres); ``view`` its key (the
-        keyframe index), under which its judgement is remembered.
+        keyframe index), under which its judgement is remembered; ``scores`` the segments' SAM scores, a
+        split vote from a segment scored at least ``confident`` also counting as a confident one.
 
         A view judged again (``revisit``, the long-term step's memory views) gives votes only to the
         Gaussians first stamped after its last judgement (made since), and leaves the per-label and per-pair
@@ -191,6 +198,12 @@ class SegmentEvidence:
         views.index_add_(0, g[judged], torch.ones(int(judged.sum()), device=dev))
         sv = split[inv] & fresh
         votes.index_add_(0, g[sv], torch.ones(int(sv.sum()), device=dev))
+        if scores:
+            sure_ids = [int(i) for i, v in scores.items() if 0 < int(i) < S and float(v) >= confident]
+            is_sure = torch.zeros(S, dtype=torch.bool, device=dev)
+            is_sure[torch.tensor(sure_ids, dtype=torch.long, device=dev)] = True
+            sure = sv & is_sure[s]
+            gm.aux("evidence_sure").index_add_(0, g[sure], torch.ones(int(sure.sum()), device=dev))
         self.stats.judged += int(judged.sum())
         self.stats.split_votes += int(sv.sum())
 
@@ -228,15 +241,22 @@ class SegmentEvidence:
         out[:m] = (self.label_owned[:m] >= min_owned) | (self.label_seen[:m] < min_views)
         return out
 
-    def split_ratio(self, gm, min_views: int) -> torch.Tensor:
+    def split_ratio(self, gm, min_views: int, quick: bool = False) -> torch.Tensor:
         """[N] the share of a Gaussian's judged views that showed it as a separate part of its label (0 with
-        fewer than ``min_views`` judged views)."""
+        fewer than ``min_views`` judged views). With ``quick``, fewer views decide when every one of them
+        showed it apart and there were two, or one of them was a confident segment (ratio 1)."""
         views, votes = gm.aux("evidence_views"), gm.aux("evidence_split")
-        return torch.where(views >= min_views, votes / views.clamp(min=1), torch.zeros_like(views))
+        decided = views >= min_views
+        if quick:
+            sure = gm.aux("evidence_sure")
+            decided |= (votes >= views) & ((views >= 2) | (sure >= 1))
+        return torch.where(decided, votes / views.clamp(min=1), torch.zeros_like(views))
 
-    def lower_confidences(self, gm, *, min_views: int = 3, split_ratio: float = 0.5) -> int:
+    def lower_confidences(
+        self, gm, *, min_views: int = 3, split_ratio: float = 0.5, quick: bool = False
+    ) -> int:
         """Eq. 16's decrease for Gaussians with split evidence (in place); returns how many."""
-        r = self.split_ratio(gm, min_views)
+        r = self.split_ratio(gm, min_views, quick)
         low = (r >= split_ratio) & (gm.labels >= 0)
         conf = gm.confidences
         conf[low] = (conf[low] - r[low] * conf[low]).clamp(0.0, 1.0)
@@ -253,6 +273,7 @@ class SegmentEvidence:
         min_views: int = 3,
         split_ratio: float = 0.5,
         merge_ratio: float = 0.9,
+        quick: bool = False,
         split_below: float = 1.0,
         r_search: float = 0.1,
         graph_k: int = 8,
@@ -278,7 +299,7 @@ class SegmentEvidence:
                     m[:, gone] = 0
                 out["merged_labels"] = len(mapping)
         if split:
-            r = self.split_ratio(gm, min_views)
+            r = self.split_ratio(gm, min_views, quick)
             low = (r >= split_ratio) & (gm.confidences < split_below) & (gm.labels >= 0)
             cand = torch.nonzero(low).squeeze(1)
             if cand.numel() >= min_group:
@@ -295,6 +316,7 @@ class SegmentEvidence:
                     gm.confidences[rows] = 0.5
                     gm.aux("evidence_views")[rows] = 0.0
                     gm.aux("evidence_split")[rows] = 0.0
+                    gm.aux("evidence_sure")[rows] = 0.0
                     out["split_labels"] = int(big.numel())
                     out["split_gaussians"] = int(rows.numel())
         self.stats.merged_labels += out["merged_labels"]

@@ -730,34 +730,39 @@ class Mapper:
         rules = cfg.evidence_split or cfg.evidence_merge or cfg.evidence_veto or cfg.evidence_protect
         return self.use_refine and rules
 
-    def _judge(self, view: int, segments: np.ndarray | None, source, revisit: bool = False) -> None:
-        """One view's co-segmentation evidence (``evidence.py``); ``source``: its Frame or MemoryEntry."""
+    def _judge(
+        self, view: int, segments: np.ndarray | None, scores: dict[int, float], source, revisit: bool = False
+    ) -> None:
+        """One view's co-segmentation evidence (``evidence.py``); ``scores``: its segments' SAM scores;
+        ``source``: its Frame or MemoryEntry."""
         cfg = self.cfg
         with self.timings.section("evidence"):
             self.evidence.observe(
                 self.map, segments, source.pose, source.K, source.depth,
                 margin=cfg.init_depth_margin, min_group=cfg.evidence_min_group, view=view, revisit=revisit,
+                scores=scores, confident=cfg.evidence_confident_score,
             )  # fmt: skip
 
     def _observe_evidence(self, k: _Keyframe) -> None:
         """The keyframe's co-segmentation evidence, on the map before association."""
         if self._collects_evidence():
-            self._judge(k.index, k.segments, k.frame)
+            self._judge(k.index, k.segments, k.scores, k.frame)
 
     def _longterm(self) -> None:
         """The long-term Eq. 16 update over the next memory views of the round-robin."""
         cfg = self.cfg
         if cfg.evidence_split:  # before Eq. 16, whose P_conf then renders the lowered confidences
             n = self.evidence.lower_confidences(
-                self.map, min_views=cfg.evidence_min_views, split_ratio=cfg.evidence_split_ratio
-            )
+                self.map, min_views=cfg.evidence_min_views, split_ratio=cfg.evidence_split_ratio,
+                quick=cfg.evidence_quick_split,
+            )  # fmt: skip
             self.timings.add("evidence_lowered", n)
         views = self.memory.next_views(cfg.longterm_views)
         if cfg.evidence_revisit and self._collects_evidence():
             # the stored views judged again, against the map as it is now: the Gaussians added since a view
             # was a keyframe have had no word from it
             for entry in views:
-                self._judge(entry.keyframe, entry.segments, entry, revisit=True)
+                self._judge(entry.keyframe, entry.segments, entry.scores, entry, revisit=True)
         with self.timings.section("longterm"):
             for entry in views:
                 st = longterm_view_update(
@@ -839,7 +844,8 @@ class Mapper:
                 ev = self.evidence.split_and_merge(
                     self.map, split=cfg.evidence_split, merge=cfg.evidence_merge,
                     min_views=cfg.evidence_min_views, split_ratio=cfg.evidence_split_ratio,
-                    merge_ratio=cfg.evidence_merge_ratio, split_below=cfg.evidence_split_conf,
+                    merge_ratio=cfg.evidence_merge_ratio, quick=cfg.evidence_quick_split,
+                    split_below=cfg.evidence_split_conf,
                     r_search=cfg.r_search, graph_k=cfg.refine_graph_k, min_group=cfg.evidence_min_group,
                 )  # fmt: skip
             for k, v in ev.items():
