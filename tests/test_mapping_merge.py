@@ -252,3 +252,20 @@ def test_merge_novel_extends_the_one_label_a_segment_holds_whole(device):
     low.segment_scores = {1: 0.9}
     m.process(low)
     assert torch.unique(m.map.labels[m.map.labels >= 0]).numel() == 2
+
+
+def test_merge_novel_extends_the_most_matched_label_it_holds_whole(device):
+    """From 6 m back the patch of frame 0 (labels A left, B right) spans columns 12-20. A segment over
+    columns 0-17 holds all of A and a quarter of B (r >= tau_valid, no merge: B is not inside it) and takes
+    A; the segment over the rest holds three quarters of B only, and is novel."""
+    seg = np.full((H, W), 2, np.int32)
+    seg[:, :18] = 1
+    m = _mapper(device, "mapping.max_pose_step=0", "mapping.prune_scale=0")
+    m.process(_wall_view(0, _halves(), 0.0))
+    a = int(m.map.labels[m.map.means[:, 0] < 0][0])
+    m.process(_wall_view(1, seg, -6.0))
+    c = m.timings.as_dict()["counts"]
+    assert c["segments_extended"] == 1 and "labels_merged" not in c
+    far_left = m.map.means[:, 0] < -2.0  # new wall, left of the patch
+    assert torch.all(m.map.labels[far_left] == a)
+    assert torch.unique(m.map.labels[m.map.labels >= 0]).numel() == 3

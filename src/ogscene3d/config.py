@@ -514,7 +514,7 @@ class MappingConfig:
         True,
         "duplicate merging also judges a confident would-be novel segment (p < tau_p): over two mapped "
         "labels (r >= tau_valid) it may merge them (a surface cut in an earlier view, seen further); "
-        "holding the whole visible extent of the one label it matches, it takes that label",
+        "holding the whole visible extent of its most matched label, it takes that label",
     )
     # multi-view co-segmentation evidence (mapping/evidence.py), beyond the paper; evidence_split,
     # evidence_merge, evidence_protect and evidence_veto all false = the paper's long-term step and

@@ -655,9 +655,9 @@ class Mapper:
     ) -> None:
         """Merge scene labels that one confident ambiguous segment shows to be one object (``merge.py``);
         the segment then takes the merged label (case ii), and this keyframe's segment labels follow. With
-        ``merge_novel`` a would-be novel segment is judged too: over two labels it may merge them, and over
-        one label that it holds whole it takes that label. Runs before Eq. 5, so that the merged segments'
-        matches get their confidence update too."""
+        ``merge_novel`` a would-be novel segment is judged too: over two labels it may merge them, and when
+        it holds its most matched label whole it takes that label. Runs before Eq. 5, so that the merged
+        segments' matches get their confidence update too."""
         cfg = self.cfg
         seg_ids = probes.seg_ids
         score = torch.tensor(
@@ -666,11 +666,11 @@ class Mapper:
         confident = score >= cfg.merge_min_score
         novel = (res.seg_case == CASE_NOVEL) & confident & bool(cfg.merge_novel)
         # ambiguous segments, and novel ones whose few matches fall on two labels, may merge those; a novel
-        # one whose matches fall on one label may hold it whole
+        # one may hold its most matched label whole
         amb = torch.nonzero(
             (res.seg_case == CASE_AMBIGUOUS) & confident | novel & (res.r >= cfg.tau_valid)
         ).squeeze(1)
-        ext = torch.nonzero(novel & (res.r < cfg.tau_valid) & (res.top_label >= 0)).squeeze(1)
+        ext = torch.nonzero(novel & (res.top_label >= 0)).squeeze(1)
         if amb.numel() == 0 and ext.numel() == 0:
             return
         with self.timings.section("merge"):

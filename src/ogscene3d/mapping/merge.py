@@ -23,9 +23,9 @@ halves of one object do.
 With ``mapping.merge_novel`` the test also judges a would-be novel segment (p < tau_p, case iii tested
 first) whose few matches fall on two labels (r >= tau_valid): a wall or floor that the first view cut in
 two, seen again further back, where the mapped part is a few percent of the segment. Without it each such
-view started a third label on the surface. A confident novel segment whose matches fall on one label
-(r < tau_valid) and that holds that label's whole visible extent (``label_containment``) takes the label: a
-small object (a clock) seen closer, whose few probes mostly missed its Gaussians, or a floor seen further.
+view started a third label on the surface. A confident novel segment that holds the whole visible extent
+of its most matched label l*_m (``label_containment``) and merges nothing takes that label: a small object (a
+clock) seen closer, whose few probes mostly missed its Gaussians, or a floor seen further.
 Counting
 Gaussians rather than rendering a label map keeps the check to one projection of the two labels'
 Gaussians, and independent of the confidences that weight a semantic render.
