@@ -205,14 +205,19 @@ def _wall_view(i: int, seg: np.ndarray, z_cam: float) -> Frame:
     )
 
 
+def _far_mapper(device, *overrides: str) -> Mapper:
+    """``_mapper`` for the step-back views: no pose-jump check (6 m in one step), no scale pruning (the far
+    view's Gaussians are large)."""
+    return _mapper(device, "mapping.max_pose_step=0", "mapping.prune_scale=0", *overrides)
+
+
 def test_merge_novel_joins_a_cut_surface_seen_further(device):
     """Frame 0 sees a patch of the wall cut in two (labels A, B); frame 1, from 6 m further back, sees the
     whole wall as one confident segment of which the patch is a few percent (p < tau_p: novel). By default
     the wall gets a third label; with ``mapping.merge_novel`` the segment shows A and B whole, each a large
     part of what is mapped in it, so they merge and the new wall takes the merged label."""
     for novel in (False, True):
-        m = _mapper(device, f"mapping.merge_novel={str(novel).lower()}", "mapping.merge_min_part=0.1",
-                    "mapping.max_pose_step=0", "mapping.prune_scale=0")  # fmt: skip
+        m = _far_mapper(device, f"mapping.merge_novel={str(novel).lower()}", "mapping.merge_min_part=0.1")
         m.process(_wall_view(0, _halves(), 0.0))
         assert torch.unique(m.map.labels).numel() == 2
         m.process(_wall_view(1, np.ones((H, W), np.int32), -6.0))
@@ -233,20 +238,19 @@ def test_merge_novel_extends_the_one_label_a_segment_holds_whole(device):
     both halves stay novel."""
     whole = np.ones((H, W), np.int32)
     for novel in (False, True):
-        m = _mapper(device, f"mapping.merge_novel={str(novel).lower()}", "mapping.max_pose_step=0",
-                    "mapping.prune_scale=0")  # fmt: skip
+        m = _far_mapper(device, f"mapping.merge_novel={str(novel).lower()}")
         m.process(_wall_view(0, whole, 0.0))
         m.process(_wall_view(1, whole, -6.0))
         c = m.timings.as_dict()["counts"]
         n_labels = torch.unique(m.map.labels[m.map.labels >= 0]).numel()
         assert (n_labels, c.get("segments_extended", 0)) == ((1, 1) if novel else (2, 0))
-    m = _mapper(device, "mapping.max_pose_step=0", "mapping.prune_scale=0")
+    m = _far_mapper(device)
     m.process(_wall_view(0, whole, 0.0))
     m.process(_wall_view(1, _halves(), -6.0))
     assert m.timings.as_dict()["counts"].get("segments_extended", 0) == 0
     assert torch.unique(m.map.labels[m.map.labels >= 0]).numel() == 3
     # a segment below mapping.merge_min_score does not take the label either
-    m = _mapper(device, "mapping.max_pose_step=0", "mapping.prune_scale=0")
+    m = _far_mapper(device)
     m.process(_wall_view(0, whole, 0.0))
     low = _wall_view(1, whole, -6.0)
     low.segment_scores = {1: 0.9}
@@ -260,7 +264,7 @@ def test_merge_novel_extends_the_most_matched_label_it_holds_whole(device):
     A; the segment over the rest holds three quarters of B only, and is novel."""
     seg = np.full((H, W), 2, np.int32)
     seg[:, :18] = 1
-    m = _mapper(device, "mapping.max_pose_step=0", "mapping.prune_scale=0")
+    m = _far_mapper(device)
     m.process(_wall_view(0, _halves(), 0.0))
     a = int(m.map.labels[m.map.means[:, 0] < 0][0])
     m.process(_wall_view(1, seg, -6.0))

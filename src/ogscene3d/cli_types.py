@@ -7,12 +7,17 @@ import argparse
 from collections.abc import Callable
 
 
+def _convert(text: str, kind: Callable[[str], int | float], expected: str) -> int | float:
+    """``kind(text)``, or an argparse error saying what was ``expected``."""
+    try:
+        return kind(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from e
+
+
 def positive_int(text: str) -> int:
     """An integer >= 1."""
-    try:
-        value = int(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from e
+    value = int(_convert(text, int, "an integer >= 1"))
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {value}")
     return value
@@ -20,10 +25,7 @@ def positive_int(text: str) -> int:
 
 def positive_float(text: str) -> float:
     """A finite number > 0."""
-    try:
-        value = float(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from e
+    value = float(_convert(text, float, "a number"))
     if not value > 0 or value == float("inf"):
         raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text}")
     return value
@@ -31,10 +33,7 @@ def positive_float(text: str) -> float:
 
 def unit_interval(text: str) -> float:
     """A number in [0, 1]."""
-    try:
-        value = float(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}") from e
+    value = float(_convert(text, float, "a number in [0, 1]"))
     if not 0.0 <= value <= 1.0:
         raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {value}")
     return value
@@ -42,10 +41,7 @@ def unit_interval(text: str) -> float:
 
 def port(text: str) -> int:
     """A TCP port, 0 for any free one."""
-    try:
-        value = int(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(f"expected a port number, got {text!r}") from e
+    value = int(_convert(text, int, "a port number"))
     if not 0 <= value <= 65535:
         raise argparse.ArgumentTypeError(f"port must be from 0 to 65535 (0: any free port), got {value}")
     return value

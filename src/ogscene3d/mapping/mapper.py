@@ -740,7 +740,7 @@ class Mapper:
             self.evidence.observe(
                 self.map, segments, source.pose, source.K, source.depth,
                 margin=cfg.init_depth_margin, min_group=cfg.evidence_min_group, view=view, revisit=revisit,
-                scores=scores, confident=cfg.evidence_confident_score,
+                scores=scores if cfg.evidence_quick_split else None, confident=cfg.evidence_confident_score,
             )  # fmt: skip
 
     def _observe_evidence(self, k: _Keyframe) -> None:

@@ -87,8 +87,9 @@ def duplicate_label_pairs(
     if not bool(ok.any()):
         return empty
     cand, l1, l2 = candidates[ok].long(), l1[ok], l2[ok]
-    n1, e1 = _counts_in(seg_index, item_labels, cand, l1)
-    n2, e2 = _counts_in(seg_index, item_labels, cand, l2)
+    c = cand.numel()
+    n, e = _counts_in(seg_index, item_labels, cand.repeat(2), torch.cat([l1, l2]))  # one pass for both
+    n1, n2, e1, e2 = n[:c], n[c:], e[:c], e[c:]
     keep = (n1 >= tau_contain * e1) & (n2 >= tau_contain * e2) & (e1 > 0) & (e2 > 0)
     if min_part > 0:
         seg = seg_index.reshape(-1).long()
