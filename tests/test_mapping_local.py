@@ -346,3 +346,40 @@ def test_make_probes_negative_segment_ids_are_no_segment(device):
     assert torch.allclose(conf[col < 2], torch.tensor(0.0))
     assert torch.allclose(conf[(col >= 2) & (col < 4)], torch.tensor(0.5))
     assert torch.allclose(conf[col >= 4], torch.tensor(1.0))
+
+
+def test_make_probes_small_segments_get_every_pixel(device):
+    """A segment with fewer grid probes than ``dense_below`` (a book a few pixels across) gets a probe at
+    every valid-depth pixel, each one pixel's footprint; the other segments keep the grid."""
+    import math
+
+    import numpy as np
+
+    from ogscene3d.frame import Frame
+    from ogscene3d.mapping.init import make_probes
+
+    h, w = 16, 16
+    ids = np.ones((h, w), dtype=np.int32)
+    ids[5:8, 9:12] = 2  # 9 pixels, 2 or so grid probes at step 2
+    depth = np.full((h, w), 2.0, np.float32)
+    depth[7, 11] = 0.0  # no depth: no probe
+    K = np.array([[20.0, 0, w / 2], [0, 20.0, h / 2], [0, 0, 1]], dtype=np.float32)
+    frame = Frame(0, np.zeros((h, w, 3), np.uint8), depth, K, np.eye(4), segments=ids)
+    dev = torch.device(device)
+    sparse = make_probes(frame, ids, {}, dev, step=2)
+    dense = make_probes(frame, ids, {}, dev, step=2, dense_below=8)
+    seg_of = lambda p: p.seg_ids[p.seg.clamp(min=0)].cpu()  # noqa: E731
+    assert int((seg_of(sparse) == 2).sum()) < 8
+    small = seg_of(dense) == 2
+    assert int(small.sum()) == 8
+    assert sorted(dense.pix[small].tolist()) == sorted(
+        v * w + u for v in range(5, 8) for u in range(9, 12) if (v, u) != (7, 11)
+    )
+    assert int((seg_of(dense) == 1).sum()) == int((seg_of(sparse) == 1).sum())  # the big one: the grid
+    on_grid = (dense.pix // w % 2 == 1) & (dense.pix % w % 2 == 1)
+    off = small.to(dense.pix.device) & ~on_grid
+    assert off.any()
+    torch.testing.assert_close(
+        dense.log_scales[off].cpu(), torch.full((int(off.sum()),), math.log(2.0 * 1 / 20.0))
+    )
+    assert torch.equal(make_probes(frame, ids, {}, dev, step=2, dense_below=2).pix, sparse.pix)  # big enough

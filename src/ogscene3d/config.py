@@ -460,6 +460,13 @@ class MappingConfig:
     init_opacity: float = setting(
         0.9, "opacity of newly added Gaussians", _float(0.0, 1.0, lo_open=True, hi_open=True)
     )
+    init_dense_below: int = setting(
+        16,
+        "a segment with fewer grid probes than this gets a probe at every pixel (a book, a light switch: "
+        "a few Gaussians could not be told from what surrounds them in later views); the paper takes every "
+        "pixel",
+        _int(0, note="0 = off"),
+    )
     init_alpha_thresh: float = setting(
         0.5, "a pixel rendered with less alpha is unexplained -> new Gaussian", _UNIT
     )
@@ -524,6 +531,12 @@ class MappingConfig:
         "refinement splits parts that most views show apart from their label off as new labels; long-term "
         "lowers their confidence",
     )
+    evidence_wrong: bool = setting(
+        True,
+        "long-term lowers the confidence of Gaussians that most views showed inside another label's segment, "
+        "away from their own label's main segment; the refinement may relabel them though their label is "
+        "protected",
+    )
     evidence_split_conf: float = setting(
         1.0,
         "confidence under which a part with split evidence is split (1 = any: the views decide; tau_low = "
@@ -550,6 +563,12 @@ class MappingConfig:
         True,
         "a Gaussian judged in fewer than evidence_min_views views is split when all of them showed it apart "
         "and there were two, or one was a segment scored evidence_confident_score or more",
+    )
+    evidence_quick_merge: bool = setting(
+        True,
+        "two labels judged together in fewer than evidence_min_views views are merged when every one of them "
+        "held both in one segment, each at least merge_min_part of it, and there were two such views, or one "
+        "was a segment scored evidence_confident_score or more",
     )
     evidence_confident_score: float = setting(
         0.95, "SAM score of a segment whose one view is enough for a quick split", _UNIT

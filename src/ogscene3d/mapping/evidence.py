@@ -12,31 +12,39 @@ incrementally:
 
 * **observe** (every keyframe, on the map as it stands before the keyframe's association; and, with
   ``evidence_revisit``, the long-term step's memory views again, against the map as it is then: Gaussians
-  made after a view was a keyframe had no word from it): the labelled Gaussians are projected into the frame
-  (visible where the observed depth agrees, ``merge.visible_pixels``); those on the boundary of a segment
-  whose interior holds most of it are left out (``spill_pixels``: a small segment, a book or a switch a few
-  pixels across, is nearly all boundary and is kept whole). For each label L, its visible Gaussians are
-  counted per segment; the segment with the most of them is L's *main* segment in this view. A Gaussian in
-  the main segment gets a "together" view; one in another segment that is itself mostly L (at least half of
-  its visible Gaussians, and ``min_group`` of them) gets a "split" view: the view shows it as a separate part
-  of L. Gaussians in a segment that belongs to another label give no vote (a boundary spill, or a plainly
-  wrong label: that is the long-term step's Eq. 16 test). Per label, the views where it was judged count,
-  and those where it *owned* its main segment (held ``OWN`` of the segment's visible Gaussians). Per label
-  pair, the views where both labels lie mostly (``CONTAIN``) in one segment count, and those where it is the
-  same segment count as "together".
-* **lower_confidences** (with the long-term step, ``evidence_split``): a Gaussian judged in at least
-  ``min_views`` views, in a split in at least ``split_ratio`` of them, loses that ratio of its confidence
-  (Eq. 16's decrease with P_2D-3D = the ratio and P_conf = 0): its stored views disagree with its label.
+  made after a view was a keyframe had no word from it, and the ones the view made itself get none from it):
+  the labelled Gaussians are projected into the frame (visible where the observed depth agrees,
+  ``merge.visible_pixels``); those on the boundary of a segment whose interior holds most of it are left out
+  (``spill_pixels``: a small segment, a book or a switch a few pixels across, is nearly all boundary and is
+  kept whole). For each label L, its visible Gaussians are counted per segment; the segment with the most of
+  them is L's *main* segment in this view. A Gaussian in the main segment gets a "together" view; one in
+  another segment that is itself mostly L (at least half of its visible Gaussians, and ``min_group`` of
+  them) gets a "split" view: the view shows it as a separate part of L. One in another segment that is
+  mostly *other* labels gets a "wrong" view: L ran over into a neighbouring object (a first view that merged
+  a cabinet with the floor gave the cabinet's label to the floor around it, and later views put that floor
+  in the floor's segment). Per label, the views where it was judged count, and those where it *owned* its
+  main segment (held ``OWN`` of the segment's visible Gaussians). Per label pair, the views where both
+  labels lie mostly (``CONTAIN``) in one segment count, those where it is the same segment count as
+  "together", and of those the ones where each label is ``min_part`` of the segment's visible Gaussians
+  ("firm"), and where that segment is confident ("sure").
+* **lower_confidences** (with the long-term step, ``evidence_split``, ``evidence_wrong``): a Gaussian judged
+  in at least ``min_views`` views, shown apart (or in another label's segment) in at least ``split_ratio``
+  of them, loses that ratio of its confidence (Eq. 16's decrease with P_2D-3D = the ratio and P_conf = 0):
+  its stored views disagree with its label. Algorithm 1 then re-decides the wrong-label ones even in a
+  protected label, giving them another label than their own (``refine.global_refinement``'s ``exposed``).
 * **quick splits** (``evidence_quick_split``): a Gaussian judged in fewer than ``min_views`` views is
   decided when every one of them showed it apart and there were two, or one of them was a segment SAM
   scored at least ``evidence_confident_score``. A book first seen in the last keyframes has no third view;
   one clean, confident view of it on its own says more than a random cut, which SAM scores low.
 * **split_and_merge** (with the global refinement, before Alg. 1): labels that at least ``merge_ratio`` of
-  at least ``min_views`` views show in one segment are merged (``evidence_merge``); Gaussians with split
-  evidence and a confidence under ``split_below`` (``mapping.evidence_split_conf``: 1 by default, the views
-  decide; ``tau_low`` waits for the long-term step's decrease) are split off their label, each spatially
-  connected group of at least ``min_group`` of them (same label, r_search) becoming a new label at
-  confidence 0.5 (``evidence_split``). Algorithm 1 then re-decides what is left low.
+  at least ``min_views`` views show in one segment are merged (``evidence_merge``); with
+  ``evidence_quick_merge`` also a pair judged in fewer views when every one held both in one segment, firm,
+  and two did or one was sure (a sofa that its first view cut in pieces; a cup inside the table's segment is
+  no firm part of it). Gaussians with split evidence and a confidence under ``split_below``
+  (``mapping.evidence_split_conf``: 1 by default, the views decide; ``tau_low`` waits for the long-term
+  step's decrease, except for quick decisions, which may have no long-term step left) are split off their
+  label, each spatially connected group of at least ``min_group`` of them (same label, r_search) becoming a
+  new label at confidence 0.5 (``evidence_split``). Algorithm 1 then re-decides what is left low.
 * **protected_labels** (for Alg. 1, ``evidence_protect``): labels that owned a segment in a view since they
   were made, and labels not yet judged in ``min_views`` views, keep their Gaussians through Alg. 1. Without
   it a small object whose confidence is low (its low SAM score at birth, Eq. 5 decreases in the views that
@@ -98,10 +106,14 @@ class SegmentEvidence:
     """Per-Gaussian split evidence (auxiliary values of the GaussianMap) and per-label-pair co-segmentation
     counts, collected view by view."""
 
+    # per label pair: views where both lay mostly in one segment each; of those, in the same one; of those,
+    # with each label a real part of the segment (``min_part``); of those, in a confident segment
+    _PAIRS = ("pair_views", "pair_together", "pair_firm", "pair_sure")
+
     def __init__(self, device: torch.device) -> None:
         self.device = device
-        self.pair_views = torch.zeros((0, 0), device=device)
-        self.pair_together = torch.zeros((0, 0), device=device)
+        for name in self._PAIRS:
+            setattr(self, name, torch.zeros((0, 0), device=device))
         self.label_seen = torch.zeros(0, device=device)
         self.label_owned = torch.zeros(0, device=device)
         self.clock = 0  # judgements so far: the stamps of observe
@@ -113,7 +125,7 @@ class SegmentEvidence:
         if n <= old:
             return
         size = max(n, 2 * old, 64)
-        for name in ("pair_views", "pair_together"):
+        for name in self._PAIRS:
             t = torch.zeros((size, size), device=self.device)
             t[:old, :old] = getattr(self, name)
             setattr(self, name, t)
@@ -136,22 +148,28 @@ class SegmentEvidence:
         revisit: bool = False,
         scores: dict[int, float] | None = None,
         confident: float = 0.95,
+        min_part: float = 0.1,
     ) -> None:
         """Add one view's evidence (see the module docstring). ``gm``: the GaussianMap; ``segments`` [H,W]
         int ids (0 = none); ``pose`` c2w, ``K``, ``depth`` the view's (metres); ``view`` its key (the
         keyframe index), under which its judgement is remembered; ``scores`` the segments' SAM scores, a
-        split vote from a segment scored at least ``confident`` also counting as a confident one.
+        split vote from a segment scored at least ``confident`` also counting as a confident one; two labels
+        in one segment count as *firm* together when each holds ``min_part`` of its visible Gaussians.
 
         A view judged again (``revisit``, the long-term step's memory views) gives votes only to the
         Gaussians first stamped after its last judgement (made since), and leaves the per-label and per-pair
         counts alone, so that no view counts twice for any Gaussian or label however often it is revisited."""
-        if segments is None or len(gm) == 0:
+        if segments is None:
             return
         since = self._judged.get(view, 0) if revisit else None
         dev = gm.device
         self.clock += 1
         if view is not None:
-            self._judged[view] = self.clock
+            # the Gaussians a keyframe makes get the next stamp (they did not exist when it was judged): its
+            # own segments made them, so a revisit must not count them as a second opinion
+            self._judged[view] = self.clock if revisit else self.clock + 1
+        if len(gm) == 0:
+            return
         born = gm.aux("evidence_born", UNSTAMPED)
         born[born == UNSTAMPED] = float(self.clock)  # the Gaussians this view is the first to see
         pick = torch.nonzero(gm.labels >= 0).squeeze(1)
@@ -189,7 +207,11 @@ class SegmentEvidence:
         n_lab = torch.zeros(int(ul.max()) + 1, device=dev).index_add_(0, ul, cnt.float())
         main_big = torch.zeros(int(ul.max()) + 1, dtype=torch.bool, device=dev)
         main_big[ul[is_main]] = cnt[is_main] >= min_group
-        split = ~is_main & (cnt.float() >= 0.5 * n_seg[us]) & (cnt >= min_group) & main_big[ul]
+        part = ~is_main & (cnt >= min_group) & main_big[ul]
+        split = part & (cnt.float() >= 0.5 * n_seg[us])
+        # a part of the label inside another label's segment, away from the label's own: the label ran over
+        # into a neighbouring object (a cabinet's label that took in the floor around it)
+        wrong = part & ~split
         together = is_main & main_big[ul]
         judged = (split | together)[inv]
         fresh = torch.ones_like(judged) if since is None else born[g] > float(since)
@@ -198,9 +220,11 @@ class SegmentEvidence:
         views.index_add_(0, g[judged], torch.ones(int(judged.sum()), device=dev))
         sv = split[inv] & fresh
         votes.index_add_(0, g[sv], torch.ones(int(sv.sum()), device=dev))
+        wv = wrong[inv] & fresh
+        gm.aux("evidence_wrong").index_add_(0, g[wv], torch.ones(int(wv.sum()), device=dev))
+        is_sure = torch.zeros(S, dtype=torch.bool, device=dev)
         if scores:
             sure_ids = [int(i) for i, v in scores.items() if 0 < int(i) < S and float(v) >= confident]
-            is_sure = torch.zeros(S, dtype=torch.bool, device=dev)
             is_sure[torch.tensor(sure_ids, dtype=torch.long, device=dev)] = True
             sure = sv & is_sure[s]
             gm.aux("evidence_sure").index_add_(0, g[sure], torch.ones(int(sure.sum()), device=dev))
@@ -223,10 +247,16 @@ class SegmentEvidence:
         labs, mains = ul[is_main][contained], us[is_main][contained]
         if labs.numel() < 2:
             return
+        part = (mc[contained].float() >= min_part * n_seg[mains]).float()
         ii, jj = labs[:, None].expand(-1, labs.numel()), labs[None, :].expand(labs.numel(), -1)
         same = (mains[:, None] == mains[None, :]).float()
-        self.pair_views.index_put_((ii.reshape(-1), jj.reshape(-1)), torch.ones(ii.numel(), device=dev), True)
-        self.pair_together.index_put_((ii.reshape(-1), jj.reshape(-1)), same.reshape(-1), True)
+        firm = same * part[:, None] * part[None, :]
+        sure = firm * is_sure[mains].float()[:, None]
+        at = (ii.reshape(-1), jj.reshape(-1))
+        self.pair_views.index_put_(at, torch.ones(ii.numel(), device=dev), True)
+        self.pair_together.index_put_(at, same.reshape(-1), True)
+        self.pair_firm.index_put_(at, firm.reshape(-1), True)
+        self.pair_sure.index_put_(at, sure.reshape(-1), True)
 
     def protected_labels(self, n_labels: int, min_views: int, min_owned: int = 1) -> torch.Tensor:
         """[n_labels] bool: the labels Algorithm 1 leaves alone (``mapping.evidence_protect``): those that
@@ -252,11 +282,30 @@ class SegmentEvidence:
             decided |= (votes >= views) & ((views >= 2) | (sure >= 1))
         return torch.where(decided, votes / views.clamp(min=1), torch.zeros_like(views))
 
+    def wrong_ratio(self, gm, min_views: int) -> torch.Tensor:
+        """[N] the share of a Gaussian's judged views that showed it inside another label's segment, away from
+        its own label's main segment (0 with fewer than ``min_views`` such views and others)."""
+        wrong, views = gm.aux("evidence_wrong"), gm.aux("evidence_views")
+        seen = views + wrong
+        return torch.where(seen >= min_views, wrong / seen.clamp(min=1), torch.zeros_like(seen))
+
     def lower_confidences(
-        self, gm, *, min_views: int = 3, split_ratio: float = 0.5, quick: bool = False
+        self,
+        gm,
+        *,
+        min_views: int = 3,
+        split_ratio: float = 0.5,
+        quick: bool = False,
+        split: bool = True,
+        wrong: bool = False,
     ) -> int:
-        """Eq. 16's decrease for Gaussians with split evidence (in place); returns how many."""
-        r = self.split_ratio(gm, min_views, quick)
+        """Eq. 16's decrease for Gaussians with split evidence (``split``) or wrong-label evidence
+        (``wrong``), by the larger of the two ratios (in place); returns how many."""
+        zero = torch.zeros_like(gm.confidences)
+        r = torch.maximum(
+            self.split_ratio(gm, min_views, quick) if split else zero,
+            self.wrong_ratio(gm, min_views) if wrong else zero,
+        )
         low = (r >= split_ratio) & (gm.labels >= 0)
         conf = gm.confidences
         conf[low] = (conf[low] - r[low] * conf[low]).clamp(0.0, 1.0)
@@ -274,6 +323,7 @@ class SegmentEvidence:
         split_ratio: float = 0.5,
         merge_ratio: float = 0.9,
         quick: bool = False,
+        quick_merge: bool = False,
         split_below: float = 1.0,
         r_search: float = 0.1,
         graph_k: int = 8,
@@ -285,6 +335,8 @@ class SegmentEvidence:
         if merge and self.pair_views.numel():
             v, t = self.pair_views, self.pair_together
             hit = (v >= min_views) & (t >= merge_ratio * v)
+            if quick_merge:  # too few views for the ratio: unanimous, and firm in two or sure in one
+                hit |= (v >= 1) & (v < min_views) & (t >= v) & ((self.pair_firm >= 2) | (self.pair_sure >= 1))
             hit.fill_diagonal_(False)
             pairs = torch.nonzero(torch.triu(hit, diagonal=1))
             present = torch.zeros(v.shape[0], dtype=torch.bool, device=v.device)
@@ -294,13 +346,16 @@ class SegmentEvidence:
             mapping = merge_labels(gm.labels, pairs)
             if mapping:
                 gone = torch.tensor(list(mapping), dtype=torch.long, device=v.device)
-                for m in (self.pair_views, self.pair_together):
+                for m in (getattr(self, name) for name in self._PAIRS):
                     m[gone] = 0
                     m[:, gone] = 0
                 out["merged_labels"] = len(mapping)
         if split:
             r = self.split_ratio(gm, min_views, quick)
-            low = (r >= split_ratio) & (gm.confidences < split_below) & (gm.labels >= 0)
+            # a quick decision (fewer than min_views views: first seen in the last keyframes) does not wait
+            # for the long-term decrease, which may not come before the stream ends
+            few = gm.aux("evidence_views") < min_views
+            low = (r >= split_ratio) & ((gm.confidences < split_below) | few) & (gm.labels >= 0)
             cand = torch.nonzero(low).squeeze(1)
             if cand.numel() >= min_group:
                 comp = connected_clusters(gm.means[cand], gm.labels[cand], r_search, graph_k)
@@ -317,6 +372,7 @@ class SegmentEvidence:
                     gm.aux("evidence_views")[rows] = 0.0
                     gm.aux("evidence_split")[rows] = 0.0
                     gm.aux("evidence_sure")[rows] = 0.0
+                    gm.aux("evidence_wrong")[rows] = 0.0
                     out["split_labels"] = int(big.numel())
                     out["split_gaussians"] = int(rows.numel())
         self.stats.merged_labels += out["merged_labels"]

@@ -1,16 +1,18 @@
 """New Gaussians ("probes") of a keyframe from its depth and segmentation (paper Sec. III-B.2, first part).
 
-Valid-depth pixels on a regular grid of step ``step`` (so about one probe per ``step**2`` pixels, in every
-segment alike) are back-projected to world points. Every probe of a segment takes part in the segment's
-KNN association; only the probes whose pixel the current map does not already explain (rendered
-alpha below ``alpha_thresh``, or observed depth in front of the rendered depth by more than
-``depth_margin``) become new Gaussians. Scale: isotropic, the footprint of one grid cell at that depth
-(depth * step / focal), so neighbouring Gaussians overlap; rotation identity; colour from the RGB.
+Valid-depth pixels on a regular grid of step ``step`` (so about one probe per ``step**2`` pixels) are
+back-projected to world points; a segment with fewer than ``dense_below`` grid probes
+(``mapping.init_dense_below``: a book, a light switch) gets one at every pixel instead. Every probe of a
+segment takes part in the segment's KNN association; only the probes whose pixel the current map does not
+already explain (rendered alpha below ``alpha_thresh``, or observed depth in front of the rendered depth by
+more than ``depth_margin``) become new Gaussians. Scale: isotropic, the footprint of one grid cell at that
+depth (depth * step / focal; one pixel for the dense ones), so neighbouring Gaussians overlap; rotation
+identity; colour from the RGB.
 
-The paper initializes new Gaussians from every pixel of every segment of each keyframe; adding only the
-unexplained ones keeps a revisited surface from being duplicated at every keyframe (as in SplaTAM), and the
-explained probes still stand for G_m in Eq. 4 (``local.py``; ``fill_unlabeled`` there lets an existing
-unlabelled Gaussian under a labelled segment play the new Gaussian's part).
+The paper initializes new Gaussians from every pixel of every segment of each keyframe (``step`` 1);
+adding only the unexplained ones keeps a revisited surface from being duplicated at every keyframe (as in
+SplaTAM), and the explained probes still stand for G_m in Eq. 4 (``local.py``; ``fill_unlabeled`` there lets
+an existing unlabelled Gaussian under a labelled segment play the new Gaussian's part).
 A probe's confidence is its segment's SAM score rescaled from ``score_range`` to ``conf_range`` (paper:
 [0.88, 1] -> [0.5, 1], clamped); a segment without a score (a segmenter or a segments folder that gives
 none) counts as scored 1, i.e. confidence 1. Pixels outside every segment get confidence 0.
@@ -68,6 +70,7 @@ def make_probes(
     depth_margin: float = 0.1,
     min_depth: float = 0.0,
     max_depth: float = 0.0,
+    dense_below: int = 0,
 ) -> Probes:
     """Back-project the grid pixels of ``frame`` (must have a pose). ``segments`` int [H,W] (0 or negative =
     none) or None; ``rendered_alpha``/``rendered_depth`` [H,W] from rendering the map at the frame's pose
@@ -88,6 +91,13 @@ def make_probes(
     gv, gu = torch.nonzero(ok, as_tuple=True)
     vv, uu = gv * step + o, gu * step + o
     z32 = depth[gv, gu]
+    extra = _dense_pixels(frame, segments, step, dense_below, min_depth, max_depth) if step > 1 else None
+    cell = torch.full((len(z32),), float(step), dtype=torch.float64, device=device)
+    if extra is not None:  # small segments: every pixel (their grid probes are already in)
+        ev, eu = (up(a) for a in extra)
+        vv, uu = torch.cat([vv, ev]), torch.cat([uu, eu])
+        z32 = torch.cat([z32, up(np.asarray(frame.depth, dtype=np.float32)[extra])])
+        cell = torch.cat([cell, torch.ones(len(ev), dtype=torch.float64, device=device)])
     z = z32.double()
     K = frame.K.astype(np.float64)
     x = (uu.double() + 0.5 - K[0, 2]) / K[0, 0] * z  # int + float is float32 in torch: widen first
@@ -96,12 +106,17 @@ def make_probes(
     pose = torch.as_tensor(frame.pose, dtype=torch.float64, device=device)
     pw = pc @ pose[:3, :3].T + pose[:3, 3]
     focal = 0.5 * (K[0, 0] + K[1, 1])
-    log_s = torch.log(torch.clamp(z * step / focal, min=1e-6))
+    log_s = torch.log(torch.clamp(z * cell / focal, min=1e-6))
     colors = up(frame.rgb[grid])[gv, gu].float() / 255.0
+    if extra is not None:
+        colors = torch.cat([colors, up(frame.rgb[extra]).float() / 255.0])
     pix = vv * w + uu
 
     if segments is not None:
-        seg, seg_ids, raw = _probe_segments(up(np.asarray(segments)[grid].astype(np.int64))[gv, gu], scores)
+        sid = up(np.asarray(segments)[grid].astype(np.int64))[gv, gu]
+        if extra is not None:
+            sid = torch.cat([sid, up(np.asarray(segments)[extra].astype(np.int64))])
+        seg, seg_ids, raw = _probe_segments(sid, scores)
     else:
         seg_ids = torch.zeros(0, dtype=torch.int64, device=device)
         seg = torch.full((len(z),), -1, dtype=torch.int64, device=device)
@@ -128,6 +143,33 @@ def make_probes(
         seg_ids=seg_ids,
         seg_conf=seg_conf,
     )
+
+
+def _dense_pixels(
+    frame: Frame, segments: np.ndarray | None, step: int, dense_below: int, min_depth: float, max_depth: float
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """(rows, cols) of the off-grid valid-depth pixels of the segments that have fewer than ``dense_below``
+    grid probes, or None. A book or a light switch a few pixels across gets two or three grid probes: too
+    few for its Gaussians to be told from the shelf or the wall around them, in any later view."""
+    if segments is None or dense_below <= 0:
+        return None
+    seg = np.asarray(segments).astype(np.int64)
+    d = np.asarray(frame.depth, dtype=np.float32)
+    valid = np.isfinite(d) & (d > max(min_depth, 0.0)) & (seg > 0)
+    if max_depth > 0:
+        valid &= d <= max_depth
+    if not valid.any():
+        return None
+    on_grid = grid_mask(*seg.shape, step)
+    n = int(seg.max()) + 1
+    probes = np.bincount(seg[valid & on_grid], minlength=n)
+    area = np.bincount(seg[valid], minlength=n)
+    small = (area > 0) & (probes < dense_below)
+    small[0] = False
+    extra = valid & ~on_grid & small[np.maximum(seg, 0)]
+    if not extra.any():
+        return None
+    return np.nonzero(extra)
 
 
 def _probe_segments(

@@ -493,6 +493,7 @@ class Mapper:
                 depth_margin=cfg.init_depth_margin,
                 min_depth=self.config.data.min_depth,
                 max_depth=self.config.data.max_depth,
+                dense_below=cfg.init_dense_below,
             )
 
     def _local(self, k: _Keyframe) -> None:
@@ -727,7 +728,10 @@ class Mapper:
         """Whether the co-segmentation evidence is collected: where the refinement runs and a rule of
         ``evidence.py`` is on."""
         cfg = self.cfg
-        rules = cfg.evidence_split or cfg.evidence_merge or cfg.evidence_veto or cfg.evidence_protect
+        rules = (
+            cfg.evidence_split or cfg.evidence_wrong or cfg.evidence_merge or cfg.evidence_veto
+            or cfg.evidence_protect
+        )  # fmt: skip
         return self.use_refine and rules
 
     def _judge(
@@ -740,7 +744,8 @@ class Mapper:
             self.evidence.observe(
                 self.map, segments, source.pose, source.K, source.depth,
                 margin=cfg.init_depth_margin, min_group=cfg.evidence_min_group, view=view, revisit=revisit,
-                scores=scores if cfg.evidence_quick_split else None, confident=cfg.evidence_confident_score,
+                scores=scores if cfg.evidence_quick_split or cfg.evidence_quick_merge else None,
+                confident=cfg.evidence_confident_score, min_part=cfg.merge_min_part,
             )  # fmt: skip
 
     def _observe_evidence(self, k: _Keyframe) -> None:
@@ -751,10 +756,10 @@ class Mapper:
     def _longterm(self) -> None:
         """The long-term Eq. 16 update over the next memory views of the round-robin."""
         cfg = self.cfg
-        if cfg.evidence_split:  # before Eq. 16, whose P_conf then renders the lowered confidences
+        if cfg.evidence_split or cfg.evidence_wrong:  # before Eq. 16, whose P_conf renders the lowered ones
             n = self.evidence.lower_confidences(
                 self.map, min_views=cfg.evidence_min_views, split_ratio=cfg.evidence_split_ratio,
-                quick=cfg.evidence_quick_split,
+                quick=cfg.evidence_quick_split, split=cfg.evidence_split, wrong=cfg.evidence_wrong,
             )  # fmt: skip
             self.timings.add("evidence_lowered", n)
         views = self.memory.next_views(cfg.longterm_views)
@@ -845,7 +850,7 @@ class Mapper:
                     self.map, split=cfg.evidence_split, merge=cfg.evidence_merge,
                     min_views=cfg.evidence_min_views, split_ratio=cfg.evidence_split_ratio,
                     merge_ratio=cfg.evidence_merge_ratio, quick=cfg.evidence_quick_split,
-                    split_below=cfg.evidence_split_conf,
+                    quick_merge=cfg.evidence_quick_merge, split_below=cfg.evidence_split_conf,
                     r_search=cfg.r_search, graph_k=cfg.refine_graph_k, min_group=cfg.evidence_min_group,
                 )  # fmt: skip
             for k, v in ev.items():
@@ -859,6 +864,9 @@ class Mapper:
             if cfg.evidence_protect
             else None
         )
+        exposed = None
+        if protected is not None and cfg.evidence_wrong:
+            exposed = self.evidence.wrong_ratio(self.map, cfg.evidence_min_views) >= cfg.evidence_split_ratio
         with self.timings.section("refine"):
             st = global_refinement(
                 self.map.means,
@@ -871,6 +879,7 @@ class Mapper:
                 graph_k=cfg.refine_graph_k,
                 include_unlabeled=cfg.refine_unlabeled,
                 protected=protected,
+                exposed=exposed,
             )
         for k, v in st.as_dict().items():
             self.timings.add(f"refine_{k}", v)

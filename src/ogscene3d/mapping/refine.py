@@ -100,12 +100,15 @@ def global_refinement(
     graph_k: int = 8,
     include_unlabeled: bool = False,
     protected: torch.Tensor | None = None,
+    exposed: torch.Tensor | None = None,
 ) -> RefineStats:
     """Algorithm 1 on the map's tensors; ``labels`` [N] int32 and ``conf`` [N] are modified in place.
     ``include_unlabeled``: whether unlabeled Gaussians (label -1, confidence 0) take part in the individual
     refinement. ``protected`` [L] bool per label (beyond the paper, ``mapping.evidence_protect``): the
     Gaussians of a protected label keep it at both levels, though they may still give their label to others
-    (``evidence.SegmentEvidence.protected_labels`` says which labels the views show to be objects)."""
+    (``evidence.SegmentEvidence.protected_labels`` says which labels the views show to be objects);
+    ``exposed`` [N] bool: Gaussians that the protection does not cover (the views put them in another
+    label's segment: ``mapping.evidence_wrong``)."""
     stats = RefineStats()
     n = means.shape[0]
     if n == 0:
@@ -113,6 +116,8 @@ def global_refinement(
     dev = means.device
     processed = torch.zeros(n, dtype=torch.bool, device=dev)
     kept = _of_labels(labels, protected)
+    if exposed is not None:
+        kept &= ~exposed.to(dev)
 
     # ---- cluster level
     cluster = connected_clusters(means, labels, r_search, graph_k)
@@ -146,12 +151,18 @@ def global_refinement(
     cand = ~processed & (conf < tau_low) & ~kept
     if not include_unlabeled:
         cand &= labels >= 0
-    q = torch.nonzero(cand).squeeze(1)
-    if q.numel() and high.numel():
-        idx, _ = knn(means[high], means[q], 1, r_search, two_pass=True)
-        found = idx[:, 0] >= 0
-        tgt = q[found]
-        labels[tgt] = labels[high[idx[found, 0]]]
-        conf[tgt] = 0.5
-        stats.individual_gaussians = int(tgt.numel())
+    if high.numel():
+        wrong = exposed.to(dev) & cand if exposed is not None else torch.zeros_like(cand)
+        for sel, other in ((cand & ~wrong, False), (wrong, True)):
+            q = torch.nonzero(sel).squeeze(1)
+            if q.numel() == 0:
+                continue
+            # an exposed Gaussian's own label is what the views contradict: it takes another one
+            grp = (labels[high], labels[q], "different") if other else ()
+            idx, _ = knn(means[high], means[q], 1, r_search, *grp, two_pass=True)
+            found = idx[:, 0] >= 0
+            tgt = q[found]
+            labels[tgt] = labels[high[idx[found, 0]]]
+            conf[tgt] = 0.5
+            stats.individual_gaussians += int(tgt.numel())
     return stats
