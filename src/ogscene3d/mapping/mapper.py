@@ -864,9 +864,11 @@ class Mapper:
             if cfg.evidence_protect
             else None
         )
-        exposed = None
-        if protected is not None and cfg.evidence_wrong:
-            exposed = self.evidence.wrong_ratio(self.map, cfg.evidence_min_views) >= cfg.evidence_split_ratio
+        exposed = (
+            self.evidence.wrong_ratio(self.map, cfg.evidence_min_views) >= cfg.evidence_split_ratio
+            if cfg.evidence_wrong
+            else None
+        )
         with self.timings.section("refine"):
             st = global_refinement(
                 self.map.means,

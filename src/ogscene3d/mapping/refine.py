@@ -23,7 +23,11 @@ conf > tau_high within r_search and conf := 0.5.
 Beyond the paper (``mapping.evidence_protect``, on by default): the mapper passes the labels that the views
 show to be objects (``evidence.SegmentEvidence.protected_labels``), whose Gaussians keep their label at both
 levels. Under SAM-like segments a small object's confidence is low from its birth (a low SAM score) and falls
-in the views that absorb it into its support, so Algorithm 1 gave it the table's or the wall's label.
+in the views that absorb it into its support, so Algorithm 1 gave it the table's or the wall's label. The
+Gaussians that the views put in another label's segment (``mapping.evidence_wrong``: ``exposed``) are not
+kept, and take the label of their nearest confident Gaussian of *another* label at the individual level:
+their own label is what the views contradict, and the nearest confident neighbour of a wide run-over part
+is often one of its own label's Gaussians.
 
 Schedule (``mapper.py``): every ``mapping.refine_every`` = 6 keyframes, right after the long-term update,
 as Sec. IV-A.4 states ("performed every 6 keyframes"); Sec. III-B.3's "intervals determined by cumulative
