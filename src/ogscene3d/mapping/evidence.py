@@ -284,7 +284,7 @@ class SegmentEvidence:
 
     def wrong_ratio(self, gm, min_views: int) -> torch.Tensor:
         """[N] the share of a Gaussian's judged views that showed it inside another label's segment, away from
-        its own label's main segment (0 with fewer than ``min_views`` such views and others)."""
+        its own label's main segment (0 while it has been judged in fewer than ``min_views`` views)."""
         wrong, views = gm.aux("evidence_wrong"), gm.aux("evidence_views")
         seen = views + wrong
         return torch.where(seen >= min_views, wrong / seen.clamp(min=1), torch.zeros_like(seen))
