@@ -320,15 +320,17 @@ def test_a_label_run_over_into_a_neighbour_is_lowered_and_relabelled(device):
     halves = np.ones((H, W), np.int32)
     halves[:, 32:] = 2
     ev = SegmentEvidence(gm.device)
-    for _ in range(3):
+    for k in range(3):
         ev.observe(gm, halves, POSE, K, DEPTH)
+        if k == 1:  # two views decide with wrong_views 2, not with 3
+            assert ev.wrong_ratio(gm, min_views=3).max() == 0 and ev.wrong_ratio(gm, min_views=2).max() == 1
     r = ev.wrong_ratio(gm, min_views=3)
     inner = strip & (r > 0)
     assert int(inner.sum()) >= 10 and torch.all(r[inner] == 1.0)
     assert torch.all(r[~strip] == 0.0)
     assert ev.split_ratio(gm, min_views=3).max() == 0  # not a part in a segment of its own
     assert ev.lower_confidences(gm, min_views=3, split_ratio=0.5) == 0  # the rule off
-    n = ev.lower_confidences(gm, min_views=3, split_ratio=0.5, wrong=True)
+    n = ev.lower_confidences(gm, min_views=3, split_ratio=0.5, wrong=True, wrong_views=3)
     assert n == int(inner.sum()) and torch.all(gm.confidences[inner] < 0.3)
     exposed = ev.wrong_ratio(gm, 3) >= 0.5
     protected = torch.ones(2, dtype=torch.bool, device=gm.device)

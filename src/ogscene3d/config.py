@@ -537,6 +537,12 @@ class MappingConfig:
         "away from their own label's main segment; the refinement may relabel them though their label is "
         "protected",
     )
+    evidence_wrong_views: int = setting(
+        2,
+        "judged views a Gaussian needs before evidence_wrong decides (fewer than evidence_min_views: a label "
+        "that ran over is seen apart from its neighbour's segment from the first view that shows both)",
+        _int(1),
+    )
     evidence_split_conf: float = setting(
         1.0,
         "confidence under which a part with split evidence is split (1 = any: the views decide; tau_low = "

@@ -298,13 +298,15 @@ class SegmentEvidence:
         quick: bool = False,
         split: bool = True,
         wrong: bool = False,
+        wrong_views: int = 3,
     ) -> int:
         """Eq. 16's decrease for Gaussians with split evidence (``split``) or wrong-label evidence
-        (``wrong``), by the larger of the two ratios (in place); returns how many."""
+        (``wrong``, decided after ``wrong_views`` judged views), by the larger of the two ratios (in place);
+        returns how many."""
         zero = torch.zeros_like(gm.confidences)
         r = torch.maximum(
             self.split_ratio(gm, min_views, quick) if split else zero,
-            self.wrong_ratio(gm, min_views) if wrong else zero,
+            self.wrong_ratio(gm, wrong_views) if wrong else zero,
         )
         low = (r >= split_ratio) & (gm.labels >= 0)
         conf = gm.confidences

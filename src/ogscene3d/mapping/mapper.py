@@ -760,6 +760,7 @@ class Mapper:
             n = self.evidence.lower_confidences(
                 self.map, min_views=cfg.evidence_min_views, split_ratio=cfg.evidence_split_ratio,
                 quick=cfg.evidence_quick_split, split=cfg.evidence_split, wrong=cfg.evidence_wrong,
+                wrong_views=cfg.evidence_wrong_views,
             )  # fmt: skip
             self.timings.add("evidence_lowered", n)
         views = self.memory.next_views(cfg.longterm_views)
@@ -865,7 +866,7 @@ class Mapper:
             else None
         )
         exposed = (
-            self.evidence.wrong_ratio(self.map, cfg.evidence_min_views) >= cfg.evidence_split_ratio
+            self.evidence.wrong_ratio(self.map, cfg.evidence_wrong_views) >= cfg.evidence_split_ratio
             if cfg.evidence_wrong
             else None
         )
