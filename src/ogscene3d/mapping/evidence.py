@@ -371,10 +371,8 @@ class SegmentEvidence:
                     rows = cand[take]
                     gm.labels[rows] = new[take].to(gm.labels.dtype)
                     gm.confidences[rows] = 0.5
-                    gm.aux("evidence_views")[rows] = 0.0
-                    gm.aux("evidence_split")[rows] = 0.0
-                    gm.aux("evidence_sure")[rows] = 0.0
-                    gm.aux("evidence_wrong")[rows] = 0.0
+                    for name in ("evidence_views", "evidence_split", "evidence_sure", "evidence_wrong"):
+                        gm.aux(name)[rows] = 0.0  # a new label: its views start afresh
                     out["split_labels"] = int(big.numel())
                     out["split_gaussians"] = int(rows.numel())
         self.stats.merged_labels += out["merged_labels"]
