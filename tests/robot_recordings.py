@@ -331,8 +331,8 @@ def write_realsense_recording(
     recorder: a z16 depth and an rgb8 colour stream with ``K_integer``, at one place (identity extrinsics).
     ``depth_half``: depth at half the size (every other pixel, K halved), so that it needs aligning to colour,
     as a D400's depth does; otherwise depth is registered to colour already. Frame i is stamped
-    1 s + i / 30 s. Played back, the recording lacks the first frame or two (librealsense's recorder misses
-    them)."""
+    1 s + i / 30 s. Played back, the recording may lack a frame or two, more on a loaded machine
+    (librealsense's recorder misses them)."""
     import time
 
     import pyrealsense2 as rs
@@ -362,7 +362,7 @@ def write_realsense_recording(
     for name in sensors:
         sensors[name].open(profiles[name])
         sensors[name].start(lambda f: None)
-    time.sleep(0.5)
+    time.sleep(1.0)  # the recorder starts on its own thread; frames sent before it runs are lost
     for i, f in enumerate(frames):
         raw = np.ascontiguousarray(np.round(f.depth[::step, ::step] / depth_units).astype(np.uint16))
         for name, arr, bpp in (("depth", raw, 2), ("color", np.ascontiguousarray(f.rgb), 3)):
@@ -377,7 +377,7 @@ def write_realsense_recording(
             if name == "depth":
                 vf.depth_units = depth_units
             sensors[name].on_video_frame(vf)
-        time.sleep(0.05)  # the recorder writes on its own thread
+        time.sleep(0.1)  # the recorder writes on its own thread
     for s in sensors.values():
         s.stop()
         s.close()

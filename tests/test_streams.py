@@ -129,8 +129,10 @@ def test_a_realsense_recording_plays_back_as_the_scenes_frames(tmp_path, scene):
     root, frames, _ = scene
     stream = open_stream(f"realsense:{_recording(tmp_path, scene)}")
     out = list(stream)
-    # librealsense's recorder misses the first frame or two; the rest play frame by frame, none skipped
-    assert [_scene_index(g) for g in out][-2:] == [2, 3] and stream.skipped == 0
+    # librealsense's recorder misses a frame or two, more on a loaded machine (CI once kept only the last);
+    # what it kept plays in order, each frame once, none skipped by the stream
+    played = [_scene_index(g) for g in out]
+    assert played and played == sorted(set(played)) and set(played) <= {0, 1, 2, 3} and stream.skipped == 0
     for g in out:
         f = frames[_scene_index(g)]
         np.testing.assert_array_equal(g.rgb, f.rgb)
