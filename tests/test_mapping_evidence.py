@@ -340,3 +340,105 @@ def test_a_label_run_over_into_a_neighbour_is_lowered_and_relabelled(device):
                       protected=protected, exposed=exposed)  # fmt: skip
     assert torch.all(gm.labels[inner] == 0)
     assert torch.all(gm.labels[x >= 0] == 1)
+
+
+def two_part_map(device: str) -> tuple[GaussianMap, torch.Tensor]:
+    """Label 0 over two patches of the plane z = 2, apart in space (a gap of 0.25 m): the larger one left of
+    x = 0.18 (pixels u < 37), the smaller right of x = 0.43 (u >= 42), a chair that a first view gave the
+    floor's label. Returns the map and the mask of the smaller patch."""
+    gm, _ = plane_map(device)
+    x = gm.means[:, 0]
+    keep = (x < 0.18) | (x > 0.43)
+    gm.keep(keep)
+    return gm, gm.means[:, 0] > 0.43
+
+
+def two_segments() -> np.ndarray:
+    seg = np.ones((H, W), np.int32)
+    seg[:, 40:] = 2  # the gap's pixels are 37..41: either side holds one patch
+    return seg
+
+
+def test_a_part_of_a_label_in_another_segment_in_every_view_is_partitioned_off(device):
+    gm, small = two_part_map(device)
+    ev = SegmentEvidence(gm.device)
+    for _ in range(3):
+        ev.observe(gm, two_segments(), POSE, K, DEPTH)
+    assert ev.partition(gm, r_search=0.1) == 1
+    assert torch.all(gm.labels[~small] == 0)  # the largest group keeps the label
+    assert torch.all(gm.labels[small] == 1)
+    assert torch.all(gm.confidences[small] == 0.5) and torch.all(gm.confidences[~small] == 0.9)
+    assert torch.all(gm.aux("evidence_views")[small] == 0)  # a new label's views start afresh
+    assert ev.partition(gm, r_search=0.1) == 0  # nothing left to do
+
+
+def test_parts_that_views_join_stay_one_label(device):
+    """Separate patches of one surface (a floor seen through the legs of a table) are in one segment in
+    most views; a view that cuts between them is outvoted."""
+    gm, _ = two_part_map(device)
+    ev = SegmentEvidence(gm.device)
+    for k in range(4):
+        ev.observe(gm, two_segments() if k == 0 else np.ones((H, W), np.int32), POSE, K, DEPTH)
+    assert ev.partition(gm, r_search=0.1) == 0
+    assert torch.all(gm.labels == 0)
+
+
+def test_partition_needs_the_views_to_keep_parts_apart_in_most_views(device):
+    """apart 0.25: one joint view of five leaves the parts apart (0.2), one of four joins them (0.25)."""
+    for views, joint, parts in ((5, 1, 1), (4, 1, 0)):
+        gm, _ = two_part_map(device)
+        ev = SegmentEvidence(gm.device)
+        for k in range(views):
+            ev.observe(gm, np.ones((H, W), np.int32) if k < joint else two_segments(), POSE, K, DEPTH)
+        assert ev.partition(gm, r_search=0.1, apart=0.25) == parts, (views, joint)
+
+
+def test_a_surface_cut_at_random_places_is_not_partitioned(device):
+    """One connected surface is one component, however the views cut it."""
+    gm, _ = plane_map(device)
+    ev = SegmentEvidence(gm.device)
+    for cut in (12, 24, 36, 48):
+        seg = np.ones((H, W), np.int32)
+        seg[:, cut:] = 2
+        ev.observe(gm, seg, POSE, K, DEPTH)
+    assert ev.partition(gm, r_search=0.1) == 0
+    assert torch.all(gm.labels == 0)
+
+
+def test_parts_never_seen_together_stay_with_their_label(device):
+    """No view saw both parts: nothing says they are two objects."""
+    gm, _ = two_part_map(device)
+    ev = SegmentEvidence(gm.device)
+    seg = two_segments()
+    left_only = np.where(np.arange(W)[None, :] < 37, seg, 0).astype(np.int32)
+    right_only = np.where(np.arange(W)[None, :] >= 42, seg, 0).astype(np.int32)
+    for view in (left_only, right_only, left_only):
+        ev.observe(gm, view, POSE, K, DEPTH)
+    assert ev.partition(gm, r_search=0.1) == 0
+
+
+def test_each_gaussian_remembers_its_latest_views(device):
+    from ogscene3d.mapping.evidence import SLOTS, remember_segments
+
+    gm, _ = plane_map(device)
+    rows = torch.arange(3, device=gm.device)
+    for view in range(SLOTS + 2):
+        remember_segments(gm, rows, torch.full((3,), 10 + view, device=gm.device), view)
+    seen = sorted(int(gm.aux(f"evidence_seen{k}")[0]) for k in range(SLOTS))
+    assert seen == list(range(2, SLOTS + 2))
+    assert all(
+        int(gm.aux(f"evidence_seg{k}")[0]) == 10 + int(gm.aux(f"evidence_seen{k}")[0]) for k in range(SLOTS)
+    )
+    assert float(gm.aux("evidence_seen0")[5]) == -1.0  # never judged
+
+
+def test_split_and_merge_partitions_first_when_asked(device):
+    gm, small = two_part_map(device)
+    ev = SegmentEvidence(gm.device)
+    for _ in range(3):
+        ev.observe(gm, two_segments(), POSE, K, DEPTH)
+    out = ev.split_and_merge(gm, split=False, merge=False, r_search=0.1)
+    assert out["partitioned_labels"] == 0 and torch.all(gm.labels == 0)
+    out = ev.split_and_merge(gm, split=False, merge=False, r_search=0.1, partition=True)
+    assert out["partitioned_labels"] == 1 and ev.stats.partitioned_labels == 1
+    assert torch.all(gm.labels[small] == 1)

@@ -524,8 +524,8 @@ class MappingConfig:
         "holding the whole visible extent of its most matched label, it takes that label",
     )
     # multi-view co-segmentation evidence (mapping/evidence.py), beyond the paper; evidence_split,
-    # evidence_merge, evidence_protect and evidence_veto all false = the paper's long-term step and
-    # Algorithm 1 (with the extensions above). docs/consistency.md has each rule's measured effect.
+    # evidence_partition, evidence_merge, evidence_protect and evidence_veto all false = the paper's long-term
+    # step and Algorithm 1 (with the extensions above). docs/consistency.md has each rule's measured effect.
     evidence_split: bool = setting(
         True,
         "refinement splits parts that most views show apart from their label off as new labels; long-term "
@@ -548,6 +548,19 @@ class MappingConfig:
         "confidence under which a part with split evidence is split (1 = any: the views decide; tau_low = "
         "only once the long-term step has lowered it)",
         _float(0.0, 1.0, lo_open=True),
+    )
+    evidence_partition: bool = setting(
+        True,
+        "refinement gives a new label to each group of a label's spatial components that the views keep in "
+        "another segment than the label's largest group (a chair that a first view merged with the floor)",
+    )
+    evidence_partition_apart: float = setting(
+        0.25,
+        "share of the common views under which a group of components is apart from its label's largest group",
+        _float(0.0, 1.0, lo_open=True),
+    )
+    evidence_partition_min: int = setting(
+        2, "Gaussians a spatial component needs to be judged by evidence_partition", _int(1)
     )
     evidence_revisit: bool = setting(
         True,

@@ -36,6 +36,16 @@ incrementally:
   decided when every one of them showed it apart and there were two, or one of them was a segment SAM
   scored at least ``evidence_confident_score``. A book first seen in the last keyframes has no third view;
   one clean, confident view of it on its own says more than a random cut, which SAM scores low.
+* **partition** (with the global refinement, first, ``evidence_partition``): every judged Gaussian remembers
+  the segment each of its latest ``SLOTS`` views put it in. A label's spatial components (Alg. 1's clusters,
+  each of at least ``partition_min`` Gaussians) are compared view by view through the segment most of their
+  Gaussians were in: components that at least ``LINKED`` of their common views put in one segment form a
+  group, and a group that fewer than ``partition_apart`` of its common views with the label's largest group
+  put in one segment becomes a new label. A first view that merged a chair, a cabinet and a sofa with the
+  floor, or three books with each other, left one label over parts that no later view joins again; the
+  Gaussian-level split votes below cannot undo it when each part is its label's main segment in some views.
+  Components are separated in space, so a surface that SAM cuts at random places stays whole: its pieces
+  are one component, and separate patches of it are in one segment in most views.
 * **split_and_merge** (with the global refinement, before Alg. 1): labels that at least ``merge_ratio`` of
   at least ``min_views`` views show in one segment are merged (``evidence_merge``); with
   ``evidence_quick_merge`` also a pair judged in fewer views when every one held both in one segment, firm,
@@ -71,6 +81,8 @@ from .merge import merge_labels, visible_pixels
 from .refine import connected_clusters
 
 UNSTAMPED = 3.0e38  # evidence_born of a Gaussian no view has judged yet
+SLOTS = 4  # the latest judged views whose segment each Gaussian remembers (8 measured the same)
+LINKED = 0.5  # two components of a label are one object when this share of their common views joins them
 OWN = 0.8  # a label owns a view's segment when it holds this share of the segment's visible Gaussians
 CONTAIN = 0.8  # a label lies "in one segment" of a view when this share of its visible Gaussians does
 
@@ -84,6 +96,7 @@ class EvidenceStats:
     split_labels: int = 0
     split_gaussians: int = 0
     merged_labels: int = 0
+    partitioned_labels: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return dict(self.__dict__)
@@ -100,6 +113,83 @@ def spill_pixels(seg: torch.Tensor) -> torch.Tensor:
     inner = torch.bincount(flat[~edge.reshape(-1)], minlength=area.numel())
     big = 2 * inner >= area
     return edge & big[flat].reshape(seg.shape)
+
+
+def remember_segments(gm, rows: torch.Tensor, segs: torch.Tensor, view: int) -> None:
+    """Record that judgement ``view`` (a stamp, unique per judgement) put the Gaussians ``rows`` [R] in the
+    segments ``segs`` [R]. Each Gaussian keeps its latest ``SLOTS`` views, round robin, in the auxiliary
+    values ``evidence_seen{k}`` (the stamp) and ``evidence_seg{k}`` (the segment id), -1 where empty."""
+    if rows.numel() == 0:
+        return
+    count = gm.aux("evidence_remembered")
+    slot = (count[rows] % SLOTS).long()
+    for k in range(SLOTS):
+        at = slot == k
+        gm.aux(f"evidence_seen{k}", -1.0)[rows[at]] = float(view)
+        gm.aux(f"evidence_seg{k}", -1.0)[rows[at]] = segs[at].float()
+    count[rows] += 1
+
+
+def component_segments(
+    gm, rows: torch.Tensor, comp: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Per (component, remembered view) seen: the segment most of the component's Gaussians were in, for the
+    Gaussians ``rows`` [R] in components ``comp`` [R]. Returns (component [E], view [E] compact 0..V-1,
+    segment [E]); ties go to the smaller segment id."""
+    cs, vs, ss = [], [], []
+    for k in range(SLOTS):
+        view = gm.aux(f"evidence_seen{k}", -1.0)[rows]
+        seg = gm.aux(f"evidence_seg{k}", -1.0)[rows]
+        ok = view >= 0
+        cs.append(comp[ok])
+        vs.append(view[ok].long())
+        ss.append(seg[ok].long())
+    c, v, sg = torch.cat(cs), torch.cat(vs), torch.cat(ss)
+    if c.numel() == 0:
+        return c, v, sg
+    _, vi = torch.unique(v, return_inverse=True)
+    us, si = torch.unique(sg, return_inverse=True)
+    nv, ns = int(vi.max()) + 1, us.numel()
+    uk, cnt = torch.unique((c * nv + vi) * ns + si, return_counts=True)
+    cv = uk // ns
+    order = torch.argsort(-cnt, stable=True)
+    order = order[torch.argsort(cv[order], stable=True)]
+    first = torch.ones_like(order, dtype=torch.bool)
+    first[1:] = cv[order][1:] != cv[order][:-1]
+    top = order[first]
+    return cv[top] // nv, cv[top] % nv, us[uk[top] % ns]
+
+
+def _groups(linked: torch.Tensor) -> torch.Tensor:
+    """Connected components of the symmetric [C,C] bool graph ``linked``: per node, its smallest node."""
+    grp = torch.arange(linked.shape[0], device=linked.device)
+    while True:
+        nxt = torch.where(linked, grp[None, :], grp[:, None]).min(1).values
+        if torch.equal(nxt, grp):
+            return grp
+        grp = nxt
+
+
+def _apart_groups(seg: torch.Tensor, size: torch.Tensor, apart: float) -> torch.Tensor:
+    """Per component of one label: its group's index, or -1 for the components that stay with the label.
+    ``seg`` [C,V] the segment of each component in each view (-1 unseen), ``size`` [C] their Gaussians."""
+    seen = seg >= 0
+    both = seen[:, None, :] & seen[None, :, :]
+    common = both.sum(-1)
+    together = (both & (seg[:, None, :] == seg[None, :, :])).sum(-1)
+    grp = _groups(
+        (common > 0) & (together.float() >= LINKED * common.float())
+        | torch.eye(seg.shape[0], dtype=torch.bool, device=seg.device)
+    )
+    mass = torch.zeros(seg.shape[0], device=seg.device).index_add_(0, grp, size.float())
+    main = grp == int(torch.argmax(mass))
+    out = torch.full_like(grp, -1)
+    for g in torch.unique(grp[~main]).tolist():
+        mem = grp == g
+        c = int(common[mem][:, main].sum())
+        if c > 0 and float(together[mem][:, main].sum()) < apart * c:
+            out[mem] = g
+    return out
 
 
 class SegmentEvidence:
@@ -215,6 +305,7 @@ class SegmentEvidence:
         together = is_main & main_big[ul]
         judged = (split | together)[inv]
         fresh = torch.ones_like(judged) if since is None else born[g] > float(since)
+        remember_segments(gm, g[fresh], s[fresh], self.clock)
         judged &= fresh
         views, votes = gm.aux("evidence_views"), gm.aux("evidence_split")
         views.index_add_(0, g[judged], torch.ones(int(judged.sum()), device=dev))
@@ -330,10 +421,16 @@ class SegmentEvidence:
         r_search: float = 0.1,
         graph_k: int = 8,
         min_group: int = 3,
+        partition: bool = False,
+        partition_apart: float = 0.25,
+        partition_min: int = 2,
     ) -> dict[str, int]:
-        """Merge labels that most views show in one segment, then split low-confidence parts with split
-        evidence off their labels (in place on ``gm.labels`` / ``gm.confidences``). Returns counts."""
-        out = {"merged_labels": 0, "split_labels": 0, "split_gaussians": 0}
+        """Partition labels into the objects their views show (``partition``), merge labels that most views
+        show in one segment, then split low-confidence parts with split evidence off their labels (in place
+        on ``gm.labels`` / ``gm.confidences``). Returns counts."""
+        out = {"partitioned_labels": 0, "merged_labels": 0, "split_labels": 0, "split_gaussians": 0}
+        if partition:
+            out["partitioned_labels"] = self.partition(gm, r_search, graph_k, partition_min, partition_apart)
         if merge and self.pair_views.numel():
             v, t = self.pair_views, self.pair_together
             hit = (v >= min_views) & (t >= merge_ratio * v)
@@ -375,10 +472,57 @@ class SegmentEvidence:
                         gm.aux(name)[rows] = 0.0  # a new label: its views start afresh
                     out["split_labels"] = int(big.numel())
                     out["split_gaussians"] = int(rows.numel())
+        self.stats.partitioned_labels += out["partitioned_labels"]
         self.stats.merged_labels += out["merged_labels"]
         self.stats.split_labels += out["split_labels"]
         self.stats.split_gaussians += out["split_gaussians"]
         return out
+
+    def partition(self, gm, r_search: float, graph_k: int = 8, min_size: int = 2, apart: float = 0.25) -> int:
+        """Give each group of a label's spatial components that the remembered views put apart from the
+        label's largest group a new label (see the module docstring; in place, the moved Gaussians' confidence
+        capped at 0.5 and their split evidence cleared, as a split's). Returns how many new labels."""
+        dev = gm.device
+        rows = torch.nonzero(gm.labels >= 0).squeeze(1)
+        if rows.numel() < 2 * min_size:
+            return 0
+        comp = connected_clusters(gm.means[rows], gm.labels[rows], r_search, graph_k)
+        n_comp = int(comp.max()) + 1
+        size = torch.bincount(comp, minlength=n_comp)
+        owner = torch.zeros(n_comp, dtype=torch.long, device=dev)
+        owner[comp] = gm.labels[rows].long()
+        big = size >= min_size
+        several = torch.bincount(owner[big], minlength=int(gm.next_label)) >= 2
+        cand = big & several[owner]
+        if not bool(cand.any()):
+            return 0
+        pick = cand[comp]
+        ec, ev, es = component_segments(gm, rows[pick], comp[pick])
+        if ec.numel() == 0:
+            return 0
+        n_views = int(ev.max()) + 1
+        new_label = torch.full((n_comp,), -1, dtype=torch.long, device=dev)
+        index = torch.full((n_comp,), -1, dtype=torch.long, device=dev)
+        made = 0
+        for lab in torch.nonzero(several).squeeze(1).tolist():
+            cs = torch.nonzero(cand & (owner == lab)).squeeze(1)
+            index[cs] = torch.arange(cs.numel(), device=dev)
+            m = index[ec] >= 0
+            seg = torch.full((cs.numel(), n_views), -1, dtype=torch.long, device=dev)
+            seg[index[ec[m]], ev[m]] = es[m]
+            index[cs] = -1
+            grp = _apart_groups(seg, size[cs], apart)
+            for g in torch.unique(grp[grp >= 0]).tolist():
+                new_label[cs[grp == g]] = int(gm.new_labels(1)[0])
+                made += 1
+        moved = new_label[comp] >= 0
+        if made:
+            at = rows[moved]
+            gm.labels[at] = new_label[comp[moved]].to(gm.labels.dtype)
+            gm.confidences[at] = gm.confidences[at].clamp(max=0.5)
+            for name in ("evidence_views", "evidence_split", "evidence_sure", "evidence_wrong"):
+                gm.aux(name)[at] = 0.0  # a new label: its views start afresh
+        return made
 
     def veto(
         self,

@@ -730,7 +730,7 @@ class Mapper:
         cfg = self.cfg
         rules = (
             cfg.evidence_split or cfg.evidence_wrong or cfg.evidence_merge or cfg.evidence_veto
-            or cfg.evidence_protect
+            or cfg.evidence_protect or cfg.evidence_partition
         )  # fmt: skip
         return self.use_refine and rules
 
@@ -845,7 +845,7 @@ class Mapper:
     def _refine(self) -> None:
         """Global 3D refinement (Algorithm 1), with its relabelling counts added to the timings."""
         cfg = self.cfg
-        if cfg.evidence_split or cfg.evidence_merge:  # before Algorithm 1
+        if cfg.evidence_split or cfg.evidence_merge or cfg.evidence_partition:  # before Algorithm 1
             with self.timings.section("evidence"):
                 ev = self.evidence.split_and_merge(
                     self.map, split=cfg.evidence_split, merge=cfg.evidence_merge,
@@ -853,6 +853,8 @@ class Mapper:
                     merge_ratio=cfg.evidence_merge_ratio, quick=cfg.evidence_quick_split,
                     quick_merge=cfg.evidence_quick_merge, split_below=cfg.evidence_split_conf,
                     r_search=cfg.r_search, graph_k=cfg.refine_graph_k, min_group=cfg.evidence_min_group,
+                    partition=cfg.evidence_partition, partition_apart=cfg.evidence_partition_apart,
+                    partition_min=cfg.evidence_partition_min,
                 )  # fmt: skip
             for k, v in ev.items():
                 self.timings.add(f"evidence_{k}", v)
