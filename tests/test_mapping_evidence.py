@@ -442,3 +442,17 @@ def test_split_and_merge_partitions_first_when_asked(device):
     out = ev.split_and_merge(gm, split=False, merge=False, r_search=0.1, partition=True)
     assert out["partitioned_labels"] == 1 and ev.stats.partitioned_labels == 1
     assert torch.all(gm.labels[small] == 1)
+
+
+def test_the_long_term_step_lowers_a_part_the_views_keep_apart_and_the_gate_waits_for_it(device):
+    gm, small = two_part_map(device)
+    ev = SegmentEvidence(gm.device)
+    for _ in range(3):
+        ev.observe(gm, two_segments(), POSE, K, DEPTH)
+    # the refinement gated at tau_low: nothing is low yet
+    assert ev.partition(gm, r_search=0.1, below=0.3) == 0 and torch.all(gm.labels == 0)
+    assert ev.lower_partitioned(gm, r_search=0.1) == int(small.sum())
+    assert torch.all(gm.confidences[small] == 0.0)  # apart in every view: Eq. 16's decrease by 1
+    assert torch.all(gm.confidences[~small] == 0.9)
+    assert ev.partition(gm, r_search=0.1, below=0.3) == 1
+    assert torch.all(gm.labels[small] == 1) and torch.all(gm.labels[~small] == 0)

@@ -559,6 +559,12 @@ class MappingConfig:
         "share of the common views under which a group of components is apart from its label's largest group",
         _float(0.0, 1.0, lo_open=True),
     )
+    evidence_partition_conf: float = setting(
+        0.3,
+        "mean confidence under which a group that evidence_partition finds is split off (tau_low's 0.3: once "
+        "the long-term step, which lowers such groups, has brought it low; 1 = any: the views decide)",
+        _float(0.0, 1.0, lo_open=True),
+    )
     evidence_partition_min: int = setting(
         2, "Gaussians a spatial component needs to be judged by evidence_partition", _int(1)
     )

@@ -41,7 +41,10 @@ incrementally:
   each of at least ``partition_min`` Gaussians) are compared view by view through the segment most of their
   Gaussians were in: components that at least ``LINKED`` of their common views put in one segment form a
   group, and a group that fewer than ``partition_apart`` of its common views with the label's largest group
-  put in one segment becomes a new label. A first view that merged a chair, a cabinet and a sofa with the
+  put in one segment becomes a new label once the group's mean confidence is under ``partition_below``
+  (``mapping.evidence_partition_conf``, ``tau_low`` by default): the long-term step lowers the group's
+  Gaussians by the share of the views that put it apart (``lower_partitioned``, Eq. 16's decrease), and the
+  refinement re-decides what is low. A first view that merged a chair, a cabinet and a sofa with the
   floor, or three books with each other, left one label over parts that no later view joins again; the
   Gaussian-level split votes below cannot undo it when each part is its label's main segment in some views.
   Components are separated in space, so a surface that SAM cuts at random places stays whole: its pieces
@@ -170,9 +173,11 @@ def _groups(linked: torch.Tensor) -> torch.Tensor:
         grp = nxt
 
 
-def _apart_groups(seg: torch.Tensor, size: torch.Tensor, apart: float) -> torch.Tensor:
-    """Per component of one label: its group's index, or -1 for the components that stay with the label.
-    ``seg`` [C,V] the segment of each component in each view (-1 unseen), ``size`` [C] their Gaussians."""
+def _apart_groups(seg: torch.Tensor, size: torch.Tensor, apart: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per component of one label: its group's index, or -1 for the components that stay with the label, and
+    the share of the group's common views with the label's largest group that put them apart (0 where it
+    stays). ``seg`` [C,V] the segment of each component in each view (-1 unseen), ``size`` [C] their
+    Gaussians."""
     seen = seg >= 0
     both = seen[:, None, :] & seen[None, :, :]
     common = both.sum(-1)
@@ -184,12 +189,15 @@ def _apart_groups(seg: torch.Tensor, size: torch.Tensor, apart: float) -> torch.
     mass = torch.zeros(seg.shape[0], device=seg.device).index_add_(0, grp, size.float())
     main = grp == int(torch.argmax(mass))
     out = torch.full_like(grp, -1)
+    share = torch.zeros(seg.shape[0], device=seg.device)
     for g in torch.unique(grp[~main]).tolist():
         mem = grp == g
         c = int(common[mem][:, main].sum())
-        if c > 0 and float(together[mem][:, main].sum()) < apart * c:
+        t = float(together[mem][:, main].sum())
+        if c > 0 and t < apart * c:
             out[mem] = g
-    return out
+            share[mem] = 1.0 - t / c
+    return out, share
 
 
 class SegmentEvidence:
@@ -424,13 +432,16 @@ class SegmentEvidence:
         partition: bool = False,
         partition_apart: float = 0.25,
         partition_min: int = 2,
+        partition_below: float = 1.0,
     ) -> dict[str, int]:
         """Partition labels into the objects their views show (``partition``), merge labels that most views
         show in one segment, then split low-confidence parts with split evidence off their labels (in place
         on ``gm.labels`` / ``gm.confidences``). Returns counts."""
         out = {"partitioned_labels": 0, "merged_labels": 0, "split_labels": 0, "split_gaussians": 0}
         if partition:
-            out["partitioned_labels"] = self.partition(gm, r_search, graph_k, partition_min, partition_apart)
+            out["partitioned_labels"] = self.partition(
+                gm, r_search, graph_k, partition_min, partition_apart, partition_below
+            )
         if merge and self.pair_views.numel():
             v, t = self.pair_views, self.pair_together
             hit = (v >= min_views) & (t >= merge_ratio * v)
@@ -478,14 +489,16 @@ class SegmentEvidence:
         self.stats.split_gaussians += out["split_gaussians"]
         return out
 
-    def partition(self, gm, r_search: float, graph_k: int = 8, min_size: int = 2, apart: float = 0.25) -> int:
-        """Give each group of a label's spatial components that the remembered views put apart from the
-        label's largest group a new label (see the module docstring; in place, the moved Gaussians' confidence
-        capped at 0.5 and their split evidence cleared, as a split's). Returns how many new labels."""
+    def _partition_plan(
+        self, gm, r_search: float, graph_k: int, min_size: int, apart: float
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
+        """The groups that ``partition`` would give labels of their own: per labelled Gaussian (the rows
+        [R] returned first), its group (-1 for none; ids unique over the map) and the share of the views that
+        put its group apart from its label's largest group. None when nothing is apart."""
         dev = gm.device
         rows = torch.nonzero(gm.labels >= 0).squeeze(1)
         if rows.numel() < 2 * min_size:
-            return 0
+            return None
         comp = connected_clusters(gm.means[rows], gm.labels[rows], r_search, graph_k)
         n_comp = int(comp.max()) + 1
         size = torch.bincount(comp, minlength=n_comp)
@@ -495,15 +508,15 @@ class SegmentEvidence:
         several = torch.bincount(owner[big], minlength=int(gm.next_label)) >= 2
         cand = big & several[owner]
         if not bool(cand.any()):
-            return 0
+            return None
         pick = cand[comp]
         ec, ev, es = component_segments(gm, rows[pick], comp[pick])
         if ec.numel() == 0:
-            return 0
+            return None
         n_views = int(ev.max()) + 1
-        new_label = torch.full((n_comp,), -1, dtype=torch.long, device=dev)
+        group = torch.full((n_comp,), -1, dtype=torch.long, device=dev)
+        share = torch.zeros(n_comp, device=dev)
         index = torch.full((n_comp,), -1, dtype=torch.long, device=dev)
-        made = 0
         for lab in torch.nonzero(several).squeeze(1).tolist():
             cs = torch.nonzero(cand & (owner == lab)).squeeze(1)
             index[cs] = torch.arange(cs.numel(), device=dev)
@@ -511,17 +524,61 @@ class SegmentEvidence:
             seg = torch.full((cs.numel(), n_views), -1, dtype=torch.long, device=dev)
             seg[index[ec[m]], ev[m]] = es[m]
             index[cs] = -1
-            grp = _apart_groups(seg, size[cs], apart)
-            for g in torch.unique(grp[grp >= 0]).tolist():
-                new_label[cs[grp == g]] = int(gm.new_labels(1)[0])
-                made += 1
-        moved = new_label[comp] >= 0
-        if made:
-            at = rows[moved]
-            gm.labels[at] = new_label[comp[moved]].to(gm.labels.dtype)
-            gm.confidences[at] = gm.confidences[at].clamp(max=0.5)
-            for name in ("evidence_views", "evidence_split", "evidence_sure", "evidence_wrong"):
-                gm.aux(name)[at] = 0.0  # a new label: its views start afresh
+            grp, sh = _apart_groups(seg, size[cs], apart)
+            apart_here = grp >= 0
+            group[cs[apart_here]] = cs[grp[apart_here]]  # the group's smallest component: unique on the map
+            share[cs] = sh
+        if not bool((group >= 0).any()):
+            return None
+        return rows, group[comp], share[comp]
+
+    def lower_partitioned(
+        self, gm, r_search: float, graph_k: int = 8, min_size: int = 2, apart: float = 0.25
+    ) -> int:
+        """Eq. 16's decrease for the Gaussians of the groups ``partition`` would split off, by the share of
+        the views that put them apart (in place; P_2D-3D = that share, P_conf = 0). Returns how many."""
+        plan = self._partition_plan(gm, r_search, graph_k, min_size, apart)
+        if plan is None:
+            return 0
+        rows, group, share = plan
+        at = rows[group >= 0]
+        conf = gm.confidences
+        conf[at] = (conf[at] - share[group >= 0] * conf[at]).clamp(0.0, 1.0)
+        return int(at.numel())
+
+    def partition(
+        self,
+        gm,
+        r_search: float,
+        graph_k: int = 8,
+        min_size: int = 2,
+        apart: float = 0.25,
+        below: float = 1.0,
+    ) -> int:
+        """Give each group of a label's spatial components that the remembered views put apart from the
+        label's largest group a new label (see the module docstring), when its Gaussians' mean confidence is
+        under ``below`` (1: the views decide; ``tau_low``: only what ``lower_partitioned`` brought low). In
+        place, the moved Gaussians' confidence capped at 0.5 and their split evidence cleared, as a split's.
+        Returns how many new labels."""
+        plan = self._partition_plan(gm, r_search, graph_k, min_size, apart)
+        if plan is None:
+            return 0
+        rows, group, _ = plan
+        ids, inv = torch.unique(group, return_inverse=True)
+        mean = torch.zeros(ids.numel(), device=gm.device).index_add_(0, inv, gm.confidences[rows])
+        mean /= torch.bincount(inv, minlength=ids.numel()).float()
+        take = (ids >= 0) & (mean < below)
+        made = int(take.sum())
+        if made == 0:
+            return 0
+        lut = torch.full((ids.numel(),), -1, dtype=torch.long, device=gm.device)
+        lut[take] = gm.new_labels(made).long()
+        new = lut[inv]
+        at = rows[new >= 0]
+        gm.labels[at] = new[new >= 0].to(gm.labels.dtype)
+        gm.confidences[at] = gm.confidences[at].clamp(max=0.5)
+        for name in ("evidence_views", "evidence_split", "evidence_sure", "evidence_wrong"):
+            gm.aux(name)[at] = 0.0  # a new label: its views start afresh
         return made
 
     def veto(

@@ -763,6 +763,13 @@ class Mapper:
                 wrong_views=cfg.evidence_wrong_views,
             )  # fmt: skip
             self.timings.add("evidence_lowered", n)
+        if cfg.evidence_partition:
+            with self.timings.section("evidence"):
+                n = self.evidence.lower_partitioned(
+                    self.map, cfg.r_search, cfg.refine_graph_k, cfg.evidence_partition_min,
+                    cfg.evidence_partition_apart,
+                )  # fmt: skip
+            self.timings.add("evidence_partition_lowered", n)
         views = self.memory.next_views(cfg.longterm_views)
         if cfg.evidence_revisit and self._collects_evidence():
             # the stored views judged again, against the map as it is now: the Gaussians added since a view
@@ -854,7 +861,7 @@ class Mapper:
                     quick_merge=cfg.evidence_quick_merge, split_below=cfg.evidence_split_conf,
                     r_search=cfg.r_search, graph_k=cfg.refine_graph_k, min_group=cfg.evidence_min_group,
                     partition=cfg.evidence_partition, partition_apart=cfg.evidence_partition_apart,
-                    partition_min=cfg.evidence_partition_min,
+                    partition_min=cfg.evidence_partition_min, partition_below=cfg.evidence_partition_conf,
                 )  # fmt: skip
             for k, v in ev.items():
                 self.timings.add(f"evidence_{k}", v)
