@@ -173,26 +173,32 @@ def _groups(linked: torch.Tensor) -> torch.Tensor:
         grp = nxt
 
 
-def _apart_groups(seg: torch.Tensor, size: torch.Tensor, apart: float) -> tuple[torch.Tensor, torch.Tensor]:
+def _apart_groups(
+    comp: torch.Tensor, view: torch.Tensor, seg: torch.Tensor, size: torch.Tensor, apart: float
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Per component of one label: its group's index, or -1 for the components that stay with the label, and
     the share of the group's common views with the label's largest group that put them apart (0 where it
-    stays). ``seg`` [C,V] the segment of each component in each view (-1 unseen), ``size`` [C] their
-    Gaussians."""
-    seen = seg >= 0
-    both = seen[:, None, :] & seen[None, :, :]
-    common = both.sum(-1)
-    together = (both & (seg[:, None, :] == seg[None, :, :])).sum(-1)
-    grp = _groups(
-        (common > 0) & (together.float() >= LINKED * common.float())
-        | torch.eye(seg.shape[0], dtype=torch.bool, device=seg.device)
-    )
-    mass = torch.zeros(seg.shape[0], device=seg.device).index_add_(0, grp, size.float())
+    stays). ``comp``, ``view``, ``seg`` [E]: the segment of component ``comp`` (0..C-1) in ``view``, at most
+    one entry per component and view; ``size`` [C] the components' Gaussians. Common and joint views are
+    counted as products of one-hot tables ([C,V] views, [C,P] view-segment pairs): a [C,C,V] table grows with
+    the stream's length."""
+    n, dev = size.numel(), size.device
+    _, vi = torch.unique(view, return_inverse=True)
+    seen = torch.zeros((n, int(vi.max()) + 1 if vi.numel() else 0), device=dev)
+    seen[comp, vi] = 1.0
+    _, pi = torch.unique(vi * (int(seg.max()) + 1 if seg.numel() else 1) + seg, return_inverse=True)
+    pair = torch.zeros((n, int(pi.max()) + 1 if pi.numel() else 0), device=dev)
+    pair[comp, pi] = 1.0
+    common = seen @ seen.T
+    together = pair @ pair.T
+    grp = _groups((common > 0) & (together >= LINKED * common) | torch.eye(n, dtype=torch.bool, device=dev))
+    mass = torch.zeros(n, device=dev).index_add_(0, grp, size.float())
     main = grp == int(torch.argmax(mass))
     out = torch.full_like(grp, -1)
-    share = torch.zeros(seg.shape[0], device=seg.device)
+    share = torch.zeros(n, device=dev)
     for g in torch.unique(grp[~main]).tolist():
         mem = grp == g
-        c = int(common[mem][:, main].sum())
+        c = float(common[mem][:, main].sum())
         t = float(together[mem][:, main].sum())
         if c > 0 and t < apart * c:
             out[mem] = g
@@ -513,18 +519,28 @@ class SegmentEvidence:
         ec, ev, es = component_segments(gm, rows[pick], comp[pick])
         if ec.numel() == 0:
             return None
-        n_views = int(ev.max()) + 1
         group = torch.full((n_comp,), -1, dtype=torch.long, device=dev)
         share = torch.zeros(n_comp, device=dev)
         index = torch.full((n_comp,), -1, dtype=torch.long, device=dev)
-        for lab in torch.nonzero(several).squeeze(1).tolist():
-            cs = torch.nonzero(cand & (owner == lab)).squeeze(1)
-            index[cs] = torch.arange(cs.numel(), device=dev)
-            m = index[ec] >= 0
-            seg = torch.full((cs.numel(), n_views), -1, dtype=torch.long, device=dev)
-            seg[index[ec[m]], ev[m]] = es[m]
+        # the candidate components and their entries, sorted by label: one slice of each per label
+        cs_all = torch.nonzero(cand).squeeze(1)
+        cs_all = cs_all[torch.argsort(owner[cs_all], stable=True)]
+        labs, n_cs = torch.unique_consecutive(owner[cs_all], return_counts=True)
+        order = torch.argsort(owner[ec], stable=True)
+        ec, ev, es = ec[order], ev[order], es[order]
+        e_labs, n_e = torch.unique_consecutive(owner[ec], return_counts=True)
+        e_at = dict(zip(e_labs.tolist(), zip(torch.cumsum(n_e, 0).sub(n_e).tolist(), n_e.tolist())))
+        start = 0
+        for lab, n in zip(labs.tolist(), n_cs.tolist()):
+            cs = cs_all[start : start + n]
+            start += n
+            if n < 2 or lab not in e_at:
+                continue
+            e0, ne = e_at[lab]
+            lc = ec[e0 : e0 + ne]
+            index[cs] = torch.arange(n, device=dev)
+            grp, sh = _apart_groups(index[lc], ev[e0 : e0 + ne], es[e0 : e0 + ne], size[cs], apart)
             index[cs] = -1
-            grp, sh = _apart_groups(seg, size[cs], apart)
             apart_here = grp >= 0
             group[cs[apart_here]] = cs[grp[apart_here]]  # the group's smallest component: unique on the map
             share[cs] = sh
