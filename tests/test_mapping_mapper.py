@@ -400,3 +400,34 @@ def test_inner_probes_are_off_segment_boundaries(device):
     for dtype in (np.int32, np.uint16):  # segment PNGs load as uint16
         inner = m._inner_probes(segments.astype(dtype), pix)
         assert inner.tolist() == [True, False, False, True, True, True]
+
+
+def _gap_frame(i: int) -> Frame:
+    """``_frame``'s wall without depth within 35 cm of x = 0, so that its two objects lie apart in space (the
+    test's r_search is 30 cm: Gaussians here are 17 cm apart); the first view's segment holds both (a first
+    view that merged an object with its neighbour)."""
+    f = _frame(i, (1, 1) if i == 0 else (1, 2))
+    u = (np.arange(W) + 0.5 - W / 2) / F * 2.0 + 0.2 * i
+    f.depth[:, np.abs(u) < 0.35] = 0.0
+    f.segments[:, np.abs(u) < 0.35] = 0
+    return f
+
+
+@pytest.mark.parametrize("partition", [True, False])
+def test_the_partition_gives_two_objects_a_first_view_merged_labels_of_their_own(device, partition):
+    cfg = _config(
+        "mapping.ablation=full", "mapping.refine_every=2", "mapping.longterm_every=2", "mapping.r_search=0.3",
+        "mapping.evidence_split=false", f"mapping.evidence_partition={str(partition).lower()}",
+    )  # fmt: skip
+    m = Mapper(cfg, device)
+    for i in range(6):
+        m.process(_gap_frame(i))
+    m.finalize()
+    gm = m.map
+    x, labels = gm.means[:, 0].cpu(), gm.labels.cpu()
+    left, right = labels[x < -0.35], labels[x > 0.35]
+    assert left.numel() and right.numel()
+    assert len(set(left.tolist())) == 1 and len(set(right.tolist())) == 1
+    assert (left[0] != right[0]) == partition
+    counts = m.timings.as_dict()["counts"]
+    assert (counts.get("evidence_partitioned_labels", 0) >= 1) == partition
