@@ -524,8 +524,9 @@ class MappingConfig:
         "holding the whole visible extent of its most matched label, it takes that label",
     )
     # multi-view co-segmentation evidence (mapping/evidence.py), beyond the paper; evidence_split,
-    # evidence_partition, evidence_merge, evidence_protect and evidence_veto all false = the paper's long-term
-    # step and Algorithm 1 (with the extensions above). docs/consistency.md has each rule's measured effect.
+    # evidence_wrong, evidence_partition, evidence_merge, evidence_protect and evidence_veto all false = the
+    # paper's long-term step and Algorithm 1 (with the extensions above). docs/consistency.md has each rule's
+    # measured effect.
     evidence_split: bool = setting(
         True,
         "refinement splits parts that most views show apart from their label off as new labels; long-term "
@@ -551,8 +552,9 @@ class MappingConfig:
     )
     evidence_partition: bool = setting(
         True,
-        "refinement gives a new label to each group of a label's spatial components that the views keep in "
-        "another segment than the label's largest group (a chair that a first view merged with the floor)",
+        "long-term lowers, and refinement gives a new label to, each group of a label's spatial components "
+        "that the views keep in another segment than the label's largest group (a chair that a first view "
+        "merged with the floor)",
     )
     evidence_partition_apart: float = setting(
         0.25,
