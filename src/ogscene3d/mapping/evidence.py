@@ -79,8 +79,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from .local import group_top2
 from .longterm import label_edges
 from .merge import merge_labels, visible_pixels
+from .neighbors import knn_components
 from .refine import connected_clusters
 
 UNSTAMPED = 3.0e38  # evidence_born of a Gaussian no view has judged yet
@@ -118,6 +120,13 @@ def spill_pixels(seg: torch.Tensor) -> torch.Tensor:
     return edge & big[flat].reshape(seg.shape)
 
 
+def _start_afresh(gm, rows: torch.Tensor) -> None:
+    """Clear the label-level votes of Gaussians ``rows`` that moved to a new label: its views start afresh
+    (the segments they remember stay: they say where the Gaussians were, whatever their label)."""
+    for name in ("evidence_views", "evidence_split", "evidence_sure", "evidence_wrong"):
+        gm.aux(name)[rows] = 0.0
+
+
 def remember_segments(gm, rows: torch.Tensor, segs: torch.Tensor, view: int) -> None:
     """Record that judgement ``view`` (a stamp, unique per judgement) put the Gaussians ``rows`` [R] in the
     segments ``segs`` [R]. Each Gaussian keeps its latest ``SLOTS`` views, round robin, in the auxiliary
@@ -151,26 +160,10 @@ def component_segments(
     if c.numel() == 0:
         return c, v, sg
     _, vi = torch.unique(v, return_inverse=True)
-    us, si = torch.unique(sg, return_inverse=True)
-    nv, ns = int(vi.max()) + 1, us.numel()
-    uk, cnt = torch.unique((c * nv + vi) * ns + si, return_counts=True)
-    cv = uk // ns
-    order = torch.argsort(-cnt, stable=True)
-    order = order[torch.argsort(cv[order], stable=True)]
-    first = torch.ones_like(order, dtype=torch.bool)
-    first[1:] = cv[order][1:] != cv[order][:-1]
-    top = order[first]
-    return cv[top] // nv, cv[top] % nv, us[uk[top] % ns]
-
-
-def _groups(linked: torch.Tensor) -> torch.Tensor:
-    """Connected components of the symmetric [C,C] bool graph ``linked``: per node, its smallest node."""
-    grp = torch.arange(linked.shape[0], device=linked.device)
-    while True:
-        nxt = torch.where(linked, grp[None, :], grp[:, None]).min(1).values
-        if torch.equal(nxt, grp):
-            return grp
-        grp = nxt
+    nv = int(vi.max()) + 1
+    keys, at = torch.unique(c * nv + vi, return_inverse=True)
+    top, _, _, _ = group_top2(at, sg, keys.numel())
+    return keys // nv, keys % nv, top
 
 
 def _apart_groups(
@@ -191,7 +184,11 @@ def _apart_groups(
     pair[comp, pi] = 1.0
     common = seen @ seen.T
     together = pair @ pair.T
-    grp = _groups((common > 0) & (together >= LINKED * common) | torch.eye(n, dtype=torch.bool, device=dev))
+    linked = (common > 0) & (together >= LINKED * common)
+    nodes = torch.arange(n, device=dev)
+    grp = knn_components(
+        torch.where(linked, nodes[None, :], torch.full_like(linked, -1, dtype=torch.long))
+    ).long()
     mass = torch.zeros(n, device=dev).index_add_(0, grp, size.float())
     main = grp == int(torch.argmax(mass))
     out = torch.full_like(grp, -1)
@@ -485,8 +482,7 @@ class SegmentEvidence:
                     rows = cand[take]
                     gm.labels[rows] = new[take].to(gm.labels.dtype)
                     gm.confidences[rows] = 0.5
-                    for name in ("evidence_views", "evidence_split", "evidence_sure", "evidence_wrong"):
-                        gm.aux(name)[rows] = 0.0  # a new label: its views start afresh
+                    _start_afresh(gm, rows)
                     out["split_labels"] = int(big.numel())
                     out["split_gaussians"] = int(rows.numel())
         self.stats.partitioned_labels += out["partitioned_labels"]
@@ -593,8 +589,7 @@ class SegmentEvidence:
         at = rows[new >= 0]
         gm.labels[at] = new[new >= 0].to(gm.labels.dtype)
         gm.confidences[at] = gm.confidences[at].clamp(max=0.5)
-        for name in ("evidence_views", "evidence_split", "evidence_sure", "evidence_wrong"):
-            gm.aux(name)[at] = 0.0  # a new label: its views start afresh
+        _start_afresh(gm, at)
         return made
 
     def veto(

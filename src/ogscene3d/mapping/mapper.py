@@ -763,7 +763,7 @@ class Mapper:
                 wrong_views=cfg.evidence_wrong_views,
             )  # fmt: skip
             self.timings.add("evidence_lowered", n)
-        if cfg.evidence_partition:
+        if cfg.evidence_partition and self._collects_evidence():  # no remembered views without the refinement
             with self.timings.section("evidence"):
                 n = self.evidence.lower_partitioned(
                     self.map, cfg.r_search, cfg.refine_graph_k, cfg.evidence_partition_min,
