@@ -8,9 +8,13 @@ warp or open3d until something needs them.
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ._lazy import lazy_exports
+from ._source_tree import mount_source_folders
+
+mount_source_folders(__name__, Path(__file__).resolve().parent)
 
 __version__ = "0.1.0"
 

@@ -6,25 +6,21 @@ A path that exists always wins over a shipped name, so a local file called ``rep
 
 from __future__ import annotations
 
-from importlib import resources
+import importlib
 from pathlib import Path
 
 CONFIG_SUFFIX = ".yaml"
 
-# setuptools' editable installs do not resolve ``ogscene3d.configs`` (a data folder with no __init__.py mapped
-# under a regular package), nor do ones made before it was mapped; in a source checkout the same files sit in
-# ``configs/`` at the repository root, two levels above this package.
-_SOURCE_TREE_CONFIGS = Path(__file__).resolve().parents[2] / "configs"
-
 
 def shipped_configs() -> dict[str, Path]:
     """The shipped configs by name (``{"replica": .../replica.yaml, ...}``)."""
+    # ``ogscene3d.configs`` is a folder without __init__.py (see ``_source_tree``): its files are those of
+    # the folders on its ``__path__``.
     try:
-        entries = list(resources.files("ogscene3d.configs").iterdir())
-    except (ModuleNotFoundError, FileNotFoundError, NotADirectoryError):
-        entries = []
-    if not entries and _SOURCE_TREE_CONFIGS.is_dir():
-        entries = list(_SOURCE_TREE_CONFIGS.iterdir())
+        folders = list(importlib.import_module("ogscene3d.configs").__path__)
+    except ModuleNotFoundError:
+        folders = []
+    entries = [e for folder in folders if Path(folder).is_dir() for e in Path(folder).iterdir()]
     return {
         e.name[: -len(CONFIG_SUFFIX)]: Path(str(e))
         for e in sorted(entries, key=lambda e: e.name)
