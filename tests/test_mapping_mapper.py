@@ -413,11 +413,11 @@ def _gap_frame(i: int) -> Frame:
     return f
 
 
-@pytest.mark.parametrize("partition", [True, False])
-def test_the_partition_gives_two_objects_a_first_view_merged_labels_of_their_own(device, partition):
+@pytest.mark.parametrize("evidence", [True, False])
+def test_the_evidence_gives_two_objects_a_first_view_merged_labels_of_their_own(device, evidence):
     cfg = _config(
         "mapping.ablation=full", "mapping.refine_every=2", "mapping.longterm_every=2", "mapping.r_search=0.3",
-        "mapping.evidence_split=false", f"mapping.evidence_partition={str(partition).lower()}",
+        f"mapping.evidence={str(evidence).lower()}",
     )  # fmt: skip
     m = Mapper(cfg, device)
     for i in range(6):
@@ -428,6 +428,6 @@ def test_the_partition_gives_two_objects_a_first_view_merged_labels_of_their_own
     left, right = labels[x < -0.35], labels[x > 0.35]
     assert left.numel() and right.numel()
     assert len(set(left.tolist())) == 1 and len(set(right.tolist())) == 1
-    assert (left[0] != right[0]) == partition
+    assert (left[0] != right[0]) == evidence
     counts = m.timings.as_dict()["counts"]
-    assert (counts.get("evidence_partitioned_labels", 0) >= 1) == partition
+    assert (counts.get("evidence_new_labels", 0) >= 1) == evidence

@@ -523,99 +523,32 @@ class MappingConfig:
         "labels (r >= tau_valid) it may merge them (a surface cut in an earlier view, seen further); "
         "holding the whole visible extent of its most matched label, it takes that label",
     )
-    # multi-view co-segmentation evidence (mapping/evidence.py), beyond the paper; evidence_split,
-    # evidence_wrong, evidence_partition, evidence_merge, evidence_protect and evidence_veto all false = the
-    # paper's long-term step and Algorithm 1 (with the extensions above). docs/consistency.md has each rule's
-    # measured effect.
-    evidence_split: bool = setting(
+    # the multi-view evidence model (mapping/evidence.py), beyond the paper; evidence: false = the paper's
+    # long-term step and Algorithm 1 (with the extensions above). docs/consistency.md has the model and each
+    # threshold's measured effect.
+    evidence: bool = setting(
         True,
-        "refinement splits parts that most views show apart from their label off as new labels; long-term "
-        "lowers their confidence",
+        "the views' co-segmentation evidence decides merges and splits of labels at the global refinement, "
+        "guards Algorithm 1 against relabelling across a clear separation, and lowers disputed Gaussians in "
+        "the long-term step; false = the paper's refinement and long-term step",
     )
-    evidence_wrong: bool = setting(
-        True,
-        "long-term lowers the confidence of Gaussians that most views showed inside another label's segment, "
-        "away from their own label's main segment; the refinement may relabel them though their label is "
-        "protected",
+    evidence_cell: float = setting(
+        0.05, "metres; the voxel size of the evidence's cells (a part's Gaussians in one voxel)", _POS
     )
-    evidence_wrong_views: int = setting(
-        2,
-        "judged views a Gaussian needs before evidence_wrong decides (fewer than evidence_min_views: a label "
-        "that ran over is seen apart from its neighbour's segment from the first view that shows both)",
-        _int(1),
-    )
-    evidence_split_conf: float = setting(
-        1.0,
-        "confidence under which a part with split evidence is split (1 = any: the views decide; tau_low = "
-        "only once the long-term step has lowered it)",
-        _float(0.0, 1.0, lo_open=True),
-    )
-    evidence_partition: bool = setting(
-        True,
-        "long-term lowers, and refinement gives a new label to, each group of a label's spatial components "
-        "that the views keep in another segment than the label's largest group (a chair that a first view "
-        "merged with the floor)",
-    )
-    evidence_partition_apart: float = setting(
-        0.25,
-        "share of the common views under which a group of components is apart from its label's largest group",
-        _float(0.0, 1.0, lo_open=True),
-    )
-    evidence_partition_conf: float = setting(
-        0.3,
-        "mean confidence under which a group that evidence_partition finds is split off (tau_low's 0.3: once "
-        "the long-term step, which lowers such groups, has brought it low; 1 = any: the views decide)",
-        _float(0.0, 1.0, lo_open=True),
-    )
-    evidence_partition_min: int = setting(
-        2, "Gaussians a spatial component needs to be judged by evidence_partition", _int(1)
-    )
-    evidence_revisit: bool = setting(
-        True,
-        "the long-term step adds its memory views' evidence again, judged against the map as it is then",
-    )
-    evidence_merge: bool = setting(True, "refinement merges labels that nearly all views show in one segment")
-    evidence_protect: bool = setting(
-        True,
-        "Algorithm 1 leaves alone the labels that owned a segment in evidence_protect_views views, and "
-        "those not yet judged in evidence_min_views",
-    )
-    evidence_protect_views: int = setting(
-        1, "views in which a label must own (nearly fill) a segment to be protected", _int(1)
-    )
-    evidence_min_views: int = setting(
-        3, "views a Gaussian or a label pair needs before the evidence decides on it", _int(1)
-    )
-    evidence_quick_split: bool = setting(
-        True,
-        "a Gaussian judged in fewer than evidence_min_views views is split when all of them showed it apart "
-        "and there were two, or one was a segment scored evidence_confident_score or more",
-    )
-    evidence_quick_merge: bool = setting(
-        True,
-        "two labels judged together in fewer than evidence_min_views views are merged when every one of them "
-        "held both in one segment, each at least merge_min_part of it, and there were two such views, or one "
-        "was a segment scored evidence_confident_score or more",
-    )
-    evidence_confident_score: float = setting(
-        0.95, "SAM score of a segment whose one view is enough for a quick split", _UNIT
+    evidence_separation: float = setting(
+        0.5,
+        "two groups of parts merge only when the views separated them in at most this share of the views "
+        "that held them firmly together (and never, when no view held them firmly together)",
+        _NONNEG,
     )
     evidence_split_ratio: float = setting(
         0.5,
-        "share of views showing a Gaussian as a separate part that marks it",
+        "a group of a part's cells becomes a part of its own when this share of its views across the cut "
+        "put it apart from the rest of the part",
         _float(0.0, 1.0, lo_open=True),
     )
-    evidence_merge_ratio: float = setting(
-        0.9, "share of one-segment views that merges two labels", _float(0.0, 1.0, lo_open=True)
-    )
-    evidence_min_group: int = setting(
-        3, "Gaussians a separate part needs (per view, and to be split off)", _int(1)
-    )
-    evidence_veto: bool = setting(
-        False, "undo Algorithm 1 relabellings between labels that most views show apart"
-    )
-    evidence_apart_ratio: float = setting(
-        0.3, "labels seen in one segment in fewer than this share of their views are apart", _UNIT
+    evidence_dispute_views: int = setting(
+        2, "judged views a Gaussian needs before the views can dispute its label", _int(1)
     )
 
     def cross_check(self) -> str | None:
@@ -1048,6 +981,17 @@ def _coerce(value: Any, tp: Any, key: str) -> Any:
 RETIRED: dict[str, str] = {
     "graph.captioner.backoff_s": "the openai client's own retry backoff (it honours Retry-After)",
     "graph.relations.backoff_s": "the openai client's own retry backoff (it honours Retry-After)",
+    **{
+        f"mapping.{name}": "mapping.evidence, one evidence model (docs/consistency.md)"
+        for name in (
+            "evidence_split", "evidence_wrong", "evidence_wrong_views", "evidence_split_conf",
+            "evidence_partition", "evidence_partition_apart", "evidence_partition_conf",
+            "evidence_partition_min", "evidence_revisit", "evidence_merge", "evidence_protect",
+            "evidence_protect_views", "evidence_min_views", "evidence_quick_split", "evidence_quick_merge",
+            "evidence_confident_score", "evidence_merge_ratio", "evidence_min_group", "evidence_veto",
+            "evidence_apart_ratio",
+        )
+    },
 }
 
 

@@ -56,7 +56,7 @@ from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame, implausible_median_depth
 from ..gaussians import GaussianMap, corrupt_npz_message
 from .checkpoint import CheckpointArrays, read_checkpoint
-from .evidence import SegmentEvidence
+from .evidence import MIN_PART, EvidenceModel
 from .init import make_probes
 from .keyframes import KeyframeSelector
 from .local import (
@@ -66,6 +66,8 @@ from .local import (
     associate_segments,
     coherence,
     fill_unlabeled,
+    group_top2,
+    rescale_sam_scores,
     update_confidences,
 )
 from .longterm import MemoryBuffer, MemoryEntry, label_edges, longterm_view_update
@@ -73,7 +75,7 @@ from .memory_files import load_view, manifest, read_manifest, remove_unreference
 from .merge import duplicate_label_pairs, label_containment, merge_labels, relabel, visible_pixels
 from .optimize import View, optimize_map
 from .pose_jump import PoseJumpCheck, PoseJumpError
-from .refine import global_refinement
+from .refine import connected_clusters, global_refinement
 
 log = logging.getLogger(__name__)
 
@@ -195,6 +197,7 @@ class _Keyframe:
     labels: torch.Tensor | None = None  # per probe: scene label (-1: none) and confidence
     conf: torch.Tensor | None = None
     seg_to_label: tuple[np.ndarray, np.ndarray] | None = None  # segment ids -> their scene labels
+    parts: torch.Tensor | None = None  # per probe: the evidence part its new Gaussian joins (evidence.py)
 
 
 class Mapper:
@@ -225,7 +228,12 @@ class Mapper:
         self.next_index = 0
         self.keyframe_count = 0
         self.rng = np.random.default_rng(config.seed)
-        self.evidence = SegmentEvidence(self.device)  # multi-view co-segmentation evidence (evidence.py)
+        # the views' co-segmentation evidence (evidence.py), collected where the refinement runs
+        self.evidence = EvidenceModel(
+            self.device, cell=cfg.evidence_cell, radius=cfg.r_search, separation=cfg.evidence_separation,
+            split_ratio=cfg.evidence_split_ratio, min_part=cfg.merge_min_part,
+            min_views=cfg.evidence_dispute_views,
+        )  # fmt: skip
         # built now, so that a mistake in the graph's settings (captioner, relations, confidence model)
         # stops the run before its first frame instead of disabling the graph hours into it
         self._graph = self._new_graph() if config.graph.enabled else None
@@ -373,10 +381,10 @@ class Mapper:
             return False
         k = self._begin_keyframe(frame)
         self._render_check(k)
-        self._observe_evidence(k)
         self._init(k)
         self._local(k)
         self._add(k)
+        self._observe_evidence(k)
         self._optimize(k)
         self._memory(k)
         self._scheduled_passes()
@@ -555,16 +563,57 @@ class Mapper:
                 )
             k.labels[sel] = res.seg_labels[probes.seg[sel]]
             k.seg_to_label = (probes.seg_ids.cpu().numpy(), res.seg_labels.cpu().numpy())
+            if self._collects_evidence():
+                k.parts = self._new_parts(probes, sel, res)
             for name, v in res.counts().items():
                 self.timings.add(f"segments_{name}", v)
             k.conf = torch.where(k.labels >= 0, 1.0 if self.naive else probes.conf, k.conf)
+
+    def _new_parts(self, probes, sel: torch.Tensor, res) -> torch.Tensor:
+        """Per probe: the evidence part its new Gaussian joins (``evidence.py``). A segment matched with a
+        label (case ii) continues the part that most of its probes' nearest Gaussians of that label belong
+        to; the new Gaussians of any other segment (novel, ambiguous, or matched without such a Gaussian),
+        and those outside every segment, start a part per spatial component (linked within ``r_search``, as
+        Algorithm 1's clusters): a segment over two objects apart in space makes two parts, which the views
+        that follow may hold together or keep apart."""
+        gm, S = self.map, int(res.seg_labels.numel())
+        self.evidence.ensure_cells(gm)
+        seg = probes.seg[sel]
+        near = res.nearest
+        hit = near >= 0
+        same = torch.zeros_like(hit)
+        same[hit] = gm.labels[near[hit]].long() == res.seg_labels[seg[hit]].long()
+        part_of = self.evidence.parts_of(gm)
+        top, cnt, _, _ = group_top2(seg[same], part_of[near[same]].clamp(min=0), S)
+        seg_part = torch.where(cnt > 0, top, torch.full_like(top, -1))
+        parts = torch.full((len(probes),), -1, dtype=torch.long, device=self.device)
+        parts[sel] = seg_part[seg]
+        fresh = torch.nonzero(probes.new & (parts < 0)).squeeze(1)
+        if fresh.numel():
+            group = torch.full((len(probes),), S, dtype=torch.int32, device=self.device)  # S: no segment
+            group[sel] = seg.to(torch.int32)
+            comp = connected_clusters(probes.means[fresh], group[fresh], self.cfg.r_search, self.cfg.refine_graph_k)
+            # a few Gaussians apart from the rest of their segment (a hole the map did not explain) join the
+            # segment's largest component: a part too small to be judged says nothing
+            size = torch.bincount(comp)
+            seg_of = torch.zeros_like(size).scatter_(0, comp, group[fresh].long())
+            best = torch.zeros(S + 1, dtype=torch.long, device=self.device)
+            best.scatter_reduce_(0, seg_of, size, reduce="amax")
+            ids = torch.arange(size.numel(), device=self.device)
+            is_best = size >= best[seg_of]
+            main = torch.full((S + 1,), size.numel(), dtype=torch.long, device=self.device)
+            main.scatter_reduce_(0, seg_of[is_best], ids[is_best], reduce="amin")
+            comp = torch.where(size[comp] >= MIN_PART, comp, main[seg_of[comp]])
+            _, comp = torch.unique(comp, return_inverse=True)
+            parts[fresh] = self.evidence.new_parts(int(comp.max()) + 1)[comp]
+        return parts
 
     def _add(self, k: _Keyframe) -> None:
         """The probes the map does not explain become Gaussians."""
         cfg, probes = self.cfg, k.probes
         with self.timings.section("add"):
             new = probes.new
-            self.map.append(
+            rows = self.map.append(
                 probes.means[new],
                 probes.colors[new],
                 probes.log_scales[new],
@@ -574,6 +623,13 @@ class Mapper:
                 origin_kf=k.index,
             )
             self.timings.add("gaussians_added", int(new.sum()))
+        if self._collects_evidence():
+            with self.timings.section("evidence"):
+                idx = torch.arange(rows.start, rows.stop, device=self.device)
+                parts = k.parts[new] if k.parts is not None else None
+                if parts is None:  # no segments: one part for the keyframe's Gaussians
+                    parts = self.evidence.new_parts(1).expand(idx.numel())
+                self.evidence.assign(self.map, idx, parts)
 
     def _optimize(self, k: _Keyframe) -> None:
         """Geometry/appearance optimisation over the keyframe and memory views, then pruning."""
@@ -725,57 +781,35 @@ class Mapper:
             self.timings.add("segments_merged", int(merged.numel()))
 
     def _collects_evidence(self) -> bool:
-        """Whether the co-segmentation evidence is collected: where the refinement runs and a rule of
-        ``evidence.py`` is on."""
-        cfg = self.cfg
-        rules = (
-            cfg.evidence_split or cfg.evidence_wrong or cfg.evidence_merge or cfg.evidence_veto
-            or cfg.evidence_protect or cfg.evidence_partition
-        )  # fmt: skip
-        return self.use_refine and rules
-
-    def _judge(
-        self, view: int, segments: np.ndarray | None, scores: dict[int, float], source, revisit: bool = False
-    ) -> None:
-        """One view's co-segmentation evidence (``evidence.py``); ``scores``: its segments' SAM scores;
-        ``source``: its Frame or MemoryEntry."""
-        cfg = self.cfg
-        with self.timings.section("evidence"):
-            self.evidence.observe(
-                self.map, segments, source.pose, source.K, source.depth,
-                margin=cfg.init_depth_margin, min_group=cfg.evidence_min_group, view=view, revisit=revisit,
-                scores=scores if cfg.evidence_quick_split or cfg.evidence_quick_merge else None,
-                confident=cfg.evidence_confident_score, min_part=cfg.merge_min_part,
-            )  # fmt: skip
+        """Whether the views' evidence is collected (``evidence.py``): where the refinement runs."""
+        return self.use_refine and self.cfg.evidence
 
     def _observe_evidence(self, k: _Keyframe) -> None:
-        """The keyframe's co-segmentation evidence, on the map before association."""
-        if self._collects_evidence():
-            self._judge(k.index, k.segments, k.scores, k.frame)
+        """The keyframe's co-segmentation evidence, once its new Gaussians are in the map (its segments made
+        them: the view is their first judge)."""
+        if not self._collects_evidence() or k.segments is None:
+            return
+        seg_range = tuple(self.config.segmentation.sam_score_range)
+        conf_range = tuple(self.config.segmentation.conf_range)
+        ids = list(k.scores)
+        weights = {}
+        if ids:
+            w = rescale_sam_scores(torch.tensor([k.scores[i] for i in ids]), seg_range, conf_range)
+            weights = dict(zip(ids, w.tolist()))
+        frame = k.frame
+        with self.timings.section("evidence"):
+            self.evidence.observe(
+                self.map, k.segments, frame.pose, frame.K, frame.depth, weights=weights,
+                margin=self.cfg.init_depth_margin, born=k.index,
+            )  # fmt: skip
 
     def _longterm(self) -> None:
         """The long-term Eq. 16 update over the next memory views of the round-robin."""
         cfg = self.cfg
-        if cfg.evidence_split or cfg.evidence_wrong:  # before Eq. 16, whose P_conf renders the lowered ones
-            n = self.evidence.lower_confidences(
-                self.map, min_views=cfg.evidence_min_views, split_ratio=cfg.evidence_split_ratio,
-                quick=cfg.evidence_quick_split, split=cfg.evidence_split, wrong=cfg.evidence_wrong,
-                wrong_views=cfg.evidence_wrong_views,
-            )  # fmt: skip
-            self.timings.add("evidence_lowered", n)
-        if cfg.evidence_partition and self._collects_evidence():  # no remembered views without the refinement
+        if self._collects_evidence():  # before Eq. 16, whose P_conf renders the lowered ones
             with self.timings.section("evidence"):
-                n = self.evidence.lower_partitioned(
-                    self.map, cfg.r_search, cfg.refine_graph_k, cfg.evidence_partition_min,
-                    cfg.evidence_partition_apart,
-                )  # fmt: skip
-            self.timings.add("evidence_partition_lowered", n)
+                self.timings.add("evidence_lowered", self.evidence.lower_disputed(self.map))
         views = self.memory.next_views(cfg.longterm_views)
-        if cfg.evidence_revisit and self._collects_evidence():
-            # the stored views judged again, against the map as it is now: the Gaussians added since a view
-            # was a keyframe have had no word from it
-            for entry in views:
-                self._judge(entry.keyframe, entry.segments, entry.scores, entry, revisit=True)
         with self.timings.section("longterm"):
             for entry in views:
                 st = longterm_view_update(
@@ -850,35 +884,16 @@ class Mapper:
 
     # ------------------------------------------------------------------ end, files
     def _refine(self) -> None:
-        """Global 3D refinement (Algorithm 1), with its relabelling counts added to the timings."""
+        """Global 3D refinement (Algorithm 1), deciding from the views' evidence where it is collected, with
+        its relabelling counts added to the timings."""
         cfg = self.cfg
-        if cfg.evidence_split or cfg.evidence_merge or cfg.evidence_partition:  # before Algorithm 1
+        separated = exposed = None
+        if self._collects_evidence():  # merges and splits first, then Algorithm 1 guarded by the same views
             with self.timings.section("evidence"):
-                ev = self.evidence.split_and_merge(
-                    self.map, split=cfg.evidence_split, merge=cfg.evidence_merge,
-                    min_views=cfg.evidence_min_views, split_ratio=cfg.evidence_split_ratio,
-                    merge_ratio=cfg.evidence_merge_ratio, quick=cfg.evidence_quick_split,
-                    quick_merge=cfg.evidence_quick_merge, split_below=cfg.evidence_split_conf,
-                    r_search=cfg.r_search, graph_k=cfg.refine_graph_k, min_group=cfg.evidence_min_group,
-                    partition=cfg.evidence_partition, partition_apart=cfg.evidence_partition_apart,
-                    partition_min=cfg.evidence_partition_min, partition_below=cfg.evidence_partition_conf,
-                )  # fmt: skip
-            for k, v in ev.items():
-                self.timings.add(f"evidence_{k}", v)
-        # the veto undoes Alg. 1 relabellings between labels the views show apart: it needs the labels before
-        before = (self.map.labels.clone(), self.map.confidences.clone()) if cfg.evidence_veto else None
-        protected = (
-            self.evidence.protected_labels(
-                int(self.map.next_label), cfg.evidence_min_views, cfg.evidence_protect_views
-            )
-            if cfg.evidence_protect
-            else None
-        )
-        exposed = (
-            self.evidence.wrong_ratio(self.map, cfg.evidence_wrong_views) >= cfg.evidence_split_ratio
-            if cfg.evidence_wrong
-            else None
-        )
+                for k, v in self.evidence.decide(self.map).items():
+                    self.timings.add(f"evidence_{k}", v)
+                separated = self.evidence.separation_test(self.map)
+                exposed = self.evidence.disputed(self.map)
         with self.timings.section("refine"):
             st = global_refinement(
                 self.map.means,
@@ -890,17 +905,11 @@ class Mapper:
                 cluster_radius=cfg.refine_cluster_radius,
                 graph_k=cfg.refine_graph_k,
                 include_unlabeled=cfg.refine_unlabeled,
-                protected=protected,
+                separated=separated,
                 exposed=exposed,
             )
         for k, v in st.as_dict().items():
             self.timings.add(f"refine_{k}", v)
-        if before is not None:
-            with self.timings.section("evidence"):
-                n = self.evidence.veto(
-                    self.map, *before, min_views=cfg.evidence_min_views, apart_ratio=cfg.evidence_apart_ratio
-                )
-            self.timings.add("evidence_vetoed", n)
 
     def finalize(self) -> None:
         """End of stream: one last long-term pass and refinement (per the ablation), then pruning.
