@@ -121,12 +121,14 @@ class Timings:
         self.seconds: dict[str, float] = {}
         self.calls: dict[str, int] = {}
         self.counts: dict[str, float] = {}
-        self.per_keyframe: list[dict[str, float]] = []  # seconds per module within each keyframe's process
-        self._keyframe: dict[str, float] | None = None
+        # per keyframe of the stream: its frame index and the wall and CPU seconds of each module in its
+        # process (CPU time: the process's, all threads; steadier than wall time on a shared machine)
+        self.per_keyframe: list[dict] = []
+        self._keyframe: dict | None = None
 
-    def begin_keyframe(self) -> None:
+    def begin_keyframe(self, frame_index: int) -> None:
         """The sections from here to :meth:`end_keyframe` make a new row of ``per_keyframe``."""
-        self._keyframe = {}
+        self._keyframe = {"frame": int(frame_index), "wall": {}, "cpu": {}}
         self.per_keyframe.append(self._keyframe)
 
     def end_keyframe(self) -> None:
@@ -137,7 +139,7 @@ class Timings:
         sync = self.device.type == "cuda"
         if sync:
             torch.cuda.synchronize(self.device)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         try:
             yield
         finally:
@@ -147,7 +149,9 @@ class Timings:
             self.seconds[name] = self.seconds.get(name, 0.0) + dt
             self.calls[name] = self.calls.get(name, 0) + 1
             if self._keyframe is not None:
-                self._keyframe[name] = self._keyframe.get(name, 0.0) + dt
+                wall, cpu = self._keyframe["wall"], self._keyframe["cpu"]
+                wall[name] = wall.get(name, 0.0) + dt
+                cpu[name] = cpu.get(name, 0.0) + time.process_time() - c0
 
     def add(self, name: str, value: float = 1) -> None:
         self.counts[name] = self.counts.get(name, 0) + value
@@ -164,8 +168,10 @@ class Timings:
         self.seconds = {str(k): float(v) for k, v in state.get("seconds", {}).items()}
         self.calls = {str(k): int(v) for k, v in state.get("calls", {}).items()}
         self.counts = {str(k): v for k, v in state.get("counts", {}).items()}
-        rows = state.get("per_keyframe", [])
-        self.per_keyframe = [{str(k): float(v) for k, v in row.items()} for row in rows]
+        self.per_keyframe = [
+            {"frame": int(row["frame"]), "wall": dict(row["wall"]), "cpu": dict(row["cpu"])}
+            for row in state.get("per_keyframe", [])
+        ]
         self._keyframe = None
 
     def as_dict(self) -> dict:
@@ -175,13 +181,16 @@ class Timings:
             "calls": dict(self.calls),
             "ms_per_keyframe": {k: round(1000 * v / kf, 3) for k, v in self.seconds.items()},
             "counts": {k: (int(v) if float(v).is_integer() else v) for k, v in self.counts.items()},
-            # per module, its milliseconds in each keyframe in order (0: it did not run there); the end of
-            # stream's passes (finalize) are in "seconds" only
-            "per_keyframe_ms": {
-                name: [round(1000 * row.get(name, 0.0), 3) for row in self.per_keyframe]
-                for name in sorted({n for row in self.per_keyframe for n in row})
-            },
+            # each keyframe's frame index, and per module its wall and CPU milliseconds in each keyframe in
+            # order (0: it did not run there); the end of stream's passes (finalize) are in "seconds" only
+            "per_keyframe_frame": [row["frame"] for row in self.per_keyframe],
+            "per_keyframe_ms": self._series("wall"),
+            "per_keyframe_cpu_ms": self._series("cpu"),
         }
+
+    def _series(self, kind: str) -> dict[str, list[float]]:
+        names = sorted({n for row in self.per_keyframe for n in row[kind]})
+        return {n: [round(1000 * row[kind].get(n, 0.0), 3) for row in self.per_keyframe] for n in names}
 
     def table(self) -> str:
         """A per-module timing table (text)."""
@@ -461,7 +470,7 @@ class Mapper:
             )
 
     def _begin_keyframe(self, frame: Frame) -> _Keyframe:
-        self.timings.begin_keyframe()
+        self.timings.begin_keyframe(frame.index)
         segments, scores, names = self._segments(frame)
         k = _Keyframe(self.keyframe_count, frame, segments, scores, names)
         self.keyframe_count += 1
