@@ -1,38 +1,49 @@
-r"""The paper's ablation (Tab. "Ablation study") on several synthetic seeds: per seed, averaged, plotted.
+r"""The paper's ablation (Tab. "Ablation study") on synthetic seeds, rooms and long scans: per seed, averaged.
 
-Each seed's procedural room is mapped four times with ``mapping.ablation`` = naive (KNN-majority labels, no
-confidence, no refinement, no long-term), local (local 3D optimization only: the paper's row a), local+global
-(+ global 3D refinement: row b), full (+ long-term global optimization: row c), by
+Each seed's scene (``--layout room``: the 60-frame procedural room; ``scan``: a 300-frame long scan,
+``datasets/long_scan.py``; ``both``) is mapped with ``mapping.ablation`` = naive (KNN-majority labels, no
+confidence, no refinement, no long-term), local (local 3D optimization only: the paper's row a),
+local+global (+ global 3D refinement: row b), full (+ long-term global optimization: row c), by
 :func:`ogscene3d.mapping.ablation.run_ablation`, and the same frames' segments are clustered offline by the
-yardstick (``yardstick.py``: view-consensus clustering of all frames at once, as MaskClustering does).
+strong yardstick (``yardstick.py``: view consensus of all frames' segments with a separation rule).
 
-Scores, on the GT points that some frame of the sequence saw (``gt/points.ply`` ``observed``):
+Scores, on the GT points that some frame of the sequence saw (``gt/points.ply`` ``observed``), per row and
+per seed:
 
 * **instance mIoU**: scene labels matched one to one to GT instances (Hungarian, on IoU), mean over the GT
-  instances, walls and floor included (``_instances.py``); the headline figure of issue 26;
-* **class mIoU**: HOV-SG protocol (k=5 nearest Gaussians vote per GT point, wall/floor/ceiling left out of
-  the means), scene labels named by majority overlap with the GT instances (an oracle naming, the same for
-  every row, so differences come from the mapping alone);
+  instances, walls and floor included (``_instances.py``);
+* **class mIoU / F-mIoU**: HOV-SG protocol (k=5 nearest Gaussians vote per GT point, wall/floor/ceiling
+  left out of the means), scene labels named by majority overlap with the GT instances (an oracle naming,
+  the same for every row, so differences come from the mapping alone);
+* **labels**: scene labels in the final map (clusters, for the yardstick);
+* **unlabelled**: the share of the observed GT points whose nearest Gaussian (voxel, for the yardstick)
+  carries no label;
+* **% of the yardstick**: the row's instance mIoU over the yardstick's, per seed;
 * **recovered**: of the objects whose first view's segments got them wrong (absorbed into a surface, merged
-  with their support, cut or missed), how many end with a matched label of IoU >= 0.5.
+  with their support or the floor, cut or missed), how many end with a matched label of IoU >= 0.5;
+* **objects lost by repair**: the objects that the local row labels with IoU >= 0.5 and that end below 0.25
+  in a later row (listed: seed, object, class, IoU local -> row).
 
 Spread = sample standard deviation over seeds (ddof=1); the paired column gives the per-seed difference of
 instance mIoU to the previous row and on how many seeds it is positive. ``--segments perfect`` maps every
 object cleanly segmented in every frame (ids reshuffled per frame: simulated-SAM level "none"). The scene
-graph is off (it does not change the semantic map).
+graph is off (it does not change the semantic map). Long scans map with ``mapping.max_pose_step`` 1.6 m /
+65 degrees (the check only warns; their jumps are meant). ``--reuse`` keeps the rows an earlier run of the
+same settings mapped into OUT (a stopped run goes on; scores and yardstick are computed again).
 
-    python benchmarks/ablation.py --seeds 0,1 --device cpu --frames 30            # quick look
-    python benchmarks/ablation.py --seeds 0-9 --device cpu --frames 30 --out ablation_out
+    python benchmarks/ablation.py --seeds 0,1 --device cpu --set mapping.opt_iters=1   # quick look
+    python benchmarks/ablation.py --seeds 0-9 --layout both --device cpu --set mapping.opt_iters=1 --out abl
     python benchmarks/ablation.py --seeds 0-9 --segments perfect --ablations naive,full --no-yardstick
 
-Writes OUT/ablation.json and OUT/ablation.png (grouped bars of instance mIoU / class mIoU / recovered %,
-error bars = ±1 std, dots = seeds). Paper, Replica (a/b/c class mIoU): 22.98 / 25.35 / 36.07.
+Writes OUT/ablation.json and OUT/ablation_<layout>.png (grouped bars of instance mIoU / class F-mIoU /
+recovered %, error bars = ±1 std, dots = seeds). Paper, Replica (a/b/c class mIoU): 22.98 / 25.35 / 36.07.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import hashlib
 import json
 import math
 import sys
@@ -44,7 +55,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import positive_int, run_main  # noqa: E402
-from _instances import class_miou, instance_scores, recovered, wrong_first_views  # noqa: E402
+from _instances import (  # noqa: E402
+    class_scores,
+    instance_scores,
+    lost_objects,
+    recovered,
+    unlabelled_share,
+    wrong_first_views,
+)
 
 from ogscene3d.batch import json_safe  # noqa: E402
 from ogscene3d.config import load_config  # noqa: E402
@@ -58,8 +76,14 @@ from ogscene3d.mapping.mapper import ABLATIONS  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 YARDSTICK = "yardstick"
-# (key, column title, is a fraction shown in %)
-METRICS = (("inst", "inst mIoU"), ("cls", "class mIoU"), ("rec", "recovered %"))
+LAYOUTS = ("room", "scan")
+SCAN_FRAMES = 300
+# the long scans' jumps (up to 1.5 m / 60 degrees) are meant: the pose-jump check (warn only) stays quiet
+SCAN_OVERRIDES = ("mapping.max_pose_step=1.6", "mapping.max_pose_step_deg=65")
+# (key, column title): the plotted metrics, fractions shown in %
+METRICS = (("inst", "inst mIoU"), ("fcls", "class F-mIoU"), ("rec", "recovered %"))
+# every per-seed number of a row that the summary averages (fractions)
+SCALARS = ("inst", "cls", "fcls", "unlabelled", "rec", "of_yardstick")
 PAPER_REPLICA = {
     "local": (22.98, 35.15, 42.85),
     "local+global": (25.35, 38.16, 49.02),
@@ -84,7 +108,7 @@ def parse_seeds(text: str) -> list[int]:
     return seeds
 
 
-def _stats(values: list[float]) -> dict:
+def _stats(values: list) -> dict:
     v = [x for x in values if x is not None and math.isfinite(x)]
     if not v:
         return {"mean": None, "std": None, "min": None, "max": None, "n": 0}
@@ -99,15 +123,17 @@ def _stats(values: list[float]) -> dict:
 
 
 def summarize(per_seed: dict[int, dict[str, dict]], rows: list[str]) -> dict:
-    """{row: {metric: stats with "values" per seed, "paired_inst": stats of the per-seed instance-mIoU
-    difference to the previous mapping row, with "positive" seeds}} over seeds."""
+    """{row: {metric: stats with "values" per seed, "labels", "recovered", "paired_inst": stats of the
+    per-seed instance-mIoU difference to the previous mapping row, with "positive" seeds}} over seeds."""
     out: dict[str, dict] = {}
     prev = None
     for row in rows:
         r: dict = {}
-        for key, _ in METRICS:
-            vals = [per_seed[s][row][key] for s in per_seed]
+        for key in SCALARS:
+            vals = [per_seed[s][row].get(key) for s in per_seed]
             r[key] = {**_stats(vals), "values": vals}
+        labels = [per_seed[s][row].get("labels") for s in per_seed]
+        r["labels"] = {**_stats(labels), "values": labels}
         r["recovered"] = [per_seed[s][row]["recovered"] for s in per_seed]
         if prev is not None:
             diffs = []
@@ -118,6 +144,23 @@ def summarize(per_seed: dict[int, dict[str, dict]], rows: list[str]) -> dict:
         out[row] = r
         if row != YARDSTICK:
             prev = row
+    return out
+
+
+def lost_by_repair(per_seed: dict[int, dict[str, dict]], rows: list[str], names: dict) -> dict[str, list]:
+    """{row: [(seed, object id, class, IoU in local, IoU in the row)]} for the rows after local."""
+    out: dict[str, list] = {}
+    if "local" not in rows:
+        return out
+    for row in rows[rows.index("local") + 1 :]:
+        if row == YARDSTICK:
+            continue
+        out[row] = []
+        for s, res in per_seed.items():
+            before = {int(k): v for k, v in res["local"]["iou_per_instance"].items()}
+            after = {int(k): v for k, v in res[row]["iou_per_instance"].items()}
+            for i in lost_objects(before, after):
+                out[row].append((s, i, names.get(s, {}).get(i, "?"), before[i], after.get(i, 0.0)))
     return out
 
 
@@ -140,16 +183,22 @@ def _table(rows: list[list[str]]) -> str:
 def format_summary(summary: dict) -> str:
     """The averaged table: mean ± std per metric, paired instance-mIoU gain over the previous row."""
     n = len(next(iter(summary.values()))["inst"]["values"])
-    rows = [["row", "inst mIoU", "class mIoU", "recovered", "Δinst vs prev (paired)", "seeds > 0"]]
+    rows = [["row", "inst mIoU", "class mIoU", "class F-mIoU", "labels", "unlabelled %",
+             "% of yardstick (min)", "recovered", "Δinst vs prev (paired)", "seeds > 0"]]  # fmt: skip
     for name, r in summary.items():
         rec = [x for x in r["recovered"] if x is not None]
         rec_text = f"{sum(a for a, _ in rec)}/{sum(b for _, b in rec)}" if rec else "-"
         paired = r.get("paired_inst")
+        ys = r["of_yardstick"]
         rows.append(
             [
                 name,
                 _pm(r["inst"]),
                 _pm(r["cls"]),
+                _pm(r["fcls"]),
+                f"{r['labels']['mean']:.0f}" if r["labels"]["mean"] is not None else "-",
+                _pm(r["unlabelled"], digits=1),
+                f"{100 * ys['mean']:.1f} ({100 * ys['min']:.1f})" if ys["mean"] is not None else "-",
                 rec_text,
                 _pm(paired) if paired else "",
                 f"{paired['positive']}/{n}" if paired else "",
@@ -159,24 +208,32 @@ def format_summary(summary: dict) -> str:
 
 
 def format_per_seed(per_seed: dict[int, dict[str, dict]], rows: list[str]) -> str:
-    """Per seed: instance mIoU / class mIoU / recovered of every row."""
+    """Per seed and row: instance mIoU / class F-mIoU / labels / unlabelled % / % of the yardstick."""
     table = [["seed", *rows]]
     for s, res in per_seed.items():
         cells = [str(s)]
         for row in rows:
             m = res[row]
-            rec = m["recovered"]
-            cells.append(
-                f"{100 * m['inst']:.1f} / {100 * m['cls']:.1f} / " + (f"{rec[0]}/{rec[1]}" if rec else "-")
-            )
+            ys = f"{100 * m['of_yardstick']:.0f}%" if m.get("of_yardstick") is not None else "-"
+            cells.append(f"{100 * m['inst']:.1f} / {100 * m['fcls']:.1f} / {m['labels']} / "
+                         f"{100 * m['unlabelled']:.1f} / {ys}")  # fmt: skip
         table.append(cells)
     return _table(table)
+
+
+def format_lost(lost: dict[str, list]) -> str:
+    lines = []
+    for row, items in lost.items():
+        lines.append(f"{row}: {len(items)} object(s) lost by repair (local IoU >= 0.5, {row} < 0.25)")
+        for s, i, cls, a, b in items:
+            lines.append(f"  seed {s}, object {i} ({cls}): {a:.2f} -> {b:.2f}")
+    return "\n".join(lines)
 
 
 def plot_summary(
     summary: dict, title: str, subtitle: str, width: int = 1000, height: int = 540
 ) -> np.ndarray:
-    """Grouped bars (instance mIoU, class mIoU, recovered %) per row with ±1 std error bars and per-seed
+    """Grouped bars (instance mIoU, class F-mIoU, recovered %) per row with ±1 std error bars and per-seed
     dots; uint8 RGB [H, W, 3] drawn with OpenCV (written with ``ogscene3d.eval.plots.write_png``)."""
     img = np.full((height, width, 3), 255, np.uint8)
     font = cv2.FONT_HERSHEY_SIMPLEX
@@ -234,71 +291,127 @@ def plot_summary(
     return img
 
 
-def score_seed(scene: Path, seed_out: Path, ablations: list[str], res: dict, yardstick: bool) -> dict:
-    """Instance mIoU, class mIoU and recovered objects of every mapping row (and the yardstick)."""
+def _row_dir(seed_out: Path, abl: str) -> Path:
+    return seed_out / abl.replace("+", "_")
+
+
+def _fingerprint(cfg, abl: str, scene: Path) -> str:
+    """What a reused row must have been mapped with: the settings and the scene's parameters."""
+    seg, mapping = dataclasses.asdict(cfg.segmentation), dataclasses.asdict(cfg.mapping)
+    doc = {"ablation": abl, "mapping": mapping, "seg": seg, "scene": (scene / "scene.json").read_text()}
+    return hashlib.sha1(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def map_rows(cfg, scene: Path, seed_out: Path, ablations: list[str], device, reuse: bool) -> dict[str, dict]:
+    """Map the scene once per row (``run_ablation``), or take a row an earlier run mapped with the same
+    settings (``reuse``). -> {row: {"hovsg": {miou, fmiou, macc}, "seconds", "gaussians", "labels"}}."""
+    out: dict[str, dict] = {}
+    for abl in ablations:
+        record = _row_dir(seed_out, abl) / "ablation_row.json"
+        key = _fingerprint(cfg, abl, scene)
+        if reuse and record.is_file():
+            saved = json.loads(record.read_text())
+            if saved.get("fingerprint") == key:
+                out[abl] = saved
+                continue
+        res = run_ablation(cfg, scene, scene, seed_out, [abl], device, ("hovsg",))[abl]
+        res["fingerprint"] = key
+        record.write_text(json.dumps(json_safe(res), indent=1) + "\n")
+        out[abl] = res
+    return out
+
+
+def score_seed(scene: Path, seed_out: Path, res: dict[str, dict], yardstick: bool) -> dict:
+    """Every row's scores (see the module docstring), the yardstick's, and the objects of wrong first
+    views."""
     gt = load_ground_truth(scene)
     wrong = wrong_first_views(scene)
     rows: dict[str, dict] = {}
-    for abl in ablations:
-        run = read_run(seed_out / abl.replace("+", "_"))
+    for abl, r in res.items():
+        run = read_run(_row_dir(seed_out, abl))
         inst = instance_scores(run.means, run.labels, gt)
         rows[abl] = {
             "inst": inst["miou"],
-            "cls": res[abl]["hovsg"]["miou"],
+            "cls": r["hovsg"]["miou"],
+            "fcls": r["hovsg"]["fmiou"],
+            "labels": int(r["labels"]),
+            "unlabelled": unlabelled_share(run.means, run.labels, gt),
             "recovered": recovered(inst["iou"], wrong),
             "iou_per_instance": inst["iou"],
-            "seconds": res[abl]["seconds"],
-            "gaussians": res[abl]["gaussians"],
+            "seconds": r["seconds"],
+            "gaussians": r["gaussians"],
         }
     if yardstick:
-        from yardstick import _frames, view_consensus
+        from yardstick import _frames, strong_consensus
 
         t0 = time.perf_counter()
-        pts, lab = view_consensus(_frames(scene))
+        pts, lab = strong_consensus(_frames(scene))
         inst = instance_scores(pts, lab, gt)
+        cls, fcls = class_scores(pts, lab, gt)
         rows[YARDSTICK] = {
             "inst": inst["miou"],
-            "cls": class_miou(pts, lab, gt),
+            "cls": cls,
+            "fcls": fcls,
+            "labels": int(len(np.unique(lab[lab >= 0]))),
+            "unlabelled": unlabelled_share(pts, lab, gt),
             "recovered": recovered(inst["iou"], wrong),
             "iou_per_instance": inst["iou"],
             "seconds": time.perf_counter() - t0,
         }
+    ys = rows.get(YARDSTICK, {}).get("inst")
     for r in rows.values():
         a, b = r["recovered"]
         r["rec"] = a / b if b else None
+        r["of_yardstick"] = r["inst"] / ys if ys else None
     rows["wrong_first_views"] = {str(k): v for k, v in wrong.items()}  # type: ignore[assignment]
+    rows["classes"] = {str(i): gt.class_names[c] for i, c in gt.instance_classes.items()}  # type: ignore
     return rows
 
 
-def report_partial(path: Path, out: Path) -> int:
-    """The tables and plot of the seeds a stopped run finished (``ablation_partial.json``)."""
-    raw = json.loads(path.read_text())
-    per_seed = {int(k): v for k, v in raw.items()}
-    if not per_seed:
-        raise SystemExit(f"{path}: no finished seed")
+def report(per_seed: dict[int, dict], title: str, out: Path, layout: str, subtitle: str) -> dict:
+    """Print the tables of one layout, write its plot; -> its summary and lost objects."""
     first = next(iter(per_seed.values()))
     rows = [r for r in (*ABLATIONS, YARDSTICK) if r in first]
     summary = summarize(per_seed, rows)
-    print(f"{len(per_seed)} seeds finished ({', '.join(map(str, per_seed))}), from {path}; in %")
-    print("per seed (inst mIoU / class mIoU / recovered after a wrong first view):")
+    names = {s: {int(k): v for k, v in res.get("classes", {}).items()} for s, res in per_seed.items()}
+    lost = lost_by_repair(per_seed, rows, names)
+    print(title)
+    print("per seed (inst mIoU / class F-mIoU / labels / unlabelled % / % of the yardstick's inst mIoU):")
     print(format_per_seed(per_seed, rows))
     print("mean ± sample std over seeds:")
     print(format_summary(summary))
-    out.mkdir(parents=True, exist_ok=True)
-    img = plot_summary(summary, f"Ablation, {len(per_seed)} seeds", str(path))
-    png = write_png(out / "ablation.png", img)
+    print(format_lost(lost))
+    img = plot_summary({k: {m: v[m] for m, _ in METRICS} for k, v in summary.items()}, title, subtitle)
+    png = write_png(out / f"ablation_{layout}.png", img)
     print(f"wrote {png}")
+    return {"summary": summary, "lost_by_repair": lost}
+
+
+def report_partial(path: Path, out: Path) -> int:
+    """The tables and plots of the seeds a stopped run finished (``ablation_partial.json``)."""
+    raw = json.loads(path.read_text())
+    out.mkdir(parents=True, exist_ok=True)
+    for layout, seeds in raw.items():
+        per_seed = {int(k): v for k, v in seeds.items()}
+        if not per_seed:
+            continue
+        title = f"{layout}: {len(per_seed)} seeds finished ({', '.join(map(str, per_seed))}), from {path}"
+        report(per_seed, title, out, layout, str(path))
     return 0
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", default="0,1,2", help="e.g. 0,1,2 or 0-4 (default 0,1,2)")
+    ap.add_argument("--layout", default="room", choices=[*LAYOUTS, "both"], help="rooms, long scans or both")
     default_cfg = ROOT / "configs" / "synthetic.yaml"
     ap.add_argument("--config", default=str(default_cfg) if default_cfg.is_file() else None)
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument(
-        "--frames", type=positive_int, default=None, help="frames per scene (default: the config's)"
+        "--frames", type=positive_int, default=None, help="frames per room (default: the config's)"
+    )
+    ap.add_argument(
+        "--scan-frames", type=positive_int, default=SCAN_FRAMES, help=f"frames per scan ({SCAN_FRAMES})"
     )
     ap.add_argument("--size", default=None, help="WxH (default: the config's)")
     ap.add_argument(
@@ -312,6 +425,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--ablations", default=",".join(ABLATIONS), help=f"subset of {','.join(ABLATIONS)}")
     ap.add_argument("--no-yardstick", action="store_true", help="skip the offline view-consensus yardstick")
+    ap.add_argument("--reuse", action="store_true", help="keep rows OUT holds that were mapped the same way")
     ap.add_argument("--device", default=None, help="cpu, cuda (default: config, else CUDA if present)")
     ap.add_argument("--out", type=Path, default=Path("ablation_out"), help="runs, scenes, JSON and PNG")
     ap.add_argument(
@@ -334,79 +448,72 @@ def main(argv: list[str] | None = None) -> int:
             ap.error(f"unknown ablation {a!r}; expected some of {ABLATIONS}")
     if args.segments == "perfect" and args.noise not in (None, "none"):
         ap.error("--segments perfect is noise 'none'; leave --noise out")
-    overrides = list(args.overrides)
-    if args.frames is not None:
-        overrides.append(f"synthetic.frames={args.frames}")
-    if args.size is not None:
-        w, h = (int(v) for v in args.size.lower().split("x"))
-        overrides += [f"synthetic.width={w}", f"synthetic.height={h}"]
-    noise = "none" if args.segments == "perfect" else args.noise
-    if noise is not None:
-        overrides.append(f"synthetic.noise={noise}")
-    cfg = load_config(args.config, overrides)
-    s = cfg.synthetic
+    layouts = list(LAYOUTS) if args.layout == "both" else [args.layout]
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
-    rows = ablations + ([] if args.no_yardstick else [YARDSTICK])
-
-    per_seed: dict[int, dict[str, dict]] = {}
-    t_all = time.perf_counter()
-    for seed in seeds:
-        scene = configured_scene(out / "scenes" / f"seed_{seed}", dataclasses.replace(s, seed=seed))
-        print(f"seed {seed}: mapping {len(ablations)} ablations of {scene} ...", file=sys.stderr, flush=True)
-        res = run_ablation(cfg, scene, scene, out / f"seed_{seed}", ablations, args.device, ("hovsg",))
-        per_seed[seed] = score_seed(scene, out / f"seed_{seed}", ablations, res, not args.no_yardstick)
-        for row in rows:
-            m = per_seed[seed][row]
-            print(
-                f"  {row:<13} inst mIoU {100 * m['inst']:.2f}  class mIoU {100 * m['cls']:.2f}  "
-                f"recovered {m['recovered'][0]}/{m['recovered'][1]}  ({m['seconds']:.1f} s)",
-                file=sys.stderr,
-                flush=True,
-            )
-        # written after every seed: a run stopped early keeps the seeds it finished
-        (out / "ablation_partial.json").write_text(json.dumps(json_safe(per_seed), indent=1) + "\n")
     protocol_text = (
-        "class mIoU: HOV-SG, k=5 nearest Gaussians vote per GT point, "
+        "class (F-)mIoU: HOV-SG, k=5 nearest Gaussians vote per GT point, "
         f"{'/'.join(HOVSG_DEFAULT_IGNORE)} left out; instance mIoU: Hungarian 1:1 labels to GT instances"
     )
-    summary = summarize(per_seed, rows)
-    segments_text = "perfect segments" if args.segments == "perfect" else f"simulated SAM '{s.noise}'"
-    print()
-    print(
-        f"ablation on {len(seeds)} synthetic seeds ({s.frames} frames {s.width}x{s.height}, "
-        f"{segments_text}), observed GT points, in %"
-    )
-    print(protocol_text)
-    print("per seed (inst mIoU / class mIoU / recovered after a wrong first view):")
-    print(format_per_seed(per_seed, rows))
-    print("mean ± sample std over seeds:")
-    print(format_summary(summary))
+    partial: dict[str, dict] = {}
+    report_doc: dict = {"version": 3, "protocol_description": protocol_text, "gt_points": "observed",
+                        "label_naming": "majority overlap with GT instances (oracle), same for every row",
+                        "unlabelled": "share of observed GT points whose nearest Gaussian carries no label",
+                        "statistics": "mean, sample std (ddof=1), min, max over seeds; paired_inst = "
+                        "per-seed difference of instance mIoU to the previous mapping row", "seeds": seeds,
+                        "segments": args.segments, "layouts": {}}  # fmt: skip
+    t_all = time.perf_counter()
+    for layout in layouts:
+        overrides = list(args.overrides) + [f"synthetic.layout={layout}"]
+        frames = args.frames if layout == "room" else args.scan_frames
+        if frames is not None:
+            overrides.append(f"synthetic.frames={frames}")
+        if layout == "scan":
+            overrides = list(SCAN_OVERRIDES) + overrides
+        if args.size is not None:
+            w, h = (int(v) for v in args.size.lower().split("x"))
+            overrides += [f"synthetic.width={w}", f"synthetic.height={h}"]
+        noise = "none" if args.segments == "perfect" else args.noise
+        if noise is not None:
+            overrides.append(f"synthetic.noise={noise}")
+        cfg = load_config(args.config, overrides)
+        s = cfg.synthetic
+        per_seed: dict[int, dict[str, dict]] = {}
+        for seed in seeds:
+            scene = configured_scene(out / "scenes" / f"{layout}_{seed}", dataclasses.replace(s, seed=seed))
+            seed_out = out / f"{layout}_{seed}"
+            print(
+                f"{layout} {seed}: mapping {len(ablations)} rows of {scene} ...", file=sys.stderr, flush=True
+            )
+            res = map_rows(cfg, scene, seed_out, ablations, args.device, args.reuse)
+            per_seed[seed] = score_seed(scene, seed_out, res, not args.no_yardstick)
+            for row, m in per_seed[seed].items():
+                if row in ("wrong_first_views", "classes"):
+                    continue
+                print(
+                    f"  {row:<13} inst mIoU {100 * m['inst']:.2f}  F-mIoU {100 * m['fcls']:.2f}  labels "
+                    f"{m['labels']}  unlabelled {100 * m['unlabelled']:.1f} %  ({m['seconds']:.1f} s)",
+                    file=sys.stderr,
+                    flush=True,
+                )
+            # written after every seed: a run stopped early keeps the seeds it finished
+            partial[layout] = per_seed
+            (out / "ablation_partial.json").write_text(json.dumps(json_safe(partial), indent=1) + "\n")
+        segments_text = "perfect segments" if args.segments == "perfect" else f"simulated SAM '{s.noise}'"
+        title = f"{layout}s: {len(seeds)} seeds ({s.frames} frames {s.width}x{s.height}, {segments_text})"
+        print()
+        doc = report(per_seed, title, out, layout, protocol_text)
+        report_doc["layouts"][layout] = {
+            "synthetic": {"layout": layout, "frames": s.frames, "width": s.width, "height": s.height,
+                          "noise": s.noise},
+            "overrides": overrides,
+            **doc,
+            "per_seed": {str(k): v for k, v in per_seed.items()},
+        }  # fmt: skip
     print(f"paper, Replica (class mIoU a/b/c): {' / '.join(f'{v[0]:.2f}' for v in PAPER_REPLICA.values())}")
-    print(f"total {time.perf_counter() - t_all:.0f} s on {args.device or cfg.device or 'auto'}")
-
-    img = plot_summary(
-        summary,
-        f"Ablation, {len(seeds)} synthetic seeds ({s.frames} frames, {s.width}x{s.height}, {segments_text})",
-        protocol_text,
-    )
-    png = write_png(out / "ablation.png", img)
-    report = {
-        "version": 2,
-        "protocol_description": protocol_text,
-        "gt_points": "observed",
-        "label_naming": "majority overlap with GT instances (oracle), same for every row",
-        "statistics": "mean, sample std (ddof=1), min, max over seeds; paired_inst = per-seed difference of "
-        "instance mIoU to the previous mapping row",
-        "seeds": seeds,
-        "synthetic": {"frames": s.frames, "width": s.width, "height": s.height, "noise": s.noise},
-        "segments": args.segments,
-        "overrides": overrides,
-        "summary": summary,
-        "per_seed": {str(k): v for k, v in per_seed.items()},
-    }
-    (out / "ablation.json").write_text(json.dumps(json_safe(report), indent=2) + "\n")
-    print(f"wrote {out / 'ablation.json'} and {png}")
+    print(f"total {time.perf_counter() - t_all:.0f} s on {args.device or 'auto'}")
+    (out / "ablation.json").write_text(json.dumps(json_safe(report_doc), indent=2) + "\n")
+    print(f"wrote {out / 'ablation.json'}")
     return 0
 
 

@@ -1,4 +1,4 @@
-"""The ablation benchmark's instance scores and the offline view-consensus yardstick, on hand-built cases."""
+"""The ablation benchmark's instance scores and the offline view-consensus yardsticks, on hand-built cases."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from ogscene3d.eval.readers import GroundTruth
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 _instances = pytest.importorskip("_instances")
 yardstick = pytest.importorskip("yardstick")
+weak = pytest.importorskip("_maskclustering")
 
 
 def three_boxes() -> GroundTruth:
@@ -50,6 +51,14 @@ def test_class_miou_names_labels_by_overlap():
     assert _instances.class_miou(gt.points, gt.instances + 5, gt, which="all") == pytest.approx(1.0)
 
 
+def test_lost_objects_and_unlabelled_share():
+    assert _instances.lost_objects({1: 0.9, 2: 0.6, 3: 0.4, 4: 0.5}, {1: 0.1, 2: 0.3, 3: 0.0}) == [1, 4]
+    gt = three_boxes()
+    labels = np.where(gt.instances == 3, -1, gt.instances)  # the cup's points carry no label
+    assert _instances.unlabelled_share(gt.points, labels, gt) == pytest.approx(1 / 3)
+    assert _instances.class_scores(gt.points, gt.instances, gt, which="all") == pytest.approx((1.0, 1.0))
+
+
 def test_consensus_edges_and_components():
     # 4 masks over 5 frames: containers per frame (-2 not seen, -1 seen but in no mask)
     cont = np.array(
@@ -60,10 +69,10 @@ def test_consensus_edges_and_components():
             [-2, -2, -2, -2, 3],  # mask 3: one shared frame only (< MIN_VIEWS)
         ]
     )
-    edges = yardstick.consensus_edges(cont, 0.9)
+    edges = weak.consensus_edges(cont, 0.9)
     assert edges.tolist() == [[0, 1]]
-    assert yardstick.consensus_edges(cont, 0.25).tolist() == [[0, 1], [0, 2], [1, 2]]
-    comp = yardstick._components(4, edges)
+    assert weak.consensus_edges(cont, 0.25).tolist() == [[0, 1], [0, 2], [1, 2]]
+    comp = weak._components(4, edges)
     assert comp[0] == comp[1] and len({comp[1], comp[2], comp[3]}) == 3
 
 
@@ -75,7 +84,70 @@ def test_voxels_go_to_the_most_specific_claim():
     points = np.array([cup, cup, cup, cup, table, table, table, table, table])
     cluster = np.array([0, 0, 1, 1, 0, 0, 0, 0, 0])  # 0: table (7 points), 1: cup (2)
     frame = np.array([0, 1, 2, 3, 0, 1, 2, 3, 4])
-    centres, lab = yardstick.assign_voxels(points, cluster, frame)
-    at = {tuple(np.floor(c / yardstick.VOXEL).astype(int)): int(v) for c, v in zip(centres, lab)}
-    assert at[tuple(np.floor(cup / yardstick.VOXEL).astype(int))] == 1
-    assert at[tuple(np.floor(table / yardstick.VOXEL).astype(int))] == 0
+    centres, lab = weak.assign_voxels(points, cluster, frame)
+    at = {tuple(np.floor(c / weak.VOXEL).astype(int)): int(v) for c, v in zip(centres, lab)}
+    assert at[tuple(np.floor(cup / weak.VOXEL).astype(int))] == 1
+    assert at[tuple(np.floor(table / weak.VOXEL).astype(int))] == 0
+
+
+def _views(masks_per_frame: list[list[np.ndarray]], n_voxels: int) -> yardstick.Views:
+    """Hand-built views: every frame sees every voxel; ``masks_per_frame[g]`` lists its masks' voxels."""
+    seen, mask, mframe = [], [], []
+    k = 0
+    for g, masks in enumerate(masks_per_frame):
+        m = np.full(n_voxels, -1, np.int64)
+        for vox in masks:
+            m[vox] = k
+            mframe.append(g)
+            k += 1
+        seen.append(np.arange(n_voxels))
+        mask.append(m)
+    points = np.stack([np.arange(n_voxels) * 0.1, np.zeros(n_voxels), np.zeros(n_voxels)], 1)
+    return yardstick.Views(points, seen, mask, np.array(mframe), np.ones(k))
+
+
+def test_strong_yardstick_keeps_an_absorbed_cup_apart_from_its_table():
+    """Voxels 0-19 are a table, 20-23 a cup on it. Six frames segment both as one mask (the cup absorbed),
+    two show them apart: the separation rule keeps the two clusters apart, and the votes of the six
+    absorbing masks go to the cup on its voxels (without that rule they would make it table)."""
+    table, cup, both = np.arange(20), np.arange(20, 24), np.arange(24)
+    views = _views([[both]] * 6 + [[table, cup]] * 2, 24)
+    node_of_mask, h = yardstick.cluster(views)
+    assert node_of_mask[6] == node_of_mask[8] == node_of_mask[0]  # table masks with the absorbing ones
+    assert node_of_mask[7] == node_of_mask[9] != node_of_mask[6]  # the cup apart
+    lab = yardstick.vote(views, node_of_mask, h)
+    assert len(set(lab[table])) == 1 and set(lab[cup]) == {node_of_mask[7]}
+    assert set(yardstick.vote(views, node_of_mask, h, nested=False)[cup]) == {node_of_mask[6]}
+
+
+def test_strong_yardstick_leaves_out_a_mask_over_two_objects():
+    """A first view merges a refrigerator (voxels 0-9) with the floor (10-29); four later views show them
+    apart: the merged mask is under-segmented (split in every view that sees it) and has no vote."""
+    fridge, floor = np.arange(10), np.arange(10, 30)
+    views = _views([[np.arange(30)]] + [[fridge, floor]] * 4, 30)
+    node_of_mask, h = yardstick.cluster(views)
+    assert node_of_mask[0] == -1
+    assert len(set(node_of_mask[[1, 3, 5, 7]])) == 1 and len(set(node_of_mask[[2, 4, 6, 8]])) == 1
+    lab = yardstick.vote(views, node_of_mask, h)
+    assert len(set(lab[fridge])) == 1 and set(lab[fridge]).isdisjoint(lab[floor])
+
+
+def test_strong_yardstick_views_from_frames():
+    """Two frames of a flat wall 2 m away, left and right halves segmented apart in the first and as one in
+    the second: one set of voxels, three masks with their scores."""
+    from types import SimpleNamespace
+
+    K = np.array([[20.0, 0, 8], [0, 20.0, 6], [0, 0, 1]])
+    seg0 = np.ones((12, 16), np.int32)
+    seg0[:, 8:] = 2
+    scores = {1: 0.9, 2: 0.97}
+    frames = [
+        SimpleNamespace(depth=np.full((12, 16), 2.0), K=K, pose=np.eye(4), segments=s, segment_scores=scores)
+        for s in (seg0, np.ones((12, 16), np.int32))
+    ]
+    views = yardstick.build_views(frames)
+    assert views.n_masks == 3 and views.mask_frame.tolist() == [0, 0, 1]
+    assert views.mask_score.tolist() == [0.9, 0.97, 0.9]
+    assert len(views.seen[0]) == len(views.seen[1]) == len(views.points)
+    assert (views.mask[1] == 2).all() and {0, 1} <= set(views.mask[0].tolist())
+    assert np.allclose(views.points[:, 2], 2.0)

@@ -142,6 +142,7 @@ def test_resume_goes_on_with_the_runs_own_data_and_settings(tmp_path, capsys):
     assert t["counts"]["frames"] == 3 and t["calls"]["add"] == t["counts"]["keyframes"] == 3
     # (timings.json rounds seconds to the microsecond)
     assert t["ms_per_keyframe"]["add"] == pytest.approx(1000 * t["seconds"]["add"] / 3, abs=1e-2)
+    assert len(t["per_keyframe_ms"]["add"]) == 3  # each keyframe's own time, across the resume too
     # a finished run has nothing left to do, and its files stay as they are
     before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
     assert main(["run", "--out", str(out), "--resume", "--no-progress"]) == 0

@@ -205,6 +205,12 @@ def test_full_ablation_runs_longterm_and_refinement(device):
     m.finalize()
     t = m.timings.as_dict()
     assert t["calls"]["longterm"] == 3 and t["calls"]["refine"] == 3  # keyframes 2, 4 and finalize
+    # each keyframe's time per module; the end of stream's passes only in the totals
+    series = t["per_keyframe_ms"]
+    assert t["per_keyframe_frame"] == [0, 1, 2, 3] and len(t["per_keyframe_cpu_ms"]["local"]) == 4
+    assert len(series["local"]) == 4 and all(v > 0 for v in series["local"])
+    assert [v > 0 for v in series["longterm"]] == [False, True, False, True]
+    assert sum(series["refine"]) < 1000 * t["seconds"]["refine"]
     assert t["counts"]["longterm_updated"] > 0
     assert sorted(torch.unique(m.map.labels).tolist()) == [0, 1]
     assert bool(((m.map.confidences >= 0) & (m.map.confidences <= 1)).all())

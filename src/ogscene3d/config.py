@@ -274,6 +274,13 @@ class SyntheticConfig:
     noise: NoiseLevel = setting("default", "how far the simulated SAM segments err")
     depth_noise: float = setting(0.0, "std of the depth noise in metres", _NONNEG)
     pose_noise: float = setting(0.0, "std of the translation noise of the given poses in metres", _NONNEG)
+    layout: Literal["room", "scan"] = setting(
+        "room",
+        "the scene kind: room (one furnished room, a smooth walk around it) | scan (a long scan like a real "
+        "ScanNet one: a larger room whose large furniture stands side by side, a walk that leaves places and "
+        "comes back, irregular frame gaps up to 1.5 m / 60 degrees, objects merged with the floor or their "
+        "neighbour in their first views; give it 300 frames or more)",
+    )
 
 
 @dataclass

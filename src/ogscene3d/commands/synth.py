@@ -33,6 +33,13 @@ def add_parser(subparsers) -> None:
         choices=choices("synthetic.noise"),
         help="simulated-SAM level (docs/consistency.md)",
     )
+    p.add_argument(
+        "--layout",
+        default=None,
+        choices=choices("synthetic.layout"),
+        help="room (default: one room, a smooth walk) | scan (a long scan like a real ScanNet one; "
+        "give it 300 frames or more)",
+    )
     p.add_argument("--depth-noise", type=float, default=None, help="depth noise std in metres")
     p.add_argument("--pose-noise", type=float, default=None, help="pose translation noise std in metres")
     p.add_argument("--device", default="cpu", help="Warp device for ray casting (cpu, cuda, cuda:0)")
@@ -69,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
         noise=cfg.noise if args.noise is None else args.noise,
         depth_noise=cfg.depth_noise if args.depth_noise is None else args.depth_noise,
         pose_noise=cfg.pose_noise if args.pose_noise is None else args.pose_noise,
+        layout=cfg.layout if args.layout is None else args.layout,
     )
     try:
         reused = _reusable(args.out, params, args.force)

@@ -14,11 +14,14 @@ def simulate_scene_segments(
     from ..segmentation.precomputed import write_segments
     from ..segmentation.simulated import SimulatedSegmenter
     from .loader import open_dataset
+    from .long_scan import merges_by_frame
+    from .synthetic import load_first_views
 
     ds = open_dataset(scene_dir, kind="synthetic")
     # what each object stands or hangs on: SAM-like noise merges an object with its support in some views
     support = {k: v["support"] for k, v in ds.gt["instances"].items() if v.get("support") is not None}
-    seg = SimulatedSegmenter(noise, seed, support)
+    # a long scan's objects merged with the floor or a neighbour in their first views (the scene's plan)
+    seg = SimulatedSegmenter(noise, seed, support, merges_by_frame(load_first_views(scene_dir)))
     out = Path(out_dir)
     for frame in ds:
         s = seg(frame.rgb, frame.depth, gt_instances=frame.gt_instances, frame_index=frame.index)

@@ -22,6 +22,7 @@ Layout of a scene folder (the Replica NICE-SLAM layout plus ``gt/`` and ``segmen
     gt/instances.json          see below
     gt/points.ply              labelled point cloud sampled on the surfaces (see below)
     gt/mesh.ply                the scene mesh (see below)
+    gt/first_views.json        long scans only: the first-view merge plan (datasets/long_scan.py)
     scene.json                 generator parameters; written last, so it marks a complete scene
 
 ``gt/instances.json``::
@@ -77,6 +78,13 @@ from ..atomic import atomic_write_bytes, atomic_write_text
 from ..config import DataConfig, SyntheticConfig
 from ..errors import DataError
 from .base import FrameRecord, read_label_png
+from .long_scan import (
+    build_scan_room,
+    merge_partners,
+    merges_by_frame,
+    plan_first_view_merges,
+    scan_trajectory,
+)
 from .procedural import (
     INVERSE_RELATIONS,
     RELATION_VOCABULARY,
@@ -100,6 +108,7 @@ SWEEP = 1.6 * np.pi  # radians the camera walks around the room (given enough fr
 MAX_STEP_DEG = 20.0
 MAX_STEP_M = 0.35
 GENERATOR_VERSION = 2  # 2: gt/points.ply carries the per-point "observed" flag
+LAYOUTS = ("room", "scan")  # synthetic.layout
 
 
 # --------------------------------------------------------------------------------------- trajectory
@@ -242,6 +251,10 @@ class MeshRenderer:
             device=self.device,
         )
         return rgb.numpy(), depth.numpy(), inst.numpy()
+
+    def instances(self, pose: np.ndarray, K: np.ndarray, width: int, height: int) -> np.ndarray:
+        """The instance map int32 [H, W] of a c2w pose (one ray per pixel centre, as in :meth:`render`)."""
+        return self._cast(pose, K, width, height, 1)[2].astype(np.int32)
 
     def render(self, pose: np.ndarray, K: np.ndarray, width: int, height: int) -> tuple[np.ndarray, ...]:
         """(rgb uint8 [H, W, 3], depth float32 [H, W] metres, instance int32 [H, W]) for a c2w pose.
@@ -429,10 +442,13 @@ def _pose_lines(poses: np.ndarray) -> str:
     return "".join(" ".join(f"{v:.9e}" for v in p.reshape(-1)) + "\n" for p in poses)
 
 
-def _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise) -> dict:
+def _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise, layout="room") -> dict:
     from ..segmentation.simulated_detector import SIMULATED_DETECTOR_VERSION
 
+    # the default room's parameters name no layout: a room made before layouts existed is reused as it is
+    extra = {} if layout == "room" else {"layout": str(layout)}
     return {
+        **extra,
         "detector": SIMULATED_DETECTOR_VERSION,  # named segments: a scene made without them is made again
         "generator": "ogscene3d.synthetic",
         "version": GENERATOR_VERSION,
@@ -456,6 +472,7 @@ def make_synthetic_scene(
     depth_noise: float = 0.0,
     pose_noise: float = 0.0,
     *,
+    layout: str = "room",
     overwrite: bool = False,
     device: str | None = "cpu",
     progress: Callable[[Iterator], Iterator] | bool = False,
@@ -466,7 +483,9 @@ def make_synthetic_scene(
     ``noise``: simulated-SAM noise level (none | low | default | high); ``depth_noise``: std of
     additive Gaussian depth noise in metres; ``pose_noise``: std of the translation noise of the
     poses written to traj.txt in metres (rotation noise: half that in radians; gt/traj.txt keeps
-    the true poses). If ``out_dir`` already holds a complete scene made with the same arguments it
+    the true poses). ``layout``: "room" (a furnished room, a smooth walk around it) or "scan" (a long scan
+    like a real ScanNet one, :mod:`.long_scan`). If ``out_dir`` already holds a complete scene made with the
+    same arguments it
     is reused as is; a folder holding anything else is an error unless ``overwrite``.
     ``progress``: True for a tqdm bar, or a wrapper ``iterable -> iterable``. ``remedy``: what the error for
     a folder holding something else tells the user to do (a command names its own options).
@@ -481,11 +500,13 @@ def make_synthetic_scene(
         raise ValueError(f"image size must be at least 8x8, got {width}x{height}")
     if noise not in NOISE_LEVELS:
         raise ValueError(f"noise must be one of {sorted(NOISE_LEVELS)}, got {noise!r}")
+    if layout not in LAYOUTS:
+        raise ValueError(f"layout must be one of {list(LAYOUTS)}, got {layout!r}")
     for name, val in (("depth_noise", depth_noise), ("pose_noise", pose_noise)):
         if not np.isfinite(val) or val < 0:
             raise ValueError(f"{name} must be a finite number >= 0, got {val}")
     out = Path(out_dir)
-    params = _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise)
+    params = _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise, layout)
     marker = out / "scene.json"
     if marker.is_file():
         try:
@@ -506,14 +527,24 @@ def make_synthetic_scene(
     for sub in ("results", "segments", "gt"):
         (out / sub).mkdir(parents=True, exist_ok=True)
 
-    room = build_room(seed)
     K = intrinsics_for(width, height)
-    poses = exploration_trajectory(room, frames, seed)
+    if layout == "scan":
+        room = build_scan_room(seed)
+        poses = scan_trajectory(room, frames, seed)
+    else:
+        room = build_room(seed)
+        poses = exploration_trajectory(room, frames, seed)
     noise_rng = np.random.default_rng(np.random.SeedSequence([seed, 0xD0152]))
     written_poses = perturb_poses(poses, pose_noise, noise_rng)
     renderer = MeshRenderer(room, device=device)
+    merges = {}
+    if layout == "scan" and NOISE_LEVELS[noise].first_view_merge_prob > 0:
+        plan = _first_view_plan(renderer, room, poses, K, width, height, NOISE_LEVELS[noise], seed)
+        atomic_write_text(out / "gt" / "first_views.json", json.dumps(_plan_json(plan), indent=1))
+        merges = merges_by_frame(plan)
     # support relations let the simulated SAM merge an object with what it stands or hangs on
-    segmenter = SimulatedSegmenter(noise, seed=seed, support={o.instance_id: o.support for o in room.objects})
+    segmenter = SimulatedSegmenter(noise, seed=seed, support={o.instance_id: o.support for o in room.objects},
+                                   first_view_merges=merges)  # fmt: skip
     # the detector errs at the matching level (the legacy SAM levels change only how SAM errs)
     detector = SimulatedDetector({o.instance_id: o.class_name for o in room.objects},
                                  noise=noise.removeprefix("legacy-"), seed=seed,
@@ -544,7 +575,9 @@ def make_synthetic_scene(
     with bars:  # the bar's log routing ends with the loop
         for i in steps:
             rgb, depth, inst = renderer.render(poses[i], K, width, height)
-            observed |= observed_in_frame(pts["xyz"], pts["instance"], poses[i], K, depth, inst)
+            todo = np.nonzero(~observed)[0]  # a point seen once is observed: only the others are tested
+            xyz, owner = pts["xyz"][todo], pts["instance"][todo]
+            observed[todo] = observed_in_frame(xyz, owner, poses[i], K, depth, inst)
             valid = depth > 0
             if depth_noise > 0:
                 depth = depth + noise_rng.normal(0.0, depth_noise, depth.shape).astype(np.float32)
@@ -572,6 +605,36 @@ def make_synthetic_scene(
     )
     atomic_write_text(marker, json.dumps(params, indent=2))
     return out
+
+
+def _first_view_plan(
+    renderer: MeshRenderer, room: Room, poses, K, width, height, level, seed
+) -> dict[int, dict]:
+    """A long scan's first-view merge plan (:func:`.long_scan.plan_first_view_merges`): which objects the
+    views that first show them merge with the floor or a neighbour. The instance maps come from one ray per
+    pixel, as the written ones do."""
+    areas = np.zeros((len(poses), len(room.objects) + 1), np.int64)
+    for i, pose in enumerate(poses):
+        inst = renderer.instances(pose, K, width, height)
+        areas[i] = np.bincount(inst.reshape(-1), minlength=areas.shape[1])[: areas.shape[1]]
+    return plan_first_view_merges(merge_partners(room), areas, level.first_view_merge_prob, seed)
+
+
+def _plan_json(plan: dict[int, dict]) -> dict:
+    return {"version": 1, "first_views": {str(k): v for k, v in sorted(plan.items())}}
+
+
+def load_first_views(scene_dir: str | Path) -> dict[int, dict]:
+    """A long scan's first-view merge plan ({instance: {"partner", "frames"}}; {} for a scene without one)."""
+    path = Path(scene_dir) / "gt" / "first_views.json"
+    if not path.is_file():
+        return {}
+    try:
+        doc = json.loads(path.read_text())
+        return {int(k): {"partner": int(v["partner"]), "frames": [int(f) for f in v["frames"]]}
+                for k, v in doc["first_views"].items()}  # fmt: skip
+    except (json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError) as e:
+        raise DataError(f"{path}: malformed first-view plan ({e})") from e
 
 
 # --------------------------------------------------------------------------------------- reader
@@ -623,6 +686,5 @@ class SyntheticDataset(ReplicaDataset):
 def configured_scene(out_dir: str | Path, s: SyntheticConfig, **kwargs: Any) -> Path:
     """:func:`make_synthetic_scene` with the settings of a config's ``synthetic`` section (keyword arguments
     as there: ``overwrite``, ``device``, ``progress``, ``remedy``)."""
-    return make_synthetic_scene(
-        out_dir, s.seed, s.frames, s.width, s.height, s.noise, s.depth_noise, s.pose_noise, **kwargs
-    )
+    args = (s.seed, s.frames, s.width, s.height, s.noise, s.depth_noise, s.pose_noise)
+    return make_synthetic_scene(out_dir, *args, layout=s.layout, **kwargs)

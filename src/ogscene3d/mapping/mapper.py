@@ -115,38 +115,66 @@ def _name_votes(segments: np.ndarray, lut: np.ndarray, names: dict[int, str]) ->
 
 
 class Timings:
-    """Accumulated wall time (s) and call counts per module, plus free-form counters."""
+    """Accumulated wall time (s) and call counts per module, plus free-form counters, and each keyframe's
+    time per module (``per_keyframe``: how a module's cost grows along the stream)."""
 
     def __init__(self, device: torch.device) -> None:
         self.device = device
         self.seconds: dict[str, float] = {}
         self.calls: dict[str, int] = {}
         self.counts: dict[str, float] = {}
+        # per keyframe of the stream: its frame index and the wall and CPU seconds of each module in its
+        # process (CPU time: the process's, all threads; steadier than wall time on a shared machine)
+        self.per_keyframe: list[dict] = []
+        self._keyframe: dict | None = None
+
+    def begin_keyframe(self, frame_index: int) -> None:
+        """The sections from here to :meth:`end_keyframe` make a new row of ``per_keyframe``."""
+        self._keyframe = {"frame": int(frame_index), "wall": {}, "cpu": {}}
+        self.per_keyframe.append(self._keyframe)
+
+    def end_keyframe(self) -> None:
+        self._keyframe = None
 
     @contextmanager
     def section(self, name: str):
         sync = self.device.type == "cuda"
         if sync:
             torch.cuda.synchronize(self.device)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         try:
             yield
         finally:
             if sync:
                 torch.cuda.synchronize(self.device)
-            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t0
+            dt = time.perf_counter() - t0
+            self.seconds[name] = self.seconds.get(name, 0.0) + dt
             self.calls[name] = self.calls.get(name, 0) + 1
+            if self._keyframe is not None:
+                wall, cpu = self._keyframe["wall"], self._keyframe["cpu"]
+                wall[name] = wall.get(name, 0.0) + dt
+                cpu[name] = cpu.get(name, 0.0) + time.process_time() - c0
 
     def add(self, name: str, value: float = 1) -> None:
         self.counts[name] = self.counts.get(name, 0) + value
 
     def state(self) -> dict:
-        return {"seconds": self.seconds, "calls": self.calls, "counts": self.counts}
+        return {
+            "seconds": self.seconds,
+            "calls": self.calls,
+            "counts": self.counts,
+            "per_keyframe": self.per_keyframe,
+        }
 
     def load_state(self, state: dict) -> None:
         self.seconds = {str(k): float(v) for k, v in state.get("seconds", {}).items()}
         self.calls = {str(k): int(v) for k, v in state.get("calls", {}).items()}
         self.counts = {str(k): v for k, v in state.get("counts", {}).items()}
+        self.per_keyframe = [
+            {"frame": int(row["frame"]), "wall": dict(row["wall"]), "cpu": dict(row["cpu"])}
+            for row in state.get("per_keyframe", [])
+        ]
+        self._keyframe = None
 
     def as_dict(self) -> dict:
         kf = max(1, int(self.counts.get("keyframes", 0)))
@@ -155,7 +183,16 @@ class Timings:
             "calls": dict(self.calls),
             "ms_per_keyframe": {k: round(1000 * v / kf, 3) for k, v in self.seconds.items()},
             "counts": {k: (int(v) if float(v).is_integer() else v) for k, v in self.counts.items()},
+            # each keyframe's frame index, and per module its wall and CPU milliseconds in each keyframe in
+            # order (0: it did not run there); the end of stream's passes (finalize) are in "seconds" only
+            "per_keyframe_frame": [row["frame"] for row in self.per_keyframe],
+            "per_keyframe_ms": self._series("wall"),
+            "per_keyframe_cpu_ms": self._series("cpu"),
         }
+
+    def _series(self, kind: str) -> dict[str, list[float]]:
+        names = sorted({n for row in self.per_keyframe for n in row[kind]})
+        return {n: [round(1000 * row[kind].get(n, 0.0), 3) for row in self.per_keyframe] for n in names}
 
     def table(self) -> str:
         """A per-module timing table (text)."""
@@ -391,6 +428,7 @@ class Mapper:
         self._graph_update(k)
         self._count_map()
         self._checkpoint()
+        self.timings.end_keyframe()
         return True
 
     # ------------------------------------------------------------------ stages of a frame
@@ -440,6 +478,7 @@ class Mapper:
             )
 
     def _begin_keyframe(self, frame: Frame) -> _Keyframe:
+        self.timings.begin_keyframe(frame.index)
         segments, scores, names = self._segments(frame)
         k = _Keyframe(self.keyframe_count, frame, segments, scores, names)
         self.keyframe_count += 1
@@ -920,6 +959,7 @@ class Mapper:
         then takes the next memory views of its round-robin, and a second refinement changes little
         (measured: docs/deviations.md, "final pass"), so the simpler rule stays."""
         cfg = self.cfg
+        self.timings.end_keyframe()  # a keyframe that raised mid-way does not take the end's passes
         if self.keyframe_count == 0:
             return
         if self.use_longterm:

@@ -6,6 +6,10 @@ ablations. Starting from the per-pixel instance ids it applies, in this order:
 1. **missed objects**: every instance is dropped with ``drop_prob``; small ones (area below
    ``small_area`` of the image) and far ones (mean valid depth beyond ``far_depth`` m) additionally
    with ``miss_small_prob``;
+1a. **first-view merges** (long scans, ``synthetic.layout: scan``): the frames listed in a plan made by the
+   generator (``datasets/long_scan.py``) paint an instance into the segment of a given partner (the floor,
+   the large furniture next to it, what it stands on) when the two touch in the image: an object
+   under-segmented in the views that first show it. No plan, no change (and no random draw);
 1b. **absorbed objects** (the SAM-like levels): a small or far instance is, with ``absorb_prob``,
    painted into the segment of the surface behind or under it instead of getting its own: its support
    (``support``: instance -> the instance it rests on or hangs on) when that touches it in the image,
@@ -70,6 +74,9 @@ class NoiseLevel:
     support_merge_area: float = 0.06  # fraction of the image: larger instances are never merged
     object_split_prob: float = 0.0  # a medium region (object_split_area .. large_area) cut in two
     object_split_area: float = 0.01
+    # long scans only (a first-view plan, datasets/long_scan.py): the share of the objects on the floor or on
+    # large furniture that the views first showing them merge with the floor or a neighbour
+    first_view_merge_prob: float = 0.0
 
     @property
     def clean(self) -> bool:
@@ -77,7 +84,7 @@ class NoiseLevel:
         return not any(
             (self.drop_prob, self.miss_small_prob, self.merge_prob, self.split_prob, self.boundary_px,
              self.unlabeled_boundary, self.spurious_rate, self.min_area, self.absorb_prob,
-             self.support_merge_prob, self.object_split_prob)
+             self.support_merge_prob, self.object_split_prob, self.first_view_merge_prob)
         )  # fmt: skip
 
 
@@ -100,9 +107,11 @@ LEGACY_LEVELS: dict[str, NoiseLevel] = {
 # object is absorbed by the surface behind it (not left out), some views merge an object with its support,
 # and objects are cut in two as well.
 _SAM_LIKE = {
-    "low": dict(absorb_prob=0.3, support_merge_prob=0.15, object_split_prob=0.1),
-    "default": dict(absorb_prob=0.5, support_merge_prob=0.25, object_split_prob=0.15),
-    "high": dict(absorb_prob=0.7, support_merge_prob=0.4, object_split_prob=0.3),
+    "low": dict(absorb_prob=0.3, support_merge_prob=0.15, object_split_prob=0.1, first_view_merge_prob=0.25),
+    "default": dict(
+        absorb_prob=0.5, support_merge_prob=0.25, object_split_prob=0.15, first_view_merge_prob=0.4
+    ),
+    "high": dict(absorb_prob=0.7, support_merge_prob=0.4, object_split_prob=0.3, first_view_merge_prob=0.6),
 }
 
 NOISE_LEVELS: dict[str, NoiseLevel] = {
@@ -198,6 +207,23 @@ def _absorb_and_merge(
     return grown
 
 
+def _first_view_merges(inst: np.ndarray, lut: np.ndarray, merges: Mapping[int, int]) -> set[int]:
+    """Step 1a on the id table ``lut`` (in place): each instance of ``merges`` joins its partner's segment
+    where the two touch in the image. Returns the instances whose segment grew."""
+    touching = {tuple(p) for p in _touching_pairs(lut[inst]).tolist()}
+    grown: set[int] = set()
+    for a, partner in sorted(merges.items()):
+        if not (0 < a < len(lut) and 0 < partner < len(lut)) or lut[a] != a:
+            continue
+        root = _find(lut, int(partner))
+        if root in (0, a) or (min(a, root), max(a, root)) not in touching:
+            continue
+        lut[lut == a] = root
+        grown.add(root)
+        touching = {tuple(p) for p in _touching_pairs(lut[inst]).tolist()}
+    return grown
+
+
 def _cut(labels: np.ndarray, s: int, k: int, next_id: int, rng: np.random.Generator) -> list[int]:
     """Cut region ``s`` of ``labels`` (in place) into ``k`` nearest-seed cells; returns the ids used."""
     ys, xs = np.nonzero(labels == s)
@@ -229,12 +255,14 @@ def simulate_segments(
     level: NoiseLevel,
     rng: np.random.Generator,
     support: Mapping[int, int] | None = None,
+    merges: Mapping[int, int] | None = None,
 ) -> Segmentation:
     """One frame of simulated SAM output from an int instance map [H, W] (0 = no surface).
 
     ``support``: instance id -> the instance it rests on or hangs on (the synthetic room's support
     relation); without it an absorbed instance goes to the touching surface behind it, and no support
-    merges happen."""
+    merges happen. ``merges``: instance id -> the partner it is merged with in this frame (step 1a: a long
+    scan's first-view plan)."""
     inst = np.asarray(instances)
     if inst.ndim != 2:
         raise ValueError(f"gt_instances must be a 2D id map, got shape {inst.shape}")
@@ -269,9 +297,12 @@ def simulate_segments(
         missed = rng.uniform(size=n_ids) < p_miss
         missed[0] = False
         lut[missed] = 0
+        # 1a. a long scan's first views: merged with the floor or a neighbour
+        if merges:
+            grown = _first_view_merges(inst, lut, merges)
         # 1b, 1c. absorbed into the surface behind, merged with the support
         if level.absorb_prob > 0 or level.support_merge_prob > 0:
-            grown = _absorb_and_merge(inst, lut, hard, mean_d, area, support, level, rng)
+            grown |= _absorb_and_merge(inst, lut, hard, mean_d, area, support, level, rng)
 
     # 2. merging of touching small instances (union-find over the few candidate pairs)
     if level.merge_prob > 0:
@@ -368,13 +399,18 @@ class SimulatedSegmenter:
     """Segmenter protocol over ground truth: ``seg(rgb, depth, gt_instances=...)``.
 
     ``noise``: a level name (see ``NOISE_LEVELS``) or a :class:`NoiseLevel`. ``support``: instance id ->
-    the instance it rests on or hangs on (a synthetic room's, for support merges). The output of a
+    the instance it rests on or hangs on (a synthetic room's, for support merges). ``first_view_merges``:
+    {frame index: {instance: partner}}, a long scan's first-view plan (step 1a). The output of a
     frame depends only on (seed, frame_index, inputs); without ``frame_index`` an internal call
     counter is used, so a fixed call order is reproducible too.
     """
 
     def __init__(
-        self, noise: str | NoiseLevel = "default", seed: int = 0, support: Mapping[int, int] | None = None
+        self,
+        noise: str | NoiseLevel = "default",
+        seed: int = 0,
+        support: Mapping[int, int] | None = None,
+        first_view_merges: Mapping[int, Mapping[int, int]] | None = None,
     ) -> None:
         if isinstance(noise, str):
             if noise not in NOISE_LEVELS:
@@ -383,6 +419,9 @@ class SimulatedSegmenter:
         self.level = noise
         self.seed = int(seed)
         self.support = {int(k): int(v) for k, v in (support or {}).items() if v is not None}
+        self.first_view_merges = {
+            int(f): {int(a): int(b) for a, b in m.items()} for f, m in (first_view_merges or {}).items()
+        }
         self._calls = 0
 
     def __call__(
@@ -405,7 +444,8 @@ class SimulatedSegmenter:
         index = self._calls if frame_index is None else int(frame_index)
         self._calls += 1
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, 0x5A4, index]))
-        return simulate_segments(gt_instances, depth, self.level, rng, self.support)
+        merges = self.first_view_merges.get(index)
+        return simulate_segments(gt_instances, depth, self.level, rng, self.support, merges)
 
     def segment_frame(self, frame) -> Segmentation:
         """Segment an :class:`~ogscene3d.frame.Frame` that carries ``gt_instances``."""

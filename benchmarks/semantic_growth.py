@@ -1,0 +1,136 @@
+r"""Issue 39's cost target: the semantic stages per keyframe late in a long scan against early in it.
+
+The semantic stages (local association, the evidence, the long-term step, the refinement and the duplicate
+merge) should cost what a view sees, not what the stream has seen: at the 300th frame at most 2x their cost
+at the 60th. The mapper's ``timings.json`` keeps each keyframe's time per module (``per_keyframe_ms``,
+``per_keyframe_cpu_ms``, ``per_keyframe_frame``); this reads it for the full row of long scans and compares
+the mean per keyframe over a window of keyframes ending at each of the two frames (``--window`` keyframes,
+by default 12: two rounds of the 6-keyframe schedule of the long-term step and the refinement, so that a
+window holds the same number of each).
+
+Stages: ``local`` (its time includes ``merge``, shown apart but not added twice), ``evidence``,
+``longterm``, ``refine``; "semantic" is their sum. CPU time (the process's, every thread) is the headline:
+on a shared machine it moves less than wall time; wall time is printed beside it.
+
+    python benchmarks/semantic_growth.py RUN_DIR [RUN_DIR ...]          # runs mapped already (full row)
+    python benchmarks/semantic_growth.py --seeds 0-2 --device cpu --set mapping.opt_iters=1 --out growth
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import positive_int, run_main  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+STAGES = ("local", "merge", "evidence", "longterm", "refine")
+SUMMED = ("local", "evidence", "longterm", "refine")  # merge runs inside local
+TARGET = 2.0
+
+
+def window_cost(timings: dict, frame: int, window: int, kind: str = "per_keyframe_cpu_ms") -> dict | None:
+    """Mean milliseconds per keyframe of each stage (and "semantic", their sum) over the ``window``
+    keyframes ending at the last keyframe at or before ``frame``; None when the run has not got so far."""
+    frames = np.asarray(timings.get("per_keyframe_frame", []))
+    series = timings.get(kind, {})
+    if frames.size == 0 or frames[0] > frame:
+        return None
+    end = int(np.searchsorted(frames, frame, side="right"))  # keyframes up to and including the frame
+    if end < window:
+        return None
+    out = {s: float(np.mean(series.get(s, [0.0] * len(frames))[end - window : end])) for s in STAGES}
+    out["semantic"] = sum(out[s] for s in SUMMED)
+    out["keyframes"] = (int(frames[end - window]), int(frames[end - 1]))
+    return out
+
+
+def growth(timings: dict, early: int, late: int, window: int) -> dict:
+    """{"cpu": {early: costs, late: costs, "ratio": {stage: late / early}}, "wall": ...}."""
+    out = {}
+    for name, kind in (("cpu", "per_keyframe_cpu_ms"), ("wall", "per_keyframe_ms")):
+        a, b = window_cost(timings, early, window, kind), window_cost(timings, late, window, kind)
+        if a is None or b is None:
+            raise SystemExit(f"the run has no {window} keyframes up to frame {late} (or {early})")
+        ratio = {s: (b[s] / a[s] if a[s] > 0 else None) for s in (*STAGES, "semantic")}
+        out[name] = {"early": a, "late": b, "ratio": ratio}
+    return out
+
+
+def _row(label: str, g: dict) -> list[str]:
+    cpu, wall = g["cpu"], g["wall"]
+    cells = [label]
+    for s in (*STAGES, "semantic"):
+        r = cpu["ratio"][s]
+        cells.append(f"{cpu['early'][s]:.1f} -> {cpu['late'][s]:.1f} ({r:.2f}x)" if r else "-")
+    cells.append(f"{wall['ratio']['semantic']:.2f}x" if wall["ratio"]["semantic"] else "-")
+    return cells
+
+
+def _map_scans(args) -> list[Path]:
+    from ablation import SCAN_OVERRIDES, parse_seeds
+
+    from ogscene3d.config import load_config
+    from ogscene3d.datasets import configured_scene
+    from ogscene3d.mapping.ablation import run_ablation
+
+    overrides = [*SCAN_OVERRIDES, *args.overrides, "synthetic.layout=scan", f"synthetic.frames={args.frames}"]
+    cfg = load_config(args.config, overrides)
+    runs = []
+    for seed in parse_seeds(args.seeds):
+        scene = configured_scene(
+            args.out / "scenes" / f"scan_{seed}", dataclasses.replace(cfg.synthetic, seed=seed)
+        )
+        run_ablation(cfg, scene, scene, args.out / f"scan_{seed}", ["full"], args.device, ("hovsg",))
+        runs.append(args.out / f"scan_{seed}" / "full")
+    return runs
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("runs", nargs="*", type=Path, help="run directories (their timings.json)")
+    ap.add_argument("--seeds", default=None, help="map the full row of these long scans first (e.g. 0-2)")
+    ap.add_argument("--frames", type=positive_int, default=300, help="frames per scan (300)")
+    ap.add_argument("--early", type=positive_int, default=60, help="the early frame (60)")
+    ap.add_argument("--late", type=positive_int, default=300, help="the late frame (300)")
+    ap.add_argument("--window", type=positive_int, default=12, help="keyframes per window (12)")
+    default_cfg = ROOT / "configs" / "synthetic.yaml"
+    ap.add_argument("--config", default=str(default_cfg) if default_cfg.is_file() else None)
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--device", default=None, help="cpu, cuda (default: config, else CUDA if present)")
+    ap.add_argument("--out", type=Path, default=Path("growth_out"), help="scenes and runs of --seeds")
+    args = ap.parse_args(argv)
+    runs = list(args.runs) + (_map_scans(args) if args.seeds else [])
+    if not runs:
+        ap.error("give run directories or --seeds")
+    results = {}
+    table = [["run", *(f"{s} ms/kf" for s in STAGES), "semantic ms/kf", "semantic wall"]]
+    for run in runs:
+        path = run / "timings.json"
+        if not path.is_file():
+            raise SystemExit(f"{path}: missing (a run directory of ogscene3d run or the ablation)")
+        g = growth(json.loads(path.read_text()), args.early, args.late, args.window)
+        results[str(run)] = g
+        table.append(_row(str(run), g))
+    ratios = [g["cpu"]["ratio"]["semantic"] for g in results.values()]
+    from ablation import _table
+
+    print(f"semantic stages, CPU ms per keyframe over {args.window} keyframes up to frame {args.early} -> "
+          f"up to frame {args.late} (ratio); target <= {TARGET}x")  # fmt: skip
+    print(_table(table))
+    print(f"semantic ratio: mean {np.mean(ratios):.2f}x, max {np.max(ratios):.2f}x over {len(ratios)} run(s)")
+    args.out.mkdir(parents=True, exist_ok=True)
+    doc = {"early": args.early, "late": args.late, "window": args.window, "target": TARGET, "runs": results}
+    (args.out / "semantic_growth.json").write_text(json.dumps(doc, indent=2) + "\n")
+    print(f"wrote {args.out / 'semantic_growth.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    run_main(main)
