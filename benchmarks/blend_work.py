@@ -24,7 +24,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import SEMANTIC_SCENES, camera, parse_count, positive_int, print_table, run_main  # noqa: E402
 
-from ogscene3d.projection import _Project, bin_gaussians  # noqa: E402
+from ogscene3d.rendering._projection import _Project, bin_gaussians  # noqa: E402
 
 TILE = 16
 

@@ -1,13 +1,13 @@
-"""projection.py internals (shared by render.py and semantics.py): the bare Warp array descriptors of
-launch arguments, and the tile sort."""
+"""The rendering package's projection internals (shared by the rasterizer and the semantic renderer): the
+bare Warp array descriptors of launch arguments, and the tile sort."""
 
 from __future__ import annotations
 
 import pytest
 import torch
 
-from ogscene3d import projection
 from ogscene3d.device import init_warp
+from ogscene3d.rendering import _projection as projection
 
 wp = init_warp()
 

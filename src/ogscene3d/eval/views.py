@@ -153,7 +153,7 @@ def render_views(
     import torch
 
     from ..gaussians import GaussianMap
-    from ..semantics import render_semantics
+    from ..rendering import render_semantics
 
     idx = sorted(set(frames))
     for i in idx:

@@ -450,7 +450,7 @@ class Mapper:
 
     def _render_check(self, k: _Keyframe) -> None:
         """The map rendered at the keyframe's pose (alpha + expected depth): the pixels it explains."""
-        from ..render import rasterization
+        from ..rendering import rasterization
 
         with self.timings.section("render_check"):
             if len(self.map) == 0:
@@ -828,7 +828,7 @@ class Mapper:
 
     def _render_labels(self, frame: Frame) -> np.ndarray:
         """The map's label per pixel [H,W] int32 (-1 where nothing labelled renders) at the frame's pose."""
-        from ..render import render_semantics
+        from ..rendering import render_semantics
 
         gm = self.map
         viewmat = torch.as_tensor(np.linalg.inv(frame.pose), dtype=torch.float32, device=self.device)[None]

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import torch
 
-from ._validate import ValueChecks, check_int, check_tensor
-from .device import warp_stream
-from .projection import (
+from .._validate import ValueChecks, check_int, check_tensor
+from ..device import warp_stream
+from ._projection import (
     TileBins,
     _as_wp,
     _check_shapes,
@@ -285,16 +285,4 @@ def rasterization(
     return render, alphas, meta
 
 
-# The semantic half of the functional API lives in its own module; the design names render.py as the home
-# of all three functions, so they are importable from here too (semantics builds on .projection, not on
-# this module: dependencies run one way).
-from .semantics import SemanticRender, render_semantics, rendering_contribution  # noqa: E402
-
-__all__ = [
-    "TileBins",
-    "bin_gaussians",
-    "rasterization",
-    "render_semantics",
-    "rendering_contribution",
-    "SemanticRender",
-]
+__all__ = ["RENDER_MODES", "MAX_CHANNELS_PER_PASS", "rasterization"]

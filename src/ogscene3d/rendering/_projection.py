@@ -1,6 +1,6 @@
 """Projection of 3D Gaussians to 2D (EWA) and their binning into screen tiles: the steps the colour
-rasterizer (:mod:`ogscene3d.render`) and the semantic renderer (:mod:`ogscene3d.semantics`) share, with the
-Warp interop (torch tensors as Warp arrays, on torch's stream) and the input checks both run.
+rasterizer (``_rasterization``) and the semantic renderer (``_semantics``) share, with the Warp interop
+(torch tensors as Warp arrays, on torch's stream) and the input checks both run.
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from typing import Any
 
 import torch
 
-from ._validate import ValueChecks, check_image_size, check_tensor
-from .device import init_warp, warp_stream
+from .._validate import ValueChecks, check_image_size, check_tensor
+from ..device import init_warp, warp_stream
 
 
 def _wp():

@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 
 import torch
 
-from ._validate import ValueChecks, check_int, check_tensor
-from .device import warp_stream
-from .projection import (
+from .._validate import ValueChecks, check_int, check_tensor
+from ..device import warp_stream
+from ._projection import (
     TileBins,
     _as_wp,
     _check_shapes,
