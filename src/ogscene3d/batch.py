@@ -235,8 +235,9 @@ def map_scene(
 
     from .config import load_config
     from .datasets import configured_scene
-    from .mapping.engine import MappingEngine, open_frames, run_directory
+    from .mapping.engine import MappingEngine, open_frames
     from .mapping.mapper import Mapper
+    from .runs import run_directory
 
     t_start = time.perf_counter()
     ov = [*overrides, *spec.overrides]

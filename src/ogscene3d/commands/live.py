@@ -191,7 +191,7 @@ def run(args: argparse.Namespace) -> int:
     check_bindable(args.host, args.port)
     if args.run_dir is not None or args.out is None:
         return _serve(args)
-    from ..mapping.engine import run_directory
+    from ..runs import run_directory
 
     with run_directory(args.out, "live"):  # one writer per run directory, as for `ogscene3d run`
         return _serve(args)

@@ -56,8 +56,9 @@ def add_parser(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..datasets import configured_scene
     from ..device import resolve_device
-    from ..mapping.engine import MappingEngine, open_frames, run_directory, stopped_message
+    from ..mapping.engine import MappingEngine, open_frames, stopped_message
     from ..mapping.mapper import Mapper
+    from ..runs import run_directory
 
     overrides = list(args.overrides)
     if args.models:  # the exported models' settings first: --set still overrides them

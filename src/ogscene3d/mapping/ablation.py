@@ -11,7 +11,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from ..config import Config
-from .engine import MappingEngine, run_directory
+from ..runs import run_directory
+from .engine import MappingEngine
 from .mapper import ABLATIONS, Mapper
 
 
