@@ -43,6 +43,8 @@ import numpy as np
 
 from ..datasets.replica_semantic import class_entries
 from ..errors import DataError
+from ..runs import RunFolder
+from ..runs.gaussians_ply import SEMANTIC_FIELDS, read_gaussians_ply
 from .ground_truth import GroundTruth, reindex_class_ids
 from .replica_gt import load_replica_ground_truth, replica_semantic_files
 
@@ -157,26 +159,18 @@ def read_run(run_dir: str | Path) -> RunData:
     run = Path(run_dir)
     if not run.is_dir():
         raise DataError(f"{run}: run directory not found")
-    ply = run / "gaussians.ply"
+    ply = RunFolder(run).gaussians
     if not ply.is_file():
         raise DataError(f"{ply}: missing (a run directory holds gaussians.ply; docs/formats.md)")
-    v = _read_ply_vertices(ply)
-    names = v.dtype.names or ()
-    if "label" not in names:
-        raise DataError(f"{ply}: vertex field 'label' missing: not a semantic Gaussian map")
-    means = _xyz(v, ply)
-    labels = _int_field(v, "label", ply)
-    conf = (
-        np.asarray(v["confidence"], dtype=np.float32)
-        if "confidence" in names
-        else np.ones(len(labels), np.float32)
-    )
-    if not np.all(np.isfinite(conf)):
-        raise DataError(f"{ply}: field 'confidence' has NaN/inf")
-    opac = None
-    if "opacity" in names:
-        logit = np.asarray(v["opacity"], dtype=np.float64)
-        opac = (1.0 / (1.0 + np.exp(-np.clip(logit, -60, 60)))).astype(np.float32)
+    gaussians = read_gaussians_ply(ply, SEMANTIC_FIELDS)
+    labels = gaussians.labels
+    assert labels is not None  # a required field
+    conf = gaussians.confidences
+    if conf is None:
+        conf = np.ones(len(labels), np.float32)
+    opac = gaussians.opacities() if gaussians.opacity_logits is not None else None
+    means = gaussians.means.astype(np.float64)
+    labels = labels.astype(np.int64)
     graph = None
     gpath = run / "graph.json"
     if gpath.is_file():

@@ -8,6 +8,7 @@ or the evaluation, and nothing heavy (torch, warp, open3d) is imported.
 
 from __future__ import annotations
 
+from .gaussians_ply import GaussianPly, read_gaussians_ply, write_gaussians_ply
 from .layout import (
     CONFIG,
     EXPORT,
@@ -32,6 +33,7 @@ __all__ = [
     "EXPORT",
     "EXPORTS",
     "GAUSSIANS",
+    "GaussianPly",
     "GRAPH",
     "LOCK",
     "MAP",
@@ -45,5 +47,7 @@ __all__ = [
     "StopRequest",
     "TIMINGS",
     "TRAJECTORY",
+    "read_gaussians_ply",
     "run_directory",
+    "write_gaussians_ply",
 ]

@@ -1,8 +1,8 @@
 """Reading a saved run directory for browsing (``ogscene3d-live RUN_DIR``).
 
-Only file formats are used here (README "File formats"): ``gaussians.ply`` through plyfile, ``graph.json``,
-``timings.json``, ``config.yaml`` and, when present, the memory keyframe poses in ``map.npz``. Nothing
-from the mapper is imported, so a run can be browsed wherever the files are.
+Only file formats are used here, read by their owner :mod:`ogscene3d.runs` (docs/formats.md):
+``gaussians.ply``, ``graph.json``, ``timings.json``, ``config.yaml`` and, when present, the memory keyframe
+poses in ``map.npz``. Nothing from the mapper is imported, so a run can be browsed wherever the files are.
 """
 
 from __future__ import annotations
@@ -17,13 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError
+from ..runs.gaussians_ply import read_gaussians_ply
 from .snapshot import MapSnapshot, timings_ms_per_keyframe
 
 log = logging.getLogger(__name__)
 
-SH_C0 = 0.28209479177387814
-_REQUIRED = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity"]
-_REQUIRED += [f"scale_{i}" for i in range(3)] + [f"rot_{i}" for i in range(4)]
 
 
 @dataclass
@@ -32,48 +30,6 @@ class RunInfo:
 
     path: Path
     up: np.ndarray | None
-
-
-def read_gaussians_ply(path: str | Path) -> dict[str, np.ndarray]:
-    """Read a 3DGS PLY (SH degree 0, optional ``label``/``confidence``) into snapshot arrays.
-
-    Returns means [N,3], quats [N,4] wxyz, scales [N,3] (exp of the stored log scales), opacities [N]
-    (sigmoid of the stored logits), colors [N,3] in [0,1] (from f_dc), labels [N] int32 (-1 when the
-    file has none), confidences [N] float32 (0 when none). Raises DataError on a missing or corrupt file.
-    """
-    from plyfile import PlyData
-
-    p = Path(path)
-    if not p.is_file():
-        raise DataError(f"{p}: Gaussian PLY does not exist")
-    try:
-        ply = PlyData.read(str(p))
-        v = ply["vertex"].data
-    except Exception as e:  # plyfile raises several unrelated exception types on corrupt input
-        raise DataError(f"{p}: cannot read PLY ({type(e).__name__}: {e})") from e
-    names = v.dtype.names or ()
-    missing = [k for k in _REQUIRED if k not in names]
-    if missing:
-        raise DataError(f"{p}: PLY vertex lacks the 3DGS properties {missing}")
-    n = len(v)
-
-    def cols(*keys: str) -> np.ndarray:
-        return np.stack([np.asarray(v[k], dtype=np.float32) for k in keys], axis=1).reshape(n, len(keys))
-
-    with np.errstate(over="ignore"):
-        scales = np.exp(cols("scale_0", "scale_1", "scale_2").astype(np.float64)).astype(np.float32)
-        opac = (1.0 / (1.0 + np.exp(-np.asarray(v["opacity"], dtype=np.float64)))).astype(np.float32)
-    return {
-        "means": cols("x", "y", "z"),
-        "quats": cols("rot_0", "rot_1", "rot_2", "rot_3"),
-        "scales": scales,
-        "opacities": opac,
-        "colors": np.clip(cols("f_dc_0", "f_dc_1", "f_dc_2") * SH_C0 + 0.5, 0.0, 1.0),
-        "labels": np.asarray(v["label"], dtype=np.int32) if "label" in names else np.full(n, -1, np.int32),
-        "confidences": np.asarray(v["confidence"], dtype=np.float32)
-        if "confidence" in names
-        else np.zeros(n, np.float32),
-    }
 
 
 def _check_node(p: Path, i: int, node: object) -> None:
@@ -209,7 +165,7 @@ def load_run(run_dir: str | Path) -> tuple[MapSnapshot, RunInfo]:
     ply = root / "gaussians.ply"
     if not ply.is_file():
         raise DataError(f"{root}: not a run directory (no gaussians.ply)")
-    arrays = read_gaussians_ply(ply)
+    arrays = read_gaussians_ply(ply).arrays()
     graph = read_graph_json(root / "graph.json") if (root / "graph.json").is_file() else None
     timings = _read_timings(root / "timings.json")
     trajectory = _read_trajectory(root / "map.npz")
@@ -228,4 +184,4 @@ def load_run(run_dir: str | Path) -> tuple[MapSnapshot, RunInfo]:
     return snap, RunInfo(path=root, up=_read_up(root / "config.yaml"))
 
 
-__all__ = ["RunInfo", "load_run", "read_gaussians_ply", "read_graph_json"]
+__all__ = ["RunInfo", "load_run", "read_graph_json"]
