@@ -45,6 +45,7 @@ from ..datasets.replica_semantic import class_entries
 from ..errors import DataError
 from ..runs import RunFolder
 from ..runs.gaussians_ply import SEMANTIC_FIELDS, read_gaussians_ply
+from ..runs.graph_json import read_graph_json
 from .ground_truth import GroundTruth, reindex_class_ids
 from .replica_gt import load_replica_ground_truth, replica_semantic_files
 
@@ -172,36 +173,10 @@ def read_run(run_dir: str | Path) -> RunData:
     means = gaussians.means.astype(np.float64)
     labels = labels.astype(np.int64)
     graph = None
-    gpath = run / "graph.json"
+    gpath = RunFolder(run).graph
     if gpath.is_file():
         graph = read_graph_json(gpath)
     return RunData(means=means, labels=labels, confidences=conf, opacities=opac, graph=graph)
-
-
-def read_graph_json(path: str | Path) -> dict[str, Any]:
-    """Parse and sanity-check ``graph.json`` ({"nodes": [...], "edges": [...]})."""
-    path = Path(path)
-    try:
-        g = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise DataError(f"{path}: file not found") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise DataError(f"{path}: invalid JSON ({e})") from None
-    if (
-        not isinstance(g, dict)
-        or not isinstance(g.get("nodes", []), list)
-        or not isinstance(g.get("edges", []), list)
-    ):
-        raise DataError(f"{path}: expected an object with 'nodes' and 'edges' lists")
-    for n in g.get("nodes", []):
-        if not isinstance(n, dict) or "id" not in n:
-            raise DataError(f"{path}: every node needs an 'id' (got {n!r:.80})")
-    for e in g.get("edges", []):
-        if not isinstance(e, dict) or not {"source", "target", "relation"} <= set(e):
-            raise DataError(f"{path}: every edge needs 'source', 'target', 'relation' (got {e!r:.80})")
-    g.setdefault("nodes", [])
-    g.setdefault("edges", [])
-    return g
 
 
 def _load_json(path: Path) -> Any:

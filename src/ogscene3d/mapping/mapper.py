@@ -55,6 +55,7 @@ from ..device import resolve_device
 from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame, implausible_median_depth
 from ..gaussians import GaussianMap, corrupt_npz_message
+from ..runs.graph_json import write_graph_json
 from .checkpoint import CheckpointArrays, read_checkpoint
 from .evidence import SegmentEvidence
 from .init import make_probes
@@ -1129,7 +1130,7 @@ class Mapper:
                 log.warning("could not serialise the scene graph: %s: %s", type(e).__name__, e)
         if graph is None:
             graph = {"version": 1, "nodes": self._label_nodes(), "edges": []}
-        atomic_write_text(path, json.dumps(graph, indent=1))
+        write_graph_json(path, graph)
 
     def _label_nodes(self) -> list[dict]:
         """Graph nodes straight from the map's labels (used when no scene graph was built)."""

@@ -9,6 +9,7 @@ or the evaluation, and nothing heavy (torch, warp, open3d) is imported.
 from __future__ import annotations
 
 from .gaussians_ply import GaussianPly, read_gaussians_ply, write_gaussians_ply
+from .graph_json import read_graph_json, write_graph_json
 from .layout import (
     CONFIG,
     EXPORT,
@@ -48,6 +49,8 @@ __all__ = [
     "TIMINGS",
     "TRAJECTORY",
     "read_gaussians_ply",
+    "read_graph_json",
     "run_directory",
     "write_gaussians_ply",
+    "write_graph_json",
 ]

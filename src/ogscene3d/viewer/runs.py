@@ -18,6 +18,7 @@ import numpy as np
 
 from ..errors import DataError
 from ..runs.gaussians_ply import read_gaussians_ply
+from ..runs.graph_json import read_graph_json
 from .snapshot import MapSnapshot, timings_ms_per_keyframe
 
 log = logging.getLogger(__name__)
@@ -30,52 +31,6 @@ class RunInfo:
 
     path: Path
     up: np.ndarray | None
-
-
-def _check_node(p: Path, i: int, node: object) -> None:
-    """DataError naming the file, the node and the field unless ``node`` has an integer id and a finite
-    3-vector center (the viewer places every node at its center)."""
-    if not isinstance(node, dict) or "id" not in node or "center" not in node:
-        raise DataError(f"{p}: node {i} lacks 'id' or 'center'")
-    nid = node["id"]
-    if not isinstance(nid, int) or isinstance(nid, bool):
-        raise DataError(f"{p}: node {i} field 'id' must be an integer, got {nid!r:.60}")
-    center = node["center"]
-    numbers = isinstance(center, list) and all(
-        isinstance(v, int | float) and not isinstance(v, bool) for v in center
-    )
-    if not numbers or len(center) != 3:
-        raise DataError(f"{p}: node {nid} has a bad center {center!r:.80} (field 'center': 3 numbers)")
-    if not np.isfinite(np.asarray(center, dtype=np.float64)).all():
-        raise DataError(f"{p}: node {nid} has a non-finite center {center!r:.80} (field 'center')")
-
-
-def read_graph_json(path: str | Path) -> dict:
-    """Read graph.json and check its structure (nodes need an integer id and a finite 3-vector center;
-    edges a source and target among the node ids). DataError naming the file and the field."""
-    p = Path(path)
-    try:
-        doc = json.loads(p.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise DataError(f"{p}: cannot read graph JSON ({e})") from e
-    if not isinstance(doc, dict) or not isinstance(doc.get("nodes", []), list):
-        raise DataError(f"{p}: expected an object with a 'nodes' list")
-    nodes = doc.get("nodes", [])
-    for i, node in enumerate(nodes):
-        _check_node(p, i, node)
-    ids = {n["id"] for n in nodes}
-    edges = doc.get("edges", [])
-    if not isinstance(edges, list):
-        raise DataError(f"{p}: 'edges' must be a list")
-    for i, e in enumerate(edges):
-        if not isinstance(e, dict) or not _known(e.get("source"), ids) or not _known(e.get("target"), ids):
-            raise DataError(f"{p}: edge {i} does not join two known nodes (fields 'source', 'target')")
-    return {"version": doc.get("version", 1), "nodes": nodes, "edges": edges}
-
-
-def _known(node_id: object, ids: set[int]) -> bool:
-    # an unhashable id (a list) cannot be looked up in the set: it is simply not a known node
-    return isinstance(node_id, int) and not isinstance(node_id, bool) and node_id in ids
 
 
 def _read_timings(path: Path) -> dict:
@@ -166,7 +121,7 @@ def load_run(run_dir: str | Path) -> tuple[MapSnapshot, RunInfo]:
     if not ply.is_file():
         raise DataError(f"{root}: not a run directory (no gaussians.ply)")
     arrays = read_gaussians_ply(ply).arrays()
-    graph = read_graph_json(root / "graph.json") if (root / "graph.json").is_file() else None
+    graph = read_graph_json(root / "graph.json", centers=True) if (root / "graph.json").is_file() else None
     timings = _read_timings(root / "timings.json")
     trajectory = _read_trajectory(root / "map.npz")
     counts: dict[str, float] = {"gaussians": len(arrays["means"])}
@@ -184,4 +139,4 @@ def load_run(run_dir: str | Path) -> tuple[MapSnapshot, RunInfo]:
     return snap, RunInfo(path=root, up=_read_up(root / "config.yaml"))
 
 
-__all__ = ["RunInfo", "load_run", "read_graph_json"]
+__all__ = ["RunInfo", "load_run"]
