@@ -16,16 +16,15 @@ Files: ``save_npz``/``load_npz`` hold everything needed to resume mapping; ``exp
 from __future__ import annotations
 
 import math
-import zipfile
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from .atomic import atomic_path
 from .device import resolve_device
 from .errors import DataError
 from .runs.gaussians_ply import PLY_PROPERTIES, SH_C0, read_gaussians_ply, write_gaussians_ply
+from .runs.map_npz import NPZ_VERSION, corrupt_npz_message, read_map_npz, write_map_npz
 
 # Per-Gaussian fields: name -> (trailing shape, dtype).
 FIELDS: dict[str, tuple[tuple[int, ...], torch.dtype]] = {
@@ -39,22 +38,6 @@ FIELDS: dict[str, tuple[tuple[int, ...], torch.dtype]] = {
     "origin_kf": ((), torch.int32),
 }
 _FLOAT_FIELDS = [k for k, (_, dt) in FIELDS.items() if dt.is_floating_point]
-#: The format of map.npz. 2: a mapper checkpoint holds every mapper array (``mapping/checkpoint.py``);
-#: 1: older files, which may lack those added over its life (upgraded on load).
-NPZ_VERSION = 2
-
-
-#: What np.load raises on a damaged or truncated npz file (a checkpoint cut short by a full disk or a kill).
-NPZ_READ_ERRORS: tuple[type[Exception], ...] = (OSError, ValueError, EOFError, zipfile.BadZipFile)
-
-
-def corrupt_npz_message(path: Path, error: Exception) -> str:
-    """The error for an npz file np.load cannot read (truncated by a full disk, damaged in a copy)."""
-    # np.load calls any non-zip file "pickled (object) data" and suggests unpickling it: never for a map
-    return (
-        f"{path}: not a readable map npz, corrupt or truncated ({type(error).__name__}); restore a copy or "
-        "start a new run"
-    )
 
 
 def _logit(p: torch.Tensor | float) -> torch.Tensor:
@@ -310,22 +293,17 @@ class GaussianMap:
             if k in arrays:
                 raise ValueError(f"save_npz: extra key {k!r} clashes with a map field")
             arrays[k] = np.asarray(v)
-        with atomic_path(path) as tmp:
-            with open(tmp, "wb") as f:
-                np.savez(f, **arrays)
+        write_map_npz(path, arrays)
 
     @classmethod
     def load_npz(cls, path: str | Path, device: str | torch.device = "cpu") -> GaussianMap:
         """Load a map written by ``save_npz`` (extra arrays are ignored; read them with ``np.load``)."""
         p = Path(path)
-        if not p.is_file():
-            raise DataError(f"{p}: map file does not exist")
+        # only the map's arrays: a mapper checkpoint also holds its memory views (hundreds of MB)
+        state = read_map_npz(p, lambda k: k in FIELDS or k in ("next_label", "version"))
         try:
-            with np.load(p, allow_pickle=False) as z:
-                # only the map's arrays: a mapper checkpoint also holds its memory views (hundreds of MB)
-                state = {k: z[k] for k in z.files if k in FIELDS or k == "next_label"}
-                version = int(z["version"]) if "version" in z.files else 1
-        except NPZ_READ_ERRORS as e:
+            version = int(state.pop("version", 1))
+        except (TypeError, ValueError) as e:
             raise DataError(corrupt_npz_message(p, e)) from e
         if version > NPZ_VERSION:
             raise DataError(

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError, DataError
-from ..gaussians import NPZ_READ_ERRORS
+from ..runs.map_npz import read_map_npz
 
 log = logging.getLogger(__name__)
 
@@ -87,10 +87,10 @@ def _mapped_count(run_dir: Path, selection: Any, data: Any) -> tuple[int, str]:
     if not ckpt.is_file():
         return num_selected, "no map.npz: the whole selection is taken as mapped"
     try:
-        with np.load(ckpt, allow_pickle=False) as z:
-            nxt = int(z["mapper_next_index"]) if "mapper_next_index" in z.files else None
-            source = json.loads(str(z["mapper_source"])) if "mapper_source" in z.files else {}
-    except (KeyError, *NPZ_READ_ERRORS) as e:
+        z = read_map_npz(ckpt, ("mapper_next_index", "mapper_source"))
+        nxt = int(z["mapper_next_index"]) if "mapper_next_index" in z else None
+        source = json.loads(str(z["mapper_source"])) if "mapper_source" in z else {}
+    except (DataError, ValueError) as e:
         raise DataError(f"{ckpt}: cannot read how far the run got ({e})") from None
     # its next frame is a position in the selection it was mapped with (recorded since checkpoints say so)
     for key in ("start", "stride"):

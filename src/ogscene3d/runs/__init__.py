@@ -27,10 +27,12 @@ from .layout import (
     RunFolder,
 )
 from .lock import RunDirBusyError, RunDirLock, run_directory
+from .map_npz import CorruptMapError, read_map_npz, write_map_npz
 from .stop import StopRequest
 
 __all__ = [
     "CONFIG",
+    "CorruptMapError",
     "EXPORT",
     "EXPORTS",
     "GAUSSIANS",
@@ -50,7 +52,9 @@ __all__ = [
     "TRAJECTORY",
     "read_gaussians_ply",
     "read_graph_json",
+    "read_map_npz",
     "run_directory",
     "write_gaussians_ply",
     "write_graph_json",
+    "write_map_npz",
 ]

@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import json
 import logging
-import zipfile
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,6 +17,7 @@ import numpy as np
 from ..errors import DataError
 from ..runs.gaussians_ply import read_gaussians_ply
 from ..runs.graph_json import read_graph_json
+from ..runs.map_npz import read_map_npz
 from .snapshot import MapSnapshot, timings_ms_per_keyframe
 
 log = logging.getLogger(__name__)
@@ -72,15 +71,15 @@ def _read_trajectory(path: Path) -> np.ndarray:
     if not path.is_file():
         return empty
     try:
-        with np.load(path, allow_pickle=False) as z:
-            if "mem_pose" not in z.files or "mem_keyframe" not in z.files:
-                return empty
-            poses = np.asarray(z["mem_pose"], dtype=np.float64)
-            keyframes = np.asarray(z["mem_keyframe"])
-    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as e:
-        # a run cut short mid-write leaves a truncated zip (BadZipFile) or member (zlib.error, EOFError)
-        log.warning("%s: unreadable (%s: %s); no keyframe poses shown", path, type(e).__name__, e)
+        z = read_map_npz(path, ("mem_pose", "mem_keyframe"))
+    except DataError as e:
+        # a run cut short mid-write leaves a truncated zip or member
+        log.warning("%s; no keyframe poses shown", e)
         return empty
+    if "mem_pose" not in z or "mem_keyframe" not in z:
+        return empty
+    poses = np.asarray(z["mem_pose"], dtype=np.float64)
+    keyframes = np.asarray(z["mem_keyframe"])
     if poses.ndim != 3 or poses.shape[1:] != (4, 4) or keyframes.shape != (len(poses),):
         log.warning(
             "%s: fields 'mem_pose' %s / 'mem_keyframe' %s are not [T,4,4] / [T]; no keyframe poses shown",
