@@ -47,6 +47,7 @@ import yaml
 from .atomic import atomic_write_text
 from .errors import ConfigError, DataError
 from .eval.options import EvalOptions
+from .runs import RunFolder, json_safe, write_metrics
 
 log = logging.getLogger(__name__)
 
@@ -291,19 +292,6 @@ def map_scene(
     }
 
 
-def json_safe(x: Any) -> Any:
-    """NaN/inf -> None, numpy scalars -> Python, tuples -> lists (strict JSON), recursively."""
-    if isinstance(x, dict):
-        return {str(k): json_safe(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [json_safe(v) for v in x]
-    if hasattr(x, "item") and callable(x.item) and getattr(x, "ndim", 1) == 0:
-        x = x.item()
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x
-
-
 def evaluate_scene(
     run_dir: str | Path,
     gt: str | Path | None = None,
@@ -323,7 +311,7 @@ def evaluate_scene(
 
     opts = options or EvalOptions()
     run = Path(run_dir)
-    if not (run / "gaussians.ply").is_file():
+    if not RunFolder(run).gaussians.is_file():
         raise DataError(f"{run}: not a run directory (no gaussians.ply)")
     gt_path = Path(gt) if gt is not None else find_ground_truth(run)
     if gt_path is None:
@@ -342,7 +330,7 @@ def evaluate_scene(
                 nan_text=["ignored" if n in m.ignored else "not in GT" for n in m.class_names],
             )
             report["semantic_3d"][proto]["bar_chart"] = write_png(run / f"iou_{proto}.png", chart).name
-    atomic_write_text(run / "metrics.json", json.dumps(json_safe(report), indent=2, allow_nan=False) + "\n")
+    write_metrics(RunFolder(run).metrics, report)
     rec: dict[str, Any] = {
         "name": name or run.name,
         "status": "ok",
@@ -718,13 +706,13 @@ def find_runs(out: str | Path) -> tuple[list[tuple[str, Path, str | None]], list
                 continue
             seen.add(name)
             # run directories are found relative to OUT, so a moved batch folder still works
-            if (root / name / "gaussians.ply").is_file():
+            if RunFolder(root / name).gaussians.is_file():
                 runs.append((name, root / name, s.get("gt")))
             else:
                 why = s.get("error") or "no gaussians.ply in its run directory"
                 unmapped.append({"name": name, "status": "not mapped", "error": f"run-batch: {why}"})
     for d in sorted(p for p in root.iterdir() if p.is_dir() and p.name not in seen):
-        if (d / "gaussians.ply").is_file():
+        if RunFolder(d).gaussians.is_file():
             runs.append((d.name, d, None))
     if not runs and not unmapped:
         raise DataError(f"{root}: no run directories (sub-folders with gaussians.ply) found")

@@ -9,8 +9,6 @@ import argparse
 import logging
 from pathlib import Path
 
-import yaml
-
 from ..config import add_override_argument, add_poses_argument, choices, load_config
 from ..errors import DataError
 
@@ -58,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
     from ..mapping.engine import MappingEngine, open_frames, stopped_message
     from ..mapping.mapper import Mapper
-    from ..runs import run_directory
+    from ..runs import RunFolder, recorded_data_path, run_directory
 
     overrides = list(args.overrides)
     if args.models:  # the exported models' settings first: --set still overrides them
@@ -70,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     if args.device:
         overrides.append(f"device={args.device}")
     out = Path(args.out)
-    saved = out / "config.yaml"
+    saved = RunFolder(out).config
     base = args.config
     if args.resume and base is None and saved.is_file():
         base = saved  # a resumed run goes on with the settings (and the data) it started with
@@ -79,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     if args.poses:
         cfg.tracking.poses = args.poses
     resolve_device(cfg.device)  # an unusable device fails before a synthetic scene is generated
-    data = args.data or cfg.data.path or (_recorded_data_path(saved) if args.resume else None)
+    data = args.data or cfg.data.path or (recorded_data_path(out) if args.resume else None)
     if data is None and args.resume:
         raise DataError(f"{out}: --resume needs the run's dataset: pass --data (the run records none)")
     with run_directory(out, "run"):
@@ -125,17 +123,6 @@ def run(args: argparse.Namespace) -> int:
     print(summary.line())
     print(engine.mapper.timings.table())
     return 0
-
-
-def _recorded_data_path(saved: Path) -> str | None:
-    """data.path from a run's config.yaml (None when absent or unreadable)."""
-    try:
-        loaded = yaml.safe_load(saved.read_text())
-    except (OSError, yaml.YAMLError):
-        return None
-    data = loaded.get("data") if isinstance(loaded, dict) else None
-    path = data.get("path") if isinstance(data, dict) else None
-    return path if isinstance(path, str) else None
 
 
 # The most a Gaussian centre may drift per keyframe (mapping.lr_means x mapping.opt_iters) before small

@@ -43,7 +43,7 @@ import numpy as np
 
 from ..datasets.replica_semantic import class_entries
 from ..errors import DataError
-from ..runs import RunFolder
+from ..runs import RunFolder, recorded_data_path
 from ..runs.gaussians_ply import SEMANTIC_FIELDS, read_gaussians_ply
 from ..runs.graph_json import read_graph_json
 from .ground_truth import GroundTruth, reindex_class_ids
@@ -68,25 +68,6 @@ class RunData:
     graph: dict[str, Any] | None  # parsed graph.json or None
 
 
-def run_data_path(run_dir: str | Path) -> Path | None:
-    """``data.path`` of ``RUN_DIR/config.yaml`` (relative to the run directory when relative), or None."""
-    run = Path(run_dir)
-    cfg = run / "config.yaml"
-    if not cfg.is_file():
-        return None
-    import yaml
-
-    try:
-        data = yaml.safe_load(cfg.read_text()) or {}
-    except yaml.YAMLError as e:
-        raise DataError(f"{cfg}: invalid YAML ({e})") from None
-    path = (data.get("data") or {}).get("path") if isinstance(data, dict) else None
-    if not path:
-        return None
-    p = Path(path)
-    return p if p.is_absolute() else run / p
-
-
 def find_ground_truth(run_dir: str | Path) -> Path | None:
     """The ground truth of the scene a run was made from, if it can be found: ``RUN_DIR/scene`` (where
     ``ogscene3d run`` without ``--data`` generates a synthetic scene) or ``data.path`` of
@@ -94,8 +75,8 @@ def find_ground_truth(run_dir: str | Path) -> Path | None:
     labels PLY or is a sequence whose frames carry class maps (label-fusion; 2D scores only). None when
     none does."""
     run = Path(run_dir)
-    data = run_data_path(run)
-    for c in (run / "scene", data):
+    data = recorded_data_path(run)
+    for c in (RunFolder(run).scene, data):
         if c is not None and (c / "gt" / "instances.json").is_file():
             return c
     if data is not None and data.is_dir() and (_scannet_label_ply(data) is not None or _frame_classes(data)):

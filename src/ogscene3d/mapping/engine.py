@@ -23,17 +23,9 @@ from typing import Any
 
 from ..config import Config
 from ..errors import DataError, OGSceneError
-from ..runs import EXPORTS, StopRequest
+from ..runs import EXPORTS, RunFolder, SaveError, StopRequest, resumed_run_id, start_run_dir
 from .pose_jump import PoseJumpError
-from .source import (
-    check_same_source,
-    dataset_source,
-    matching_pixel_centers,
-    record_data,
-    remove_run_temps,
-    resumed_run_id,
-    start_run_dir,
-)
+from .source import check_same_source, dataset_source, matching_pixel_centers, record_data, remove_run_temps
 
 log = logging.getLogger(__name__)
 
@@ -143,7 +135,7 @@ class MappingEngine:
         run_id = None
         if resume:
             run_id = self._resume(cfg, ds, source)
-        elif (out / "map.npz").is_file():
+        elif RunFolder(out).map.is_file():
             # config.yaml is rewritten now: should this run die before its first save, --resume refuses the
             # old map beside the new settings (resumed_run_id), so say so while the old map can still be kept
             log.warning(
@@ -158,7 +150,7 @@ class MappingEngine:
     def _resume(self, cfg: Config, ds: Any, source: dict) -> str | None:
         mapper, out = self.mapper, self.out
         assert out is not None
-        ckpt = out / "map.npz"
+        ckpt = RunFolder(out).map
         if not ckpt.is_file():
             raise DataError(f"{ckpt}: --resume needs a checkpoint from an earlier run in --out")
         mapper.load_checkpoint(ckpt)
@@ -342,7 +334,7 @@ class MappingEngine:
             if isinstance(e, PoseJumpError)
             else "fix the frame (or --set data.on_bad_frame=skip)"
         )
-        log.error("the map so far is in %s: %s, then --resume", self.out / "map.npz", fix)
+        log.error("the map so far is in %s: %s, then --resume", RunFolder(self.out).map, fix)
 
     def _save_partial(self) -> bool:
         """After a stop: the map so far, with the files ``eval`` and the viewer read (not finalized: a
@@ -354,19 +346,18 @@ class MappingEngine:
         return True
 
     def _save(self, out: Path) -> None:
-        from .mapper import SaveError
-
         try:
             with self.guard():
                 self.mapper.save(out)
         except SaveError as e:
             saved = ", ".join(e.written) if e.written else "nothing"
             fix = "free some space" if e.cause.errno in (errno.ENOSPC, errno.EDQUOT) else "fix that"
-            if "map.npz" in e.written:
+            ckpt = RunFolder(out).map
+            if ckpt.name in e.written:
                 go_on = f"{fix}, then `ogscene3d run --resume --out {out}` writes the rest"
-            elif (out / "map.npz").is_file():
+            elif ckpt.is_file():
                 go_on = (
-                    f"{out / 'map.npz'} holds an earlier checkpoint: {fix}, then `ogscene3d run --resume "
+                    f"{ckpt} holds an earlier checkpoint: {fix}, then `ogscene3d run --resume "
                     f"--out {out}` goes on from it"
                 )
             else:
@@ -381,7 +372,7 @@ class MappingEngine:
         out = self.out
         if out is None:
             return
-        ckpt = out / "map.npz"
+        ckpt = RunFolder(out).map
         stale = [
             name for name in EXPORTS if not (out / name).is_file()
             or (out / name).stat().st_mtime_ns < ckpt.stat().st_mtime_ns

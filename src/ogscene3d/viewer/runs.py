@@ -7,7 +7,6 @@ poses in ``map.npz``. Nothing from the mapper is imported, so a run can be brows
 
 from __future__ import annotations
 
-import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError
+from ..runs import RunFolder, read_timings, recorded_up
 from ..runs.gaussians_ply import read_gaussians_ply
 from ..runs.graph_json import read_graph_json
 from ..runs.map_npz import read_map_npz
@@ -30,22 +30,6 @@ class RunInfo:
 
     path: Path
     up: np.ndarray | None
-
-
-def _read_timings(path: Path) -> dict:
-    """timings.json as a dict; {} with a warning when it is unreadable or not an object (it only feeds
-    the timings panel, so a bad file must not stop browsing)."""
-    if not path.is_file():
-        return {}
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        log.warning("%s: unreadable (%s); no timings shown", path, e)
-        return {}
-    if not isinstance(doc, dict):
-        log.warning("%s: expected a JSON object, got %s; no timings shown", path, type(doc).__name__)
-        return {}
-    return doc
 
 
 def _run_counts(timings: dict, path: Path) -> dict[str, float]:
@@ -95,36 +79,20 @@ def _read_trajectory(path: Path) -> np.ndarray:
     return poses[ok][order]
 
 
-def _read_up(path: Path) -> np.ndarray | None:
-    if not path.is_file():
-        return None
-    import yaml
-
-    try:
-        doc = yaml.safe_load(path.read_text())
-        up = np.asarray(doc["graph"]["up_axis"], dtype=np.float64)
-    except Exception:  # noqa: BLE001 - the up vector only orients the camera; a default is fine
-        log.warning("%s: no readable graph.up_axis; using the viewer's default up direction", path)
-        return None
-    if up.shape != (3,) or not np.isfinite(up).all() or np.linalg.norm(up) == 0:
-        return None
-    return up / np.linalg.norm(up)
-
-
 def load_run(run_dir: str | Path) -> tuple[MapSnapshot, RunInfo]:
     """Read a run directory into one snapshot (status "browse") plus its :class:`RunInfo`."""
     root = Path(run_dir)
     if not root.is_dir():
         raise DataError(f"{root}: run directory does not exist")
-    ply = root / "gaussians.ply"
-    if not ply.is_file():
+    folder = RunFolder(root)
+    if not folder.gaussians.is_file():
         raise DataError(f"{root}: not a run directory (no gaussians.ply)")
-    arrays = read_gaussians_ply(ply).arrays()
-    graph = read_graph_json(root / "graph.json", centers=True) if (root / "graph.json").is_file() else None
-    timings = _read_timings(root / "timings.json")
-    trajectory = _read_trajectory(root / "map.npz")
+    arrays = read_gaussians_ply(folder.gaussians).arrays()
+    graph = read_graph_json(folder.graph, centers=True) if folder.graph.is_file() else None
+    timings = read_timings(folder.timings)
+    trajectory = _read_trajectory(folder.map)
     counts: dict[str, float] = {"gaussians": len(arrays["means"])}
-    counts.update(_run_counts(timings, root / "timings.json"))
+    counts.update(_run_counts(timings, folder.timings))
     snap = MapSnapshot(
         **arrays,
         trajectory=trajectory,
@@ -135,7 +103,7 @@ def load_run(run_dir: str | Path) -> tuple[MapSnapshot, RunInfo]:
         map_rev=0,
         status=f"browsing {root.name}",
     )
-    return snap, RunInfo(path=root, up=_read_up(root / "config.yaml"))
+    return snap, RunInfo(path=root, up=recorded_up(root))
 
 
 __all__ = ["RunInfo", "load_run"]
