@@ -84,20 +84,3 @@ class RunFolder:
     def lock(self) -> Path:
         return self.path / LOCK
 
-
-__all__ = [
-    "CONFIG",
-    "EXPORT",
-    "EXPORTS",
-    "GAUSSIANS",
-    "GRAPH",
-    "LOCK",
-    "MAP",
-    "METRICS",
-    "RUN_FILES",
-    "RUN_ID",
-    "RunFolder",
-    "SCENE",
-    "TIMINGS",
-    "TRAJECTORY",
-]

@@ -212,20 +212,3 @@ def write_metrics(path: str | Path, report: dict[str, Any]) -> Path:
     atomic_write_text(path, json.dumps(json_safe(report), indent=2, allow_nan=False) + "\n")
     return path
 
-
-__all__ = [
-    "config_digest",
-    "json_safe",
-    "read_config",
-    "read_run_id",
-    "read_timings",
-    "recorded_data_path",
-    "recorded_up",
-    "remove_run_id",
-    "resumed_run_id",
-    "start_run_dir",
-    "write_config",
-    "write_metrics",
-    "write_run_id",
-    "write_timings",
-]
