@@ -235,10 +235,7 @@ def map_scene(
     import torch
 
     from .config import load_config
-    from .datasets import configured_scene
-    from .mapping.engine import MappingEngine, open_frames
-    from .mapping.mapper import Mapper
-    from .runs import run_directory
+    from .mapping.session import mapping_session
 
     t_start = time.perf_counter()
     ov = [*overrides, *spec.overrides]
@@ -246,25 +243,20 @@ def map_scene(
         ov.append(f"device={device}")
     cfg = load_config(config, ov)
     run_dir = Path(out_root) / spec.name
-    with run_directory(run_dir, "run-batch"):
-        if spec.synthetic_seed is not None:
-            s = cfg.synthetic
-            s.seed = spec.synthetic_seed
-            data = configured_scene(run_dir / "scene", s, remedy="give a new --out, or remove that folder")
-        else:
-            data = Path(str(spec.data))
-        # recorded in config.yaml: where the frames came from (and where `eval` looks for ground truth)
-        ds = open_frames(cfg, data, spec.segments)
-        mapper = Mapper(cfg, cfg.device)
-        # a scene stopped by a bad frame resumes with `run --resume --out`
-        engine = MappingEngine(mapper, run_dir, data)
-        engine.open(cfg, ds)
+    data = None  # synthetic: the scene of the scene's seed, generated in RUN_DIR/scene
+    if spec.synthetic_seed is not None:
+        cfg.synthetic.seed = spec.synthetic_seed
+    else:
+        data = Path(str(spec.data))
+    # recorded in config.yaml: where the frames came from (and where `eval` looks for ground truth); a scene
+    # stopped by a bad frame resumes with `run --resume --out`
+    with mapping_session(cfg, run_dir, data, command="run-batch", segments=spec.segments) as session:
+        mapper = session.mapper
         dev = mapper.device
         if dev.type == "cuda":
             torch.cuda.reset_peak_memory_stats(dev)
         # bad frames raise, or are skipped with a warning (data.on_bad_frame)
-        with engine.stop.signals():
-            summary = engine.run(ds.frames(), total=len(ds), progress=progress, desc=spec.name)
+        summary = session.run(progress=progress, desc=spec.name)
     if summary.status == "stopped":
         # Ctrl-C / SIGTERM: this scene's map so far is saved (`run --resume --out`); the batch stops
         raise KeyboardInterrupt(f"{run_dir}: stopped after {summary.read} frames")

@@ -25,7 +25,7 @@ from ..config import Config
 from ..errors import DataError, OGSceneError
 from ..runs import EXPORTS, RunFolder, SaveError, StopRequest, resumed_run_id, start_run_dir
 from .pose_jump import PoseJumpError
-from .source import check_same_source, dataset_source, matching_pixel_centers, record_data, remove_run_temps
+from .source import check_same_source, dataset_source, matching_pixel_centers, remove_run_temps
 
 log = logging.getLogger(__name__)
 
@@ -66,20 +66,6 @@ class MapSaveFailed(OGSceneError):
 
 
 # ----------------------------------------------------------------------------------------------- engine
-def open_frames(
-    cfg: Config, data: str | Path, segments: str | Path | None = None, max_frames: int | None = None
-):
-    """The dataset of a run (its path, and ``segments`` when given, recorded in ``cfg``: the run's
-    ``config.yaml`` then tells ``eval`` the ground truth and ``--resume`` the frames)."""
-    from ..datasets import open_dataset
-
-    record_data(cfg, data, segments)
-    ds = open_dataset(max_frames=max_frames, config=cfg.data)
-    if len(ds) == 0:
-        raise DataError(f"{data}: the dataset has no frames")
-    return ds
-
-
 def _counts(mapper: Any) -> dict:
     return dict(getattr(getattr(mapper, "timings", None), "counts", {}) or {})
 
