@@ -84,6 +84,13 @@ MIN_VISIBLE = 3  # visible Gaussians a part needs to be judged
 MIN_PART = int(os.environ.get("EV_MINPART", 8))  # a segment's Gaussians apart in space start parts of their own from this many on
 CELL_MIN = 1  # visible Gaussians (in its segment) a cell needs to be judged
 NEIGHBOURS = 8  # a cell's neighbours in a view: its nearest visible cells (within ``radius``)
+COHERE = float(os.environ.get("EV_COHERE", 2.0))  # apart segments hold at most this many times the group
+SPLIT_MIN = int(os.environ.get("EV_SPLITMIN", 3))  # Gaussians a group of cells needs to be split off
+SPLIT_VIEWS = float(os.environ.get("EV_SPLITVIEWS", 1.5))  # weighted views apart a split needs (about two)
+ANCHOR = 8  # a part's oldest visible cells whose segment anchors its cells' votes in a view
+CONF_APART = os.environ.get("EV_CONFAPART", "1") == "1"
+UNSURE_APART = float(os.environ.get("EV_UNSURE", 1.0))  # weight of a cell's apart vote from a low-scored segment
+LINK_RATIO = float(os.environ.get("EV_LINKRATIO", 3.0))  # together at least this many times apart: linked
 LINK_VIEWS = 2  # views that must judge two cells of a part before they count as linked
 WEAK_OWNERS = os.environ.get("EV_WEAKOWN", "1") == "1"
 DISPUTE = 0.5  # a Gaussian is disputed when this share of its judged views disputed its label
@@ -243,13 +250,17 @@ class EvidenceModel:
         self.min_views = int(min_views)
         self.cell_part = torch.zeros(0, dtype=torch.long, device=device)
         self.cell_vox = torch.zeros((0, 3), dtype=torch.long, device=device)
-        self.cell_main = torch.zeros((0, 2), device=device)  # views in / apart from its part's main segment
+        # per cell: views in / apart from its part's anchor segment, and the part's Gaussians in the segments
+        # of the apart views (summed, weighted)
+        self.cell_main = torch.zeros((0, 3), device=device)
         self._cell_keys = torch.zeros(0, dtype=torch.int64, device=device)  # sorted (part, voxel) keys
         self._cell_ids = torch.zeros(0, dtype=torch.long, device=device)
         self.next_part = 0
         self.part_owned = torch.zeros(0, device=device)  # views in which the part owned its segment
+        self.part_apart = torch.zeros(0, device=device)  # views that separated the part from another
         self.part_touched = torch.zeros(0, dtype=torch.bool, device=device)  # judged since the last decide
         self.cell_pairs = PairTable(3, device)  # together, apart (weighted), views
+        self._judged: dict[int, tuple[int, int]] = {}  # view -> (cells, parts) when it was last judged
         self.part_pairs = PairTable(3, device)  # FIRM, WEAK, APART
         self.stats = EvidenceStats()
 
@@ -257,7 +268,7 @@ class EvidenceModel:
     def new_parts(self, count: int) -> torch.Tensor:
         start = self.next_part
         self.next_part += int(count)
-        for name in ("part_owned", "part_touched"):
+        for name in ("part_owned", "part_apart", "part_touched"):
             t = getattr(self, name)
             grown = torch.zeros(self.next_part, dtype=t.dtype, device=self.device)
             grown[: t.numel()] = t
@@ -298,7 +309,7 @@ class EvidenceModel:
             cell[miss] = ids[inv]
             self.cell_part = torch.cat([self.cell_part, parts.long()[first]])
             self.cell_vox = torch.cat([self.cell_vox, vox[first]])
-            self.cell_main = torch.cat([self.cell_main, torch.zeros((uk.numel(), 2), device=keys.device)])
+            self.cell_main = torch.cat([self.cell_main, torch.zeros((uk.numel(), 3), device=keys.device)])
             self._reindex_cells()
             self.stats.cells = int(self.cell_part.numel())
         gm.aux("ev_cell", -1.0)[rows] = cell.float()
@@ -330,16 +341,26 @@ class EvidenceModel:
         depth: np.ndarray,
         *,
         weights: dict[int, float] | None = None,
+        confident: set[int] | None = None,
         margin: float = 0.1,
-        born: int | None = None,
+        view: int | None = None,
+        revisit: bool = False,
     ) -> None:
         """Add one view's evidence (see the module docstring). ``segments`` [H,W] ids (0 = none); ``pose``
         c2w, ``K``, ``depth`` the view's (metres); ``weights`` each segment's weight (its rescaled SAM
-        score; 1 where missing); ``born``: the keyframe index of this view, whose own new Gaussians cast no
-        Gaussian-level vote (their label came from these segments)."""
+        score; 1 where missing); ``confident``: the segments SAM scored high; ``view``: the keyframe index
+        of this view, whose own new Gaussians cast no Gaussian-level vote (their label came from these
+        segments). A view judged again (``revisit``: the long-term step's memory views) votes only where it
+        has not yet: for the cells and parts made since it was last judged, and the Gaussians made after it,
+        so that no view counts twice for anything however often it is revisited."""
         if segments is None or len(gm) == 0:
             return
         self.ensure_cells(gm)
+        since = self._judged.get(view, (0, 0)) if revisit else (0, 0)
+        if view is not None:
+            self._judged[view] = (int(self.cell_part.numel()), self.next_part)
+        if revisit and since == self._judged[view]:
+            return  # nothing made since
         dev = gm.device
         seg = torch.as_tensor(np.ascontiguousarray(segments), device=dev).long()
         pix = visible_pixels(
@@ -361,34 +382,80 @@ class EvidenceModel:
         for i, v in (weights or {}).items():
             if 0 < int(i) < S:
                 w[int(i)] = float(v)
+        sure = torch.ones(S, dtype=torch.bool, device=dev)
+        if confident is not None and CONF_APART:
+            sure[:] = False
+            ids = [int(i) for i in confident if 0 < int(i) < S]
+            sure[torch.tensor(ids, dtype=torch.long, device=dev)] = True
         cell = gm.aux("ev_cell", -1.0)[g].long()
         # cells: every visible Gaussian (a Gaussian at an edge, in its object's segment in most views, links
         # with its object's cells; an even split links nothing)
-        self._observe_cells(cell, s, w)
+        self._observe_cells(cell, gm.labels[g].long(), s, w, sure, since[0])
         # parts and Gaussians: a big segment's boundary pixels are left out (spills across an edge)
         ok = ~spill_pixels(seg).reshape(-1)[px]
         g, s, cell = g[ok], s[ok], cell[ok]
         if g.numel() == 0:
             return
         n_seg = torch.bincount(s, minlength=S).float()
-        self._observe_parts(self.cell_part[cell], s, n_seg, w)
-        self._observe_gaussians(gm, g, s, S, born)
+        self._observe_parts(self.cell_part[cell], gm.labels[g].long(), s, n_seg, w, since[1])
+        self._observe_gaussians(gm, g, s, S, view, revisit)
 
-    def _observe_cells(self, cell: torch.Tensor, s: torch.Tensor, w: torch.Tensor) -> None:
+    def _observe_cells(
+        self,
+        cell: torch.Tensor,
+        lab: torch.Tensor,
+        s: torch.Tensor,
+        w: torch.Tensor,
+        sure: torch.Tensor,
+        since: int = 0,
+    ) -> None:
         n_cell = torch.bincount(cell, minlength=int(self.cell_part.numel()))
         top, cnt = _majority(cell, s, int(self.cell_part.numel()))
         c = torch.nonzero((cnt >= CELL_MIN) & (2 * cnt > n_cell)).squeeze(1)  # a strict majority
         if c.numel() == 0:
             return
-        # each judged cell: in its part's main segment of this view (the one holding most of the part), or not
+        # each judged cell: in its part's anchor segment of this view, or in another segment that the part
+        # holds most of (the part falls into two segments here: two objects, or a random cut); in a segment of
+        # other parts it says nothing here (the Gaussians' disputes judge that: a label that ran over into its
+        # neighbour). The anchor is the segment of most of the part's oldest visible cells (``ANCHOR``): the
+        # largest share of a part that spans two objects is now one of them, now the other, as the view
+        # moves; its oldest cells are where it began
         part_of = self.cell_part[cell]
-        main, _ = _majority(part_of, s, self.next_part)
-        n_part = torch.bincount(part_of, minlength=self.next_part)
-        pc = self.cell_part[c]
+        P, S = self.next_part, int(w.numel())
+        pc, sc = self.cell_part[c], top[c]
+        order = torch.argsort(pc * (int(c.max()) + 1) + c)  # by part, then by age (cell id)
+        po = pc[order]
+        start = torch.ones_like(po, dtype=torch.bool)
+        start[1:] = po[1:] != po[:-1]
+        first = torch.cummax(torch.where(start, torch.arange(po.numel(), device=c.device), 0), 0).values
+        oldest = order[torch.arange(po.numel(), device=c.device) - first < ANCHOR]
+        anchor, _ = _majority(pc[oldest], sc[oldest], P)
+        n_part = torch.bincount(part_of, minlength=P)
+        # a segment is the part's when the part's label holds most of it (the label's other parts share it)
+        plab, _ = _majority(part_of, lab, P)
+        L = int(lab.max()) + 2 if lab.numel() else 1
+        held_l = torch.bincount((lab + 1) * S + s, minlength=L * S)  # [label + 1, segment] visible Gaussians
+        held_p = torch.bincount(part_of * S + s, minlength=P * S)
+        n_seg = torch.bincount(s, minlength=S)
+
+        def held(parts: torch.Tensor, segs: torch.Tensor) -> torch.Tensor:
+            pl = plab[parts]
+            return torch.where(pl >= 0, held_l[(pl + 1).clamp(min=0) * S + segs], held_p[parts * S + segs])
+
+        own = held(pc, sc) >= MAJOR * n_seg[sc]
         ok = n_part[pc] >= MIN_VISIBLE
-        inside = (top[c] == main[pc]).float()
-        wc = w[top[c]] * ok
-        self.cell_main.index_add_(0, c, torch.stack([wc * inside, wc * (1 - inside)], 1))
+        inside = sc == anchor[pc]
+        wc = w[sc] * ok
+        # apart from segments that SAM scored low counts less: it cuts a wall at random places, and scores the
+        # pieces low
+        both_sure = sure[sc] & sure[anchor[pc].clamp(min=0)]
+        wa = wc * torch.where(both_sure, 1.0, UNSURE_APART)
+        fresh = c >= since
+        away = wa * (~inside & own)
+        # and, for the apart votes, how much of the part that segment held: an object the part took in is
+        # all of its segment; a random cut is a large piece of the part
+        votes = torch.stack([wc * inside, away, away * held_p[pc * S + sc].float()], 1)
+        self.cell_main.index_add_(0, c[fresh], votes[fresh])
         if c.numel() < 2:
             return
         centre = (self.cell_vox[c].float() + 0.5) * self.cell
@@ -399,37 +466,69 @@ class EvidenceModel:
         a, b = c[i[keep]], c[nbr[keep]]
         key = torch.unique(PairTable.key(a, b))  # a pair found from both sides counts once
         a, b = key >> 31, key & ((1 << 31) - 1)
+        if since:
+            a, b = a[b >= since], b[b >= since]  # b > a: one of them made since
         sa, sb = top[a], top[b]
         same = sa == sb
+        pa = self.cell_part[a]
+        # apart where both segments are mostly the part's (see above)
+        apart = ~same & (held(pa, sa) >= MAJOR * n_seg[sa]) & (held(pa, sb) >= MAJOR * n_seg[sb])
         wt = torch.minimum(w[sa], w[sb])
-        self.cell_pairs.add(a, b, torch.stack([wt * same, wt * ~same, torch.ones_like(wt)], 1))
+        wx = wt * torch.where(sure[sa] & sure[sb], 1.0, UNSURE_APART)
+        self.cell_pairs.add(a, b, torch.stack([wt * same, wx * apart, torch.ones_like(wt)], 1))
 
-    def _observe_parts(self, part: torch.Tensor, s: torch.Tensor, n_seg: torch.Tensor, w: torch.Tensor) -> None:
-        n_part = torch.bincount(part, minlength=self.next_part)
-        top, cnt = _majority(part, s, self.next_part)
+    def _observe_parts(
+        self,
+        part: torch.Tensor,
+        lab: torch.Tensor,
+        s: torch.Tensor,
+        n_seg: torch.Tensor,
+        w: torch.Tensor,
+        since: int = 0,
+    ) -> None:
+        """Part pairs of one view (``part``, ``lab``, ``s`` per visible Gaussian). A part's share of a segment is
+        its label's (the parts of one object share the segment that shows it): each of two parts in one
+        segment is a real part of it when its label holds ``min_part`` of it, and a view separates two parts
+        in two segments where each one's label is the main one of its segment (``MAJOR``)."""
+        P, S = self.next_part, int(n_seg.numel())
+        n_part = torch.bincount(part, minlength=P)
+        top, cnt = _majority(part, s, P)
         p = torch.nonzero((n_part >= MIN_VISIBLE) & (cnt >= CONTAIN * n_part)).squeeze(1)
         if p.numel() == 0:
             return
-        self.part_touched[p] = True
-        sp, share = top[p], cnt[p].float() / n_seg[top[p]]
-        self.part_owned[p[share >= OWN]] += 1
+        self.part_touched[p[p >= since]] = True
+        sp = top[p]
+        # each judged part's label (the one most of its visible Gaussians carry) and that label's share of the
+        # part's segment; an unlabelled part counts alone
+        plab, _ = _majority(part, lab, P)
+        lp = plab[p]
+        L = int(lab.max()) + 2 if lab.numel() else 1
+        held = torch.bincount((lab + 1) * S + s, minlength=L * S).float()
+        share = torch.where(lp >= 0, held[(lp + 1) * S + sp], cnt[p].float()) / n_seg[sp]
+        self.part_owned[p[(share >= OWN) & (p >= since)]] += 1
         if p.numel() < 2:
             return
         i, j = torch.triu_indices(p.numel(), p.numel(), 1, device=p.device)
+        if since:  # (p is sorted: j > i) one of them made since
+            keep = p[j] >= since
+            i, j = i[keep], j[keep]
         si, sj = sp[i], sp[j]
         same = si == sj
         big = share >= self.min_part
         firm = same & big[i] & big[j]
-        # apart: each part the main one in its segment. A SAM cut through a wall puts a small piece of it in a
-        # segment of its own now and then, but that segment is mostly the rest of the wall; an object that
-        # SAM shows on its own is most of its segment
+        # apart: each part's label the main one in its segment. A SAM cut through a wall puts a small piece of it
+        # in a segment of its own now and then, but that segment is mostly the rest of the wall; an object
+        # that SAM shows on its own is most of its segment
         major = share >= MAJOR
         apart = ~same & major[i] & major[j]
         wt = torch.where(same, w[si], torch.minimum(w[si], w[sj]))
         vals = torch.stack([wt * firm, wt * (same & ~firm), wt * apart], 1)
+        self.part_apart.index_add_(0, p[i], wt * apart).index_add_(0, p[j], wt * apart)
         self.part_pairs.add(p[i], p[j], vals)
 
-    def _observe_gaussians(self, gm, g: torch.Tensor, s: torch.Tensor, S: int, born: int | None) -> None:
+    def _observe_gaussians(
+        self, gm, g: torch.Tensor, s: torch.Tensor, S: int, view: int | None, revisit: bool
+    ) -> None:
         lab = gm.labels[g].long()
         labelled = lab >= 0
         L = _n_labels(gm)
@@ -439,8 +538,8 @@ class EvidenceModel:
         n_lab = torch.bincount(s[labelled], minlength=S)
         seg_lab = torch.where(2 * seg_cnt > n_lab, seg_lab, torch.full_like(seg_lab, -1))
         vote = seg_lab[s]
-        if born is not None:
-            old = gm.origin_kf[g] != born
+        if view is not None:  # the Gaussians the view made itself (or, revisited, those it judged) cast none
+            old = (gm.origin_kf[g] > view) if revisit else (gm.origin_kf[g] != view)
             g, s, lab, labelled, vote = g[old], s[old], lab[old], labelled[old], vote[old]
         own = labelled & (main[lab.clamp(min=0)] == s)
         disputed = labelled & ~own & (vote != lab)
@@ -515,9 +614,10 @@ class EvidenceModel:
         a, b, part = a[inside], b[inside], pa[inside]
         t, x, nv = (self.cell_pairs.vals[inside, i] for i in range(3))
         n_cells = int(self.cell_part.numel())
-        # linked: together more often than apart, in two views at least (a cell that only its first
-        # view judged, hidden or at a segment's edge since, links nothing: it would bridge a cut)
-        linked = (t > x) & (nv >= LINK_VIEWS)
+        # linked: together at least twice as often as apart, in two views at least: a cell that only its first
+        # view judged (hidden or at a segment's edge since), or one on the edge between two objects that
+        # views give now to one, now to the other, links nothing: it would bridge the cut
+        linked = (t >= LINK_RATIO * x) & (t > 0) & (nv >= LINK_VIEWS)
         comp = _components(n_cells, a[linked], b[linked])  # singletons for every other cell
         # Gaussians per cell and per component: the part's largest component keeps it
         cell = gm.aux("ev_cell", -1.0).long()
@@ -528,23 +628,26 @@ class EvidenceModel:
         best = torch.full((self.next_part,), -1.0, device=self.device)
         best.scatter_reduce_(0, comp_part[comp_mass > 0], comp_mass[comp_mass > 0], reduce="amax")
         is_main = (comp_mass >= best[comp_part.clamp(min=0)]) & (comp_part >= 0)
-        # a component's views across its cut edges (to the rest of the part)
-        ca, cb = comp[a], comp[b]
-        cross = ca != cb
-        t_cross = torch.zeros(n_cells, device=self.device)
-        x_cross = torch.zeros(n_cells, device=self.device)
-        for c in (ca, cb):
-            t_cross.index_add_(0, c[cross], t[cross])
-            x_cross.index_add_(0, c[cross], x[cross])
-        cut = (x_cross >= 1.0) & (x_cross >= self.split_ratio * (t_cross + x_cross))
-        # or its cells lay apart from their part's main segment in most views (a component apart in space,
-        # whose cells no neighbour of the rest of the part ever judged with them)
-        judged = self.cell_main.sum(1) > 0
-        votes = torch.zeros((n_cells, 2), device=self.device).index_add_(0, comp, self.cell_main)
+        # a component's cells' views in and apart from their part's anchor segment, per judged cell
+        judged = self.cell_main[:, :2].sum(1) > 0
+        votes = torch.zeros((n_cells, 3), device=self.device).index_add_(0, comp, self.cell_main)
         n_judged = torch.zeros(n_cells, device=self.device).index_add_(0, comp, judged.float())
-        tot = votes.sum(1)
-        off = (tot >= LINK_VIEWS * 0.5 * n_judged.clamp(min=1)) & (votes[:, 1] >= self.split_ratio * tot) & (tot > 0)
-        go = (~is_main) & (comp_mass >= MIN_PART) & (cut | off)
+        together, apart = votes[:, 0] / n_judged.clamp(min=1), votes[:, 1] / n_judged.clamp(min=1)
+        # the segments that put it apart held about the component itself, not a larger piece of its part:
+        # SAM cuts a floor at random places, each time another piece; an object is its segment every time
+        size = votes[:, 2] / votes[:, 1].clamp(min=1e-9)
+        coherent = size <= COHERE * comp_mass
+        go = (
+            (comp_mass >= SPLIT_MIN) & (apart >= SPLIT_VIEWS) & coherent
+            & (apart >= self.split_ratio * (apart + together))
+        )  # fmt: skip
+        # a part keeps the components that stay; if none would, its largest
+        stays = torch.zeros(self.next_part, dtype=torch.bool, device=self.device)
+        live = (comp_mass > 0) & (comp_part >= 0)
+        live &= self.part_touched[comp_part.clamp(min=0)]
+        stays[comp_part[live & ~go]] = True
+        go &= live & (stays[comp_part.clamp(min=0)] | ~is_main)
+        t_cross, x_cross = together, apart
         # the part's largest component may tie with another: one of them stays (the smaller id)
         go_ids = torch.nonzero(go).squeeze(1)
         if go_ids.numel() == 0:
@@ -558,8 +661,9 @@ class EvidenceModel:
         self.cell_part[sel] = moved[sel]
         self.cell_main[sel] = 0.0  # their part's main segment is another now
         self._reindex_cells()
-        # the new part starts its history with what the cells said about it and its former part
-        self.part_pairs.add(new, old, torch.stack([torch.zeros_like(t_cross[go_ids]), t_cross[go_ids],
+        # the new part starts its history with what the cells said about it and its former part (the views
+        # that held them in one segment held two real parts of it)
+        self.part_pairs.add(new, old, torch.stack([t_cross[go_ids], torch.zeros_like(t_cross[go_ids]),
                                                    x_cross[go_ids]], 1))  # fmt: skip
         self.part_touched[new] = True
         return int(go_ids.numel())
@@ -603,7 +707,7 @@ class EvidenceModel:
         gv = torch.zeros((keys.numel(), 3), device=dev).index_add_(0, inv, vals[cross])
         ga, gb = (keys >> 31).tolist(), (keys & ((1 << 31) - 1)).tolist()
         own_t = torch.zeros(n, dtype=torch.bool, device=dev)
-        own_t[root[self.part_owned[:n] >= 1]] = True
+        own_t[root[self.part_apart[:n] > 0]] = True  # a group that some view showed apart from anything
         owned = own_t.tolist()
         group_adj: dict[int, dict[int, np.ndarray]] = {}
         heap = []
@@ -693,9 +797,9 @@ class EvidenceModel:
         return float(v[2]) > 0 and float(v[2]) > self.separation * float(v[0])
 
     def _mergeable(self, v: np.ndarray, owners: bool = False) -> bool:
-        """The merge test on summed statistics v (firm, weak, apart) of two groups; ``owners``: both groups
-        owned a segment in some view (objects SAM found on their own), which weak togetherness does not
-        merge."""
+        """The merge test on summed statistics v (firm, weak, apart) of two groups; ``owners``: a view showed
+        each group apart from something (objects SAM found on their own), which weak togetherness does not
+        merge: it merges a fragment into what holds it."""
         firm, weak, apart = float(v[0]), float(v[1]), float(v[2])
         if firm > 0:
             return apart <= self.separation * firm

@@ -56,7 +56,11 @@ from ..frame import Frame, implausible_median_depth
 from ..gaussians import GaussianMap, corrupt_npz_message
 from ..runs import RunFolder, save_run
 from .checkpoint import CheckpointArrays, read_checkpoint
+import os
+
 from .evidence import MIN_PART, EvidenceModel
+
+REVISIT = os.environ.get("EV_REVISIT", "1") == "1"
 from .init import make_probes
 from .keyframes import KeyframeSelector
 from .local import (
@@ -611,8 +615,8 @@ class Mapper:
         hit = near >= 0
         same = torch.zeros_like(hit)
         same[hit] = gm.labels[near[hit]].long() == res.seg_labels[seg[hit]].long()
-        part_of = self.evidence.parts_of(gm)
-        top, cnt, _, _ = group_top2(seg[same], part_of[near[same]].clamp(min=0), S)
+        cell = gm.aux("ev_cell", -1.0)[near[same]].long()
+        top, cnt, _, _ = group_top2(seg[same], self.evidence.cell_part[cell.clamp(min=0)], S)
         seg_part = torch.where(cnt > 0, top, torch.full_like(top, -1))
         parts = torch.full((len(probes),), -1, dtype=torch.long, device=self.device)
         parts[sel] = seg_part[seg]
@@ -815,20 +819,28 @@ class Mapper:
     def _observe_evidence(self, k: _Keyframe) -> None:
         """The keyframe's co-segmentation evidence, once its new Gaussians are in the map (its segments made
         them: the view is their first judge)."""
-        if not self._collects_evidence() or k.segments is None:
+        if self._collects_evidence():
+            self._judge(k.index, k.segments, k.scores, k.frame)
+
+    def _judge(self, view: int, segments, scores: dict[int, float], source, revisit: bool = False) -> None:
+        """One view's evidence (``evidence.py``): ``source`` its Frame or MemoryEntry; its segments weighted
+        by their rescaled SAM score (Eq. 5's c_sam), confident where scored ``merge_min_score`` or more."""
+        if segments is None:
             return
-        seg_range = tuple(self.config.segmentation.sam_score_range)
-        conf_range = tuple(self.config.segmentation.conf_range)
-        ids = list(k.scores)
+        ids = list(scores)
         weights = {}
         if ids:
-            w = rescale_sam_scores(torch.tensor([k.scores[i] for i in ids]), seg_range, conf_range)
+            w = rescale_sam_scores(
+                torch.tensor([scores[i] for i in ids]),
+                tuple(self.config.segmentation.sam_score_range),
+                tuple(self.config.segmentation.conf_range),
+            )
             weights = dict(zip(ids, w.tolist()))
-        frame = k.frame
+        confident = {i for i, v in scores.items() if v >= self.cfg.merge_min_score}
         with self.timings.section("evidence"):
             self.evidence.observe(
-                self.map, k.segments, frame.pose, frame.K, frame.depth, weights=weights,
-                margin=self.cfg.init_depth_margin, born=k.index,
+                self.map, segments, source.pose, source.K, source.depth, weights=weights, confident=confident,
+                margin=self.cfg.init_depth_margin, view=view, revisit=revisit,
             )  # fmt: skip
 
     def _longterm(self) -> None:
@@ -838,6 +850,11 @@ class Mapper:
             with self.timings.section("evidence"):
                 self.timings.add("evidence_lowered", self.evidence.lower_disputed(self.map))
         views = self.memory.next_views(cfg.longterm_views)
+        if self._collects_evidence() and REVISIT:
+            # the memory views judged again, against the map as it is now: what was made since they were
+            # keyframes has had no word from them
+            for entry in views:
+                self._judge(entry.keyframe, entry.segments, entry.scores, entry, revisit=True)
         with self.timings.section("longterm"):
             for entry in views:
                 st = longterm_view_update(
