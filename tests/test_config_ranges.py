@@ -292,3 +292,14 @@ def test_a_retired_key_in_an_older_runs_config_is_dropped_not_refused(tmp_path):
     assert not hasattr(cfg.graph.captioner, "backoff_s")
     with pytest.raises(ConfigError, match="unknown config key"):
         load_config(None, ["graph.captioner.no_such_key=1"])
+
+
+def test_the_retired_evidence_rules_of_an_older_run_load_with_a_notice(tmp_path, caplog):
+    # the repair rules that mapping.evidence replaced (issue 39): a run's config.yaml written before holds them
+    old = tmp_path / "config.yaml"
+    old.write_text("mapping:\n  evidence_split: true\n  evidence_partition_apart: 0.25\n  evidence_veto: false\n")
+    with caplog.at_level("INFO", logger="ogscene3d.config"):
+        cfg = load_config(old)
+    assert cfg.mapping.evidence and not hasattr(cfg.mapping, "evidence_split")
+    notes = [r.getMessage() for r in caplog.records if "no longer used" in r.getMessage()]
+    assert len(notes) == 3 and all("mapping.evidence" in n for n in notes)

@@ -249,3 +249,42 @@ def test_a_resumed_map_gets_one_part_per_label(device):
     assert bool((parts >= 0).all()) and torch.unique(parts).numel() == 3
     assert torch.unique(parts[vase]).numel() == 1 and torch.unique(parts[:4]).numel() == 1
     assert int(parts[vase][0]) != int(parts[10])
+
+
+def test_cut_pieces_larger_than_the_group_are_no_split(device):
+    """Views that cut a wall at different places, each time between its oldest cells and the far end:
+    the far end is apart in all of them, but each cut piece held a larger share of the wall than the far
+    end (a random cut, not an object in a segment of its own), so the wall stays one part."""
+    gm, _ = plane_map(device)
+    ev = with_parts(gm, [])
+    ev.observe(gm, WHOLE, POSE, K, DEPTH)
+    for at in (16, 32, 48, 16, 32, 48):
+        ev.observe(gm, halves(at), POSE, K, DEPTH)
+    assert ev.decide(gm)["part_splits"] == 0
+    assert torch.all(gm.labels == 0)
+
+
+def test_a_revisited_view_votes_only_for_what_was_made_since(device):
+    """A memory view judged again adds nothing for what it has judged already; for a part made since, it
+    adds its word once."""
+    gm, vase = plane_map(device)
+    ev = with_parts(gm, [vase])
+    ev.observe(gm, vase_view(), POSE, K, DEPTH, view=0)
+    cells, parts = ev.cell_pairs.vals.clone(), ev.part_pairs.vals.clone()
+    ev.observe(gm, vase_view(), POSE, K, DEPTH, view=0, revisit=True)
+    assert torch.equal(ev.cell_pairs.vals, cells) and torch.equal(ev.part_pairs.vals, parts)
+    # a later keyframe adds a patch in front of the plane's left part: a part of its own
+    n0 = len(gm)
+    xs, ys = np.meshgrid(np.arange(-0.9, -0.6, 0.05), np.arange(-0.3, 0.0, 0.05))
+    pts = torch.tensor(np.stack([xs.ravel(), ys.ravel(), np.full(xs.size, 2.0)], 1), dtype=torch.float32)
+    gm.append(pts, torch.full((len(pts), 3), 0.5), torch.full((len(pts),), -3.0),
+              labels=torch.full((len(pts),), 5, dtype=torch.int32), confidences=torch.full((len(pts),), 0.9))  # fmt: skip
+    rows = torch.arange(n0, len(gm), device=gm.device)
+    ev.assign(gm, rows, ev.new_parts(1).expand(rows.numel()))
+    ev.observe(gm, vase_view(), POSE, K, DEPTH, view=0, revisit=True)
+    a, b = ev.part_pairs.pairs()
+    new = int(ev.next_part) - 1
+    assert bool(((a == new) | (b == new)).any())  # the new part got the view's word
+    before = ev.part_pairs.vals.clone()
+    ev.observe(gm, vase_view(), POSE, K, DEPTH, view=0, revisit=True)  # and only once
+    assert torch.equal(ev.part_pairs.vals, before)

@@ -84,6 +84,7 @@ MIN_VISIBLE = 3  # visible Gaussians a part needs to be judged
 MIN_PART = int(os.environ.get("EV_MINPART", 8))  # a segment's Gaussians apart in space start parts of their own from this many on
 CELL_MIN = 1  # visible Gaussians (in its segment) a cell needs to be judged
 NEIGHBOURS = 8  # a cell's neighbours in a view: its nearest visible cells (within ``radius``)
+FIRM_OWN = os.environ.get("EV_FIRMOWN", "0") == "1"  # firm: each part's own share (not its label's)
 COHERE = float(os.environ.get("EV_COHERE", 2.0))  # apart segments hold at most this many times the group
 SPLIT_MIN = int(os.environ.get("EV_SPLITMIN", 3))  # Gaussians a group of cells needs to be split off
 SPLIT_VIEWS = float(os.environ.get("EV_SPLITVIEWS", 1.5))  # weighted views apart a split needs (about two)
@@ -505,6 +506,7 @@ class EvidenceModel:
         L = int(lab.max()) + 2 if lab.numel() else 1
         held = torch.bincount((lab + 1) * S + s, minlength=L * S).float()
         share = torch.where(lp >= 0, held[(lp + 1) * S + sp], cnt[p].float()) / n_seg[sp]
+        own_share = cnt[p].float() / n_seg[sp]  # the part's own share: a real part of the segment
         self.part_owned[p[(share >= OWN) & (p >= since)]] += 1
         if p.numel() < 2:
             return
@@ -514,7 +516,7 @@ class EvidenceModel:
             i, j = i[keep], j[keep]
         si, sj = sp[i], sp[j]
         same = si == sj
-        big = share >= self.min_part
+        big = (own_share if FIRM_OWN else share) >= self.min_part
         firm = same & big[i] & big[j]
         # apart: each part's label the main one in its segment. A SAM cut through a wall puts a small piece of it
         # in a segment of its own now and then, but that segment is mostly the rest of the wall; an object
