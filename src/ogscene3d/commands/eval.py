@@ -199,8 +199,41 @@ def _run(args: argparse.Namespace) -> int:
             f"{g['num_no_edge']} no edge, {g['num_wrong_relation']} wrong relation; "
             f"{g['num_matched_nodes']} nodes matched)"
         )
+    _print_rooms_and_queries(report)
     _finish(report, out)
     return 0
+
+
+def _print_rooms_and_queries(report: dict[str, Any]) -> None:
+    """The room segmentation and query accuracy lines (when the report has them)."""
+    r = report.get("rooms")
+    if r:
+        print()
+        print(f"rooms: {r['protocol']}")
+        print(
+            f"room precision {_pct(r['precision'])}   recall {_pct(r['recall'])}   (matched per room: "
+            f"{_pct(r['matched_precision'])} / {_pct(r['matched_recall'])}; {r['num_gt_rooms']} GT rooms, "
+            f"{r['num_pred_rooms']} predicted)"
+        )
+        for gid, row in r["per_room"].items():
+            settle = row.get("settle_frames")
+            when = "" if settle is None else f", node {settle:+d} frames after the room was entered"
+            pred = row["pred_room"]
+            name = f"#{pred} {r['pred_types'].get(str(pred), '')}" if pred is not None else "none"
+            print(
+                f"  GT room {gid}: precision {_pct(row['precision'])} recall {_pct(row['recall'])} "
+                f"(room {name}{when})"
+            )
+    q = report.get("queries")
+    if q:
+        print()
+        print(f"queries: {q['protocol']}")
+        cells = [
+            f"{k} {_pct(v['top1_accuracy'])} ({v['top1']}/{v['queries']}, {v['answerable']} answerable)"
+            for k, v in q["per_kind"].items()
+            if v["queries"]
+        ]
+        print("top-1   " + "   ".join(cells))
 
 
 def _finish(report: dict[str, Any], out: Path) -> None:

@@ -25,7 +25,13 @@ def add_parser(subparsers) -> None:
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--config", default=None, help="YAML config (its `synthetic` section gives the defaults)")
     p.add_argument("--seed", type=int, default=None, help="scene, trajectory and noise seed")
-    p.add_argument("--frames", type=int, default=None, help="number of frames")
+    p.add_argument("--frames", type=int, default=None, help="number of frames (--layout apartment: per room)")
+    p.add_argument(
+        "--layout",
+        default=None,
+        choices=choices("synthetic.layout"),
+        help="one furnished room, or an apartment of 2-5 rooms walked through room by room",
+    )
     p.add_argument("--size", type=image_size(8), default=None, metavar="WxH", help="image size, e.g. 160x120")
     p.add_argument(
         "--noise",
@@ -56,6 +62,12 @@ def _reusable(out: str | Path, params: dict, overwrite: bool) -> bool:
         return False
 
 
+def _frame_count(out: Path) -> int:
+    """The frames written (an apartment's path has ``frames`` per room): the poses in traj.txt."""
+    with open(Path(out) / "traj.txt") as f:
+        return sum(1 for line in f if line.strip())
+
+
 def run(args: argparse.Namespace) -> int:
     from ..datasets.synthetic import make_synthetic_scene
 
@@ -69,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
         noise=cfg.noise if args.noise is None else args.noise,
         depth_noise=cfg.depth_noise if args.depth_noise is None else args.depth_noise,
         pose_noise=cfg.pose_noise if args.pose_noise is None else args.pose_noise,
+        layout=cfg.layout if args.layout is None else args.layout,
     )
     try:
         reused = _reusable(args.out, params, args.force)
@@ -82,9 +95,10 @@ def run(args: argparse.Namespace) -> int:
             raise
         # Bad argument values (frames, size, noise std, device): print them like config errors.
         raise ConfigError(f"synth: {e}") from e
+    what = f"{_frame_count(out)} frames" + (", an apartment" if params["layout"] == "apartment" else "")
     if reused:
-        print(f"synthetic scene reused from {out} ({params['frames']} frames, made with the same arguments)")
+        print(f"synthetic scene reused from {out} ({what}, made with the same arguments)")
     else:
         dt = time.perf_counter() - t0
-        print(f"synthetic scene written to {out} ({params['frames']} frames, {dt:.1f} s)")
+        print(f"synthetic scene written to {out} ({what}, {dt:.1f} s)")
     return 0
