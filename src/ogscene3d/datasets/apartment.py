@@ -396,17 +396,20 @@ def _kitchen(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
 
 def _bedroom(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
     floor, rng = ids["floor"], b.rng
-    width = rng.uniform(1.4, 1.6)
-    bed = _wall_piece(
-        b,
-        "bed",
-        lambda c, y, s: _bed(c, y, s, b.color((0.45, 0.32, 0.22))),
-        [width, rng.uniform(1.95, 2.1), 0.5],
-        W,
-        D,
-        floor,
-        margin=0.2,
-    )
+    bed = None
+    for width in (rng.uniform(1.4, 1.6), rng.uniform(0.9, 1.0)):  # a double bed, else a single one
+        bed = _wall_piece(
+            b,
+            "bed",
+            lambda c, y, s: _bed(c, y, s, b.color((0.45, 0.32, 0.22))),
+            [width, rng.uniform(1.95, 2.1), 0.5],
+            W,
+            D,
+            floor,
+            margin=0.2,
+        )
+        if bed is not None:
+            break
     if bed is not None:
         obj, side, center, _ = bed
         for _ in range(int(rng.integers(1, 3))):
