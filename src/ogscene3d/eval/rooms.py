@@ -174,23 +174,14 @@ def rooms_block(
     ``gt_points`` (``gt_point_rooms``: -1 = none), with the Gaussians ``means`` put in rooms by their
     outlines."""
     from ..config import RoomsConfig
-    from ..graph.rooms import RoomMap
+    from ..graph.rooms import assign_rooms, read_rooms
 
     up = run_up(graph)
-    rm = RoomMap(RoomsConfig())
-    rm.load(graph, source, up)
-    rooms = list(rm.rooms.values())
-    pred = rm_assign(means, up, rm)
+    _, floors, rooms = read_rooms(graph, source)
+    pred = assign_rooms(means, up, floors, rooms, RoomsConfig().assign_radius)
     first = {r.id: r.first_frame for r in rooms if r.first_frame >= 0}
     scores = room_scores(gt_points, gt_point_rooms, means, pred, up, entered=entered, first_seen=first)
     out = scores.to_dict()
     out["pred_types"] = {str(r.id): r.type for r in rooms}
-    out["num_floors"] = len(rm.floors)
+    out["num_floors"] = len(floors)
     return out
-
-
-def rm_assign(points: np.ndarray, up: np.ndarray, rm) -> np.ndarray:
-    """The room id of every point by the room map's outlines (:func:`~ogscene3d.graph.rooms.assign_rooms`)."""
-    from ..graph.rooms import assign_rooms
-
-    return assign_rooms(points, up, rm.floors, list(rm.rooms.values()), rm.config.assign_radius)

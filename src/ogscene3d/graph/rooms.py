@@ -544,6 +544,20 @@ def build_room_typer(config: RoomsConfig):
     return LLMRoomTyper.from_config(config) if config.typer == "llm" else RuleRoomTyper()
 
 
+def read_rooms(doc: Mapping[str, Any], source: str = "graph.json") -> tuple[np.ndarray | None, list[Floor],
+                                                                            list[RoomNode]]:  # fmt: skip
+    """The up vector (None when the document has none), storeys and rooms of a graph.json document (none in
+    files written before rooms); DataError naming ``source`` for malformed ones."""
+    rm = RoomMap(RoomsConfig(), typer=RuleRoomTyper())
+    up = doc.get("up")
+    try:
+        u = unit_up(up) if up is not None else None
+    except ValueError:
+        raise DataError(f"{source}: 'up' must be a finite non-zero 3-vector, got {up!r}") from None
+    rm.load(doc, source, u if u is not None else np.array([0.0, 0.0, 1.0]))
+    return u, rm.floors, [rm.rooms[i] for i in sorted(rm.rooms)]
+
+
 # --------------------------------------------------------------------------------------- the room map
 
 

@@ -839,12 +839,15 @@ class SceneGraph:
             edges[(min(s, t), max(s, t))] = SceneEdge(s, t, rel, score, str(e.get("predictor", "")))
         if self.room_map is not None:
             self.room_map.load(doc, source, self.up)
+            for i, rid in self.room_map.object_room.items():  # the rooms' object lists say it too
+                if i in nodes and nodes[i].room is None:
+                    nodes[i].room = rid
         self.nodes, self.edges = nodes, edges
         self._initialized = True
 
     def to_networkx(self):
-        """A ``networkx.DiGraph``: object nodes (ids = labels, ``kind`` "object", ``room``: their room id or -1)
-        with attributes label, caption, tag, confidence, center_x/y/z, the
+        """A ``networkx.DiGraph``: object nodes (ids = labels, ``kind`` "object", ``room``: their room id or
+        -1) with attributes label, caption, tag, confidence, center_x/y/z, the
         axis-aligned box bbox_min_x/y/z and bbox_max_x/y/z, the oriented box obb_center_x/y/z,
         obb_extent_x/y/z (full side lengths) and obb_axes (its 3x3 rows, 9 numbers, as a JSON list),
         num_gaussians, first_seen, last_updated, caption_source; edge attributes relation, score,
