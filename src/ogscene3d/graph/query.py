@@ -1,7 +1,8 @@
 """Queries over objects, their relations and their rooms: "pillow on the bed", "chair in the kitchen",
 "the mug on the desk in the office".
 
-Offline (:func:`parse_query`, :func:`rank`): the text is read as *target* [*relation* *anchor*] [in *room*]:
+Offline (:func:`parse_query`, :func:`rank`): the text is read as a *target*, then optionally a *relation* and an
+*anchor*, then optionally *in* a *room*:
 object terms are the graph's tags and the offline synonyms (:mod:`.terms`), relation phrases those the
 relation vocabulary knows ("on top of", "next to", "inside", ...), room terms the room types and their
 synonyms ("lounge", "study") or "room 3". Each node matching the target is scored by how well its tag or
