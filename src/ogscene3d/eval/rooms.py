@@ -18,13 +18,14 @@ its matched node was first seen (negative: seen through a doorway before it was 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from ..graph.geometry import horizontal_basis, unit_up
+from ..graph.rooms import raster_outline
 
 
 @dataclass
@@ -67,10 +68,14 @@ class RoomScores:
         }
 
 
+def _keys(ij: np.ndarray) -> np.ndarray:
+    ij = np.asarray(ij, dtype=np.int64).reshape(-1, 2)
+    return np.unique((ij[:, 0] + (1 << 30)) << 32 | (ij[:, 1] + (1 << 30)))
+
+
 def _cells(points: np.ndarray, up: np.ndarray, voxel: float) -> np.ndarray:
     e1, e2 = horizontal_basis(unit_up(up))
-    ij = np.floor(np.stack([points @ e1, points @ e2], axis=1) / voxel).astype(np.int64)
-    return np.unique((ij[:, 0] + (1 << 30)) << 32 | (ij[:, 1] + (1 << 30)))
+    return _keys(np.floor(np.stack([points @ e1, points @ e2], axis=1) / voxel))
 
 
 def _near(keys: np.ndarray) -> np.ndarray:
@@ -88,6 +93,7 @@ def room_scores(
     voxel: float = 0.05,
     entered: Mapping[int, int | None] | None = None,
     first_seen: Mapping[int, int] | None = None,
+    outlines: Mapping[int, Sequence[np.ndarray]] | None = None,
 ) -> RoomScores:
     """Score predicted rooms against ground-truth rooms (see the module docstring).
 
@@ -98,6 +104,8 @@ def room_scores(
         voxel: bird's-eye cell size in metres.
         entered: GT room id -> the first frame the camera stood in it (None: never); with ``first_seen``
             (pred room id -> the first frame its node existed) it gives each room's ``settle_frames``.
+        outlines: pred room id -> its outline polygons (world points [K, 3] each): the cells they hold
+            belong to the room too (its extent, also where the map holds few Gaussians).
 
     Returns:
         :class:`RoomScores`.
@@ -105,9 +113,14 @@ def room_scores(
     from scipy.optimize import linear_sum_assignment
 
     gt_ids = [int(i) for i in np.unique(gt_rooms) if i >= 0]
-    pred_ids = [int(i) for i in np.unique(pred_rooms) if i >= 0]
+    outlines = outlines or {}
+    pred_ids = sorted({int(i) for i in np.unique(pred_rooms) if i >= 0} | set(outlines))
     gt_cells = {g: _cells(gt_points[gt_rooms == g], up, voxel) for g in gt_ids}
-    pred_cells = {p: _cells(pred_points[pred_rooms == p], up, voxel) for p in pred_ids}
+    pred_cells = {
+        p: np.union1d(_cells(pred_points[pred_rooms == p], up, voxel),
+                      _keys(raster_outline(outlines.get(p, []), up, voxel)))
+        for p in pred_ids
+    }  # fmt: skip
     gt_near = {g: _near(c) for g, c in gt_cells.items()}
     pred_near = {p: _near(c) for p, c in pred_cells.items()}
     over_pred = np.zeros((len(pred_ids), len(gt_ids)))  # share of the pred room's cells near the GT room
@@ -147,7 +160,7 @@ def room_scores(
         per_room=per_room,
         pred_precision={p: float(v) for p, v in zip(pred_ids, precision)},
         protocol=f"HOV-SG room precision / recall: bird's-eye cells of {voxel:g} m, shared within one cell; "
-        "GT rooms: their observed surface points; predicted rooms: the Gaussians in their outlines",
+        "GT rooms: all their surface points; predicted rooms: their outlines and the Gaussians in them",
     )
 
 
@@ -180,7 +193,9 @@ def rooms_block(
     _, floors, rooms = read_rooms(graph, source)
     pred = assign_rooms(means, up, floors, rooms, RoomsConfig().assign_radius)
     first = {r.id: r.first_frame for r in rooms if r.first_frame >= 0}
-    scores = room_scores(gt_points, gt_point_rooms, means, pred, up, entered=entered, first_seen=first)
+    outlines = {r.id: r.outline for r in rooms}
+    scores = room_scores(gt_points, gt_point_rooms, means, pred, up, entered=entered, first_seen=first,
+                         outlines=outlines)  # fmt: skip
     out = scores.to_dict()
     out["pred_types"] = {str(r.id): r.type for r in rooms}
     out["num_floors"] = len(floors)

@@ -392,10 +392,12 @@ def _rooms_and_queries(
             "rooms not scored: graph.json has no rooms (graph.rooms.enabled was off, or an older run)"
         )
     else:
+        # every surface point of a room, seen or not, as HOV-SG's ground-truth room is its whole region: the
+        # floor under the camera's path or behind furniture is the room's, and its outline may hold it
         lut = gt.instance_rooms
-        point_rooms = np.array([lut.get(int(i), -1) for i in gt.instances[keep]], dtype=np.int64)
+        point_rooms = np.array([lut.get(int(i), -1) for i in gt.instances], dtype=np.int64)
         entered = {k: v.get("first_frame") for k, v in gt.rooms.items()}
-        rooms = rooms_block(run.graph, scored.means, gt.points[keep], point_rooms, entered)
+        rooms = rooms_block(run.graph, scored.means, gt.points, point_rooms, entered)
     gt_inst = np.where(assoc >= 0, gt.instances[np.maximum(assoc, 0)], -1)
     names = {i: gt.class_names[c] for i, c in gt.instance_classes.items()}
     present = {int(i) for i in np.unique(gt.instances[keep]) if i >= 0}

@@ -295,11 +295,18 @@ class HeuristicCaptioner:
     * wall: a vertical sheet at least ``wall_min_height`` high and 1 m wide;
     * otherwise "<size> <colour> [flat horizontal | flat vertical] object, about <largest extent>" with
       size small (< 0.3 m), medium (< 1 m) or large.
+
+    Where a detector named the node's segments, its majority class is the tag, except on a node whose
+    geometry is a floor, ceiling or wall and of whose pixels that class named less than ``structure_share``:
+    an object's segments that the mapping gave to the surface behind it do not make the surface that object.
     """
 
-    def __init__(self, structure_band: float = 0.2, wall_min_height: float = 1.2) -> None:
+    def __init__(
+        self, structure_band: float = 0.2, wall_min_height: float = 1.2, structure_share: float = 0.5
+    ) -> None:
         self.structure_band = structure_band
         self.wall_min_height = wall_min_height
+        self.structure_share = structure_share
 
     def describe(self, requests: Sequence[CaptionRequest]) -> dict[int, Description]:
         return {r.node.id: self.describe_one(r) for r in requests}
@@ -310,7 +317,10 @@ class HeuristicCaptioner:
         desc = self._geometric(req)
         if not req.detector_name_votes:
             return desc
-        name, _ = max(req.detector_name_votes.items(), key=lambda kv: (kv[1], kv[0]))
+        name, pixels = max(req.detector_name_votes.items(), key=lambda kv: (kv[1], kv[0]))
+        if desc.tag in ("floor", "ceiling", "wall") and pixels < self.structure_share * req.label_pixels:
+            share = pixels / req.label_pixels
+            return Description(f"{desc.caption}; {share:.0%} of it detected as {name}", desc.tag, desc.source)
         return Description(f"{name} (detector class); {desc.caption}", name, "detector")
 
     def _geometric(self, req: CaptionRequest) -> Description:

@@ -1,14 +1,13 @@
 """Queries over objects, their relations and their rooms: "pillow on the bed", "chair in the kitchen",
 "the mug on the desk in the office".
 
-Offline (:func:`parse_query`, :func:`rank`): the text is read as a *target*, then optionally a *relation* and an
-*anchor*, then optionally *in* a *room*:
-object terms are the graph's tags and the offline synonyms (:mod:`.terms`), relation phrases those the
-relation vocabulary knows ("on top of", "next to", "inside", ...), room terms the room types and their
-synonyms ("lounge", "study") or "room 3". Each node matching the target is scored by how well its tag or
-caption names it, times how well the relation holds with a node matching the anchor (an edge of the graph
-with that relation, its inverse or a close one; else the nodes' boxes), times whether it lies in a room of
-that type; every hit says why it matched.
+Offline (:func:`parse_query`, :func:`rank`): the text is read as a *target*, then optionally a *relation*
+and an *anchor*, then optionally *in* a *room*: object terms are the graph's tags and the offline synonyms
+(:mod:`.terms`), relation phrases those the relation vocabulary knows ("on top of", "next to", "inside",
+...), room terms the room types and their synonyms ("lounge", "study") or "room 3". Each node matching the
+target is scored by how well its tag or caption names it, times how well the relation holds with a node
+matching the anchor (an edge of the graph with that relation, its inverse or a close one; else the nodes'
+boxes), times whether it lies in a room of that type; every hit says why it matched.
 
 Through an LLM (:class:`LLMQuery`, ``graph.query.kind: llm``): the query and a compact graph (objects with
 their tags and rooms, relations, rooms with their types) go to the OpenAI-compatible endpoint, node ids come
@@ -337,17 +336,23 @@ def rank(q: ParsedQuery, ctx: QueryContext, top_k: int | None = None) -> QueryAn
     if q.ignored:
         notes.append(f"ignored: {', '.join(q.ignored)}")
     rooms_wanted: set[int] | None = None
+    rooms_cued: set[int] = set()  # rooms of another type whose objects point to the type asked for too
     if q.room is not None or q.room_id is not None or q.floor is not None:
-        chosen = [
+        place = [
             r
             for r in ctx.rooms.values()
-            if (q.room is None or r.type == q.room)
-            and (q.room_id is None or r.id == q.room_id)
-            and (q.floor is None or r.floor == q.floor)
+            if (q.room_id is None or r.id == q.room_id) and (q.floor is None or r.floor == q.floor)
         ]
+        chosen = [r for r in place if q.room is None or r.type == q.room]
+        if q.room is not None:
+            rooms_cued = {r.id for r in place if r.type != q.room and r.type_scores.get(q.room, 0.0) > 0}
         rooms_wanted = {r.id for r in chosen}
-        if not chosen:
-            have = ", ".join(sorted({f"{r.type} (#{r.id})" for r in ctx.rooms.values()})) or "none yet"
+        have = ", ".join(sorted({f"{r.type} (#{r.id})" for r in ctx.rooms.values()})) or "none yet"
+        if not chosen and rooms_cued:
+            best = max(rooms_cued, key=lambda i: ctx.rooms[i].type_scores[q.room])
+            rooms_wanted, rooms_cued = {best}, rooms_cued - {best}
+            notes.append(f"no room typed {q.room!r} in the map (rooms: {have}); room #{best} has its objects")
+        elif not chosen:
             notes.append(f"no room {q.describe().split(', ')[-1]} in the map (rooms: {have}); rooms not used")
             rooms_wanted = None
     if q.target is None:  # a room query
@@ -372,6 +377,8 @@ def rank(q: ParsedQuery, ctx: QueryContext, top_k: int | None = None) -> QueryAn
             return 0.35, "in no room"
         if rid in rooms_wanted:
             return 1.0, f"in {_room_text(room)}"
+        if rid in rooms_cued:
+            return 0.4, f"in {_room_text(room)}, which holds {q.room} objects too"
         return 0.15, f"but in {_room_text(room)}"
 
     targets = scores(q.target)
@@ -406,7 +413,8 @@ def rank(q: ParsedQuery, ctx: QueryContext, top_k: int | None = None) -> QueryAn
         if text:
             why.append(text)
         hits.append(QueryHit("object", i, float(score), "; ".join(why), node))
-    hits.sort(key=lambda h: (-h.score, h.id))
+    # of nodes that answer alike, the larger first: more likely the object than a fragment named so
+    hits.sort(key=lambda h: (-round(h.score, 6), -int(h.node.num_gaussians), h.id))
     return QueryAnswer(q.text, hits[:top_k] if top_k else hits, "; ".join(notes), q)
 
 

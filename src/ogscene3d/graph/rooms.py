@@ -80,6 +80,8 @@ ROOM_SYNONYMS: dict[str, str] = {
     "kitchenette": "kitchen",
 }
 _MIN_TYPE_SCORE = 2.0  # a single weak cue (a pillow, a sink) names no room
+#: Gaussians from which an object's cue counts fully when typing a room (a smaller one counts in proportion).
+FULL_WEIGHT_GAUSSIANS = 400
 
 
 def room_type_of(text: str) -> str | None:
@@ -129,6 +131,7 @@ class RoomNode:
     type: str = UNKNOWN_ROOM
     type_source: str = ""
     type_reason: str = ""
+    type_scores: dict[str, float] = field(default_factory=dict)  # the rule's cue weight per type
     objects: list[int] = field(default_factory=list)
     first_seen: int = -1
     last_updated: int = -1
@@ -142,6 +145,7 @@ class RoomNode:
             "type": self.type,
             "type_source": self.type_source,
             "type_reason": self.type_reason,
+            "type_scores": {k: round(float(v), 3) for k, v in sorted(self.type_scores.items())},
             "center": [float(v) for v in self.center],
             "bbox_min": [float(v) for v in self.bbox_min],
             "bbox_max": [float(v) for v in self.bbox_max],
@@ -171,6 +175,7 @@ class RoomNode:
                 type=str(d.get("type", UNKNOWN_ROOM)),
                 type_source=str(d.get("type_source", "")),
                 type_reason=str(d.get("type_reason", "")),
+                type_scores={str(k): float(v) for k, v in (d.get("type_scores") or {}).items()},
                 objects=[int(i) for i in d.get("objects", [])],
                 first_seen=int(d.get("first_seen", -1)),
                 last_updated=int(d.get("last_updated", -1)),
@@ -369,23 +374,30 @@ def segment_rooms(points: np.ndarray, up: np.ndarray, config: RoomsConfig) -> Se
     return seg
 
 
-def _outline_cells(room: RoomNode, up: np.ndarray, cell: float) -> np.ndarray:
-    """The global cell keys a room's outlines cover (as :func:`segment_rooms` keys them)."""
+def raster_outline(outline: Sequence[np.ndarray], up: np.ndarray, cell: float) -> np.ndarray:
+    """The cells (i, j) [K, 2] of the horizontal grid of ``cell`` metres (cell (i, j) spans ``[i, i + 1) *
+    cell`` along e1 and ``[j, j + 1) * cell`` along e2, as :func:`segment_rooms` indexes them) whose centres
+    the polygons ``outline`` (world points [M, 3] each) hold."""
     import cv2
 
     e1, e2 = horizontal_basis(unit_up(up))
-    polys = [np.stack([p @ e1, p @ e2], axis=1) / cell for p in room.outline if len(p) >= 3]
+    polys = [np.stack([p @ e1, p @ e2], axis=1) / cell for p in outline if len(p) >= 3]
     if not polys:
-        return np.zeros(0, dtype=np.int64)
+        return np.zeros((0, 2), dtype=np.int64)
     allp = np.concatenate(polys)
     lo = np.floor(allp.min(0)).astype(np.int64) - 1
     shape = np.ceil(allp.max(0)).astype(np.int64) - lo + 2
     grid = np.zeros((int(shape[1]), int(shape[0])), dtype=np.uint8)
     for q in polys:
-        # cell (i, j) spans [i, i + 1): its centre lies inside the polygon when the polygon covers it
+        # OpenCV fills the pixels whose centres lie inside; pixel (i, j)'s centre is at (i + 0.5, j + 0.5)
         cv2.fillPoly(grid, [np.round((q - lo - 0.5) * 16).astype(np.int32)], 1, shift=4)
     jj, ii = np.nonzero(grid)
-    return np.unique(_cell_key(room.floor, np.stack([ii, jj], axis=1) + lo))
+    return np.stack([ii, jj], axis=1) + lo
+
+
+def _outline_cells(room: RoomNode, up: np.ndarray, cell: float) -> np.ndarray:
+    """The global cell keys a room's outlines cover (as :func:`segment_rooms` keys them)."""
+    return np.unique(_cell_key(room.floor, raster_outline(room.outline, up, cell)))
 
 
 # --------------------------------------------------------------------------------------- assignment
@@ -446,34 +458,45 @@ def assign_rooms(
 
 
 class RuleRoomTyper:
-    """Names a room from its objects' tags: the type whose cues (:data:`ROOM_TYPE_CUES`, whole words of the
-    tags, synonyms included) weigh most, when at least 2 (one strong cue); else "room"."""
+    """Names a room from its objects' tags: the type whose cues (:data:`ROOM_TYPE_CUES`; a tag names a cue
+    by itself, else through its synonyms) weigh most, each object counting by its size (up to
+    :data:`FULL_WEIGHT_GAUSSIANS` Gaussians, so that a fragment a detector misnamed counts little), when
+    they weigh at least 2 (one strong cue); else "room"."""
 
     name = "rule"
 
-    def describe(self, tags: Sequence[str]) -> tuple[str, str]:
-        """(type, reason) for a room holding objects tagged ``tags``."""
+    @staticmethod
+    def scores(tags: Sequence[str], sizes: Sequence[int] | None = None) -> tuple[dict[str, float], dict]:
+        """({type: cue weight}, {type: the tags that gave it}) of a room holding objects tagged ``tags``
+        (``sizes``: their Gaussians; None: each counts fully)."""
         scores: dict[str, float] = {}
         found: dict[str, list[str]] = {}
-        for tag in tags:
+        for k, tag in enumerate(tags):
             words = " ".join(re.sub(r"[^a-z ]+", " ", str(tag).lower()).split())
             if not words:
                 continue
             names = {words}
-            for g in SYNONYM_GROUPS:
-                if words in g:
-                    names |= set(g)
+            if not any(words in cues for cues in ROOM_TYPE_CUES.values()):
+                for g in SYNONYM_GROUPS:
+                    if words in g:
+                        names |= set(g)
+            size = 1.0 if sizes is None else min(1.0, float(sizes[k]) / FULL_WEIGHT_GAUSSIANS)
             for kind, cues in ROOM_TYPE_CUES.items():
-                w = max((cues.get(n, 0.0) for n in names), default=0.0)
+                w = max((cues.get(n, 0.0) for n in names), default=0.0) * size
                 if w > 0:
                     scores[kind] = scores.get(kind, 0.0) + w
                     found.setdefault(kind, []).append(words)
+        return scores, found
+
+    def describe(self, tags: Sequence[str], sizes: Sequence[int] | None = None) -> tuple[str, str]:
+        """(type, reason) for a room holding objects tagged ``tags`` (``sizes``: their Gaussians)."""
+        scores, found = self.scores(tags, sizes)
         if not scores:
             return UNKNOWN_ROOM, "no object that names a room type"
         best = max(sorted(scores), key=lambda k: scores[k])
         if scores[best] < _MIN_TYPE_SCORE:
-            return UNKNOWN_ROOM, f"too few cues ({', '.join(found[best])})"
-        return best, f"{', '.join(sorted(set(found[best])))} (score {scores[best]:g})"
+            return UNKNOWN_ROOM, f"too few cues ({', '.join(sorted(set(found[best])))})"
+        return best, f"{', '.join(sorted(set(found[best])))} (score {scores[best]:.1f})"
 
 
 class LLMRoomTyper:
@@ -497,8 +520,10 @@ class LLMRoomTyper:
                             config.max_retries, model_setting="graph.rooms.model")  # fmt: skip
         return cls(client, config.max_tokens)
 
-    def describe_with_source(self, tags: Sequence[str]) -> tuple[str, str, str]:
-        """(type, reason, source "llm" | "rule")."""
+    def describe_with_source(
+        self, tags: Sequence[str], sizes: Sequence[int] | None = None
+    ) -> tuple[str, str, str]:
+        """(type, reason, source "llm" | "rule"); ``sizes`` weigh the tags for the rule only."""
         key = tuple(sorted(str(t) for t in tags if str(t).strip()))
         if not key:
             t, why = self.fallback.describe(key)
@@ -529,13 +554,13 @@ class LLMRoomTyper:
             out = (kind, str(reply.get("reason", ""))[:200], "llm")
         except Exception as e:  # any model failure: the rule names the room
             log.warning("room typing LLM failed (%s); using the offline rule", e)
-            t, why = self.fallback.describe(key)
+            t, why = self.fallback.describe(tags, sizes)
             return t, why, "rule"
         self._cache[key] = out
         return out
 
-    def describe(self, tags: Sequence[str]) -> tuple[str, str]:
-        t, why, _ = self.describe_with_source(tags)
+    def describe(self, tags: Sequence[str], sizes: Sequence[int] | None = None) -> tuple[str, str]:
+        t, why, _ = self.describe_with_source(tags, sizes)
         return t, why
 
 
@@ -565,7 +590,8 @@ class RoomMap:
     """The storeys and rooms of a growing map, kept across updates (see the module docstring).
 
     ``update(kf, means, up, objects)`` segments the rooms anew, carries the ids of the previous rooms over,
-    assigns the object nodes to rooms and types the rooms; ``objects``: {node id: (points [M, 3], tag)}.
+    assigns the object nodes to rooms and types the rooms; ``objects``: {node id: (points [M, 3], tag[,
+    number of Gaussians])} (without the number, the points count).
     """
 
     def __init__(self, config: RoomsConfig, typer=None) -> None:
@@ -576,6 +602,7 @@ class RoomMap:
         self.object_room: dict[int, int] = {}
         self._cells: dict[int, np.ndarray] = {}  # room id -> its global cell keys at the last update
         self._tags: dict[int, str] = {}  # object node id -> tag, at the last assignment
+        self._sizes: dict[int, int] = {}  # object node id -> its Gaussians, at the last assignment
         self._next_id = 1
 
     def update(
@@ -680,14 +707,19 @@ class RoomMap:
                 self.object_room[i] = rid
                 self.rooms[rid].objects.append(i)
         self._tags = {i: objects[i][1] for i in order}
+        self._sizes = {
+            i: int(objects[i][2]) if len(objects[i]) > 2 else len(pts[k]) for k, i in enumerate(order)
+        }
 
     def _type(self, kf: int) -> None:
         for r in self.rooms.values():
             names = [self._tags.get(i, "") for i in r.objects]
+            sizes = [self._sizes.get(i, FULL_WEIGHT_GAUSSIANS) for i in r.objects]
+            r.type_scores = RuleRoomTyper.scores(names, sizes)[0]
             if isinstance(self.typer, LLMRoomTyper):
-                r.type, r.type_reason, r.type_source = self.typer.describe_with_source(names)
+                r.type, r.type_reason, r.type_source = self.typer.describe_with_source(names, sizes)
             else:
-                r.type, r.type_reason = self.typer.describe(names)
+                r.type, r.type_reason = self.typer.describe(names, sizes)
                 r.type_source = self.typer.name
 
     def to_dict(self) -> dict:

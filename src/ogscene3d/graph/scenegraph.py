@@ -136,6 +136,9 @@ class SceneGraph:
         self._obs: dict[int, ObservationSet] = {}
         self._gt_class_votes: dict[int, dict[int, int]] = {}
         self._name_votes: dict[int, dict[str, int]] = {}
+        self._label_pixels: dict[
+            int, int
+        ] = {}  # label -> its pixels in the observed keyframes (all named or not)
         self._gt_instance_votes: dict[int, dict[int, int]] = {}
         self._lock = threading.RLock()
         self._initialized = False
@@ -213,6 +216,8 @@ class SceneGraph:
         c0, c1 = cols.argmax(axis=1), W - 1 - cols[:, ::-1].argmax(axis=1)
         c = self.config
         with self._lock:
+            for lab, a in zip(labs.tolist(), area.tolist()):
+                self._label_pixels[lab] = self._label_pixels.get(lab, 0) + a
             for k in np.nonzero(area >= c.min_obs_pixels)[0]:
                 lab, a = int(labs[k]), int(area[k])
                 obs = self._obs.setdefault(lab, ObservationSet())
@@ -364,7 +369,8 @@ class SceneGraph:
         t0 = time.perf_counter()
         with self._lock:
             objects = {
-                i: (n.points if len(n.points) else n.center[None], n.tag) for i, n in self.nodes.items()
+                i: (n.points if len(n.points) else n.center[None], n.tag, n.num_gaussians)
+                for i, n in self.nodes.items()
             }
         self.room_map.update(kf, means, self.up, objects, self._keyframe_frames.get(kf, -1))
         with self._lock:
@@ -520,6 +526,7 @@ class SceneGraph:
                     gt_class_votes=dict(self._gt_class_votes.get(i, {})),
                     gt_instance_votes=dict(self._gt_instance_votes.get(i, {})),
                     detector_name_votes=dict(self._name_votes.get(i, {})),
+                    label_pixels=self._label_pixels.get(i, 0),
                 )
                 for i in todo
             ]
@@ -556,7 +563,11 @@ class SceneGraph:
                 fresh = self._fallback_captioner.describe(
                     [
                         CaptionRequest(
-                            n, ObservationSet(), ctx, detector_name_votes=dict(self._name_votes.get(n.id, {}))
+                            n,
+                            ObservationSet(),
+                            ctx,
+                            detector_name_votes=dict(self._name_votes.get(n.id, {})),
+                            label_pixels=self._label_pixels.get(n.id, 0),
                         )
                         for n in stale
                     ]
@@ -758,6 +769,7 @@ class SceneGraph:
                 "num_updates": self.num_updates,
                 "last_rooms_count": self._last_rooms_count,
                 "name_votes": {str(k): dict(v) for k, v in self._name_votes.items()},
+                "label_pixels": {str(k): int(v) for k, v in self._label_pixels.items()},
             }
 
     def load_state(self, state: Any, source: str = "checkpoint") -> None:
@@ -773,10 +785,12 @@ class SceneGraph:
             name_votes = {
                 int(k): {str(n): int(c) for n, c in v.items()} for k, v in state.get("name_votes", {}).items()
             }
+            label_pixels = {int(k): int(v) for k, v in state.get("label_pixels", {}).items()}
         except (AttributeError, TypeError, ValueError) as e:
             raise DataError(f"{source}: scene graph state has invalid name votes ({e})") from None
         with self._lock:
             self._name_votes = name_votes
+            self._label_pixels = label_pixels
             self._read_json(state["graph"], source)
             self._last_update_count, self.last_update_keyframe, self.num_updates = schedule
             self._last_rooms_count = int(state.get("last_rooms_count", self._last_update_count))
@@ -901,7 +915,8 @@ class SceneGraph:
         """Floors (``floor_<id>``) and rooms (``room_<id>``) as nodes, with "in" edges object -> room ->
         floor (edge attribute ``predictor`` "rooms"); call with the lock held."""
         for f in self.floors:
-            G.add_node(f"floor_{f.id}", kind="floor", label=-1, height=float(f.height))
+            if any(r.floor == f.id for r in self.rooms.values()):  # a storey holding no room is left out
+                G.add_node(f"floor_{f.id}", kind="floor", label=-1, height=float(f.height))
         for i in sorted(self.rooms):
             r = self.rooms[i]
             G.add_node(

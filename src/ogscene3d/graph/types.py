@@ -260,6 +260,8 @@ class CaptionRequest:
     gt_instance_votes: dict[int, int] = field(default_factory=dict)
     # {class name: pixels} of the segments a detector named that were given this node's label
     detector_name_votes: dict[str, int] = field(default_factory=dict)
+    # the node's label's pixels in the same keyframes, named or not (0: not counted)
+    label_pixels: int = 0
 
 
 @dataclass
