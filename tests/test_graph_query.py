@@ -1,6 +1,7 @@
 """Queries over objects, relations and rooms: the offline parser, the ranking with its reasons, bad queries,
 ``ogscene3d graph -q --json``, and the LLM path end to end against a local fake endpoint."""
 
+import contextlib
 import json
 
 import numpy as np
@@ -148,16 +149,15 @@ def test_graph_command_prints_reasons_and_json(tmp_path, capsys):
 
 @pytest.fixture
 def fake_llm():
-    servers = []
+    """``make(respond)`` -> a running :class:`FakeServer` (test_graph_llm.py), closed after the test."""
+    with contextlib.ExitStack() as stack:
 
-    def make(respond):
-        s = FakeServer(respond)
-        servers.append(s)
-        return s
+        def make(respond):
+            server = FakeServer(respond)
+            stack.callback(server.close)
+            return server
 
-    yield make
-    for s in servers:
-        s.close()
+        yield make
 
 
 def _llm_graph(url) -> SceneGraph:

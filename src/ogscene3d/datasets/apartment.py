@@ -24,7 +24,6 @@ import numpy as np
 
 from .procedural import (
     STRUCTURAL_CLASSES,
-    TEXTURE_CHECKER,
     TEXTURE_NOISE,
     WORLD_FROM_ZUP,
     Part,
@@ -37,6 +36,7 @@ from .procedural import (
     _chair,
     _decoration,
     _finish,
+    _floor_and_ceiling,
     _floor_lamp,
     _furniture_spot,
     _light_switches,
@@ -128,21 +128,7 @@ def _wall_parts(side: str, W: float, D: float, H: float, color, openings: list[f
 def _room_shell(b: _Builder, W: float, D: float, H: float, doors: dict[str, list[float]]) -> dict[str, int]:
     """Floor, ceiling and four walls (with doorways at ``doors`` {side: offsets}) of a room centred on the
     origin, and a keep-out box in front of every doorway; the instance ids by name as ``_structure``'s."""
-    t = WALL_THICKNESS
-    ids = {}
-    floor = make_part(
-        "box",
-        [0, 0, -t / 2],
-        b.color((0.62, 0.5, 0.38)),
-        size=[W + 2 * t, D + 2 * t, t],
-        texture=TEXTURE_CHECKER,
-        texture_scale=0.5,
-    )
-    ids["floor"] = b.add("floor", [floor]).instance_id
-    ceiling = make_part(
-        "box", [0, 0, H + t / 2], b.color((0.9, 0.9, 0.88), 0.03), size=[W + 2 * t, D + 2 * t, t]
-    )
-    ids["ceiling"] = b.add("ceiling", [ceiling]).instance_id
+    ids = _floor_and_ceiling(b, W, D, H, WALL_THICKNESS)
     wall_color = b.color((0.78, 0.76, 0.7), 0.1)
     for side in _SIDES:
         color = wall_color * b.rng.uniform(0.93, 1.05)
@@ -178,6 +164,12 @@ def _wall_piece(b: _Builder, cls: str, make, size, W: float, D: float, floor: in
         if obj is not None:
             return obj, side, center, yaw
     return None
+
+
+def _cabinet_piece(b: _Builder, cls: str, base, jitter: float, size, W: float, D: float, floor: int):
+    """A closed box of furniture (:func:`~.procedural._cabinet`) of colour ``base`` +- ``jitter`` against a
+    random wall, as :func:`_wall_piece` places it."""
+    return _wall_piece(b, cls, lambda c, y, s: _cabinet(c, y, s, b.color(base, jitter)), size, W, D, floor)
 
 
 def _on_top(b: _Builder, support: SceneObject | None, classes, k: tuple[int, int]) -> None:
@@ -283,6 +275,22 @@ def _attached(
     return b.try_add(cls, [part], wall, "attached to", margin=0.03)
 
 
+def _bookshelf(b: _Builder, W: float, D: float, floor: int, size, boards: int) -> None:
+    """A bookshelf of ``size`` with ``boards`` boards against a random wall, books on every board."""
+    shelf = _wall_piece(
+        b,
+        "bookshelf",
+        lambda c, y, s: _shelf(c, y, s, b.color((0.55, 0.38, 0.22)), boards),
+        size,
+        W,
+        D,
+        floor,
+    )
+    if shelf is not None:
+        for top in shelf[0].top_surfaces:
+            _books_in_shelf(b, shelf[0], top)
+
+
 def _living_room(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
     floor, rng = ids["floor"], b.rng
     sofa = _wall_piece(
@@ -304,14 +312,8 @@ def _living_room(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
         parts, tops = _table(tc, yaw + np.pi / 2, [1.0, 0.55, 0.45], b.color((0.5, 0.35, 0.22)))
         table = b.try_add("table", parts, floor, "on", tops, margin=0.05)
         _on_top(b, table, ["cup", "book", "vase", "bowl"], (1, 3))
-    stand = _wall_piece(
-        b,
-        "cabinet",
-        lambda c, y, s: _cabinet(c, y, s, b.color((0.3, 0.25, 0.2), 0.08)),
-        [rng.uniform(1.2, 1.6), 0.45, 0.5],
-        W,
-        D,
-        floor,
+    stand = _cabinet_piece(
+        b, "cabinet", (0.3, 0.25, 0.2), 0.08, [rng.uniform(1.2, 1.6), 0.45, 0.5], W, D, floor
     )
     if stand is not None:
         obj, _, center, yaw = stand
@@ -329,52 +331,19 @@ def _living_room(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
             for p in parts
         ]
         b.try_add("tv", moved, obj.instance_id, "on", margin=0.0)
-    shelf = _wall_piece(
-        b,
-        "bookshelf",
-        lambda c, y, s: _shelf(c, y, s, b.color((0.55, 0.38, 0.22)), 3),
-        [rng.uniform(0.8, 1.1), 0.34, rng.uniform(1.5, 1.8)],
-        W,
-        D,
-        floor,
-    )
-    if shelf is not None:
-        for top in shelf[0].top_surfaces:
-            _books_in_shelf(b, shelf[0], top)
+    _bookshelf(b, W, D, floor, [rng.uniform(0.8, 1.1), 0.34, rng.uniform(1.5, 1.8)], 3)
 
 
 def _kitchen(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
     floor, rng = ids["floor"], b.rng
-    counter = _wall_piece(
-        b,
-        "counter",
-        lambda c, y, s: _cabinet(c, y, s, b.color((0.8, 0.78, 0.72), 0.06)),
-        [rng.uniform(1.6, 2.2), 0.6, 0.9],
-        W,
-        D,
-        floor,
+    counter = _cabinet_piece(
+        b, "counter", (0.8, 0.78, 0.72), 0.06, [rng.uniform(1.6, 2.2), 0.6, 0.9], W, D, floor
     )
     if counter is not None:
         _place_small(b, "sink", counter[0], counter[0].top_surfaces[0])
         _on_top(b, counter[0], ["bottle", "bowl", "cup", "box"], (1, 3))
-    _wall_piece(
-        b,
-        "refrigerator",
-        lambda c, y, s: _cabinet(c, y, s, b.color((0.9, 0.9, 0.92), 0.03)),
-        [0.7, 0.7, rng.uniform(1.7, 1.9)],
-        W,
-        D,
-        floor,
-    )
-    _wall_piece(
-        b,
-        "stove",
-        lambda c, y, s: _cabinet(c, y, s, b.color((0.2, 0.2, 0.22), 0.03)),
-        [0.6, 0.6, 0.9],
-        W,
-        D,
-        floor,
-    )
+    _cabinet_piece(b, "refrigerator", (0.9, 0.9, 0.92), 0.03, [0.7, 0.7, rng.uniform(1.7, 1.9)], W, D, floor)
+    _cabinet_piece(b, "stove", (0.2, 0.2, 0.22), 0.03, [0.6, 0.6, 0.9], W, D, floor)
     for _ in range(30):
         size = np.array([rng.uniform(1.0, 1.2), rng.uniform(0.7, 0.8), 0.75])
         yaw = float(rng.integers(2)) * np.pi / 2
@@ -420,10 +389,11 @@ def _bedroom(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
             parts, tops = _cabinet(c, yaw, [0.45, 0.4, 0.55], b.color((0.5, 0.36, 0.24)))
             stand = b.try_add("nightstand", parts, floor, "on", tops, margin=0.02)
             _on_top(b, stand, ["lamp", "book", "cup"], (1, 1))
-    _wall_piece(
+    _cabinet_piece(
         b,
         "wardrobe",
-        lambda c, y, s: _cabinet(c, y, s, b.color((0.7, 0.6, 0.48), 0.06)),
+        (0.7, 0.6, 0.48),
+        0.06,
         [rng.uniform(1.0, 1.4), 0.6, rng.uniform(1.9, 2.05)],
         W,
         D,
@@ -435,14 +405,8 @@ def _bathroom(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
     floor, rng = ids["floor"], b.rng
     white = np.array([0.93, 0.93, 0.92])
     _wall_piece(b, "toilet", lambda c, y, s: _toilet(c, y, s, white), [0.45, 0.7, 0.8], W, D, floor)
-    vanity = _wall_piece(
-        b,
-        "cabinet",
-        lambda c, y, s: _cabinet(c, y, s, b.color((0.55, 0.45, 0.35), 0.06)),
-        [rng.uniform(0.6, 0.9), 0.45, 0.82],
-        W,
-        D,
-        floor,
+    vanity = _cabinet_piece(
+        b, "cabinet", (0.55, 0.45, 0.35), 0.06, [rng.uniform(0.6, 0.9), 0.45, 0.82], W, D, floor
     )
     if vanity is not None:
         obj, side, center, _ = vanity
@@ -522,22 +486,12 @@ def _office(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
             "on",
             margin=0.02,
         )
-    shelf = _wall_piece(
-        b,
-        "bookshelf",
-        lambda c, y, s: _shelf(c, y, s, b.color((0.55, 0.38, 0.22)), 4),
-        [rng.uniform(0.8, 1.2), 0.34, rng.uniform(1.6, 1.85)],
-        W,
-        D,
-        floor,
-    )
-    if shelf is not None:
-        for top in shelf[0].top_surfaces:
-            _books_in_shelf(b, shelf[0], top)
-    cab = _wall_piece(
+    _bookshelf(b, W, D, floor, [rng.uniform(0.8, 1.2), 0.34, rng.uniform(1.6, 1.85)], 4)
+    cab = _cabinet_piece(
         b,
         "cabinet",
-        lambda c, y, s: _cabinet(c, y, s, b.color((0.85, 0.83, 0.78), 0.1)),
+        (0.85, 0.83, 0.78),
+        0.1,
         [rng.uniform(0.8, 1.1), 0.45, rng.uniform(0.7, 0.85)],
         W,
         D,

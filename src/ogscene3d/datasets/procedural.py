@@ -249,6 +249,25 @@ class _Builder:
 
 def _structure(b: _Builder, W: float, D: float, H: float) -> dict[str, int]:
     t = 0.05
+    ids = _floor_and_ceiling(b, W, D, H, t)
+    wall_color = b.color((0.78, 0.76, 0.7), 0.1)
+    walls = {
+        "+x": ([W / 2 + t / 2, 0, H / 2], [t, D, H]),
+        "-x": ([-W / 2 - t / 2, 0, H / 2], [t, D, H]),
+        "+y": ([0, D / 2 + t / 2, H / 2], [W, t, H]),
+        "-y": ([0, -D / 2 - t / 2, H / 2], [W, t, H]),
+    }
+    for name, (c, s) in walls.items():
+        part = make_part(
+            "box", c, wall_color * b.rng.uniform(0.93, 1.05), size=s, texture=TEXTURE_NOISE, texture_scale=0.6
+        )
+        ids[name] = b.add("wall", [part]).instance_id
+    return ids
+
+
+def _floor_and_ceiling(b: _Builder, W: float, D: float, H: float, t: float) -> dict[str, int]:
+    """A W x D room's floor (top at z = 0) and ceiling (bottom at z = H), ``t`` thick, reaching under and
+    over its walls; their instance ids by name."""
     ids = {}
     floor = make_part(
         "box",
@@ -263,18 +282,6 @@ def _structure(b: _Builder, W: float, D: float, H: float) -> dict[str, int]:
         "box", [0, 0, H + t / 2], b.color((0.9, 0.9, 0.88), 0.03), size=[W + 2 * t, D + 2 * t, t]
     )
     ids["ceiling"] = b.add("ceiling", [ceiling]).instance_id
-    wall_color = b.color((0.78, 0.76, 0.7), 0.1)
-    walls = {
-        "+x": ([W / 2 + t / 2, 0, H / 2], [t, D, H]),
-        "-x": ([-W / 2 - t / 2, 0, H / 2], [t, D, H]),
-        "+y": ([0, D / 2 + t / 2, H / 2], [W, t, H]),
-        "-y": ([0, -D / 2 - t / 2, H / 2], [W, t, H]),
-    }
-    for name, (c, s) in walls.items():
-        part = make_part(
-            "box", c, wall_color * b.rng.uniform(0.93, 1.05), size=s, texture=TEXTURE_NOISE, texture_scale=0.6
-        )
-        ids[name] = b.add("wall", [part]).instance_id
     return ids
 
 
@@ -557,23 +564,13 @@ def _small_object(b: _Builder, cls: str, clearance: float) -> tuple[list[Part] |
         ]
     elif cls == "monitor":
         w, h = rng.uniform(0.45, 0.6), rng.uniform(0.28, 0.36)
-        dark = b.color((0.08, 0.08, 0.1), 0.02)
-        parts = [
-            make_part("box", [0, 0, 0.01], dark, size=[0.2, 0.15, 0.02]),
-            make_part("box", [0, 0, 0.02 + 0.06], dark, size=[0.04, 0.03, 0.12]),
-            make_part("box", [0, 0, 0.14 + h / 2], dark, size=[w, 0.04, h]),
-        ]
+        parts = _screen(b.color((0.08, 0.08, 0.1), 0.02), w, h, 0.04, [0.2, 0.15], [0.04, 0.03, 0.12])
     elif cls == "pillow":
         s = np.array([0.38, 0.14, 0.34])
         parts = [make_part("box", [0, 0, s[2] / 2], c, size=s, texture=TEXTURE_STRIPES, texture_scale=0.08)]
     elif cls == "tv":  # a flat screen on a foot (apartments' living rooms)
         w, h = rng.uniform(0.8, 1.1), rng.uniform(0.48, 0.62)
-        dark = b.color((0.06, 0.06, 0.08), 0.02)
-        parts = [
-            make_part("box", [0, 0, 0.01], dark, size=[0.3, 0.2, 0.02]),
-            make_part("box", [0, 0, 0.02 + 0.05], dark, size=[0.05, 0.04, 0.1]),
-            make_part("box", [0, 0, 0.12 + h / 2], dark, size=[w, 0.05, h]),
-        ]
+        parts = _screen(b.color((0.06, 0.06, 0.08), 0.02), w, h, 0.05, [0.3, 0.2], [0.05, 0.04, 0.1])
     elif cls == "sink":  # a basin with a tap on a counter or a vanity (apartments)
         steel = b.color((0.75, 0.77, 0.8), 0.04)
         parts = [
@@ -591,6 +588,16 @@ def _small_object(b: _Builder, cls: str, clearance: float) -> tuple[list[Part] |
         parts = [Part(p.vertices @ rot.T, p.triangles, p.color, p.texture, p.texture_scale) for p in parts]
         lo, hi = np.min([p.aabb[0] for p in parts], 0), np.max([p.aabb[1] for p in parts], 0)
     return parts, (hi - lo)[:2]
+
+
+def _screen(color, w: float, h: float, thick: float, foot, stem) -> list[Part]:
+    """A screen ``w`` x ``h`` (``thick`` deep) on a stem ``stem`` (x, y, height) over a 2 cm foot ``foot``
+    (x, y), based at z = 0."""
+    return [
+        make_part("box", [0, 0, 0.01], color, size=[foot[0], foot[1], 0.02]),
+        make_part("box", [0, 0, 0.02 + stem[2] / 2], color, size=stem),
+        make_part("box", [0, 0, 0.02 + stem[2] + h / 2], color, size=[w, thick, h]),
+    ]
 
 
 def _books_in_shelf(b: _Builder, shelf: SceneObject, top) -> None:
