@@ -22,6 +22,7 @@ this only reports.
 
     python benchmarks/rooms.py --seeds 0-9 --out /tmp/rooms-bench
     python benchmarks/rooms.py --seeds 0-9 --out /tmp/rooms-bench --reuse      # reprint finished seeds
+    python benchmarks/rooms.py --seeds 0-9 --out /tmp/rooms-bench --reuse --rescore   # evaluate them again
     python benchmarks/rooms.py --seeds 0 --set synthetic.frames=40 --out /tmp/rooms-quick --json out.json
 """
 
@@ -53,7 +54,6 @@ def map_and_score(seed: int, out: Path, config: str, overrides: list[str], devic
     """Generate, map and evaluate one apartment; the record of ``rooms_seed.json``."""
     from ogscene3d.config import load_config
     from ogscene3d.datasets import configured_scene
-    from ogscene3d.eval import evaluate_run
     from ogscene3d.mapping.engine import MappingEngine, open_frames, run_directory
     from ogscene3d.mapping.mapper import Mapper
 
@@ -74,16 +74,25 @@ def map_and_score(seed: int, out: Path, config: str, overrides: list[str], devic
     if graph is None:
         raise RuntimeError(f"seed {seed}: the scene graph failed during mapping (see the log)")
     rooms_t = graph.timings.get("graph_rooms", {"seconds": 0.0, "count": 0})
-    t0 = time.perf_counter()
-    report = evaluate_run(run_dir, scene, plots=False, protocols=["hovsg"])
-    kf = max(int(mapper.keyframe_count), 1)
-    return {
+    rec = {
         "seed": seed,
         "frames": int(mapper.frames_seen),
-        "keyframes": kf,
+        "keyframes": max(int(mapper.keyframe_count), 1),
         "map_seconds": summary.seconds,
         "room_seconds": rooms_t["seconds"],
         "room_updates": rooms_t["count"],
+    }
+    return score(rec, root)
+
+
+def score(rec: dict, root: Path) -> dict:
+    """``rec`` with the evaluation of ``root``'s run against its scene (rooms, queries, notes)."""
+    from ogscene3d.eval import evaluate_run
+
+    t0 = time.perf_counter()
+    report = evaluate_run(root / "run", root / "scene", plots=False, protocols=["hovsg"])
+    return {
+        **rec,
         "eval_seconds": time.perf_counter() - t0,
         "rooms": report.report["rooms"],
         "queries": report.report["queries"],
@@ -171,6 +180,12 @@ def main() -> int:
     )
     p.add_argument("--out", required=True, type=Path, help="folder for the scenes, runs and per-seed records")
     p.add_argument("--reuse", action="store_true", help="take a seed's record from OUT when it is there")
+    p.add_argument(
+        "--rescore",
+        action="store_true",
+        help="with --reuse: evaluate the runs in OUT again (after a change to the evaluation or the queries; "
+        "the mapping figures stay the record's)",
+    )
     p.add_argument("--json", type=Path, help="write the per-seed records and the pooled figures here")
     args = p.parse_args()
     records = []
@@ -178,6 +193,9 @@ def main() -> int:
         path = args.out / f"seed_{seed}" / "rooms_seed.json"
         if args.reuse and path.is_file():
             rec = json.loads(path.read_text())
+            if args.rescore:
+                rec = score(rec, path.parent)
+                path.write_text(json.dumps(json_safe(rec), indent=1))
         else:
             rec = map_and_score(seed, args.out, args.config, args.overrides, args.device)
             path.write_text(json.dumps(json_safe(rec), indent=1))

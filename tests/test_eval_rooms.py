@@ -19,7 +19,7 @@ from ogscene3d.graph import GroundTruthCaptioner, MeanConfidence, SceneGraph
 UP = np.array([0.0, -1.0, 0.0])
 
 
-def _square(x0, x1, n=2000, rng=None):
+def _square(x0, x1, n=12000, rng=None):
     rng = rng or np.random.default_rng(0)
     return to_world(plane([x0, 0, 0], [x1, 4, 0], rng, n / (4 * (x1 - x0))), UP)
 
@@ -37,6 +37,12 @@ def test_room_scores_of_a_perfect_a_merged_and_a_split_segmentation():
     assert merged.per_room[2]["pred_room"] is None or merged.per_room[1]["pred_room"] is None
     split = room_scores(pts, gt, pts, np.where(pts[:, 0] < 2, 1, np.where(gt == 1, 2, 3)), UP)
     assert split.precision == pytest.approx(1.0) and split.recall == pytest.approx((0.5 + 1.0) / 2, abs=0.05)
+    # a room's outline counts as its extent where it holds few Gaussians (a far floor)
+    sparse = np.where(gt == 2, 12, np.where(pts[:, 0] < 1.0, 11, -1))
+    corners = to_world(np.array([[0.0, 0, 0], [4, 0, 0], [4, 4, 0], [0, 4, 0]]), UP)
+    assert room_scores(pts, gt, pts, sparse, UP).per_room[1]["recall"] < 0.3
+    filled = room_scores(pts, gt, pts, sparse, UP, outlines={11: [corners]})
+    assert filled.per_room[1]["recall"] > 0.97 and filled.per_room[1]["precision"] > 0.97
     none = room_scores(pts, gt, pts, np.full(len(pts), -1), UP)
     assert none.num_pred == 0 and none.recall == 0.0 and np.isnan(none.precision)
     settled = room_scores(pts, gt, pts, np.where(gt == 1, 11, 12), UP, entered={1: 0, 2: 40},
