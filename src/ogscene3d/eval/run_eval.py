@@ -397,16 +397,23 @@ def _rooms_and_queries(
         lut = gt.instance_rooms
         point_rooms = np.array([lut.get(int(i), -1) for i in gt.instances], dtype=np.int64)
         entered = {k: v.get("first_frame") for k, v in gt.rooms.items()}
-        rooms = rooms_block(run.graph, scored.means, gt.points, point_rooms, entered)
+        try:
+            rooms = rooms_block(run.graph, scored.means, gt.points, point_rooms, entered)
+        except DataError as e:
+            notes.append(f"rooms not scored: {e}")
     gt_inst = np.where(assoc >= 0, gt.instances[np.maximum(assoc, 0)], -1)
     names = {i: gt.class_names[c] for i, c in gt.instance_classes.items()}
     present = {int(i) for i in np.unique(gt.instances[keep]) if i >= 0}
     room_types = {k: str(v["type"]) for k, v in gt.rooms.items()}
     symmetric = gt.symmetric_relations if gt.symmetric_relations is not None else ("next to",)
-    queries = queries_block(
-        run.graph, run.labels, gt_inst, names, gt.relations, gt.instance_rooms, room_types, present,
-        min_node_iou, symmetric,
-    )  # fmt: skip
+    try:
+        queries = queries_block(
+            run.graph, run.labels, gt_inst, names, gt.relations, gt.instance_rooms, room_types, present,
+            min_node_iou, symmetric,
+        )  # fmt: skip
+    except DataError as e:  # a graph.json with too little in it to answer queries (no node geometry)
+        notes.append(f"queries not scored: {e}")
+        queries = None
     return rooms, queries
 
 
