@@ -291,7 +291,7 @@ def _box_relation(a: SceneNode, b: SceneNode, relation: str, up: np.ndarray) -> 
     """Whether "a relation b" holds for the nodes' boxes (no edge between them): 0.5-0.7, or 0."""
     (alo, ahi), (blo, bhi) = _up_box(a, up), _up_box(b, up)
     gap = np.maximum(np.maximum(alo[1:] - bhi[1:], blo[1:] - ahi[1:]), 0.0)
-    overlap = bool(np.all(gap <= 0.0))
+    overlap = bool(np.all(gap <= 0.1))  # boxes of mapped Gaussians fall a little short of the surfaces
     if relation == "on":
         return 0.7 if overlap and abs(alo[0] - bhi[0]) < 0.1 else 0.0
     if relation in ("under", "below"):
