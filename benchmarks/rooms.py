@@ -53,23 +53,17 @@ def _seeds(text: str) -> list[int]:
 def map_and_score(seed: int, out: Path, config: str, overrides: list[str], device: str | None) -> dict:
     """Generate, map and evaluate one apartment; the record of ``rooms_seed.json``."""
     from ogscene3d.config import load_config
-    from ogscene3d.datasets import configured_scene
-    from ogscene3d.mapping.engine import MappingEngine, open_frames, run_directory
-    from ogscene3d.mapping.mapper import Mapper
+    from ogscene3d.mapping.session import mapping_session, synthetic_scene
 
     cfg = load_config(config, [*overrides, *([f"device={device}"] if device else [])])
     if cfg.synthetic.layout != "apartment":
         raise SystemExit(f"{config}: synthetic.layout must be apartment (got {cfg.synthetic.layout})")
     cfg.synthetic.seed = seed
     root = out / f"seed_{seed}"
-    scene = configured_scene(root / "scene", cfg.synthetic, remedy="give a new --out, or remove that folder")
-    run_dir = root / "run"
-    with run_directory(run_dir, "benchmarks/rooms.py"):
-        ds = open_frames(cfg, scene)
-        mapper = Mapper(cfg, cfg.device)
-        engine = MappingEngine(mapper, run_dir, scene)
-        engine.open(cfg, ds)
-        summary = engine.run(ds.frames(), total=len(ds))
+    scene = synthetic_scene(cfg, root / "scene")
+    with mapping_session(cfg, root / "run", scene, command="benchmarks/rooms.py") as session:
+        mapper = session.mapper
+        summary = session.run()
     graph = mapper.graph
     if graph is None:
         raise RuntimeError(f"seed {seed}: the scene graph failed during mapping (see the log)")
