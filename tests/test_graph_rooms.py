@@ -235,3 +235,16 @@ def test_rooms_update_between_graph_updates():
     off.rooms.enabled = False
     g = SceneGraph(off, captioner=HeuristicCaptioner(), node_confidence=MeanConfidence())
     assert [kf for kf in range(12) if g.is_due(kf)] == [11] and "rooms" not in g.to_json()
+
+
+def test_a_large_map_is_read_through_a_subset():
+    rng = np.random.default_rng(8)
+    a, b = two_rooms(rng)
+    pts = np.concatenate([a, b])
+    full, sub = RoomMap(RoomsConfig()), RoomMap(RoomsConfig(max_points=20_000))
+    full.update(0, pts, np.array([0, 0, 1.0]), {})
+    sub.update(0, pts, np.array([0, 0, 1.0]), {})
+    assert len(pts) > 40_000 and len(sub.rooms) == len(full.rooms) == 2
+    for rid, r in full.rooms.items():
+        assert sub.rooms[rid].num_gaussians == pytest.approx(r.num_gaussians, rel=0.05)
+        assert sub.rooms[rid].area == pytest.approx(r.area, rel=0.05)

@@ -739,6 +739,9 @@ class RoomsConfig:
         1.5, "square metres below which a segment is no room (its Gaussians go to the nearest room)", _NONNEG
     )
     storey_height: float = setting(2.0, "metres: the least height between two storeys' floors", _POS)
+    max_points: int = setting(
+        200_000, "Gaussians a room update reads at most (a fixed random subset of a larger map)", _int(1000)
+    )
     assign_radius: float = setting(
         0.5, "metres outside every room's outline beyond which a Gaussian or object is in no room", _NONNEG
     )

@@ -617,6 +617,10 @@ class RoomMap:
         (world metres)."""
         P = np.asarray(means, dtype=np.float64).reshape(-1, 3)
         P = P[np.all(np.isfinite(P), axis=1)]
+        scale = 1.0
+        if len(P) > self.config.max_points:  # a large map: a fixed random subset keeps the update cheap
+            scale = len(P) / self.config.max_points
+            P = P[np.random.default_rng(0).choice(len(P), self.config.max_points, replace=False)]
         seg = segment_rooms(P, up, self.config)
         ids = self._match(seg)
         rooms: dict[int, RoomNode] = {}
@@ -645,7 +649,7 @@ class RoomMap:
         which = assign_rooms(P, up, self.floors, room_list, self.config.assign_radius)
         for r in room_list:
             mine = P[which == r.id]
-            r.num_gaussians = len(mine)
+            r.num_gaussians = int(round(len(mine) * scale))
             if len(mine):
                 r.center, r.bbox_min, r.bbox_max = mine.mean(0), mine.min(0), mine.max(0)
             else:  # (a room's own floor cells hold points, so this stays rare)
