@@ -248,3 +248,29 @@ def test_a_large_map_is_read_through_a_subset():
     for rid, r in full.rooms.items():
         assert sub.rooms[rid].num_gaussians == pytest.approx(r.num_gaussians, rel=0.05)
         assert sub.rooms[rid].area == pytest.approx(r.area, rel=0.05)
+
+
+def test_an_llm_typer_is_asked_only_when_the_update_may():
+    """Room updates between graph updates keep the model's room types (and ask the rule for new rooms)."""
+    from ogscene3d.graph.rooms import LLMRoomTyper
+
+    class Client:
+        calls = 0
+
+        def chat(self, messages, max_tokens=None):
+            Client.calls += 1
+            return '{"type": "bedroom", "reason": "a bed"}'
+
+    rng = np.random.default_rng(9)
+    a, b = two_rooms(rng)
+    up = np.array([0, 0, 1.0])
+    bed = box_surface([0.5, 2.5, 0.0], [2.0, 3.9, 0.5], rng, 500.0)
+    rm = RoomMap(RoomsConfig(), typer=LLMRoomTyper(Client()))
+    rm.update(0, np.concatenate([a, b, bed]), up, {1: (bed, "bed")}, ask_model=False)
+    assert Client.calls == 0 and {r.type_source for r in rm.rooms.values()} == {"rule"}
+    rm.update(1, np.concatenate([a, b, bed]), up, {1: (bed, "bed")})
+    assert Client.calls == 1  # the room with the bed (the empty one needs no model)
+    typed = rm.rooms[rm.object_room[1]]
+    assert (typed.type, typed.type_source) == ("bedroom", "llm")
+    rm.update(2, np.concatenate([a, b, bed]), up, {1: (bed, "big bed")}, ask_model=False)
+    assert Client.calls == 1 and rm.rooms[typed.id].type_source == "llm"

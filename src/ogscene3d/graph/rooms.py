@@ -612,9 +612,11 @@ class RoomMap:
         up: np.ndarray,
         objects: Mapping[int, tuple[np.ndarray, str]],
         frame: int = -1,
+        ask_model: bool = True,
     ) -> None:
         """One room update at keyframe ``kf`` (dataset frame ``frame``) from all Gaussian means [N, 3]
-        (world metres)."""
+        (world metres). ``ask_model``: an LLM typer is asked (else a room keeps the type it had, a new one
+        gets the rule's until the next update that asks)."""
         P = np.asarray(means, dtype=np.float64).reshape(-1, 3)
         P = P[np.all(np.isfinite(P), axis=1)]
         scale = 1.0
@@ -657,7 +659,7 @@ class RoomMap:
                 r.center, r.bbox_min, r.bbox_max = pts.mean(0), pts.min(0), pts.max(0)
         self.rooms = rooms
         self.assign_objects(objects, up)
-        self._type(kf)
+        self._type(ask_model)
 
     @staticmethod
     def _lift(poly: np.ndarray, height: float, up: np.ndarray) -> np.ndarray:
@@ -715,13 +717,18 @@ class RoomMap:
             i: int(objects[i][2]) if len(objects[i]) > 2 else len(pts[k]) for k, i in enumerate(order)
         }
 
-    def _type(self, kf: int) -> None:
+    def _type(self, ask_model: bool = True) -> None:
         for r in self.rooms.values():
             names = [self._tags.get(i, "") for i in r.objects]
             sizes = [self._sizes.get(i, FULL_WEIGHT_GAUSSIANS) for i in r.objects]
             r.type_scores = RuleRoomTyper.scores(names, sizes)[0]
-            if isinstance(self.typer, LLMRoomTyper):
+            if isinstance(self.typer, LLMRoomTyper) and ask_model:
                 r.type, r.type_reason, r.type_source = self.typer.describe_with_source(names, sizes)
+            elif isinstance(self.typer, LLMRoomTyper) and r.type_source == "llm":
+                continue  # between the updates that ask the model, its type stays
+            elif isinstance(self.typer, LLMRoomTyper):
+                r.type, r.type_reason = self.typer.fallback.describe(names, sizes)
+                r.type_source = "rule"
             else:
                 r.type, r.type_reason = self.typer.describe(names, sizes)
                 r.type_source = self.typer.name

@@ -353,7 +353,7 @@ class SceneGraph:
 
     def _safe_rooms(self, kf: int, means: np.ndarray, save: bool) -> bool:
         try:
-            self._update_rooms(kf, means)
+            self._update_rooms(kf, means, ask_model=False)
         except Exception:
             log.exception("room update at keyframe %d failed; mapping continues", kf)
             return False
@@ -364,8 +364,9 @@ class SceneGraph:
                 log.warning("scene graph: could not write %s (%s)", self.out_path, e)
         return True
 
-    def _update_rooms(self, kf: int, means: np.ndarray) -> None:
-        """Segment the rooms anew from all Gaussian means and put the object nodes in them."""
+    def _update_rooms(self, kf: int, means: np.ndarray, ask_model: bool = True) -> None:
+        """Segment the rooms anew from all Gaussian means and put the object nodes in them (``ask_model``:
+        an LLM room typer is asked, at graph updates only)."""
         if self.room_map is None:
             return
         t0 = time.perf_counter()
@@ -374,7 +375,7 @@ class SceneGraph:
                 i: (n.points if len(n.points) else n.center[None], n.tag, n.num_gaussians)
                 for i, n in self.nodes.items()
             }
-        self.room_map.update(kf, means, self.up, objects, self._keyframe_frames.get(kf, -1))
+        self.room_map.update(kf, means, self.up, objects, self._keyframe_frames.get(kf, -1), ask_model)
         with self._lock:
             for i, n in self.nodes.items():
                 n.room = self.room_map.object_room.get(i)
