@@ -297,22 +297,16 @@ class HeuristicCaptioner:
       size small (< 0.3 m), medium (< 1 m) or large.
 
     Where a detector named the node's segments, its majority class is the tag, unless that class named less
-    than ``min_share`` of the node's pixels in the keyframes seen, or less than ``structure_share`` of a
-    node whose geometry is a floor, ceiling or wall: an object's segments that the mapping gave to the
-    surface behind it do not make the surface that object (on the synthetic apartments such names cover
-    0-3 % of a wall, a right name 10 % and more of its node).
+    than ``min_share`` of the node's pixels in the keyframes seen: an object's segments that the mapping gave
+    to the surface behind it do not make the surface that object (on a synthetic apartment such names
+    covered 0-3 % of a wall, a right name 10 % and more of its node).
     """
 
     def __init__(
-        self,
-        structure_band: float = 0.2,
-        wall_min_height: float = 1.2,
-        structure_share: float = 0.5,
-        min_share: float = 0.1,
+        self, structure_band: float = 0.2, wall_min_height: float = 1.2, min_share: float = 0.1
     ) -> None:
         self.structure_band = structure_band
         self.wall_min_height = wall_min_height
-        self.structure_share = structure_share
         self.min_share = min_share
 
     def describe(self, requests: Sequence[CaptionRequest]) -> dict[int, Description]:
@@ -325,8 +319,7 @@ class HeuristicCaptioner:
         if not req.detector_name_votes:
             return desc
         name, pixels = max(req.detector_name_votes.items(), key=lambda kv: (kv[1], kv[0]))
-        need = self.structure_share if desc.tag in ("floor", "ceiling", "wall") else self.min_share
-        if pixels < need * req.label_pixels:
+        if pixels < self.min_share * req.label_pixels:
             share = pixels / req.label_pixels
             return Description(f"{desc.caption}; {share:.0%} of it detected as {name}", desc.tag, desc.source)
         return Description(f"{name} (detector class); {desc.caption}", name, "detector")
