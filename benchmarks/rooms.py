@@ -94,8 +94,9 @@ def score(rec: dict, root: Path) -> dict:
     }
 
 
-HEADERS = ["seed", "rooms gt/pred", "P %", "R %", "matched P %", "matched R %", "settle (frames)",
-           *(f"top-1 {k}" for k in KINDS), "room ms/kf", "keyframe ms", "room share %"]  # fmt: skip
+HEADERS = ["seed", "rooms gt/pred", "P %", "R %", "matched P %", "matched R %", "types right",
+           "settle (frames)", *(f"top-1 {k}" for k in KINDS), "room ms/kf", "keyframe ms",
+           "room share %"]  # fmt: skip
 
 
 def _row(rec: dict) -> dict:
@@ -111,6 +112,7 @@ def _row(rec: dict) -> dict:
         100 * r.get("recall", float("nan")),
         100 * r.get("matched_precision", float("nan")),
         100 * r.get("matched_recall", float("nan")),
+        f"{r.get('types_correct', '-')}/{r.get('num_gt_rooms', 0)}",
         f"{min(settle)}..{max(settle)}" if settle else "-",
         *(f"{v['top1']}/{v['queries']}" for v in (q[k] for k in KINDS)),
         1000 * rec["room_seconds"] / kf,
@@ -148,6 +150,9 @@ def pooled(records: list[dict]) -> dict:
         "matched_precision_mean": sum(r["precision"] for r in rows) / len(rows) if rows else None,
         "matched_recall_mean": sum(r["recall"] for r in rows) / len(rows) if rows else None,
         "rooms_unmatched": sum(r["pred_room"] is None for r in rows),
+        "types_correct": sum(
+            r.get("gt_type") is not None and r.get("gt_type") == r.get("pred_type") for r in rows
+        ),
         "settle_frames": {
             "mean": sum(settle) / len(settle) if settle else None,
             "median": sorted(settle)[len(settle) // 2] if settle else None,
@@ -206,7 +211,7 @@ def main() -> int:
         f"\npooled over {pool['rooms_gt']} GT rooms and {pool['rooms_pred']} predicted rooms: precision "
         f"{pct['precision_mean']:.1f} %, recall {pct['recall_mean']:.1f} % (HOV-SG); matched per room "
         f"{pct['matched_precision_mean']:.1f} / {pct['matched_recall_mean']:.1f} %, "
-        f"{pool['rooms_unmatched']} GT rooms unmatched"
+        f"{pool['rooms_unmatched']} GT rooms unmatched; room types right for {pool['types_correct']}"
     )
     s = pool["settle_frames"]
     print(

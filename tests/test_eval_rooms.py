@@ -153,6 +153,7 @@ def test_eval_scores_rooms_and_queries(tmp_path, capsys):
     assert r["num_gt_rooms"] == 2 and r["num_pred_rooms"] == 2
     assert r["precision"] > 0.97 and r["recall"] > 0.97 and r["matched_recall"] > 0.97
     assert {row["settle_frames"] for row in r["per_room"].values()} == {20, -10}  # first seen at frame 20
+    assert r["types_correct"] == 2 and r["per_room"]["2"]["pred_type"] == "kitchen"
     q = report["queries"]["per_kind"]
     assert q["object"]["top1_accuracy"] == 1.0 and q["object"]["queries"] == 6
     assert q["relation"]["top1_accuracy"] == 1.0 and q["relation"]["queries"] == 4

@@ -200,7 +200,7 @@ def _print_rooms_and_queries(report: dict[str, Any]) -> None:
         print(
             f"room precision {_pct(r['precision'])}   recall {_pct(r['recall'])}   (matched per room: "
             f"{_pct(r['matched_precision'])} / {_pct(r['matched_recall'])}; {r['num_gt_rooms']} GT rooms, "
-            f"{r['num_pred_rooms']} predicted)"
+            f"{r['num_pred_rooms']} predicted; types right: {r.get('types_correct', 'n/a')})"
         )
         for gid, row in r["per_room"].items():
             settle = row.get("settle_frames")
@@ -208,8 +208,8 @@ def _print_rooms_and_queries(report: dict[str, Any]) -> None:
             pred = row["pred_room"]
             name = f"#{pred} {r['pred_types'].get(str(pred), '')}" if pred is not None else "none"
             print(
-                f"  GT room {gid}: precision {_pct(row['precision'])} recall {_pct(row['recall'])} "
-                f"(room {name}{when})"
+                f"  GT room {gid} ({row.get('gt_type') or '?'}): precision {_pct(row['precision'])} recall "
+                f"{_pct(row['recall'])} (room {name}{when})"
             )
     q = report.get("queries")
     if q:

@@ -181,11 +181,13 @@ def rooms_block(
     gt_points: np.ndarray,
     gt_point_rooms: np.ndarray,
     entered: Mapping[int, int | None],
+    gt_types: Mapping[int, str] | None = None,
     source: str = "graph.json",
 ) -> dict[str, Any]:
     """The ``rooms`` block of ``metrics.json``: the graph's rooms (graph.json) scored against the GT rooms of
     ``gt_points`` (``gt_point_rooms``: -1 = none), with the Gaussians ``means`` put in rooms by their
-    outlines."""
+    outlines; with ``gt_types`` (GT room id -> type) each matched room's type is checked too
+    (``types_correct``)."""
     from ..config import RoomsConfig
     from ..graph.rooms import assign_rooms, read_rooms
 
@@ -198,5 +200,11 @@ def rooms_block(
                          outlines=outlines)  # fmt: skip
     out = scores.to_dict()
     out["pred_types"] = {str(r.id): r.type for r in rooms}
+    if gt_types is not None:
+        types = {r.id: r.type for r in rooms}
+        for g, row in out["per_room"].items():
+            row["gt_type"] = gt_types.get(int(g))
+            row["pred_type"] = types.get(row["pred_room"]) if row["pred_room"] is not None else None
+        out["types_correct"] = sum(row["gt_type"] == row["pred_type"] for row in out["per_room"].values())
     out["num_floors"] = len(floors)
     return out

@@ -398,7 +398,8 @@ def _rooms_and_queries(
         point_rooms = np.array([lut.get(int(i), -1) for i in gt.instances], dtype=np.int64)
         entered = {k: v.get("first_frame") for k, v in gt.rooms.items()}
         try:
-            rooms = rooms_block(run.graph, scored.means, gt.points, point_rooms, entered)
+            types = {k: str(v["type"]) for k, v in gt.rooms.items()}
+            rooms = rooms_block(run.graph, scored.means, gt.points, point_rooms, entered, types)
         except DataError as e:
             notes.append(f"rooms not scored: {e}")
     gt_inst = np.where(assoc >= 0, gt.instances[np.maximum(assoc, 0)], -1)
