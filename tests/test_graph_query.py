@@ -213,3 +213,14 @@ def test_llm_room_types_with_the_rule_as_fallback(fake_llm):
     assert (kind, source) == ("bedroom", "rule")
     assert t.describe_with_source(["plant"]) == ("room", "", "llm")
     assert len(srv.requests) == 3 and '"bed"' in srv.requests[1]["body"]["messages"][0]["content"]
+
+
+def test_graph_command_answers_through_the_configured_endpoint(fake_llm, tmp_path, capsys):
+    srv = fake_llm(lambda body, n: (200, '{"ids": [8], "reason": "the living room chair"}', 0))
+    apartment_graph().save(tmp_path / "graph.json")
+    argv = ["graph", str(tmp_path), "-q", "chair where I watch TV", "--json", "--set", "graph.query.kind=llm",
+            "--set", f"graph.query.base_url={srv.base_url}", "--set", "graph.query.model=m"]  # fmt: skip
+    assert main(argv) == 0
+    (answer,) = json.loads(capsys.readouterr().out)
+    assert answer["source"] == "llm" and answer["hits"][0]["id"] == 8
+    assert "the living room chair" in answer["hits"][0]["reason"] and len(srv.requests) == 1
