@@ -182,6 +182,7 @@ def test_rule_typer():
     assert t.describe(["toilet", "sink"])[0] == "bathroom"
     assert t.describe(["desk", "monitor", "chair"])[0] == "office"
     assert t.describe(["pillow"])[0] == "room"  # a weak cue names no room
+    assert t.describe(["cabinet", "cabinet"])[0] == "room"  # nor a generic word for furniture
     assert t.describe([])[0] == "room"
     assert room_type_of("Lounge") == "living room" and room_type_of("study") == "office"
     assert room_type_of("garage") is None

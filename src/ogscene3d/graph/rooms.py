@@ -38,27 +38,22 @@ import numpy as np
 from ..config import RoomsConfig
 from ..errors import DataError
 from .geometry import horizontal_basis, unit_up
-from .terms import SYNONYM_GROUPS
 
 log = logging.getLogger(__name__)
 
-#: Room types the offline rule names, with the objects that point to each (weight per object).
+#: Room types the offline rule names, with the objects (and their usual other names) that point to each, and
+#: how strongly. Only these words count: a generic synonym ("cabinet" for "wardrobe") says nothing of a room.
 ROOM_TYPE_CUES: dict[str, dict[str, float]] = {
-    "bedroom": {"bed": 3, "nightstand": 2, "wardrobe": 2, "dresser": 1.5, "pillow": 0.5},
-    "kitchen": {
-        "refrigerator": 3,
-        "fridge": 3,
-        "stove": 3,
-        "oven": 3,
-        "counter": 2,
-        "microwave": 2,
-        "dishwasher": 2,
-        "sink": 0.5,
-    },  # fmt: skip
-    "bathroom": {"toilet": 3, "bathtub": 3, "shower": 3, "towel": 2, "mirror": 1, "sink": 1},
-    "living room": {"sofa": 3, "couch": 3, "tv": 2, "television": 2, "armchair": 1, "fireplace": 2},
+    "bedroom": {"bed": 3, "nightstand": 2, "bedside table": 2, "night table": 2, "wardrobe": 2,
+                "dresser": 1.5, "pillow": 0.5, "cushion": 0.5},
+    "kitchen": {"refrigerator": 3, "fridge": 3, "stove": 3, "oven": 3, "cooker": 3, "hob": 3, "counter": 2,
+                "countertop": 2, "worktop": 2, "microwave": 2, "dishwasher": 2, "sink": 0.5},
+    "bathroom": {"toilet": 3, "bathtub": 3, "bath": 3, "tub": 3, "shower": 3, "towel": 2, "mirror": 1,
+                 "sink": 1, "washbasin": 1, "basin": 1},
+    "living room": {"sofa": 3, "couch": 3, "settee": 3, "loveseat": 3, "tv": 2, "television": 2,
+                    "armchair": 1, "fireplace": 2},
     "office": {"desk": 3, "monitor": 2, "computer": 2, "laptop": 1, "printer": 2, "keyboard": 1},
-}
+}  # fmt: skip
 #: The type of a room the rule cannot name (no cue, or too little).
 UNKNOWN_ROOM = "room"
 #: Other names users give the room types (queries, LLM replies).
@@ -458,10 +453,9 @@ def assign_rooms(
 
 
 class RuleRoomTyper:
-    """Names a room from its objects' tags: the type whose cues (:data:`ROOM_TYPE_CUES`; a tag names a cue
-    by itself, else through its synonyms) weigh most, each object counting by its size (up to
-    :data:`FULL_WEIGHT_GAUSSIANS` Gaussians, so that a fragment a detector misnamed counts little), when
-    they weigh at least 2 (one strong cue); else "room"."""
+    """Names a room from its objects' tags: the type whose cues (:data:`ROOM_TYPE_CUES`, whole tags) weigh
+    most, each object counting by its size (up to :data:`FULL_WEIGHT_GAUSSIANS` Gaussians, so that a
+    fragment a detector misnamed counts little), when they weigh at least 2 (one strong cue); else "room"."""
 
     name = "rule"
 
@@ -475,14 +469,9 @@ class RuleRoomTyper:
             words = " ".join(re.sub(r"[^a-z ]+", " ", str(tag).lower()).split())
             if not words:
                 continue
-            names = {words}
-            if not any(words in cues for cues in ROOM_TYPE_CUES.values()):
-                for g in SYNONYM_GROUPS:
-                    if words in g:
-                        names |= set(g)
             size = 1.0 if sizes is None else min(1.0, float(sizes[k]) / FULL_WEIGHT_GAUSSIANS)
             for kind, cues in ROOM_TYPE_CUES.items():
-                w = max((cues.get(n, 0.0) for n in names), default=0.0) * size
+                w = cues.get(words, 0.0) * size
                 if w > 0:
                     scores[kind] = scores.get(kind, 0.0) + w
                     found.setdefault(kind, []).append(words)
