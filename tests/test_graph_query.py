@@ -224,3 +224,18 @@ def test_graph_command_answers_through_the_configured_endpoint(fake_llm, tmp_pat
     (answer,) = json.loads(capsys.readouterr().out)
     assert answer["source"] == "llm" and answer["hits"][0]["id"] == 8
     assert "the living room chair" in answer["hits"][0]["reason"] and len(srv.requests) == 1
+
+
+def test_a_room_type_no_room_has_goes_to_the_untyped_rooms_first():
+    g = apartment_graph()
+    office = _room(3, "room", (8.1, 0), (11, 4))
+    office.type_reason, office.type_scores = "too few cues (monitor)", {"office": 0.5}
+    g.room_map.rooms[3] = office
+    g.room_map.rooms[2].type_scores = {"living room": 5.0, "office": 0.3}  # a stray cue in the living room
+    chair = _node(9, [9.0, 1.0, 0.0], [9.45, 1.45, 0.9], "chair", np.random.default_rng(1), 3)
+    g.nodes[9] = chair
+    a = g.ask("chair in the office")
+    assert a.hits[0].id == 9 and "untyped, maybe the office" in a.hits[0].reason
+    assert "no room typed 'office'" in a.message
+    assert [h.id for h in g.ask("office").hits] == [3, 2]  # the untyped room, then the cued one
+    assert g.ask("chair in the bedroom").hits[0].id == 3  # a typed room still comes first

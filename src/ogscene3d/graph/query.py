@@ -329,37 +329,65 @@ def _room_text(r: RoomNode) -> str:
     return f"room #{r.id} '{r.type}'"
 
 
+def _room_reason(r: RoomNode) -> str:
+    return f"{_room_text(r)} ({r.type_source or 'no'} type: {r.type_reason})"
+
+
+def _room_weights(q: ParsedQuery, ctx: QueryContext, notes: list[str]) -> dict[int, tuple[float, str]] | None:
+    """{room id: (weight, why)} of the rooms a query's room terms ask for (None: no room term, or no room
+    the terms could mean). A room typed as asked weighs 1; when none is, an untyped room ("room": its
+    objects named no type) weighs 0.6 to 1 by how much its objects point to the type asked for; a room typed
+    otherwise whose objects point to it too 0.4 (0.25 beside a room typed as asked); any other 0.15."""
+    if q.room is None and q.room_id is None and q.floor is None:
+        return None
+    place = [
+        r
+        for r in ctx.rooms.values()
+        if (q.room_id is None or r.id == q.room_id) and (q.floor is None or r.floor == q.floor)
+    ]
+    have = ", ".join(sorted({f"{r.type} (#{r.id})" for r in ctx.rooms.values()})) or "none yet"
+    if not place:
+        notes.append(f"no room {q.describe().split(', ')[-1]} in the map (rooms: {have}); rooms not used")
+        return None
+    out = {r.id: (0.15, "") for r in ctx.rooms.values()}
+    if q.room is None:
+        out.update({r.id: (1.0, "") for r in place})
+        return out
+    cue = {r.id: r.type_scores.get(q.room, 0.0) for r in place}
+    typed = [r for r in place if r.type == q.room]
+    untyped = [r for r in place if r.type == UNKNOWN_ROOM]
+    best = max((cue[r.id] for r in untyped), default=0.0)
+    for r in place:
+        if r.type == q.room:
+            out[r.id] = (1.0, "")
+        elif r.type == UNKNOWN_ROOM and not typed:
+            out[r.id] = (
+                0.6 + 0.4 * (cue[r.id] / best if best > 0 else 0.0),
+                f", untyped, maybe the {q.room}",
+            )
+        elif r.type == UNKNOWN_ROOM:
+            out[r.id] = (0.4 if cue[r.id] > 0 else 0.3, ", untyped")
+        elif cue[r.id] > 0:
+            out[r.id] = (0.25 if typed else 0.4, f", which holds {q.room} objects too")
+    if not typed:
+        notes.append(f"no room typed {q.room!r} in the map (rooms: {have}): untyped rooms and rooms holding "
+                     f"{q.room} objects answer instead")  # fmt: skip
+    return out
+
+
 def rank(q: ParsedQuery, ctx: QueryContext, top_k: int | None = None) -> QueryAnswer:
     """Score every node against a parsed query (see the module docstring)."""
     up = unit_up(ctx.up)
     notes: list[str] = []
     if q.ignored:
         notes.append(f"ignored: {', '.join(q.ignored)}")
-    rooms_wanted: set[int] | None = None
-    rooms_cued: set[int] = set()  # rooms of another type whose objects point to the type asked for too
-    if q.room is not None or q.room_id is not None or q.floor is not None:
-        place = [
-            r
-            for r in ctx.rooms.values()
-            if (q.room_id is None or r.id == q.room_id) and (q.floor is None or r.floor == q.floor)
-        ]
-        chosen = [r for r in place if q.room is None or r.type == q.room]
-        if q.room is not None:
-            rooms_cued = {r.id for r in place if r.type != q.room and r.type_scores.get(q.room, 0.0) > 0}
-        rooms_wanted = {r.id for r in chosen}
-        have = ", ".join(sorted({f"{r.type} (#{r.id})" for r in ctx.rooms.values()})) or "none yet"
-        if not chosen and rooms_cued:
-            best = max(rooms_cued, key=lambda i: ctx.rooms[i].type_scores[q.room])
-            rooms_wanted, rooms_cued = {best}, rooms_cued - {best}
-            notes.append(f"no room typed {q.room!r} in the map (rooms: {have}); room #{best} has its objects")
-        elif not chosen:
-            notes.append(f"no room {q.describe().split(', ')[-1]} in the map (rooms: {have}); rooms not used")
-            rooms_wanted = None
-    if q.target is None:  # a room query
+    weights = _room_weights(q, ctx, notes)
+    if q.target is None:  # a room query: the rooms, best first
+        w = weights or {}
         hits = [
-            QueryHit("room", r.id, 1.0, f"{_room_text(r)} ({r.type_source or 'no'} type: {r.type_reason})", r)
-            for r in sorted(ctx.rooms.values(), key=lambda r: r.id)
-            if rooms_wanted is not None and r.id in rooms_wanted
+            QueryHit("room", i, w[i][0], _room_reason(ctx.rooms[i]), ctx.rooms[i])
+            for i in sorted(w, key=lambda i: (-w[i][0], i))
+            if w[i][0] > 0.15
         ]
         return QueryAnswer(q.text, hits[:top_k], "; ".join(notes), q)
 
@@ -371,15 +399,12 @@ def rank(q: ParsedQuery, ctx: QueryContext, top_k: int | None = None) -> QueryAn
     def room_factor(i: int) -> tuple[float, str]:
         rid = ctx.object_room.get(i)
         room = ctx.rooms.get(rid) if rid is not None else None
-        if rooms_wanted is None:
+        if weights is None:
             return 1.0, (f"in {_room_text(room)}" if room is not None else "")
         if room is None:
             return 0.35, "in no room"
-        if rid in rooms_wanted:
-            return 1.0, f"in {_room_text(room)}"
-        if rid in rooms_cued:
-            return 0.4, f"in {_room_text(room)}, which holds {q.room} objects too"
-        return 0.15, f"but in {_room_text(room)}"
+        w, why = weights.get(rid, (0.15, ""))
+        return w, f"in {_room_text(room)}{why}" if w >= 0.15 else f"but in {_room_text(room)}"
 
     targets = scores(q.target)
     if not targets:
@@ -403,7 +428,7 @@ def rank(q: ParsedQuery, ctx: QueryContext, top_k: int | None = None) -> QueryAn
                 w, text = _edge_relation(ctx, i, a, q.relation)
                 if w == 0.0:
                     w, text = _box_relation(node, ctx.nodes[a], q.relation, up), "boxes"
-                w *= s_a * (room_factor(a)[0] if rooms_wanted is not None else 1.0)
+                w *= s_a * (room_factor(a)[0] if weights is not None else 1.0)
                 if w > best:
                     best, best_why = w, f"{q.relation} #{a} {ctx.nodes[a].tag!r} ({text})"
             score *= 0.25 + 0.75 * best
