@@ -44,6 +44,7 @@ OBJECTS = known_terms(["pillow", "bed", "chair", "table", "cup", "sofa", "book",
         ("chair in room 2", dict(target="chair", room_id=2)),
         ("blue chair", dict(target="chair", ignored=["blue"])),
         ("the table that holds a cup", dict(target="table", relation="under", anchor="cup")),
+        ("piano next to the sofa", dict(target="piano", relation="next to", anchor="sofa")),  # no such term
     ],
 )
 def test_parser_reads_objects_relations_and_rooms(text, want):
@@ -239,3 +240,16 @@ def test_a_room_type_no_room_has_goes_to_the_untyped_rooms_first():
     assert "no room typed 'office'" in a.message
     assert [h.id for h in g.ask("office").hits] == [3, 2]  # the untyped room, then the cued one
     assert g.ask("chair in the bedroom").hits[0].id == 3  # a typed room still comes first
+
+
+def test_synonyms_name_whole_tags_only():
+    from ogscene3d.graph.terms import text_score
+
+    assert text_score("sofa", "couch", "") == pytest.approx(0.9) and text_score("lamp", "light", "") == 0.9
+    assert text_score("lamp", "light switch", "") == 0.0  # "light" is a lamp, a light switch is not
+    assert text_score("lamp", "gray object", "small light gray object") == 0.0
+    assert text_score("lamp", "floor lamp", "") == 0.9 and text_score("cup", "cups", "") == 0.9
+    assert text_score("cushion", "thing", "a sofa with two cushions") == 0.6
+    g = apartment_graph()
+    a = g.ask("piano next to the sofa")  # not "anything next to the sofa"
+    assert a.hits == [] and "nothing in the map matches 'piano'" in a.message

@@ -226,6 +226,7 @@ def _items(words: list[str], objects: set[str]) -> tuple[list[tuple[str, Any]], 
             continue
         if word not in FILLERS:
             ignored.append(word)
+            items.append(("unknown", word))
         i += 1
     return items, ignored
 
@@ -240,8 +241,12 @@ def parse_query(text: str, objects: set[str]) -> ParsedQuery | str:
     items, q.ignored = _items(words, objects)
     pending_rel: tuple[str, bool, str] | None = None
     objs: list[tuple[str, tuple[str, bool, str] | None]] = []  # (term, relation phrase before it)
+    unknown_target: str | None = None  # a word that is no term where the target would stand
     for kind, value in items:
-        if kind == "room":
+        if kind == "unknown":
+            if not objs and pending_rel is None and unknown_target is None:
+                unknown_target = value
+        elif kind == "room":
             if q.room is None:
                 q.room = value
             pending_rel = None  # "in" before a room is the room's preposition, not a relation
@@ -256,8 +261,9 @@ def parse_query(text: str, objects: set[str]) -> ParsedQuery | str:
         else:
             objs.append((value, pending_rel))
             pending_rel = None
-    if objs and objs[0][1] is not None:  # "on the table": anything on the table
-        objs.insert(0, ("*", None))
+    if objs and objs[0][1] is not None:  # "on the table": anything on the table; "toilet next to the
+        # trash can" without a toilet term: the unknown word, which nothing in the map matches
+        objs.insert(0, (unknown_target or "*", None))
     if objs:
         q.target = objs[0][0]
     if len(objs) > 1:

@@ -61,14 +61,14 @@ def word_pattern(term: str) -> re.Pattern:
 
 def text_score(term: str, tag: str, caption: str) -> float:
     """How well ``term`` names a node: 1.0 for its exact tag, 0.9 for a whole word of the tag, 0.6 for a
-    whole word of the caption, 0 otherwise; a synonym counts 0.9 times, in the tag only (a caption's "light
-    gray" is no lamp)."""
-    t, c = normalize_text(tag), normalize_text(caption)
-    best = 0.6 if word_pattern(normalize_text(term)).search(c) else 0.0
+    whole word of the caption, 0 otherwise; a synonym counts 0.9 times as the whole tag only (a caption's
+    "light gray" or a "light switch" is no lamp)."""
+    q, t, c = normalize_text(term), normalize_text(tag), normalize_text(caption)
+    pat = word_pattern(q)
+    best = 1.0 if t == q else 0.9 if pat.search(t) else 0.6 if pat.search(c) else 0.0
     for word, w in expand(term).items():
-        pat = word_pattern(word)
-        s = 1.0 if t == word else 0.9 if pat.search(t) else 0.0
-        best = max(best, s * w)
+        if word != q and t in (word, word + "s", word + "es"):
+            best = max(best, w)
     return best
 
 
