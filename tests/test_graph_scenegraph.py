@@ -252,6 +252,8 @@ def test_json_roundtrip_networkx_graphml_and_query(tmp_path):
     g.nodes[0].tag, g.nodes[0].caption = "couch", "a grey fabric couch with two cushions"
     g.nodes[1].tag, g.nodes[1].caption = "coffee table", "a low wooden coffee table"
     g.nodes[2].tag, g.nodes[2].caption = "mug", "a white mug on the table"
+    for n in g.nodes.values():
+        n.caption_source = "vlm"  # (a model's captions: their words count in queries)
     path = tmp_path / "graph.json"
     g.save(path)
     h = SceneGraph.load(path)

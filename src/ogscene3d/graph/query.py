@@ -294,12 +294,16 @@ def _up_box(node: SceneNode, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _box_relation(a: SceneNode, b: SceneNode, relation: str, up: np.ndarray) -> float:
-    """Whether "a relation b" holds for the nodes' boxes (no edge between them): 0.5-0.7, or 0."""
+    """Whether "a relation b" holds for the nodes' boxes (no edge between them): 0.4-0.7, or 0; "on" and "next
+    to" weigh less as the boxes lie farther apart (of two candidates, the closer answers first)."""
     (alo, ahi), (blo, bhi) = _up_box(a, up), _up_box(b, up)
     gap = np.maximum(np.maximum(alo[1:] - bhi[1:], blo[1:] - ahi[1:]), 0.0)
     overlap = bool(np.all(gap <= 0.1))  # boxes of mapped Gaussians fall a little short of the surfaces
     if relation == "on":
-        return 0.7 if overlap and abs(alo[0] - bhi[0]) < 0.1 else 0.0
+        # a's bottom near b's top (b's box may reach higher: what else stands on it), a above b's middle
+        lift = float(alo[0] - bhi[0])
+        above = (alo[0] + ahi[0]) / 2 > (blo[0] + bhi[0]) / 2
+        return 0.7 - min(abs(lift), 0.3) if overlap and above and -0.3 <= lift <= 0.1 else 0.0
     if relation in ("under", "below"):
         return 0.6 if overlap and ahi[0] <= blo[0] + 0.1 else 0.0
     if relation == "above":
@@ -309,7 +313,8 @@ def _box_relation(a: SceneNode, b: SceneNode, relation: str, up: np.ndarray) -> 
         return 0.6 if bool(np.all((c >= blo) & (c <= bhi))) else 0.0
     if relation == "next to":
         vertical = alo[0] < bhi[0] and blo[0] < ahi[0]
-        return 0.6 if vertical and float(np.linalg.norm(gap)) < 0.5 else 0.0
+        d = float(np.linalg.norm(gap))
+        return 0.7 - 0.6 * d if vertical and d < 0.5 else 0.0
     if relation == "attached to":
         return 0.5 if float(np.linalg.norm(gap)) < 0.05 else 0.0
     return 0.0

@@ -1006,7 +1006,13 @@ class SceneGraph:
         configured, embedding similarity (the larger of the two)."""
         with self._lock:
             nodes = [self.nodes[i] for i in sorted(self.nodes)]
-        scores = {n.id: s for n in nodes if (s := text_score(term, n.tag, n.caption)) > 0}
+        # an offline caption repeats the tag and describes geometry ("12 % of it detected as book"): only
+        # the words of a model's caption count
+        scores = {
+            n.id: s
+            for n in nodes
+            if (s := text_score(term, n.tag, "" if n.caption_source in OFFLINE_SOURCES else n.caption)) > 0
+        }
         if self.config.query_embedding != "none" and nodes:
             try:
                 sims = self._embedding_scores(" ".join(str(term).lower().split()), nodes)

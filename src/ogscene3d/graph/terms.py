@@ -61,8 +61,9 @@ def word_pattern(term: str) -> re.Pattern:
 
 def text_score(term: str, tag: str, caption: str) -> float:
     """How well ``term`` names a node: 1.0 for its exact tag, 0.9 for a whole word of the tag, 0.6 for a
-    whole word of the caption, 0 otherwise; a synonym counts 0.9 times as the whole tag only (a caption's
-    "light gray" or a "light switch" is no lamp)."""
+    whole word of the caption (pass "" for an offline caption: it says nothing the tag does not), 0
+    otherwise; a synonym counts 0.9 times as the whole tag only (a caption's "light gray" or a "light
+    switch" is no lamp)."""
     q, t, c = normalize_text(term), normalize_text(tag), normalize_text(caption)
     pat = word_pattern(q)
     best = 1.0 if t == q else 0.9 if pat.search(t) else 0.6 if pat.search(c) else 0.0
