@@ -45,6 +45,8 @@ OBJECTS = known_terms(["pillow", "bed", "chair", "table", "cup", "sofa", "book",
         ("blue chair", dict(target="chair", ignored=["blue"])),
         ("the table that holds a cup", dict(target="table", relation="under", anchor="cup")),
         ("piano next to the sofa", dict(target="piano", relation="next to", anchor="sofa")),  # no such term
+        ("piano in the kitchen", dict(target="piano", room="kitchen")),  # not the kitchen itself
+        ("kitchen area", dict(target=None, room="kitchen", ignored=["area"])),
     ],
 )
 def test_parser_reads_objects_relations_and_rooms(text, want):

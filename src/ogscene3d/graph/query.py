@@ -242,11 +242,14 @@ def parse_query(text: str, objects: set[str]) -> ParsedQuery | str:
     pending_rel: tuple[str, bool, str] | None = None
     objs: list[tuple[str, tuple[str, bool, str] | None]] = []  # (term, relation phrase before it)
     unknown_target: str | None = None  # a word that is no term where the target would stand
+    seen_term = False
     for kind, value in items:
         if kind == "unknown":
-            if not objs and pending_rel is None and unknown_target is None:
+            if not seen_term and unknown_target is None:
                 unknown_target = value
-        elif kind == "room":
+            continue
+        seen_term = True
+        if kind == "room":
             if q.room is None:
                 q.room = value
             pending_rel = None  # "in" before a room is the room's preposition, not a relation
@@ -276,6 +279,12 @@ def parse_query(text: str, objects: set[str]) -> ParsedQuery | str:
             if swapped:  # "the shelf that holds a book": the book in the shelf -> inverse of "in" is kept
                 q.relation = _INVERSE.get(name, name)
         q.ignored += [o for o, _ in objs[2:]]
+    if (
+        q.target is None
+        and unknown_target is not None
+        and (q.room or q.room_id is not None or q.floor is not None)
+    ):
+        q.target = unknown_target  # "toilet in the bathroom" without a toilet term: not the bathroom itself
     if q.target is None and q.room is None and q.room_id is None:
         return f"no known object, relation or room term in {text!r}"
     return q
