@@ -77,7 +77,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="auto: splats up to --max-splats, points beyond",
     )
     p.add_argument(
-        "--color", choices=["rgb", "semantic", "confidence"], default="rgb", help="initial colouring"
+        "--color", choices=["rgb", "semantic", "confidence", "room"], default="rgb", help="initial colouring"
     )
     p.add_argument(
         "--up",
