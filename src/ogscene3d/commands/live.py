@@ -117,8 +117,11 @@ def add_parser(subparsers) -> None:
 
 
 def _up_from_config(cfg) -> tuple[float, float, float]:
-    # load_config's check_config has made sure it is a finite non-zero 3-vector
-    return tuple(float(v) for v in cfg.graph.up_axis)  # type: ignore[return-value]
+    from ..up_axis import up_vector
+
+    # load_config's check_config has made sure it is auto or a finite non-zero 3-vector; auto not chosen when
+    # the dataset opened (a live camera): an upright first camera's up, as odometry's world has it
+    return up_vector(cfg.graph.up_axis)
 
 
 def _settings(args):

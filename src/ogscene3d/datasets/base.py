@@ -222,6 +222,10 @@ class RGBDDataset:
     depth_format_default = "linear"
     min_depth_default = 0.0
     invalid_raw: int | None = None  # a raw depth value that means "no measurement" (7-Scenes: 65535)
+    # the world up direction of the format's poses (graph.up_axis auto, ogscene3d.up_axis), and what says so;
+    # None: the format defines none (7-Scenes' world is its first camera's, pitched as it was)
+    up_axis: tuple[float, float, float] | None = None
+    up_axis_source = ""
 
     def __init__(
         self,

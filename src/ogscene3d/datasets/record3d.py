@@ -65,6 +65,8 @@ def _member_number(name: str, suffix: str) -> int | None:
 class Record3DDataset(DecodedDataset):
     kind = "record3d"
     depth_scale_default = 1.0  # depth is float metres
+    up_axis = (0.0, -1.0, 0.0)
+    up_axis_source = "Record3D (ARKit's gravity-aligned world, y up, turned to OpenCV axes: -y up)"
     # ARKit intrinsics count pixel centres from 0, as OpenCV does
     pixel_centers_default = "integer"
 

@@ -105,6 +105,8 @@ def list_replica_frames(results: Path) -> list[tuple[int, Path, Path]]:
 class ReplicaDataset(RGBDDataset):
     kind = "replica"
     depth_scale_default = 6553.5
+    up_axis = (0.0, 0.0, 1.0)
+    up_axis_source = "the Replica layout (its meshes' world is z-up)"
     # Replica's renders agree with cam_params.json read with ogscene3d's pixel centres (+0.5): between
     # frames of NICE-SLAM's room0, depth reprojects best as read, worse with cx or cy shifted by half a
     # pixel either way (docs/results.md, "Dataset checks"; benchmarks/pixel_centers.py)

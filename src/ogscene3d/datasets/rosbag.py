@@ -394,6 +394,7 @@ class RosBagDataset(DecodedDataset):
                     f"{tf.root(world)!r} and {tf.root(camera)!r})"
                 )
             self.pose_desc = f"tf {world} -> {camera}"
+            self._rep103(world)
             out = [(tf.lookup(world, camera, t, tol), self.pose_desc) for t in stamps]
             if not any(p is not None for p, _ in out):
                 raise DataError(
@@ -432,6 +433,7 @@ class RosBagDataset(DecodedDataset):
                     f"to the camera frame {camera!r}: record /tf_static too, or set data.ros_camera_frame"
                 )
             link = tf
+        self._rep103(track.parent or pose_topic)
         self.pose_desc = f"{pose_topic} ({track.parent} -> {body})" + (
             f" and tf {body} -> {camera}" if link else ""
         )
@@ -443,6 +445,11 @@ class RosBagDataset(DecodedDataset):
                 T = None if step is None else T @ step
             out.append((T, self.pose_desc))
         return out
+
+    def _rep103(self, world: str) -> None:
+        """The poses' world is a ROS world frame: z-up (REP 103: x forward, y left, z up)."""
+        self.up_axis = (0.0, 0.0, 1.0)
+        self.up_axis_source = f"ROS's REP 103 (the world frame {world!r} of the recording's poses is z-up)"
 
     def _read_tf(self, by_topic: dict[str, Any]) -> TfTree | None:
         conns = [c for c in by_topic.values() if c.msgtype == TF]

@@ -113,6 +113,8 @@ def read_label_map(path: str | Path, src: str = "id", dst: str = "nyu40id") -> n
 class ScanNetDataset(RGBDDataset):
     kind = "scannet"
     depth_scale_default = 1000.0
+    up_axis = (0.0, 0.0, 1.0)
+    up_axis_source = "the ScanNet layout (its scans' world is z-up)"
 
     @staticmethod
     def detect(root: Path) -> bool:

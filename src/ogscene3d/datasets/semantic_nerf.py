@@ -138,6 +138,8 @@ def read_class_names(path: Path) -> dict[int, str]:
 class SemanticNeRFDataset(RGBDDataset):
     kind = "semantic_nerf"
     void_class_id = VOID_ID
+    up_axis = (0.0, 0.0, 1.0)
+    up_axis_source = "the Semantic-NeRF layout (Replica's world, z-up)"
     depth_scale_default = 1000.0
     # the K derived from the field of view (hfov_intrinsics) is already ogscene3d's
     pixel_centers_default = "half"

@@ -106,6 +106,8 @@ def associate(a: np.ndarray, b: np.ndarray, max_dt: float = MAX_DT, one_to_one: 
 class TUMDataset(RGBDDataset):
     kind = "tum"
     depth_scale_default = 5000.0
+    up_axis = (0.0, 0.0, 1.0)
+    up_axis_source = "the TUM layout (its motion-capture world is z-up)"
 
     @staticmethod
     def detect(root: Path) -> bool:

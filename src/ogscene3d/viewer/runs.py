@@ -185,14 +185,24 @@ def _read_trajectory(path: Path) -> np.ndarray:
     return poses[ok][order]
 
 
-def _read_up(path: Path) -> np.ndarray | None:
+def _read_up(path: Path, trajectory: np.ndarray) -> np.ndarray | None:
+    """The run's up direction: its config's graph.up_axis, or where that stayed auto (chosen from tracked
+    cameras during the run) the keyframe cameras' up direction."""
     if not path.is_file():
         return None
     import yaml
 
+    from ..up_axis import CameraUp, is_auto
+
     try:
         doc = yaml.safe_load(path.read_text())
-        up = np.asarray(doc["graph"]["up_axis"], dtype=np.float64)
+        value = doc["graph"]["up_axis"]
+        if is_auto(value):
+            cams = CameraUp()
+            for pose in trajectory:
+                cams.add(pose)
+            return cams.estimate()
+        up = np.asarray(value, dtype=np.float64)
     except Exception:  # noqa: BLE001 - the up vector only orients the camera; a default is fine
         log.warning("%s: no readable graph.up_axis; using the viewer's default up direction", path)
         return None
@@ -225,7 +235,7 @@ def load_run(run_dir: str | Path) -> tuple[MapSnapshot, RunInfo]:
         map_rev=0,
         status=f"browsing {root.name}",
     )
-    return snap, RunInfo(path=root, up=_read_up(root / "config.yaml"))
+    return snap, RunInfo(path=root, up=_read_up(root / "config.yaml", trajectory))
 
 
 __all__ = ["RunInfo", "load_run", "read_gaussians_ply", "read_graph_json"]
