@@ -3,13 +3,17 @@
 A reader lists its frames once (file paths, poses, timestamps: cheap) as :class:`FrameRecord` s and
 reads pixels only when a frame is asked for. Everything that can go wrong with a file raises
 :class:`~ogscene3d.errors.DataError` naming the file and the problem; iteration turns that into a
-logged warning and a skipped frame when ``on_bad_frame == "skip"``. Missing files are found when the
-dataset is opened (one stat per file, nothing read), all at once.
+logged warning and a skipped frame when ``on_bad_frame == "skip"``. What can be checked cheaply is checked
+when the dataset is opened, for every selected frame, all at once: its files exist, are not empty, hold their
+name's format and are not cut short (their first and last bytes, :mod:`.headers`), and its images have the
+size of the other frames' (colour that of its depth, unless the layout resamples it), so that a broken folder
+fails in seconds naming the files instead of when mapping reaches them.
 """
 
 from __future__ import annotations
 
 import logging
+from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,15 +27,13 @@ from ..errors import DataError
 from ..frame import Frame, check_pose, implausible_median_depth
 from ..segmentation.base import Segmentation
 from ..segmentation.precomputed import has_segments, read_segmentation
+from .headers import JPEG_END, PNG_END, ImageHeader, read_header
 
 log = logging.getLogger(__name__)
 
 DEPTH_FORMATS = ("linear", "shift3")
 
 MISSING_LISTED = 5  # missing files named in the error; the rest are counted
-
-_PNG_END = b"IEND\xaeB`\x82"
-_JPEG_END = b"\xff\xd9"
 
 
 # --------------------------------------------------------------------------------------- file readers
@@ -52,11 +54,11 @@ def _read_bytes(path: Path, what: str) -> bytes:
 def _check_complete(path: Path, data: bytes, what: str) -> None:
     """Reject truncated PNG/JPEG files (OpenCV would silently return a partly grey image)."""
     if data[:8] == b"\x89PNG\r\n\x1a\n":
-        if not data.rstrip(b"\x00").endswith(_PNG_END):
+        if not data.rstrip(b"\x00").endswith(PNG_END):
             raise DataError(f"{path}: {what} PNG is truncated (no IEND chunk)")
     elif data[:2] == b"\xff\xd8":
         # Some encoders pad after the end-of-image marker; look for it near the end.
-        if _JPEG_END not in data[-64:]:
+        if JPEG_END not in data[-64:]:
             raise DataError(f"{path}: {what} JPEG is truncated (no end-of-image marker)")
 
 
@@ -196,6 +198,9 @@ class FrameRecord:
     pose_source: str = ""
     pose_path: Path | None = None
     pose_error: str | None = None  # why the layout's pose of this frame could not be read (file:line ...)
+    # why the frame cannot be mapped though its files are there (a TUM frame without a pose near its stamp):
+    # named with the frames whose files are missing or broken when the dataset opens
+    lacks: str | None = None
     timestamp: float = 0.0
     extras: dict[str, Path] = field(default_factory=dict)
 
@@ -256,9 +261,11 @@ class RGBDDataset:
                 f"{self.root}: frame range start={config.start} stride={config.stride} selects none of "
                 f"{len(records)} frames"
             )
-        # frames of the selection left out when opened (files missing, under on_bad_frame: skip): a run's
-        # count of skipped frames starts from this; frames skipped while iterating come on top
+        # frames of the selection left out when opened (files missing or broken, under on_bad_frame: skip): a
+        # run's count of skipped frames starts from this; frames skipped while iterating come on top
         self.frames_left_out = 0
+        self.resize_rgb_to_depth = resize_rgb_to_depth
+        self._header_size: tuple[int, int] | None = None  # (h, w) of the depth images, from their headers
         self.records = self._drop_incomplete(selected)
         if config.intrinsics is not None:
             if len(config.intrinsics) != 4:
@@ -287,10 +294,12 @@ class RGBDDataset:
         self.segments_dir = Path(segments_dir) if segments_dir is not None else None
         if self.segments_dir is not None and not self.segments_dir.is_dir():
             raise DataError(f"{self.segments_dir}: segments folder does not exist")
-        self.resize_rgb_to_depth = resize_rgb_to_depth
         self._depth_checked = False
         self._size_checked = False
         self._warned_no_segments = False
+        if self._header_size is not None:  # K against the images' size, now rather than at the first frame
+            self._size_checked = True
+            self._check_principal_point(self._header_size, self.records[0].depth_path)
 
     def read_pixel_centers(self, config: DataConfig) -> str:
         """The convention of the intrinsics this dataset reads: ``data.pixel_centers`` or the layout's."""
@@ -302,28 +311,109 @@ class RGBDDataset:
         return conv
 
     def _drop_incomplete(self, selected: list[FrameRecord]) -> list[FrameRecord]:
-        """``selected`` less the frames whose rgb, depth or pose file is missing, found now rather than
-        when mapping reaches them (maybe hours in). Missing files are a :class:`DataError` listing them
-        all, or, when ``on_bad_frame == "skip"``, one warning and those frames left out."""
-        missing = {id(rec): paths for rec in selected if (paths := _missing_files(rec))}
-        if not missing:
+        """``selected`` less the frames that cannot be mapped, found now rather than when mapping reaches them
+        (maybe hours in): a file missing, empty, not of its name's format or cut short, an image of another
+        size than the other frames' (colour than its depth, where the layout does not resample it), or what
+        the reader found lacking (:attr:`FrameRecord.lacks`). They are a :class:`DataError` naming them all,
+        or, when ``on_bad_frame == "skip"``, one warning and those frames left out. Reads each image file's
+        first and last bytes only (:mod:`.headers`), a few hundred bytes a file."""
+        missing: dict[int, list[Path]] = {}
+        broken: dict[int, list[str]] = {}
+        unusable: dict[int, str] = {}
+        depth_heads: dict[int, ImageHeader] = {}
+        rgb_heads: dict[int, ImageHeader] = {}
+        for k, rec in enumerate(selected):
+            gone = _missing_files(rec)
+            if gone:
+                missing[k] = gone
+            files = ((rec.rgb_path, "rgb", rgb_heads), (rec.depth_path, "depth", depth_heads))
+            for path, what, heads in files:
+                if path in gone:
+                    continue
+                try:
+                    head = read_header(path, what)
+                except DataError as e:
+                    broken.setdefault(k, []).append(self._relative_message(e, path))
+                    continue
+                problem = _format_problem(head, what) if head is not None else None
+                if problem is not None:
+                    broken.setdefault(k, []).append(f"{self._relative(path)}: {problem}")
+                elif head is not None:
+                    heads[k] = head
+            if rec.lacks is not None:
+                unusable[k] = f"{self._relative(rec.rgb_path)}: {rec.lacks}"
+        self._check_sizes(selected, depth_heads, rgb_heads, broken)
+        bad = set(missing) | set(broken) | set(unusable)
+        if not bad:
             return selected
-        files = [p for paths in missing.values() for p in paths]
-        named = ", ".join(self._relative(p) for p in files[:MISSING_LISTED])
-        if len(files) > MISSING_LISTED:
-            named += f" and {len(files) - MISSING_LISTED} more"
-        msg = (
-            f"{self.root}: {len(missing)} of the {len(selected)} selected frames lack files ({self.kind} "
-            f"layout); {len(files)} missing: {named}"
-        )
-        kept = [rec for rec in selected if id(rec) not in missing]
+        msg = self._bad_frames_message(len(bad), len(selected), missing, broken, unusable)
+        kept = [rec for k, rec in enumerate(selected) if k not in bad]
         if self.config.on_bad_frame == "skip" and kept:
             log.warning("%s; leaving those frames out (data.on_bad_frame: skip)", msg)
-            self.frames_left_out = len(missing)
+            self.frames_left_out = len(bad)
             return kept
         if self.config.on_bad_frame == "skip":
             raise DataError(f"{msg}; no selected frame is left")
         raise DataError(f"{msg}; set data.on_bad_frame: skip to leave those frames out")
+
+    def _check_sizes(
+        self,
+        selected: list[FrameRecord],
+        depth_heads: dict[int, ImageHeader],
+        rgb_heads: dict[int, ImageHeader],
+        broken: dict[int, list[str]],
+    ) -> None:
+        """Add to ``broken`` the frames whose depth image has another size than most frames' (the size the
+        intrinsics are for), or whose colour image has another size than its depth (than most colour images,
+        where the layout resamples colour to depth); sets ``_header_size``."""
+        if not depth_heads:
+            return
+        sizes = Counter(h.size for h in depth_heads.values())
+        size = sizes.most_common(1)[0][0]
+        self._header_size = size
+        rgb_size = Counter(h.size for h in rgb_heads.values()).most_common(1)[0][0] if rgb_heads else None
+        for k, head in depth_heads.items():
+            if head.size != size:
+                broken.setdefault(k, []).append(
+                    f"{self._relative(selected[k].depth_path)}: depth is {head.width}x{head.height}, the "
+                    f"other frames' {size[1]}x{size[0]}"
+                )
+        for k, head in rgb_heads.items():
+            want = rgb_size if self.resize_rgb_to_depth else getattr(depth_heads.get(k), "size", None)
+            if want is not None and head.size != want:
+                whose = "the other frames'" if self.resize_rgb_to_depth else "its depth image"
+                broken.setdefault(k, []).append(
+                    f"{self._relative(selected[k].rgb_path)}: rgb is {head.width}x{head.height}, {whose} "
+                    f"{want[1]}x{want[0]}"
+                )
+
+    def _bad_frames_message(
+        self,
+        bad: int,
+        selected: int,
+        missing: dict[int, list[Path]],
+        broken: dict[int, list[str]],
+        unusable: dict[int, str],
+    ) -> str:
+        """The message naming the frames that cannot be mapped: the missing files, the broken ones, then the
+        frames that lack something else."""
+        files = [p for paths in missing.values() for p in paths]
+        problems = [p for k in sorted(broken) for p in broken[k]]
+        parts = []
+        if files:
+            parts.append(f"{len(files)} missing: {_listed([self._relative(p) for p in files])}")
+        if problems:
+            parts.append(f"{len(problems)} broken: {_listed(problems)}")
+        if unusable:
+            parts.append(f"{len(unusable)} unusable: {_listed([unusable[k] for k in sorted(unusable)])}")
+        what = "lack files" if not problems and not unusable else "cannot be mapped"
+        head = f"{self.root}: {bad} of the {selected} selected frames {what} ({self.kind} layout)"
+        return head + "; " + "; ".join(parts)
+
+    def _relative_message(self, e: DataError, path: Path) -> str:
+        """A file's error with the file named below the dataset folder."""
+        text = str(e)
+        return self._relative(path) + text[len(str(path)) :] if text.startswith(str(path)) else text
 
     def _relative(self, path: Path) -> str:
         """``path`` below the dataset folder (named at the start of messages), else in full."""
@@ -612,6 +702,27 @@ def _read_pose(rec: FrameRecord) -> np.ndarray | None:
         return check_pose(raw, rec.pose_source or str(rec.pose_path or f"pose of frame {rec.name}"))
     except ValueError as e:
         raise DataError(str(e)) from e
+
+
+def _listed(items: list[str]) -> str:
+    """The first :data:`MISSING_LISTED` of ``items``, and how many more there are."""
+    named = ", ".join(items[:MISSING_LISTED])
+    return named + (f" and {len(items) - MISSING_LISTED} more" if len(items) > MISSING_LISTED else "")
+
+
+def _format_problem(head: ImageHeader, what: str) -> str | None:
+    """What the header of an image says is wrong for its use (None: nothing), as decoding would say it."""
+    if what == "depth":
+        if head.channels != 1:
+            return f"depth image must be single-channel, got {head.channels} channels"
+        if head.bit_depth != 16:
+            return f"depth image must be 16-bit, got {head.bit_depth}-bit"
+        return None
+    if head.bit_depth != 8:
+        return f"rgb image must be 8-bit, got {head.bit_depth}-bit"
+    if head.channels not in (1, 3, 4):
+        return f"rgb image has {head.channels} channels, expected 3"
+    return None
 
 
 def _missing_files(rec: FrameRecord) -> list[Path]:

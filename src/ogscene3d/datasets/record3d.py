@@ -110,8 +110,13 @@ class Record3DDataset(DecodedDataset):
         if not colour:
             raise DataError(f"{root}: holds no rgbd/N.jpg colour images")
         records, missing = [], []
-        for n in sorted(colour):
-            lacks = [what for what, ok in (("depth", n in depth), ("pose", n < len(poses))) if not ok]
+        sizes = {i.filename: i.file_size for i in self.zip.infolist()}
+        for n in sorted(set(colour) | set(depth)):
+            # every frame the capture holds some of: a missing or empty member is named, not passed over
+            have = (("colour", colour.get(n)), ("depth", depth.get(n)))
+            lacks = [what if m is None else f"empty {what}" for what, m in have if not sizes.get(m)]
+            if n >= len(poses):
+                lacks.append("pose")
             if lacks:
                 missing.append(f"frame {n} ({' and '.join(lacks)})")
                 continue
@@ -129,7 +134,7 @@ class Record3DDataset(DecodedDataset):
             )
         if missing:
             shown = ", ".join(missing[:5]) + (f" and {len(missing) - 5} more" if len(missing) > 5 else "")
-            msg = f"{root}: {len(missing)} of {len(colour)} frames lack data: {shown}"
+            msg = f"{root}: {len(missing)} of {len(set(colour) | set(depth))} frames lack data: {shown}"
             if config.on_bad_frame != "skip" or not records:
                 raise DataError(f"{msg}; set data.on_bad_frame: skip to leave them out")
             log.warning("%s; leaving them out (data.on_bad_frame: skip)", msg)

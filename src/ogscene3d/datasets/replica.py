@@ -81,6 +81,12 @@ def read_traj(path: Path) -> np.ndarray:
     return poses
 
 
+def beyond_trajectory(path: Path, poses: int, n: int) -> str | None:
+    """Why frame number ``n`` has no pose in a trajectory file of ``poses`` lines (line i is frame i); None
+    when it has one."""
+    return None if n < poses else f"no pose: {path.name} has poses for frames 0 to {poses - 1} only"
+
+
 def bad_lines_message(errors: dict[int, str]) -> str:
     """The first bad line's error, and how many more there are."""
     first = errors[min(errors)]
@@ -131,11 +137,6 @@ class ReplicaDataset(RGBDDataset):
             raise DataError(
                 f"{bad_lines_message(bad_lines)}; set data.on_bad_frame: skip to leave those frames out"
             )
-        if frames[-1][0] >= len(poses):
-            raise DataError(
-                f"{traj_path}: {len(poses)} poses, but results/ holds frame number {frames[-1][0]} "
-                f"({frames[-1][1].name})"
-            )
         K, size = None, None
         cam = find_cam_params(root)
         if cam is not None:
@@ -147,10 +148,11 @@ class ReplicaDataset(RGBDDataset):
                 name=rgb.stem,
                 rgb_path=rgb,
                 depth_path=depth,
-                pose=poses[n],
+                pose=poses[n] if n < len(poses) else None,
                 pose_source=f"{traj_path}:{n + 1}",
                 pose_error=bad_lines.get(n),
                 timestamp=float(n),
+                lacks=beyond_trajectory(traj_path, len(poses), n),
             )
             for n, rgb, depth in frames
         ]
