@@ -180,3 +180,13 @@ def frame_files(layout: str, root: Path, i: int) -> dict[str, Path]:
         return {"colour": root / f"frame-{i:06d}.color.png", "depth": root / f"frame-{i:06d}.depth.png",
                 "pose": root / f"frame-{i:06d}.pose.txt"}  # fmt: skip
     raise ValueError(f"unknown layout {layout!r}")
+
+
+def garble_pixels(path: Path) -> Path:
+    """Garble a PNG's compressed pixels, leaving its header and end marker sound: the file passes the checks
+    made when a dataset opens, and fails only when the frame is decoded (a bad frame found mid-run)."""
+    data = bytearray(path.read_bytes())
+    start = data.index(b"IDAT") + 4
+    data[start : start + 8] = b"\xff" * 8
+    path.write_bytes(bytes(data))
+    return path

@@ -158,6 +158,29 @@ def test_config_overrides(tmp_path):
     assert open_dataset(scene, config=DataConfig(path=str(scene)), kind="auto").root == scene
 
 
+def test_data_scale_resizes_every_image_and_the_intrinsics(tmp_path):
+    """data.scale: colour by area, depth and ids by the nearest pixel, K scaled (exact with centres at +0.5);
+    segments at the folder's size are resized, those made at the scaled size read as they are."""
+    scene = make_replica(tmp_path, n=2, w=32, h=24)
+    ids = np.zeros((24, 32), np.int32)
+    ids[:, 16:] = 7
+    write_segments(tmp_path / "segs", "frame000000", ids, {7: 0.9})
+    write_segments(tmp_path / "segs", "frame000001", ids[::2, ::2], {7: 0.8})  # segmented at the scale
+    ds = open_dataset(scene, segments_dir=tmp_path / "segs", config=DataConfig(scale=0.5))
+    np.testing.assert_allclose(ds.K, [[10, 0, 8], [0, 10, 6], [0, 0, 1]])
+    assert (ds.camera.width, ds.camera.height) == (16, 12)
+    full = open_dataset(scene)[0]
+    for i, f in enumerate(ds):
+        assert f.rgb.shape == (12, 16, 3) and f.depth.shape == (12, 16) and np.allclose(f.depth, 2.0)
+        assert f.segments.shape == (12, 16) and (f.segments[:, 8:] == 7).all() and not f.segments[:, :8].any()
+        assert f.segment_scores == {7: 0.9 if i == 0 else 0.8}
+    np.testing.assert_allclose(ds[0].rgb, cv2.resize(full.rgb, (16, 12), interpolation=cv2.INTER_AREA))
+    # the same rays: a pixel centre maps to the same ray through the scaled K
+    assert ds.K[0, 2] / ds.K[0, 0] == pytest.approx(full.K[0, 2] / full.K[0, 0])
+    with pytest.raises(DataError, match=r"data.scale must be in \(0, 1\]"):
+        open_dataset(scene, config=DataConfig(scale=2.0))
+
+
 def test_scannet_layout_resizes_colour_to_depth(tmp_path):
     root = tmp_path / "scene0000_00"
     for i in range(2):

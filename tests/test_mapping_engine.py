@@ -13,6 +13,7 @@ import time
 import cv2
 import numpy as np
 import pytest
+from layout_scenes import garble_pixels
 from test_mapping_cli import H, W, _common, _replica_scene
 
 from ogscene3d.cli import main
@@ -265,7 +266,7 @@ def test_one_zero_depth_keyframe_is_warned_about_and_the_run_goes_on(tmp_path, c
 def test_a_resume_bounded_at_or_before_the_map_says_so(tmp_path, capsys, caplog):
     scene = _replica_scene(tmp_path / "scene", frames=3)
     depth = scene / "results" / "depth000002.png"
-    depth.write_bytes(b"not a png")
+    garble_pixels(depth)
     out = tmp_path / "run"
     assert main(["run", *_common(scene, out)]) == 2  # frames 0 and 1 saved on the way out
     with caplog.at_level("WARNING"):
@@ -279,7 +280,7 @@ def test_bad_frames_skipped_before_a_failing_frame_are_counted_in_the_saved_map(
     from ogscene3d.mapping.mapper import Mapper
 
     scene = _replica_scene(tmp_path / "scene", frames=4)
-    (scene / "results" / "depth000001.png").write_bytes(b"not a png")
+    garble_pixels(scene / "results" / "depth000001.png")
     out = tmp_path / "run"
     process = Mapper.process
 

@@ -214,6 +214,12 @@ class DataConfig:
     intrinsics: list[float] | None = setting(
         None, "[fx, fy, cx, cy] overriding the dataset's", check=_check_intrinsics
     )
+    scale: float = setting(
+        1.0,
+        "resize factor of the frames (colour, depth, segments and intrinsics alike, as read): 0.5 halves "
+        "width and height, a quarter of the pixels to map (large images on a CPU)",
+        _float(0.0, 1.0, lo_open=True),
+    )
     pixel_centers: Literal["auto", "integer", "half"] = setting(
         "auto",
         "where the intrinsics read (files, data.intrinsics) put the centre of pixel (0, 0): auto (the "

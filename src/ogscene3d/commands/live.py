@@ -10,6 +10,7 @@ The server binds 127.0.0.1 unless ``--host`` says otherwise and prints the URL w
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import signal
 import sys
@@ -17,7 +18,7 @@ import threading
 import time
 from pathlib import Path
 
-from ..cli_types import image_size, port, positive_float, positive_int
+from ..cli_types import add_rerun_arguments, image_size, port, positive_float, positive_int
 from ..config import add_override_argument
 from ..errors import ConfigError, DataError, OGSceneError
 
@@ -104,6 +105,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--screenshot-wait", type=positive_float, default=8.0, help="seconds to let the browser draw first"
     )
+    add_rerun_arguments(p)
 
 
 def add_parser(subparsers) -> None:
@@ -190,6 +192,14 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.run_dir is None and not args.data and not args.synthetic and not args.source:
         raise ConfigError("nothing to show: give RUN_DIR, --data DATASET, --synthetic or --source CAMERA")
+    if args.rerun or args.rerun_save:
+        if args.run_dir is not None:
+            raise ConfigError(
+                "--rerun and --rerun-save log a mapping session: give --data, --synthetic or --source"
+            )
+        from ..viewer.rerun_log import rerun_module
+
+        rerun_module()  # a missing rerun-sdk fails now, before a server starts
     # before reading a run or building a mapper: a host/port the server cannot bind is an error now
     check_bindable(args.host, args.port)
     if args.run_dir is not None or args.out is None:
@@ -204,6 +214,7 @@ def _serve(args: argparse.Namespace) -> int:
     from ..mapping.engine import stopped_message
 
     stop = threading.Event()
+    watchers = contextlib.ExitStack()  # the session's observers that need closing (a Rerun recording)
     prev = signal.getsignal(signal.SIGTERM)
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -222,7 +233,7 @@ def _serve(args: argparse.Namespace) -> int:
                 f"{len((snap.graph or {}).get('nodes', []))} graph nodes)"
             )
         else:
-            session, viewer = _start_live(args)
+            session, viewer = _start_live(args, watchers)
         if args.screenshot:
             if session is not None:
                 while not session.join(0.5) and not stop.is_set():
@@ -244,6 +255,7 @@ def _serve(args: argparse.Namespace) -> int:
                 session.join()
             # no timeout: a stop saves the map so far (--out), which must not be cut short at exit
             session.stop(timeout=None)
+        watchers.close()
         if viewer is not None:
             viewer.close()
         if threading.current_thread() is threading.main_thread():
@@ -338,7 +350,7 @@ def _viewer(args: argparse.Namespace, up, name: str):
     )
 
 
-def _start_live(args: argparse.Namespace):
+def _start_live(args: argparse.Namespace, watchers: contextlib.ExitStack):
     from ..mapping.engine import MappingEngine, open_frames
     from ..mapping.mapper import Mapper
     from ..viewer.live import LiveSession
@@ -356,6 +368,11 @@ def _start_live(args: argparse.Namespace):
     mapper = Mapper(cfg, cfg.device)
     engine = MappingEngine(mapper, args.out, data if stream is None else stream.name)
     engine.open(cfg, ds)  # with --out: config.yaml and run_id, so that `run --resume` goes on from a stop
+    from .run import run_observers
+
+    name = stream.name if stream is not None else data
+    frames = len(ds) if ds is not None else None
+    engine.observers.extend(watchers.enter_context(run_observers(args, cfg, name, frames)))
 
     up = args.up or _up_from_config(cfg)
     viewer = _viewer(args, up, stream.name if stream is not None else Path(str(data)).name)

@@ -277,6 +277,7 @@ class RGBDDataset:
             )
         self.pixel_centers = self.read_pixel_centers(config)
         self.K = to_half_pixel_K(check_K(K, str(self.root)), self.pixel_centers)
+        self._scaled_size: tuple[int, int] | None = None  # (h, w) of the frames under data.scale
         self.depth_scale = float(
             config.depth_scale if config.depth_scale is not None else self.depth_scale_default
         )
@@ -300,7 +301,28 @@ class RGBDDataset:
         if self._header_size is not None:  # K against the images' size, now rather than at the first frame
             self._size_checked = True
             self._check_principal_point(self._header_size, self.records[0].depth_path)
+        self._apply_scale(config.scale)
 
+    def _apply_scale(self, scale: float) -> None:
+        """Frames resized by ``scale`` (``data.scale``): K scaled to the new size (exact with pixel centres
+        at +0.5: a resize maps pixel edges onto pixel edges)."""
+        if not (0 < scale <= 1):
+            raise DataError(f"data.scale must be in (0, 1], got {scale}")
+        if scale == 1:
+            return
+        h, w = self._native_size()
+        sh, sw = max(1, round(h * scale)), max(1, round(w * scale))
+        self._scaled_size = (sh, sw)
+        K = self.K.astype(np.float64).copy()
+        K[0] *= sw / w
+        K[1] *= sh / h
+        self.K = K.astype(np.float32)
+
+    def _native_size(self) -> tuple[int, int]:
+        """(h, w) of the frames as stored (the depth images')."""
+        if self._header_size is not None:
+            return self._header_size
+        return read_depth_raw(self.records[0].depth_path).shape
     def read_pixel_centers(self, config: DataConfig) -> str:
         """The convention of the intrinsics this dataset reads: ``data.pixel_centers`` or the layout's."""
         conv = self.pixel_centers_default if config.pixel_centers == "auto" else config.pixel_centers
@@ -459,7 +481,7 @@ class RGBDDataset:
     @property
     def camera(self) -> Camera:
         """Camera of the first frame (reads its depth image for the size)."""
-        h, w = read_depth_raw(self.records[0].depth_path).shape
+        h, w = self._scaled_size or read_depth_raw(self.records[0].depth_path).shape
         return Camera.from_K(self.K, w, h)
 
     # -- reading
@@ -520,6 +542,14 @@ class RGBDDataset:
             if seg is not None:
                 segments, scores, names = seg.ids, seg.scores, seg.names
         gt_instances, gt_classes = self._load_gt(rec, depth.shape)
+        if self._scaled_size is not None:
+            depth, rgb, segments, gt_instances, gt_classes = _resized(
+                self._scaled_size, depth, rgb, segments, gt_instances, gt_classes
+            )
+            if segments is not None:
+                present = {int(i) for i in np.unique(segments) if i != 0}
+                scores = {i: v for i, v in scores.items() if i in present}
+                names = {i: v for i, v in names.items() if i in present}
         return Frame(
             index=i,
             rgb=np.ascontiguousarray(rgb),
@@ -566,6 +596,10 @@ class RGBDDataset:
         the frame's size (what ``ogscene3d segment`` writes) are read as they are."""
         assert self.segments_dir is not None
         stem = rec.rgb_path.stem
+        if self._scaled_size is not None and has_segments(self.segments_dir, stem):
+            seg = read_segmentation(self.segments_dir, stem)
+            if seg.ids.shape == self._scaled_size:  # segmented at data.scale (`ogscene3d segment` with it)
+                return seg
         if not has_segments(self.segments_dir, stem):
             if not self._warned_no_segments:
                 log.warning(
@@ -702,6 +736,21 @@ def _read_pose(rec: FrameRecord) -> np.ndarray | None:
         return check_pose(raw, rec.pose_source or str(rec.pose_path or f"pose of frame {rec.name}"))
     except ValueError as e:
         raise DataError(str(e)) from e
+
+
+def _resized(size: tuple[int, int], depth, rgb, segments, gt_instances, gt_classes) -> tuple:
+    """The frame's images at ``size`` (h, w) (``data.scale``): colour by area, depth and every id map by the
+    nearest pixel (a depth between two surfaces, or an id between two segments, is neither); those already at
+    ``size`` as they are."""
+    h, w = size
+
+    def nearest(img):
+        if img is None or img.shape[:2] == (h, w):
+            return img
+        return cv2.resize(img, (w, h), interpolation=cv2.INTER_NEAREST_EXACT)
+
+    colour = rgb if rgb.shape[:2] == (h, w) else cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA)
+    return nearest(depth), colour, nearest(segments), nearest(gt_instances), nearest(gt_classes)
 
 
 def _listed(items: list[str]) -> str:
