@@ -319,6 +319,41 @@ def test_timings_count_the_labels_of_the_final_map(tmp_path):
     assert counts["gaussians"] == len(saved)
 
 
+def test_observers_see_every_keyframe_and_the_end_and_one_that_fails_is_dropped(tmp_path, caplog):
+    """MappingEngine's observers (Rerun logging, the run-time estimate): called after each keyframe with its
+    seconds and after the final pass; one that raises is warned about and dropped, and the run goes on."""
+    from ogscene3d.config import load_config
+    from ogscene3d.datasets import open_dataset
+    from ogscene3d.mapping.engine import MappingEngine
+    from ogscene3d.mapping.mapper import Mapper
+    from ogscene3d.mapping.source import record_data
+
+    class Watcher:
+        def __init__(self, fail: bool = False) -> None:
+            self.fail, self.seen, self.ended = fail, [], False
+
+        def keyframe(self, mapper, frame, seconds):
+            if self.fail:
+                raise RuntimeError("viewer gone")
+            self.seen.append((frame.index, mapper.keyframe_count, seconds))
+
+        def finished(self, mapper):
+            self.ended = True
+
+    scene = _replica_scene(tmp_path / "scene", frames=4)
+    cfg = load_config(None, ["graph.enabled=false", "mapping.opt_iters=1", "mapping.keyframe_every=2"])
+    record_data(cfg, scene, scene / "segs")
+    good, bad = Watcher(), Watcher(fail=True)
+    engine = MappingEngine(Mapper(cfg, "cpu"), tmp_path / "run", scene, observers=[bad, good])
+    engine.open(cfg, open_dataset(config=cfg.data))
+    with caplog.at_level("WARNING", logger="ogscene3d.mapping.engine"):
+        summary = engine.run(open_dataset(config=cfg.data).frames(), total=4)
+    assert summary.status == "finished" and (tmp_path / "run" / "map.npz").is_file()
+    assert [(i, k) for i, k, _ in good.seen] == [(0, 1), (2, 2)] and all(s > 0 for *_, s in good.seen)
+    assert good.ended and engine.observers == [good]
+    assert "Watcher stopped after an error: RuntimeError: viewer gone" in caplog.text
+
+
 # ------------------------------------------------------------------------------------------- #30 live
 
 

@@ -16,6 +16,7 @@ from layout_scenes import Y_DOWN_TO_Z_UP, synthetic_frames, tiny_frames, tum_int
 from ogscene3d.cli import main
 from ogscene3d.config import load_config
 from ogscene3d.datasets import make_synthetic_scene, open_dataset
+from ogscene3d.errors import ConfigError
 from ogscene3d.frame import Frame
 from ogscene3d.mapping.mapper import Mapper
 from ogscene3d.up_axis import CameraUp, angle_deg, choose_up_axis
@@ -78,6 +79,33 @@ def test_auto_takes_the_formats_world_up(tmp_path, layout, caplog):
     assert cfg.graph.up_axis == [0.0, 0.0, 1.0]
     (line,) = [r.getMessage() for r in caplog.records]
     assert line.startswith("graph.up_axis auto: z (the ") and "layout" in line
+
+
+def test_a_ros_bags_tf_world_is_z_up_and_a_record3d_capture_minus_y(tmp_path, caplog):
+    """REP 103: a tf world frame is z-up; Record3D's ARKit world (y up) read in OpenCV axes is -y up. A bag
+    without poses leaves the choice to the tracked cameras."""
+    pytest.importorskip("rosbags")
+    from robot_recordings import BagSpec, small_scene, write_bag, write_r3d
+
+    from ogscene3d.datasets.record3d import lzfse_module
+
+    _, frames, K = small_scene(tmp_path / "scene")
+    z_up = [dataclasses.replace(f, pose=Y_DOWN_TO_Z_UP @ f.pose) for f in frames]
+    for spec, want in ((BagSpec(), [0.0, 0.0, 1.0]), (BagSpec(poses=None), "auto")):
+        cfg = load_config(None)
+        bag = write_bag(tmp_path / f"rec{spec.poses}.bag", z_up, K, spec)
+        with caplog.at_level(logging.INFO, logger="ogscene3d.up_axis"):
+            choose_up_axis(cfg.graph, open_dataset(bag, config=cfg.data))
+        assert cfg.graph.up_axis == want
+    assert "ROS's REP 103 (the world frame" in caplog.text
+    try:
+        lzfse_module()
+    except ConfigError:
+        pytest.skip("no LZFSE bindings for the Record3D part (pip install lzfse)")
+    cfg = load_config(None)
+    with caplog.at_level(logging.INFO, logger="ogscene3d.up_axis"):
+        choose_up_axis(cfg.graph, open_dataset(write_r3d(tmp_path / "cap.r3d", frames, K), config=cfg.data))
+    assert cfg.graph.up_axis == [0.0, -1.0, 0.0] and "Record3D (ARKit's" in caplog.text
 
 
 def test_auto_without_a_convention_takes_the_cameras(tmp_path, caplog):

@@ -134,7 +134,8 @@ def run(args: argparse.Namespace) -> int:
     if skipped:
         log.info("%d of %d frames already segmented in %s: skipping them", skipped, len(stems), out)
 
-    done, bad, n_segments, t0 = 0, 0, 0, time.perf_counter()
+    # frames the dataset left out as it opened (a broken file, under data.on_bad_frame: skip) are bad ones too
+    done, bad, n_segments, t0 = 0, int(getattr(ds, "frames_left_out", 0) or 0), 0, time.perf_counter()
     with progress(todo, desc=f"segment ({sc.backend})", disable=args.no_progress) as bar:
         for i in bar:
             try:

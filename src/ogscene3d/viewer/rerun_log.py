@@ -16,7 +16,11 @@ it logs, on the ``keyframe`` timeline (and the ``frame`` one, the dataset positi
                             ``AnnotationContext`` on ``world``), at most ``max_points`` of them
 ``world/graph/nodes``       the scene graph's nodes: boxes (``Boxes3D``, axis-aligned), named by their tags
 ``world/graph/edges``       its edges: a line between the two nodes' centres, named by the relation
+``stats/keyframe_seconds``  the seconds the keyframe took to map (``Scalars``)
 ==========================  ==========================================================================
+
+The recording comes with a layout (a blueprint): the world in 3D above the keyframe's image and its
+seconds, the timeline below following the latest keyframe.
 
 After the final pass (pruning, the last refinement and graph update) the map and the graph are logged once
 more, at keyframe = the number of keyframes. A viewer scrubs the whole session back on the timeline.
@@ -42,6 +46,7 @@ SPAWN = "spawn"
 DEFAULT_PORT = 9876  # the Rerun viewer's own default
 MAX_POINTS = 200_000  # Gaussian centres logged per keyframe (a stratified random subset beyond that)
 JPEG_QUALITY = 85
+BOX_ALPHA = 0.35  # the nodes' boxes, faint: walls' and floors' boxes span the room and would hide the map
 
 # graph.up_axis as a world axis -> Rerun's view coordinates of the world
 _VIEW = {
@@ -92,7 +97,7 @@ class RerunLogger:
                 rr.spawn(port=DEFAULT_PORT, connect=False)
                 url = f"rerun+http://127.0.0.1:{DEFAULT_PORT}/proxy"
             sinks.append(rr.GrpcSink(url))
-        self.rec.set_sinks(*sinks)
+        self.rec.set_sinks(*sinks, default_blueprint=_layout())
         self._trajectory: list[np.ndarray] = []
         self._up: Any = None
         self._keyframe = 0
@@ -188,7 +193,7 @@ class RerunLogger:
                 mins=lo,
                 sizes=hi - lo,
                 labels=[names[int(n["id"])] for n in nodes],
-                colors=(label_colors(np.array([n["id"] for n in nodes])) * 255).round().astype(np.uint8),
+                colors=_with_alpha(label_colors(np.array([n["id"] for n in nodes])), BOX_ALPHA),
                 class_ids=[int(n["id"]) + 1 for n in nodes],
             ),
         )
@@ -201,6 +206,33 @@ class RerunLogger:
                 labels=[e["relation"] for e in edges],
             ),
         )
+
+
+def _layout() -> Any:
+    """The viewer's first layout: the world in 3D (map, graph, camera, path) above the keyframe's image and
+    the seconds per keyframe, the timeline below following the latest keyframe (scrub it to go back), the
+    side panels folded."""
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(
+        rrb.Vertical(
+            rrb.Spatial3DView(origin="/world", name="map and scene graph"),
+            rrb.Horizontal(
+                rrb.Spatial2DView(origin="/world/camera", name="keyframe"),
+                rrb.TimeSeriesView(origin="/stats", name="seconds per keyframe"),
+            ),
+            row_shares=[2, 1],
+        ),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(timeline="keyframe", play_state="following"),
+    )
+
+
+def _with_alpha(rgb: np.ndarray, alpha: float) -> np.ndarray:
+    """[N, 3] RGB in [0, 1] -> [N, 4] uint8 RGBA."""
+    rgba = np.concatenate([rgb, np.full((len(rgb), 1), alpha, dtype=rgb.dtype)], axis=1)
+    return (rgba * 255).round().astype(np.uint8)
 
 
 def _node_name(node: dict) -> str:
