@@ -67,16 +67,22 @@ def test_a_tilted_world_keeps_its_tilt():
 # ------------------------------------------------------------------------------------------ at open
 
 
+def _chosen(path, caplog, *overrides: str):
+    """graph.up_axis after the dataset at ``path`` opened (what `ogscene3d run` does), the log captured."""
+    cfg = load_config(None, list(overrides))
+    assert cfg.graph.up_axis == "auto" or overrides
+    with caplog.at_level(logging.INFO, logger="ogscene3d.up_axis"):
+        choose_up_axis(cfg.graph, open_dataset(path, config=cfg.data))
+    return cfg.graph.up_axis
+
+
 @pytest.mark.parametrize("layout", ["scannet", "replica", "semantic_nerf", "tum"])
 def test_auto_takes_the_formats_world_up(tmp_path, layout, caplog):
     frames = tiny_frames()
     frames.poses = [Y_DOWN_TO_Z_UP @ p for p in frames.poses]
     root = write_layout(layout, tmp_path / layout, frames)
-    cfg = load_config(None, [f"data.intrinsics={tum_intrinsics(frames)}"] if layout == "tum" else [])
-    assert cfg.graph.up_axis == "auto"
-    with caplog.at_level(logging.INFO, logger="ogscene3d.up_axis"):
-        choose_up_axis(cfg.graph, open_dataset(root, config=cfg.data))
-    assert cfg.graph.up_axis == [0.0, 0.0, 1.0]
+    given = [f"data.intrinsics={tum_intrinsics(frames)}"] if layout == "tum" else []
+    assert _chosen(root, caplog, *given) == [0.0, 0.0, 1.0]
     (line,) = [r.getMessage() for r in caplog.records]
     assert line.startswith("graph.up_axis auto: z (the ") and "layout" in line
 
@@ -92,29 +98,20 @@ def test_a_ros_bags_tf_world_is_z_up_and_a_record3d_capture_minus_y(tmp_path, ca
     _, frames, K = small_scene(tmp_path / "scene")
     z_up = [dataclasses.replace(f, pose=Y_DOWN_TO_Z_UP @ f.pose) for f in frames]
     for spec, want in ((BagSpec(), [0.0, 0.0, 1.0]), (BagSpec(poses=None), "auto")):
-        cfg = load_config(None)
-        bag = write_bag(tmp_path / f"rec{spec.poses}.bag", z_up, K, spec)
-        with caplog.at_level(logging.INFO, logger="ogscene3d.up_axis"):
-            choose_up_axis(cfg.graph, open_dataset(bag, config=cfg.data))
-        assert cfg.graph.up_axis == want
+        assert _chosen(write_bag(tmp_path / f"rec{spec.poses}.bag", z_up, K, spec), caplog) == want
     assert "ROS's REP 103 (the world frame" in caplog.text
     try:
         lzfse_module()
     except ConfigError:
         pytest.skip("no LZFSE bindings for the Record3D part (pip install lzfse)")
-    cfg = load_config(None)
-    with caplog.at_level(logging.INFO, logger="ogscene3d.up_axis"):
-        choose_up_axis(cfg.graph, open_dataset(write_r3d(tmp_path / "cap.r3d", frames, K), config=cfg.data))
-    assert cfg.graph.up_axis == [0.0, -1.0, 0.0] and "Record3D (ARKit's" in caplog.text
+    assert _chosen(write_r3d(tmp_path / "cap.r3d", frames, K), caplog) == [0.0, -1.0, 0.0]
+    assert "Record3D (ARKit's" in caplog.text
 
 
 def test_auto_without_a_convention_takes_the_cameras(tmp_path, caplog):
     # 7-Scenes: the world is its first camera's
     root = write_layout("sevenscenes", tmp_path / "chess", tiny_frames())
-    cfg = load_config(None)
-    with caplog.at_level(logging.INFO, logger="ogscene3d.up_axis"):
-        choose_up_axis(cfg.graph, open_dataset(root, config=cfg.data))
-    assert cfg.graph.up_axis == [0.0, -1.0, 0.0]
+    assert _chosen(root, caplog) == [0.0, -1.0, 0.0]
     assert "the cameras' up direction over the first 3 frames" in caplog.text
 
 
@@ -122,21 +119,16 @@ def test_poses_of_another_world_in_a_formats_layout(tmp_path, caplog):
     """A ScanNet-layout export whose poses start at an upright first camera (-y up): the cameras are 90 deg
     from ScanNet's z, so auto takes theirs, saying why (no warning: the choice agrees with the cameras)."""
     root = write_layout("scannet", tmp_path / "byo", tiny_frames())
-    cfg = load_config(None)
-    with caplog.at_level(logging.INFO, logger="ogscene3d.up_axis"):
-        choose_up_axis(cfg.graph, open_dataset(root, config=cfg.data))
-    assert cfg.graph.up_axis == [0.0, -1.0, 0.0]
+    assert _chosen(root, caplog) == [0.0, -1.0, 0.0]
     assert "says the world is z-up, but the cameras' up direction" in caplog.text
     assert not [r for r in caplog.records if r.levelno >= logging.WARNING]
 
 
-def test_an_explicit_up_axis_wins(tmp_path):
+def test_an_explicit_up_axis_wins(tmp_path, caplog):
     frames = tiny_frames()
     frames.poses = [Y_DOWN_TO_Z_UP @ p for p in frames.poses]
     root = write_layout("scannet", tmp_path / "s", frames)
-    cfg = load_config(None, ["graph.up_axis=[1,0,0]"])
-    choose_up_axis(cfg.graph, open_dataset(root, config=cfg.data))
-    assert cfg.graph.up_axis == [1.0, 0.0, 0.0]
+    assert _chosen(root, caplog, "graph.up_axis=[1,0,0]") == [1.0, 0.0, 0.0]
 
 
 def test_frames_without_poses_leave_the_choice_to_the_mapper(tmp_path, caplog):
@@ -146,9 +138,7 @@ def test_frames_without_poses_leave_the_choice_to_the_mapper(tmp_path, caplog):
     root = write_layout("scannet", tmp_path / "s", frames)
     for p in (root / "pose").iterdir():
         p.unlink()
-    cfg = load_config(None)
-    choose_up_axis(cfg.graph, open_dataset(root, config=cfg.data))
-    assert cfg.graph.up_axis == "auto"
+    assert _chosen(root, caplog) == "auto"
     cfg = load_config(None, ["graph.init_keyframes=1", "graph.min_gaussians=5", "mapping.opt_iters=0"])
     m = Mapper(cfg, "cpu")
     turned = _turn("x", -20.0)  # the tracked world: pitched 20 degrees, as a first camera looking down
