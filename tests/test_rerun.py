@@ -34,12 +34,15 @@ def scene(tmp_path_factory):
     return make_synthetic_scene(folder, seed=1, frames=6, width=64, height=48)
 
 
+SMALL = [
+    "--set", "mapping.keyframe_every=2", "--set", "mapping.opt_iters=1",
+    "--set", "graph.init_keyframes=1", "--set", "graph.update_every=1", "--set", "graph.min_gaussians=5",
+]  # fmt: skip
+
+
 def _run(scene: Path, out: Path, *rerun: str) -> list[str]:
-    return [
-        "run", "--data", str(scene), "--out", str(out), "--device", "cpu", "--no-progress", *rerun,
-        "--set", "mapping.keyframe_every=2", "--set", "mapping.opt_iters=1",
-        "--set", "graph.init_keyframes=1", "--set", "graph.update_every=1", "--set", "graph.min_gaussians=5",
-    ]  # fmt: skip
+    args = ["run", "--data", str(scene), "--out", str(out), "--device", "cpu", "--no-progress"]
+    return [*args, *rerun, *SMALL]
 
 
 def _read(rrd: Path) -> dict[str, dict[str, dict[int, object]]]:
@@ -170,3 +173,19 @@ def test_a_bad_viewer_url_is_refused(tmp_path, scene, capsys):
     with pytest.raises(SystemExit):
         main(_run(scene, tmp_path / "run", "--rerun", "http://localhost:9876"))
     assert "expected a Rerun viewer's URL such as rerun+http://" in capsys.readouterr().err
+
+
+def test_live_logs_its_session_too(tmp_path, scene, capsys):
+    pytest.importorskip("rerun", reason='the rerun extra: pip install "ogscene3d[rerun]"')
+    from ogscene3d.commands.live import main as live_main
+
+    rrd = tmp_path / "live.rrd"
+    args = ["--data", str(scene), "--out", str(tmp_path / "live"), "--exit-when-done", "--port", "0",
+            "--device", "cpu", "--rerun-save", str(rrd), *SMALL]  # fmt: skip
+    assert live_main(args) == 0
+    got = _read(rrd)
+    assert set(got["/world/camera/image"]["EncodedImage:blob"]) == {0, 1, 2}
+    assert set(got["/world/map"]["Points3D:positions"]) == {0, 1, 2, 3}  # and the final state
+    # browsing a saved run maps nothing: there is no session to log
+    assert live_main([str(tmp_path / "live"), "--rerun-save", str(tmp_path / "x.rrd"), "--port", "0"]) == 2
+    assert "--rerun and --rerun-save log a mapping session" in capsys.readouterr().err
