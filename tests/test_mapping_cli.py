@@ -383,14 +383,14 @@ def test_the_run_id_check(tmp_path, caplog):
     between writing its id and its config.yaml leaves the earlier config.yaml, which the map matches."""
     from ogscene3d.config import load_config
     from ogscene3d.errors import DataError
-    from ogscene3d.mapping.source import resumed_run_id, start_run_dir
+    from ogscene3d.runs import resumed_run_id, start_run_dir
 
     out = tmp_path / "run"
     record = start_run_dir(out, load_config(None))
     assert resumed_run_id(out, record) == record["run_id"]
     assert resumed_run_id(out, {"path": "/x", "frames": 3}) is None
     (out / "run_id").write_text("another run\n")
-    with caplog.at_level("INFO", logger="ogscene3d.mapping.source"):
+    with caplog.at_level("INFO", logger="ogscene3d.runs.record"):
         assert resumed_run_id(out, record) == record["run_id"]
     assert "mapped by an earlier run with the settings of" in caplog.text
     start_run_dir(out, load_config(None, ["seed=1"]))

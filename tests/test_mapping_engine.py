@@ -17,14 +17,14 @@ from layout_scenes import garble_pixels
 from test_mapping_cli import H, W, _common, _replica_scene
 
 from ogscene3d.cli import main
-from ogscene3d.mapping.engine import LOCK_FILE, RunDirBusyError, RunDirLock, run_directory
+from ogscene3d.runs import LOCK, RunDirBusyError, RunDirLock, run_directory
 
 # ------------------------------------------------------------------------------------------- the lock
 
 _HOLDER = textwrap.dedent(
     """
     import sys, time
-    from ogscene3d.mapping.engine import RunDirLock
+    from ogscene3d.runs import RunDirLock
     lock = RunDirLock(sys.argv[1], "run")
     lock.acquire()
     print("locked", flush=True)
@@ -57,9 +57,9 @@ def test_a_second_writer_is_refused_naming_the_holder_and_a_killed_ones_lock_doe
     finally:
         proc.send_signal(signal.SIGKILL)  # kill -9: the lock file stays, the kernel drops the lock
         proc.wait()
-    assert (out / LOCK_FILE).is_file()
+    assert (out / LOCK).is_file()
     assert main(["run", *_common(scene, out)]) == 0
-    assert (out / "map.npz").is_file() and not (out / LOCK_FILE).exists()  # released at the end
+    assert (out / "map.npz").is_file() and not (out / LOCK).exists()  # released at the end
 
 
 def test_the_lock_is_one_per_folder_and_free_again_after_release(tmp_path):
@@ -84,7 +84,7 @@ def test_a_filesystem_without_locks_warns_and_runs(tmp_path, monkeypatch, caplog
     monkeypatch.setattr(fcntl, "flock", no_locks)
     with caplog.at_level("WARNING"), RunDirLock(tmp_path, "run"):
         pass
-    assert "refuses file locks" in caplog.text and not (tmp_path / LOCK_FILE).exists()
+    assert "refuses file locks" in caplog.text and not (tmp_path / LOCK).exists()
 
 
 def test_run_batch_scenes_and_live_take_the_lock(tmp_path, capsys):
@@ -159,7 +159,7 @@ def test_live_mapping_saves_the_map_on_sigterm(tmp_path, capsys, monkeypatch, st
     assert "the map so far is in" in capsys.readouterr().out
     for name in ("map.npz", "gaussians.ply", "config.yaml", "run_id"):
         assert (out / name).is_file(), name
-    assert not (out / LOCK_FILE).exists()
+    assert not (out / LOCK).exists()
     monkeypatch.setattr(Mapper, "process", process)
     # the live run goes on with `ogscene3d run --resume`
     assert main(["run", "--out", str(out), "--resume", "--no-progress"]) == 0

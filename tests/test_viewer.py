@@ -19,7 +19,8 @@ import torch
 from ogscene3d.colors import confidence_colors, label_colors, turbo
 from ogscene3d.errors import ConfigError, DataError
 from ogscene3d.gaussians import GaussianMap
-from ogscene3d.viewer.runs import load_run, read_graph_json
+from ogscene3d.runs.graph_json import read_graph_json
+from ogscene3d.viewer.runs import load_run
 from ogscene3d.viewer.scene import SceneLayers, ViewerSettings, labelled_nodes, legend_html, node_text
 from ogscene3d.viewer.snapshot import (
     MapSnapshot,
@@ -336,13 +337,13 @@ def test_load_run_errors_name_the_file(tmp_path):
     bad = tmp_path / "graph.json"
     bad.write_text('{"nodes": [{"id": 1, "center": [0, 0, 0]}], "edges": [{"source": 1, "target": 2}]}')
     with pytest.raises(DataError, match="edge 0"):
-        read_graph_json(bad)
+        read_graph_json(bad, centers=True)
     bad.write_text('{"nodes": [{"id": 1, "center": [0, 0]}]}')
     with pytest.raises(DataError, match="bad center"):
-        read_graph_json(bad)
+        read_graph_json(bad, centers=True)
     bad.write_text("{not json")
     with pytest.raises(DataError, match="graph.json"):
-        read_graph_json(bad)
+        read_graph_json(bad, centers=True)
 
 
 def test_load_run_tolerates_bad_optional_files(tmp_path, caplog):
@@ -389,7 +390,7 @@ def test_read_graph_json_rejects_bad_node_fields(tmp_path, node, match):
     bad = tmp_path / "graph.json"
     bad.write_text(json.dumps({"nodes": [node], "edges": []}))
     with pytest.raises(DataError, match=match) as exc:
-        read_graph_json(bad)
+        read_graph_json(bad, centers=True)
     assert str(bad) in str(exc.value)
 
 
@@ -399,7 +400,7 @@ def test_read_graph_json_rejects_unhashable_edge_ends(tmp_path):
         json.dumps({"nodes": [{"id": 1, "center": [0, 0, 0]}], "edges": [{"source": [1], "target": 1}]})
     )
     with pytest.raises(DataError, match="edge 0"):
-        read_graph_json(bad)
+        read_graph_json(bad, centers=True)
 
 
 # ------------------------------------------------------------------------------ scene layers

@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from pathlib import Path
 from typing import Any
 
-from ..atomic import atomic_write_text
 from ..errors import DataError, OGSceneError
 from ..eval.options import add_eval_arguments, eval_options_from_args
 
@@ -59,17 +57,6 @@ def add_parser(subparsers: Any) -> None:
 
 def _pct(x: Any) -> str:
     return "   n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{100 * x:6.2f}"
-
-
-def _json_safe(x: Any) -> Any:
-    """NaN/inf -> None (strict JSON), recursively."""
-    if isinstance(x, dict):
-        return {k: _json_safe(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_json_safe(v) for v in x]
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x
 
 
 def run(args: argparse.Namespace) -> int:
@@ -205,6 +192,8 @@ def _run(args: argparse.Namespace) -> int:
 
 def _finish(report: dict[str, Any], out: Path) -> None:
     """Print the trajectory line and the notes, and write metrics.json."""
+    from ..runs import METRICS, write_metrics
+
     t = report.get("trajectory")
     if t:
         print()
@@ -214,8 +203,7 @@ def _finish(report: dict[str, Any], out: Path) -> None:
         )
     for note in report.get("notes", []):
         print(f"note: {note}")
-    path = Path(out) / "metrics.json"
-    atomic_write_text(path, json.dumps(_json_safe(report), indent=2, allow_nan=False) + "\n")
+    path = write_metrics(Path(out) / METRICS, report)
     print(f"\nwrote {path}")
 
 

@@ -74,10 +74,11 @@ def node_line(n: SceneNode, caption_width: int = 60) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from ..graph.scenegraph import SceneGraph
+    from ..runs import RunFolder
 
     path = Path(args.path)
     if path.is_dir():
-        path = path / "graph.json"
+        path = RunFolder(path).graph
     if not path.is_file():
         raise DataError(f"no scene graph at {str(path)!r}")
     cfg = load_config(args.config, args.overrides).graph

@@ -204,7 +204,7 @@ def run(args: argparse.Namespace) -> int:
     check_bindable(args.host, args.port)
     if args.run_dir is not None or args.out is None:
         return _serve(args)
-    from ..mapping.engine import run_directory
+    from ..runs import run_directory
 
     with run_directory(args.out, "live"):  # one writer per run directory, as for `ogscene3d run`
         return _serve(args)
@@ -305,6 +305,7 @@ def live_data(args: argparse.Namespace, cfg) -> str | Path:
     import copy
 
     from ..datasets import configured_scene
+    from ..runs import RunFolder
 
     data = args.data
     if args.synthetic:
@@ -313,7 +314,7 @@ def live_data(args: argparse.Namespace, cfg) -> str | Path:
             s.frames = min(s.frames, args.max_frames)
         cache = args.synthetic_dir is None and args.out is None
         scene_dir = Path(
-            args.synthetic_dir or (Path(args.out) / "scene" if args.out else "outputs/live-synthetic")
+            args.synthetic_dir or (RunFolder(args.out).scene if args.out else "outputs/live-synthetic")
         )
         print(
             f"ogscene3d-live: synthetic scene (seed {s.seed}, {s.frames} frames, {s.width}x{s.height}) "
@@ -351,39 +352,37 @@ def _viewer(args: argparse.Namespace, up, name: str):
 
 
 def _start_live(args: argparse.Namespace, watchers: contextlib.ExitStack):
-    from ..mapping.engine import MappingEngine, open_frames
-    from ..mapping.mapper import Mapper
+    from ..mapping.session import open_session
     from ..viewer.live import LiveSession
+    from .run import run_observers
 
     cfg = live_config(args)
-    stream = ds = data = None
+    stream = data = None
     if args.source:  # a live camera (ogscene3d.streams): no dataset, so no frames to resume by
         from ..streams import stream_for_live
 
         stream = stream_for_live(args.source, cfg, args.max_frames, list(args.overrides))
     else:
         data = live_data(args, cfg)
-        # a saved run records its data, as `run` does
-        ds = open_frames(cfg, data, args.segments, args.max_frames)
-    mapper = Mapper(cfg, cfg.device)
-    engine = MappingEngine(mapper, args.out, data if stream is None else stream.name)
-    engine.open(cfg, ds)  # with --out: config.yaml and run_id, so that `run --resume` goes on from a stop
-    from .run import run_observers
-
-    name = stream.name if stream is not None else data
-    frames = len(ds) if ds is not None else None
-    engine.observers.extend(watchers.enter_context(run_observers(args, cfg, name, frames)))
+    # with --out: config.yaml (with the data, as `run` records it) and run_id, so that `run --resume` goes on
+    # from a stop; the caller holds the run folder's lock
+    mapping = open_session(
+        cfg, args.out, data, segments=args.segments, max_frames=args.max_frames, stream=stream
+    )
+    # what watches the session: the run-time estimate, Rerun (closed by the caller when the session ends)
+    observers = watchers.enter_context(run_observers(args, cfg, mapping.data, mapping.total))
+    mapping.engine.observers.extend(observers)
 
     up = args.up or _up_from_config(cfg)
     viewer = _viewer(args, up, stream.name if stream is not None else Path(str(data)).name)
     session = LiveSession(
-        mapper,
-        stream if stream is not None else ds.frames(),
+        mapping.mapper,
+        mapping.frames,
         viewer,
         budget=max(args.max_points, args.max_splats),
         out_dir=args.out,
-        engine=engine,
-        total=len(ds) if ds is not None else None,
+        engine=mapping.engine,
+        total=mapping.total,
     )
     viewer.set_control(session)
     session.start()

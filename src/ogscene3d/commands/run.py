@@ -1,7 +1,8 @@
 """``ogscene3d run``: map an RGB-D sequence (or the default synthetic scene) into a run directory.
 
-The options are parsed and the outcome printed here; the run itself is :mod:`ogscene3d.mapping.engine`'s
-(heavy modules are imported inside :func:`run` only, so that ``ogscene3d --help`` stays quick)."""
+The options are parsed and the outcome printed here; the session is :mod:`ogscene3d.mapping.session`'s and
+the run :mod:`ogscene3d.mapping.engine`'s (heavy modules are imported inside :func:`run` only, so that
+``ogscene3d --help`` stays quick)."""
 
 from __future__ import annotations
 
@@ -10,8 +11,6 @@ import contextlib
 import logging
 from collections.abc import Iterator
 from pathlib import Path
-
-import yaml
 
 from ..cli_types import add_rerun_arguments
 from ..config import add_override_argument, add_poses_argument, choices, load_config
@@ -58,10 +57,10 @@ def add_parser(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..datasets import configured_scene
     from ..device import resolve_device
-    from ..mapping.engine import MappingEngine, open_frames, run_directory, stopped_message
-    from ..mapping.mapper import Mapper
+    from ..mapping.engine import stopped_message
+    from ..mapping.session import mapping_session
+    from ..runs import RunFolder, recorded_data_path
 
     overrides = list(args.overrides)
     if args.models:  # the exported models' settings first: --set still overrides them
@@ -73,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     if args.device:
         overrides.append(f"device={args.device}")
     out = Path(args.out)
-    saved = out / "config.yaml"
+    saved = RunFolder(out).config
     base = args.config
     if args.resume and base is None and saved.is_file():
         base = saved  # a resumed run goes on with the settings (and the data) it started with
@@ -86,38 +85,26 @@ def run(args: argparse.Namespace) -> int:
         from ..viewer.rerun_log import rerun_module
 
         rerun_module()
-    data = args.data or cfg.data.path or (_recorded_data_path(saved) if args.resume else None)
+    data = args.data or cfg.data.path or (recorded_data_path(out) if args.resume else None)
     if data is None and args.resume:
         raise DataError(f"{out}: --resume needs the run's dataset: pass --data (the run records none)")
-    with run_directory(out, "run"):
-        if data is None:
-            s = cfg.synthetic
-            log.info(
-                "no --data: generating the synthetic scene (seed %d, %d frames, %dx%d) in %s",
-                s.seed,
-                s.frames,
-                s.width,
-                s.height,
-                out / "scene",
-            )
-            data = configured_scene(
-                out / "scene",
-                s,
-                progress=not args.no_progress,
-                remedy="give a new --out, or remove that folder to generate the scene there again",
-            )
-        # --max-frames bounds this invocation only (a resume without it goes on to the end)
-        ds = open_frames(cfg, data, args.segments, args.max_frames)
-        _warn_small_images(cfg, ds)
-        engine = MappingEngine(Mapper(cfg, cfg.device), out, data)
-        start = engine.open(cfg, ds, resume=args.resume, bounded=args.max_frames is not None)
-        with run_observers(args, cfg, data, len(ds) - start) as observers:
-            engine.observers.extend(observers)
+    # no data: the synthetic scene, generated in OUT/scene; --max-frames bounds this invocation only
+    with mapping_session(
+        cfg,
+        out,
+        data,
+        command="run",
+        segments=args.segments,
+        max_frames=args.max_frames,
+        resume=args.resume,
+        progress=not args.no_progress,
+    ) as session:
+        _warn_small_images(cfg, session.dataset)
+        with run_observers(args, cfg, session.data, session.total) as observers:
+            session.engine.observers.extend(observers)
             # bad frames raise, or are skipped with a warning under data.on_bad_frame: skip
-            with engine.stop.signals():
-                summary = engine.run(
-                    ds.frames(start), total=max(0, len(ds) - start), progress=not args.no_progress
-                )
+            summary = session.run(progress=not args.no_progress)
+    start, data = session.start, session.data
     if summary.status == "stopped":
         print(stopped_message(summary))
         return 130
@@ -132,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"nothing to do: {out} has mapped every frame of {data} (--resume read no new frame)")
         return 0
     print(summary.line())
-    print(engine.mapper.timings.table())
+    print(session.mapper.timings.table())
     return 0
 
 
@@ -158,17 +145,6 @@ def run_observers(args: argparse.Namespace, cfg, data, frames: int | None) -> It
     finally:
         if rerun is not None:
             rerun.close()
-
-
-def _recorded_data_path(saved: Path) -> str | None:
-    """data.path from a run's config.yaml (None when absent or unreadable)."""
-    try:
-        loaded = yaml.safe_load(saved.read_text())
-    except (OSError, yaml.YAMLError):
-        return None
-    data = loaded.get("data") if isinstance(loaded, dict) else None
-    path = data.get("path") if isinstance(data, dict) else None
-    return path if isinstance(path, str) else None
 
 
 # The most a Gaussian centre may drift per keyframe (mapping.lr_means x mapping.opt_iters) before small

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
+from ..runs.map_npz import read_map_npz
 
 
 def frame_names(ds: Any) -> list[str]:
@@ -77,13 +78,11 @@ def matching_pixel_centers(ds: Any, K: Any) -> str | None:
 
 def mapped_intrinsics(ckpt: Path) -> list[float] | None:
     """The 9 values of the K a checkpoint's frames were mapped with (None: not recorded or unreadable)."""
-    from ..gaussians import NPZ_READ_ERRORS  # loads torch: only when a checkpoint is read
-
     try:
-        with np.load(ckpt, allow_pickle=False) as z:
-            if "mapper_source" not in z.files:
-                return None
-            K = json.loads(str(z["mapper_source"])).get("K")
-    except (KeyError, AttributeError, *NPZ_READ_ERRORS):
+        arrays = read_map_npz(ckpt, ("mapper_source",))
+        if "mapper_source" not in arrays:
+            return None
+        K = json.loads(str(arrays["mapper_source"])).get("K")
+    except (DataError, AttributeError, ValueError):
         return None
     return K if isinstance(K, list) and len(K) == 9 else None

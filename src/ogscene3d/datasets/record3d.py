@@ -10,7 +10,7 @@ confidence, 0 low / 1 medium / 2 high).
 Frames have the depth resolution: colour is resampled to it and K scaled to it. Depth whose confidence is
 below ``data.r3d_min_confidence`` (default 1: low is left out) is invalid. ARKit's camera looks down -z with
 +y up and its world has +y up; both are turned half a turn about x, so that poses are OpenCV
-camera-to-world (z forward, y down) in a world whose up is -y, the default ``graph.up_axis``.
+camera-to-world (z forward, y down) in a world whose up is -y, which ``graph.up_axis: auto`` takes.
 """
 
 from __future__ import annotations

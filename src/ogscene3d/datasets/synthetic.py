@@ -5,8 +5,9 @@ with Warp (``kernels/raycast.py``) along a smooth exploring trajectory and write
 the built-in default scene (no dataset can be downloaded in every setting) and it comes with exact
 ground truth for evaluation.
 
-World frame: metres, **up is -y** (the default ``graph.up_axis``), floor at y = 0, the room centred
-on x = z = 0. Poses are camera-to-world 4x4 with OpenCV camera axes, as everywhere in ogscene3d.
+World frame: metres, **up is -y** (``gt/instances.json``'s ``up``, which ``graph.up_axis: auto`` takes),
+floor at y = 0, the room centred on x = z = 0. Poses are camera-to-world 4x4 with OpenCV camera axes, as
+everywhere in ogscene3d.
 
 Layout of a scene folder (the Replica NICE-SLAM layout plus ``gt/`` and ``segments/``)::
 

@@ -44,10 +44,12 @@ from typing import Any
 
 import numpy as np
 
-from ..atomic import atomic_path, atomic_write_text
+from ..atomic import atomic_path
 from ..config import GraphConfig
 from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame
+from ..runs import RunFolder
+from ..runs.graph_json import read_graph_json, write_graph_json
 from ..up_axis import up_vector
 from .captioner import Captioner, GroundTruthCaptioner, HeuristicCaptioner, build_captioner
 from .confidence import MeanConfidence, NodeConfidence, build_confidence
@@ -665,7 +667,7 @@ class SceneGraph:
 
     def save(self, path: str | Path) -> None:
         """Write graph.json atomically (never a half-written file)."""
-        atomic_write_text(path, json.dumps(self.to_json(), indent=1))
+        write_graph_json(path, self.to_json())
 
     @classmethod
     def load(cls, path: str | Path, config: GraphConfig | None = None) -> SceneGraph:
@@ -674,16 +676,10 @@ class SceneGraph:
         centres only."""
         p = Path(path)
         if p.is_dir():
-            if not (p / "graph.json").is_file():
+            if not RunFolder(p).graph.is_file():
                 raise DataError(f"run directory {str(p)!r} has no graph.json (did the run finish?)")
-            p = p / "graph.json"
-        if not p.is_file():
-            raise DataError(f"scene graph file {str(p)!r} does not exist")
-        try:
-            doc = json.loads(p.read_text(encoding="utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError) as e:
-            raise DataError(f"scene graph file {str(p)!r} is not valid JSON: {e}") from None
-        return cls.from_json(doc, config, source=str(p))
+            p = RunFolder(p).graph
+        return cls.from_json(read_graph_json(p, centers=True), config, source=str(p))
 
     @classmethod
     def from_json(cls, doc: Any, config: GraphConfig | None = None, source: str = "graph.json") -> SceneGraph:

@@ -49,12 +49,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..atomic import atomic_write_text
-from ..config import Config, check_config, choices, save_config
+from ..config import Config, check_config, choices
 from ..device import resolve_device
 from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame, implausible_median_depth
 from ..gaussians import GaussianMap, corrupt_npz_message
+from ..runs import RunFolder, save_run
 from ..up_axis import AGREE_DEG, CameraUp, angle_deg, axis_name, is_auto
 from .checkpoint import CheckpointArrays, read_checkpoint
 from .evidence import SegmentEvidence
@@ -168,17 +168,6 @@ class Timings:
 def _ran_at(keyframe_count: int, every: int) -> bool:
     """Whether a step scheduled every ``every`` keyframes (0 = never) runs at keyframe ``keyframe_count``."""
     return every > 0 and keyframe_count % every == 0
-
-
-class SaveError(OGSceneError, OSError):
-    """A write of :meth:`Mapper.save` failed: ``failed`` (a file name in the run directory), ``written``
-    (the names written before it), ``cause`` (the OSError, e.g. ENOSPC)."""
-
-    def __init__(self, failed: str, written: list[str], cause: OSError) -> None:
-        self.failed, self.written, self.cause = failed, list(written), cause
-        self.reason = cause.strerror or str(cause)
-        done = ", ".join(written) if written else "nothing"
-        super().__init__(f"could not write {failed}: {self.reason} (written before it: {done})")
 
 
 @dataclass
@@ -464,7 +453,7 @@ class Mapper:
 
     def _render_check(self, k: _Keyframe) -> None:
         """The map rendered at the keyframe's pose (alpha + expected depth): the pixels it explains."""
-        from ..render import rasterization
+        from ..rendering import rasterization
 
         with self.timings.section("render_check"):
             if len(self.map) == 0:
@@ -644,7 +633,7 @@ class Mapper:
             return
         with self.timings.section("checkpoint"):
             try:
-                self.save_checkpoint(self._checkpoint_dir / "map.npz")
+                self.save_checkpoint(RunFolder(self._checkpoint_dir).map)
             except OSError as e:
                 # a safety net: a full disk must not stop the mapping (the previous checkpoint stays)
                 log.warning(
@@ -842,7 +831,7 @@ class Mapper:
 
     def _render_labels(self, frame: Frame) -> np.ndarray:
         """The map's label per pixel [H,W] int32 (-1 where nothing labelled renders) at the frame's pose."""
-        from ..render import render_semantics
+        from ..rendering import render_semantics
 
         gm = self.map
         viewmat = torch.as_tensor(np.linalg.inv(frame.pose), dtype=torch.float32, device=self.device)[None]
@@ -1089,52 +1078,37 @@ class Mapper:
         which is what a resume needs, then the exports: gaussians.ply, timings.json, under odometry traj.txt
         (the tracked poses, one row-major c2w 4x4 per frame read) and graph.json. A save cut short (a full
         disk) thus leaves a map that ``run --resume`` writes the exports from. Saved outside a run that
-        records its id (``source["run_id"]``), an earlier run's ``run_id`` file there is removed.
+        records its id (``source["run_id"]``), an earlier run's ``run_id`` file there is removed. The run
+        folder's files and their order are :func:`ogscene3d.runs.save_run`'s.
 
         Raises:
             SaveError: a write failed; it names the file and those written before it.
         """
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        if "run_id" not in self.source:
-            from .source import RUN_ID_FILE
+        return save_run(
+            out_dir,
+            config=self.config,
+            checkpoint=self.save_checkpoint,
+            gaussians=self.map.export_ply,
+            timings=self._timings_doc,
+            trajectory=self._trajectory_text,
+            graph=self._graph_doc,
+            keeps_run_id="run_id" in self.source,
+        )
 
-            # saved outside a run that names itself (the live viewer, the ablation runner): an earlier run's
-            # id left here would vouch for this config.yaml beside that run's map.npz should this save stop
-            # before its map.npz, and --resume would go on with the old map and these settings
-            (out / RUN_ID_FILE).unlink(missing_ok=True)
-        steps: list[tuple[str, Any]] = [
-            ("config.yaml", lambda: save_config(self.config, out / "config.yaml")),
-            ("map.npz", lambda: self.save_checkpoint(out / "map.npz")),
-            ("gaussians.ply", lambda: self.map.export_ply(out / "gaussians.ply")),
-            ("timings.json", lambda: self._save_timings(out / "timings.json")),
-            ("traj.txt", lambda: self._save_trajectory(out / "traj.txt")),
-            ("graph.json", lambda: self._save_graph(out / "graph.json")),
-        ]
-        written: list[str] = []
-        for name, write in steps:
-            try:
-                write()
-            except OSError as e:
-                raise SaveError(name, written, e) from e
-            written.append(name)
-        return out
-
-    def _save_timings(self, path: Path) -> None:
+    def _timings_doc(self) -> dict:
         timings = self.timings.as_dict()
         timings["device"] = str(self.device)
         timings["ablation"] = self.cfg.ablation
         timings["finalized"] = self.finalized  # False: the map of a stopped run, which --resume goes on from
-        atomic_write_text(path, json.dumps(timings, indent=2))
+        return timings
 
-    def _save_trajectory(self, path: Path) -> None:
+    def _trajectory_text(self) -> str | None:
         from ..tracking import hold_last_good, trajectory_text
 
         filled = hold_last_good(self.trajectory)  # as `ogscene3d track` writes it: one pose per frame read
-        if filled:
-            atomic_write_text(path, trajectory_text(filled))
+        return trajectory_text(filled) if filled else None
 
-    def _save_graph(self, path: Path) -> None:
+    def _graph_doc(self) -> dict:
         graph = None
         if self._graph is not None and not self._graph_failed:
             try:
@@ -1143,7 +1117,7 @@ class Mapper:
                 log.warning("could not serialise the scene graph: %s: %s", type(e).__name__, e)
         if graph is None:
             graph = {"version": 1, "nodes": self._label_nodes(), "edges": []}
-        atomic_write_text(path, json.dumps(graph, indent=1))
+        return graph
 
     def _label_nodes(self) -> list[dict]:
         """Graph nodes straight from the map's labels (used when no scene graph was built)."""

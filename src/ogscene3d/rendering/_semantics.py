@@ -12,17 +12,17 @@ from dataclasses import dataclass, field
 
 import torch
 
-from ._validate import ValueChecks, check_int, check_tensor
-from .device import warp_stream
-from .projection import (
+from .._validate import ValueChecks, check_int, check_tensor
+from ..device import warp_stream
+from ._projection import (
+    Project,
     TileBins,
-    _as_wp,
-    _check_shapes,
-    _check_values,
-    _on_torch_stream,
-    _Project,
-    _wp,
+    as_wp,
     bin_gaussians,
+    check_shapes,
+    check_values,
+    on_torch_stream,
+    warp_module,
 )
 
 DEFAULT_BUFFER_SIZE = 8
@@ -48,11 +48,11 @@ def _check_semantic_inputs(
     means, quats, scales, opacities, labels, confidences, viewmats, Ks, width, height, checks: ValueChecks
 ):
     """Shape checks now; the value checks are queued in ``checks`` (settled by the binning's sync)."""
-    width, height = _check_shapes(means, quats, scales, opacities, viewmats, Ks, width, height)
+    width, height = check_shapes(means, quats, scales, opacities, viewmats, Ks, width, height)
     N = means.shape[0]
     check_tensor("labels", labels, (N,), means.device, dtypes=(torch.int32, torch.int64))
     check_tensor("confidences", confidences, (N,), means.device, finite=False)
-    _check_values(checks, means, quats, scales, opacities, viewmats, Ks, confidences=confidences)
+    check_values(checks, means, quats, scales, opacities, viewmats, Ks, confidences=confidences)
     if N and labels.dtype == torch.int64:
         info = torch.iinfo(torch.int32)
         # below int32's range a label would wrap around to another (even a non-negative) one
@@ -84,7 +84,7 @@ def _render(
     """Project every Gaussian, bin the labelled ones and run the semantic kernel (the binning settles
     ``checks``). -> (bins, (buffer labels, buffer weights, labels, weights, overflow counters), numerator,
     denominator); the buffer and the sums are None where not asked for."""
-    wp = _wp()
+    wp = warp_module()
     from ogscene3d.kernels.raster import BLEND_BLOCK_DIM
     from ogscene3d.kernels.semantic import semantic_kernel
 
@@ -94,7 +94,7 @@ def _render(
     C, n = viewmats.shape[0], means.shape[0]
     labels = labels.to(torch.int32)
     with torch.no_grad():
-        means2d, conics, depths, radii = _Project.apply(
+        means2d, conics, depths, radii = Project.apply(
             means.detach(),
             quats.detach(),
             scales.detach(),
@@ -134,15 +134,15 @@ def _render(
     veci = wp.types.vector(length=buffer_size, dtype=wp.int32)
     vecf = wp.types.vector(length=buffer_size, dtype=wp.float32)
     inputs = [
-        _as_wp(means2d, wp.vec2),
-        _as_wp(conics, wp.vec3),
-        _as_wp(bins.extents, wp.vec2),
-        _as_wp(opacities.detach()),
-        _as_wp(labels),
-        _as_wp(confidences.detach()),
-        _as_wp(bins.tile_start),
-        _as_wp(bins.tile_end),
-        _as_wp(bins.isect_ids),
+        as_wp(means2d, wp.vec2),
+        as_wp(conics, wp.vec3),
+        as_wp(bins.extents, wp.vec2),
+        as_wp(opacities.detach()),
+        as_wp(labels),
+        as_wp(confidences.detach()),
+        as_wp(bins.tile_start),
+        as_wp(bins.tile_end),
+        as_wp(bins.isect_ids),
         max(n, 1),
         width,
         height,
@@ -152,17 +152,17 @@ def _render(
         bins.tiles_x * bins.tiles_y,
         int(write_buffer),
         int(contribute),
-        _as_wp(mask),
+        as_wp(mask),
         int(pixel_mask is not None),
     ]
     outputs = [
-        _as_wp(buf_l, veci),
-        _as_wp(buf_w, vecf),
-        _as_wp(out_l),
-        _as_wp(out_w),
-        _as_wp(counters),
-        _as_wp(num),
-        _as_wp(den),
+        as_wp(buf_l, veci),
+        as_wp(buf_w, vecf),
+        as_wp(out_l),
+        as_wp(out_w),
+        as_wp(counters),
+        as_wp(num),
+        as_wp(den),
     ]
     with warp_stream(dev) as wdev:
         wp.launch(
@@ -178,7 +178,7 @@ def _render(
     return bins, (*buffers, out_l, out_w, counters), *sums_out
 
 
-@_on_torch_stream
+@on_torch_stream
 def render_semantics(
     means: torch.Tensor,
     quats: torch.Tensor,
@@ -228,7 +228,7 @@ def render_semantics(
     return _semantic_render(bins, buffer_size, outputs)
 
 
-@_on_torch_stream
+@on_torch_stream
 def rendering_contribution(
     means: torch.Tensor,
     quats: torch.Tensor,

@@ -10,18 +10,18 @@ from __future__ import annotations
 
 import torch
 
-from ._validate import ValueChecks, check_int, check_tensor
-from .device import warp_stream
-from .projection import (
+from .._validate import ValueChecks, check_int, check_tensor
+from ..device import warp_stream
+from ._projection import (
+    Project,
     TileBins,
-    _as_wp,
-    _check_shapes,
-    _check_values,
-    _kernels,
-    _on_torch_stream,
-    _Project,
-    _wp,
+    as_wp,
     bin_gaussians,
+    check_shapes,
+    check_values,
+    kernel_modules,
+    on_torch_stream,
+    warp_module,
 )
 
 RENDER_MODES = ("RGB", "D", "ED", "RGB+D", "RGB+ED")
@@ -37,8 +37,8 @@ def _chunks(D: int) -> list[tuple[int, int]]:
 class _Rasterize(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means2d, conics, colors, opacities, backgrounds, bins: TileBins, width, height):
-        wp = _wp()
-        _, _, raster = _kernels()
+        wp = warp_module()
+        _, _, raster = kernel_modules()
         C, N, D = colors.shape
         dev = colors.device
         out_colors = torch.empty(C, height, width, D, device=dev)
@@ -46,13 +46,13 @@ class _Rasterize(torch.autograd.Function):
         last_ids = torch.empty(C, height, width, dtype=torch.int32, device=dev)
         # launch arguments shared by every chunk, kept for the backward launches
         geometry = [
-            _as_wp(means2d.detach(), wp.vec2),
-            _as_wp(conics.detach(), wp.vec3),
-            _as_wp(bins.extents, wp.vec2),
+            as_wp(means2d.detach(), wp.vec2),
+            as_wp(conics.detach(), wp.vec3),
+            as_wp(bins.extents, wp.vec2),
         ]
-        opac = _as_wp(opacities.detach())
-        tile_start, isect_ids = _as_wp(bins.tile_start), _as_wp(bins.isect_ids)
-        alphas_arg, last_arg = _as_wp(out_alphas), _as_wp(last_ids)
+        opac = as_wp(opacities.detach())
+        tile_start, isect_ids = as_wp(bins.tile_start), as_wp(bins.isect_ids)
+        alphas_arg, last_arg = as_wp(out_alphas), as_wp(last_ids)
         tiles = bins.tiles_x * bins.tiles_y
         layout = [N, width, height, bins.tile_size, bins.tile_threads, bins.tiles_x, tiles]
         with warp_stream(dev) as wdev:
@@ -69,16 +69,16 @@ class _Rasterize(torch.autograd.Function):
                     dim=bins.blend_launch_dim,
                     inputs=[
                         *geometry,
-                        _as_wp(colors[..., s:e].detach(), vec),
+                        as_wp(colors[..., s:e].detach(), vec),
                         opac,
-                        _as_wp(bg.detach(), vec),
+                        as_wp(bg.detach(), vec),
                         int(backgrounds is not None),
                         tile_start,
-                        _as_wp(bins.tile_end),
+                        as_wp(bins.tile_end),
                         isect_ids,
                         *layout,
                     ],
-                    outputs=[_as_wp(part, vec), alphas_arg, last_arg],
+                    outputs=[as_wp(part, vec), alphas_arg, last_arg],
                     device=wdev,
                     block_dim=raster.BLEND_BLOCK_DIM,
                 )
@@ -102,8 +102,8 @@ class _Rasterize(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, v_colors_out, v_alphas_out, _v_last):
-        wp = _wp()
-        _, _, raster = _kernels()
+        wp = warp_module()
+        _, _, raster = kernel_modules()
         means2d, conics, colors, opacities, backgrounds, out_alphas, last_ids = ctx.saved_tensors
         bins: TileBins = ctx.bins
         width, height = ctx.size
@@ -131,23 +131,23 @@ class _Rasterize(torch.autograd.Function):
                     dim=bins.blend_launch_dim,
                     inputs=[
                         *geometry,
-                        _as_wp(colors[..., s:e].detach(), vec),
+                        as_wp(colors[..., s:e].detach(), vec),
                         opac,
-                        _as_wp(bg.detach(), vec),
+                        as_wp(bg.detach(), vec),
                         int(ctx.has_bg),
                         tile_start,
                         isect_ids,
                         alphas_arg,
                         last_arg,
-                        _as_wp(v_colors_out[..., s:e], vec),
-                        _as_wp(v_a),
+                        as_wp(v_colors_out[..., s:e], vec),
+                        as_wp(v_a),
                         *layout,
                     ],
                     outputs=[
-                        _as_wp(v_means2d, wp.vec2),
-                        _as_wp(v_conics, wp.vec3),
-                        _as_wp(v_part, vec),
-                        _as_wp(v_opac),
+                        as_wp(v_means2d, wp.vec2),
+                        as_wp(v_conics, wp.vec3),
+                        as_wp(v_part, vec),
+                        as_wp(v_opac),
                     ],
                     device=wdev,
                     block_dim=raster.BLEND_BLOCK_DIM,
@@ -161,7 +161,7 @@ class _Rasterize(torch.autograd.Function):
         return v_means2d, v_conics, v_colors, v_opac.sum(0), v_bg, None, None, None
 
 
-@_on_torch_stream
+@on_torch_stream
 def rasterization(
     means: torch.Tensor,
     quats: torch.Tensor,
@@ -215,7 +215,7 @@ def rasterization(
     determinant overflows float32 is culled; a Gaussian exactly at z = near_plane is culled (as gsplat's
     torch reference does; its CUDA kernel keeps it).
     """
-    width, height = _check_shapes(means, quats, scales, opacities, viewmats, Ks, width, height)
+    width, height = check_shapes(means, quats, scales, opacities, viewmats, Ks, width, height)
     if render_mode not in RENDER_MODES:
         raise ValueError(f"render_mode must be one of {RENDER_MODES}, got {render_mode!r}")
     tile_size = check_int("tile_size", tile_size, 1, 32)
@@ -234,11 +234,11 @@ def rasterization(
     if backgrounds is not None:
         check_tensor("backgrounds", backgrounds, (C, D), dev, finite=False)
     checks = ValueChecks()
-    _check_values(checks, means, quats, scales, opacities, viewmats, Ks, colors, backgrounds)
+    check_values(checks, means, quats, scales, opacities, viewmats, Ks, colors, backgrounds)
     if colors.dim() == 2:
         colors = colors.unsqueeze(0).expand(C, N, D)
 
-    means2d, conics, depths, radii = _Project.apply(
+    means2d, conics, depths, radii = Project.apply(
         means, quats, scales, opacities, viewmats, Ks, width, height, near_plane, far_plane, eps2d
     )
     with torch.no_grad():
@@ -285,16 +285,4 @@ def rasterization(
     return render, alphas, meta
 
 
-# The semantic half of the functional API lives in its own module; the design names render.py as the home
-# of all three functions, so they are importable from here too (semantics builds on .projection, not on
-# this module: dependencies run one way).
-from .semantics import SemanticRender, render_semantics, rendering_contribution  # noqa: E402
-
-__all__ = [
-    "TileBins",
-    "bin_gaussians",
-    "rasterization",
-    "render_semantics",
-    "rendering_contribution",
-    "SemanticRender",
-]
+__all__ = ["RENDER_MODES", "MAX_CHANNELS_PER_PASS", "rasterization"]
