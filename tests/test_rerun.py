@@ -169,6 +169,18 @@ def test_rerun_is_an_extra_that_the_core_install_does_not_pull():
     assert any(d.startswith("rerun-sdk") for d in extras["test"])  # CI tests it
 
 
+def test_without_a_viewer_to_start_rerun_says_what_else_to_give(tmp_path, scene, monkeypatch, capsys):
+    """--rerun starts the `rerun` on PATH (or beside this Python); with none, the run stops with the two
+    other ways."""
+    pytest.importorskip("rerun", reason='the rerun extra: pip install "ogscene3d[rerun]"')
+    monkeypatch.setenv("PATH", str(tmp_path))
+    monkeypatch.setattr(sys, "executable", str(tmp_path / "python"))
+    assert main(_run(scene, tmp_path / "run", "--rerun")) == 2
+    err = capsys.readouterr().err
+    assert "--rerun could not start Rerun's viewer (Failed to find Rerun Viewer executable" in err
+    assert "--rerun rerun+http://HOST:9876/proxy" in err and "--rerun-save FILE.rrd" in err
+
+
 def test_a_bad_viewer_url_is_refused(tmp_path, scene, capsys):
     with pytest.raises(SystemExit):
         main(_run(scene, tmp_path / "run", "--rerun", "http://localhost:9876"))

@@ -63,8 +63,9 @@ def image_size(minimum: int = 1, example: str = "160x120") -> Callable[[str], tu
 
 
 def rerun_viewer(text: str) -> str:
-    """``--rerun``'s value: a Rerun viewer's URL (``rerun+http://HOST:PORT/proxy``, ``rerun://...``)."""
-    if not text.startswith(("rerun://", "rerun+http://", "rerun+https://")):
+    """``--rerun``'s value: a Rerun viewer's URL (``rerun+http://HOST:PORT/proxy``, ``rerun://...``), or
+    ``spawn`` (what ``--rerun`` alone means: start a viewer here)."""
+    if text != "spawn" and not text.startswith(("rerun://", "rerun+http://", "rerun+https://")):
         raise argparse.ArgumentTypeError(
             f"expected a Rerun viewer's URL such as rerun+http://127.0.0.1:9876/proxy, got {text!r}"
         )

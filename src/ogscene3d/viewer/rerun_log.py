@@ -29,12 +29,15 @@ more, at keyframe = the number of keyframes. A viewer scrubs the whole session b
 from __future__ import annotations
 
 import logging
+import shutil
+import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..colors import label_colors
+from ..errors import ConfigError
 from ..optional import require
 from ..up_axis import is_auto
 from .snapshot import snapshot_from_mapper
@@ -94,7 +97,7 @@ class RerunLogger:
         if viewer is not None:
             url = viewer
             if viewer == SPAWN:
-                rr.spawn(port=DEFAULT_PORT, connect=False)
+                _spawn_viewer(rr, self.rec)
                 url = f"rerun+http://127.0.0.1:{DEFAULT_PORT}/proxy"
             sinks.append(rr.GrpcSink(url))
         self.rec.set_sinks(*sinks, default_blueprint=_layout())
@@ -123,9 +126,16 @@ class RerunLogger:
         self._log_map(snapshot_from_mapper(mapper, self.max_points, seed=int(mapper.keyframe_count)))
 
     def close(self) -> None:
-        """Write out everything logged (the ``.rrd`` file is complete after this)."""
-        self.rec.flush()
-        self.rec.disconnect()
+        """Write out everything logged (the ``.rrd`` file is complete after this). A viewer that could not be
+        reached (one that failed to start, or went away) is warned about: the run has its map already."""
+        try:
+            self.rec.flush()
+        except Exception as e:  # noqa: BLE001 - rerun-sdk raises RuntimeError for a sink it cannot reach
+            log.warning("Rerun: %s; the viewer may have missed some of the session", e)
+        try:
+            self.rec.disconnect()
+        except Exception as e:  # noqa: BLE001
+            log.warning("Rerun: %s", e)
 
     def __enter__(self) -> RerunLogger:
         return self
@@ -206,6 +216,23 @@ class RerunLogger:
                 labels=[e["relation"] for e in edges],
             ),
         )
+
+
+def _spawn_viewer(rr: Any, rec: Any) -> None:
+    """Start Rerun's viewer (listening on :data:`DEFAULT_PORT`; one already there is reused): the ``rerun``
+    on PATH, else the one installed beside this Python (a virtual environment not activated)."""
+    exe = shutil.which("rerun")
+    beside = Path(sys.executable).parent / "rerun"
+    if exe is None and beside.is_file():
+        exe = str(beside)
+    try:
+        rr.spawn(port=DEFAULT_PORT, connect=False, recording=rec, executable_path=exe)
+    except RuntimeError as e:
+        raise ConfigError(
+            f"--rerun could not start Rerun's viewer ({str(e).splitlines()[0]}); give the URL of a viewer "
+            "that runs elsewhere (--rerun rerun+http://HOST:9876/proxy), or log to a file (--rerun-save "
+            "FILE.rrd)"
+        ) from e
 
 
 def _layout() -> Any:
