@@ -13,14 +13,13 @@ import torch
 from .._validate import ValueChecks, check_int, check_tensor
 from ..device import warp_stream
 from ._projection import (
-    Project,
     TileBins,
     as_wp,
-    bin_gaussians,
     check_shapes,
     check_values,
     kernel_modules,
     on_torch_stream,
+    project_and_bin,
     warp_module,
 )
 
@@ -34,11 +33,25 @@ def _chunks(D: int) -> list[tuple[int, int]]:
     return [(s, min(D, s + MAX_CHANNELS_PER_PASS)) for s in range(0, D, MAX_CHANNELS_PER_PASS)]
 
 
+def _chunk_inputs(colors, opac, backgrounds, s: int, e: int, vec) -> list:
+    """The launch arguments of channels [s, e) that the forward and backward blending kernels share:
+    colours, opacities, backgrounds and whether there are any (without, a placeholder the kernel never
+    reads: use_background = 0)."""
+    C = colors.shape[0]
+    bg = backgrounds[:, s:e] if backgrounds is not None else torch.empty(C, e - s, device=colors.device)
+    return [
+        as_wp(colors[..., s:e].detach(), vec),
+        opac,
+        as_wp(bg.detach(), vec),
+        int(backgrounds is not None),
+    ]
+
+
 class _Rasterize(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means2d, conics, colors, opacities, backgrounds, bins: TileBins, width, height):
         wp = warp_module()
-        _, _, raster = kernel_modules()
+        raster = kernel_modules().raster
         C, N, D = colors.shape
         dev = colors.device
         out_colors = torch.empty(C, height, width, D, device=dev)
@@ -62,17 +75,12 @@ class _Rasterize(torch.autograd.Function):
                 vec = wp.types.vector(length=e - s, dtype=wp.float32)
                 # one chunk (D <= 32, the usual case) writes the output in place
                 part = out_colors if len(chunks) == 1 else torch.empty(C, height, width, e - s, device=dev)
-                # without backgrounds the kernel never reads them (use_background = 0)
-                bg = backgrounds[:, s:e] if backgrounds is not None else torch.empty(C, e - s, device=dev)
                 wp.launch(
                     fwd,
                     dim=bins.blend_launch_dim,
                     inputs=[
                         *geometry,
-                        as_wp(colors[..., s:e].detach(), vec),
-                        opac,
-                        as_wp(bg.detach(), vec),
-                        int(backgrounds is not None),
+                        *_chunk_inputs(colors, opac, backgrounds, s, e, vec),
                         tile_start,
                         as_wp(bins.tile_end),
                         isect_ids,
@@ -103,7 +111,7 @@ class _Rasterize(torch.autograd.Function):
     @staticmethod
     def backward(ctx, v_colors_out, v_alphas_out, _v_last):
         wp = warp_module()
-        _, _, raster = kernel_modules()
+        raster = kernel_modules().raster
         means2d, conics, colors, opacities, backgrounds, out_alphas, last_ids = ctx.saved_tensors
         bins: TileBins = ctx.bins
         width, height = ctx.size
@@ -122,7 +130,6 @@ class _Rasterize(torch.autograd.Function):
             for chunk, (s, e) in enumerate(chunks):
                 _, bwd = raster.raster_kernels(e - s)
                 vec = wp.types.vector(length=e - s, dtype=wp.float32)
-                bg = backgrounds[:, s:e] if ctx.has_bg else torch.empty(C, e - s, device=dev)
                 v_part = v_colors if len(chunks) == 1 else torch.zeros(C, N, e - s, device=dev)
                 # The alpha output depends on geometry only: count its gradient in one chunk.
                 v_a = v_alpha if chunk == 0 else torch.zeros_like(v_alpha)
@@ -131,10 +138,7 @@ class _Rasterize(torch.autograd.Function):
                     dim=bins.blend_launch_dim,
                     inputs=[
                         *geometry,
-                        as_wp(colors[..., s:e].detach(), vec),
-                        opac,
-                        as_wp(bg.detach(), vec),
-                        int(ctx.has_bg),
+                        *_chunk_inputs(colors, opac, backgrounds if ctx.has_bg else None, s, e, vec),
                         tile_start,
                         isect_ids,
                         alphas_arg,
@@ -215,6 +219,50 @@ def rasterization(
     determinant overflows float32 is culled; a Gaussian exactly at z = near_plane is culled (as gsplat's
     torch reference does; its CUDA kernel keeps it).
     """
+    checks = ValueChecks()
+    width, height, tile_size = _check_arguments(
+        means, quats, scales, opacities, colors, viewmats, Ks, width, height, backgrounds, checks,
+        near_plane=near_plane, far_plane=far_plane, eps2d=eps2d, tile_size=tile_size, render_mode=render_mode,
+    )  # fmt: skip
+    C, N, D = viewmats.shape[0], means.shape[0], colors.shape[-1]
+    if colors.dim() == 2:
+        colors = colors.unsqueeze(0).expand(C, N, D)
+    means2d, conics, depths, radii, bins = project_and_bin(
+        means, quats, scales, opacities, viewmats, Ks, width, height, near_plane, far_plane, eps2d, tile_size,
+        checks,
+    )  # fmt: skip
+    blend, bg = _blend_channels(render_mode, colors, depths, backgrounds)
+    render, alphas, last_ids = _Rasterize.apply(
+        means2d, conics, blend.contiguous(), opacities, bg, bins, width, height
+    )
+    if render_mode in ("ED", "RGB+ED"):
+        expected = render[..., -1:] / alphas.clamp_min(1e-10)
+        render = torch.cat([render[..., :-1], expected], dim=-1)
+    projected = {"radii": radii, "means2d": means2d, "depths": depths, "conics": conics}
+    return render, alphas, _meta(projected, opacities, bins, last_ids, C, width, height, tile_size)
+
+
+def _check_arguments(
+    means,
+    quats,
+    scales,
+    opacities,
+    colors,
+    viewmats,
+    Ks,
+    width,
+    height,
+    backgrounds,
+    checks: ValueChecks,
+    *,
+    near_plane,
+    far_plane,
+    eps2d,
+    tile_size,
+    render_mode,
+) -> tuple[int, int, int]:
+    """The shape and setting checks of :func:`rasterization` now, its value checks queued in ``checks``
+    (settled by the binning's sync). -> (width, height, tile_size)."""
     width, height = check_shapes(means, quats, scales, opacities, viewmats, Ks, width, height)
     if render_mode not in RENDER_MODES:
         raise ValueError(f"render_mode must be one of {RENDER_MODES}, got {render_mode!r}")
@@ -230,45 +278,37 @@ def rasterization(
     check_tensor("colors", colors, (N, None) if colors.dim() == 2 else (C, N, None), dev, finite=False)
     if colors.shape[-1] == 0:
         raise ValueError("colors must have at least one channel")
-    D = colors.shape[-1]
     if backgrounds is not None:
-        check_tensor("backgrounds", backgrounds, (C, D), dev, finite=False)
-    checks = ValueChecks()
+        check_tensor("backgrounds", backgrounds, (C, colors.shape[-1]), dev, finite=False)
     check_values(checks, means, quats, scales, opacities, viewmats, Ks, colors, backgrounds)
-    if colors.dim() == 2:
-        colors = colors.unsqueeze(0).expand(C, N, D)
+    return width, height, tile_size
 
-    means2d, conics, depths, radii = Project.apply(
-        means, quats, scales, opacities, viewmats, Ks, width, height, near_plane, far_plane, eps2d
-    )
-    with torch.no_grad():
-        # settles checks
-        bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, tile_size, checks)
 
+def _blend_channels(
+    render_mode: str, colors: torch.Tensor, depths: torch.Tensor, backgrounds: torch.Tensor | None
+) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """What ``render_mode`` blends ([C, N, D'] channels) and over which backgrounds (zeros for depth)."""
     if render_mode in ("D", "ED"):
-        blend, bg = depths.unsqueeze(-1), None
-    elif render_mode in ("RGB+D", "RGB+ED"):
-        blend = torch.cat([colors, depths.unsqueeze(-1)], dim=-1)
+        return depths.unsqueeze(-1), None
+    if render_mode in ("RGB+D", "RGB+ED"):
+        C = colors.shape[0]
         bg = None if backgrounds is None else torch.cat([backgrounds, backgrounds.new_zeros(C, 1)], dim=-1)
-    else:
-        blend, bg = colors, backgrounds
-    render, alphas, last_ids = _Rasterize.apply(
-        means2d, conics, blend.contiguous(), opacities, bg, bins, width, height
-    )
-    if render_mode in ("ED", "RGB+ED"):
-        expected = render[..., -1:] / alphas.clamp_min(1e-10)
-        render = torch.cat([render[..., :-1], expected], dim=-1)
-    # gsplat's keys where the meaning is the same (its densification strategies read these): not packed,
-    # so no camera_ids / gaussian_ids. Tiles are ranges [tile_start, tile_end) where gsplat has isect_offsets
-    # and its int64 sort keys isect_ids
-    meta = {
+        return torch.cat([colors, depths.unsqueeze(-1)], dim=-1), bg
+    return colors, backgrounds
+
+
+def _meta(
+    projected: dict, opacities: torch.Tensor, bins: TileBins, last_ids: torch.Tensor, C: int, width: int,
+    height: int, tile_size: int,
+) -> dict:  # fmt: skip
+    """gsplat's keys where the meaning is the same (its densification strategies read these): not packed,
+    so no camera_ids / gaussian_ids. Tiles are ranges [tile_start, tile_end) where gsplat has isect_offsets
+    and its int64 sort keys isect_ids."""
+    return {
         "camera_ids": None,
         "gaussian_ids": None,
-        "radii": radii,
-        "means2d": means2d,
-        "depths": depths,
-        "conics": conics,
-        "opacities": opacities.detach().expand(C, N),
+        **projected,
+        "opacities": opacities.detach().expand(C, opacities.shape[0]),
         "tiles_per_gauss": bins.tiles_per_gaussian,
         "flatten_ids": bins.isect_ids,
         "tile_start": bins.tile_start,
@@ -282,7 +322,6 @@ def rasterization(
         "tile_width": bins.tiles_x,
         "tile_height": bins.tiles_y,
     }
-    return render, alphas, meta
 
 
 __all__ = ["RENDER_MODES", "MAX_CHANNELS_PER_PASS", "rasterization"]
