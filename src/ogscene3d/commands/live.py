@@ -26,6 +26,16 @@ log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Every option of ``ogscene3d live`` / ``ogscene3d-live``, in the order ``--help`` lists them."""
+    _add_session_arguments(p)
+    _add_server_arguments(p)
+    _add_view_arguments(p)
+    _add_screenshot_arguments(p)
+    add_rerun_arguments(p)
+
+
+def _add_session_arguments(p: argparse.ArgumentParser) -> None:
+    """What to show: a saved run, or what to map live (data, the synthetic scene, a camera) and how."""
     p.add_argument(
         "run_dir", nargs="?", default=None, metavar="RUN_DIR", help="saved run directory to browse"
     )
@@ -57,6 +67,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="where --synthetic writes its scene (default: OUT/scene, else outputs/live-synthetic)",
     )
     add_override_argument(p, "mapping.opt_iters=5")
+
+
+def _add_server_arguments(p: argparse.ArgumentParser) -> None:
+    """Where the viewer serves and how often it updates."""
     p.add_argument(
         "--host", default="127.0.0.1", help="address to bind (0.0.0.0 exposes the viewer to the network)"
     )
@@ -67,6 +81,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="port to try first (the next free one is used if busy; 0: any free port)",
     )
     p.add_argument("--rate", type=positive_float, default=4.0, help="maximum viewer updates per second")
+
+
+def _add_view_arguments(p: argparse.ArgumentParser) -> None:
+    """How the map is drawn."""
     p.add_argument("--max-splats", type=positive_int, default=200_000, help="most Gaussians drawn as splats")
     p.add_argument(
         "--max-points", type=positive_int, default=1_000_000, help="most Gaussians drawn as points"
@@ -86,6 +104,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         choices=["+x", "-x", "+y", "-y", "+z", "-z"],
         help="world up direction (default: the config's graph.up_axis)",
     )
+
+
+def _add_screenshot_arguments(p: argparse.ArgumentParser) -> None:
+    """When to stop serving, and the headless screenshot."""
     p.add_argument(
         "--exit-when-done", action="store_true", help="stop serving once live mapping has finished"
     )
@@ -105,7 +127,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--screenshot-wait", type=positive_float, default=8.0, help="seconds to let the browser draw first"
     )
-    add_rerun_arguments(p)
 
 
 def add_parser(subparsers) -> None:
