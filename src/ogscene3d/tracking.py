@@ -89,6 +89,7 @@ from .config import TrackingConfig, check_section, choices
 from .config import add_poses_argument as add_poses_argument  # the option lives with the config
 from .errors import OGSceneError
 from .frame import Frame, check_pose
+from .progress import progress as progress_bar
 
 log = logging.getLogger(__name__)
 
@@ -797,8 +798,6 @@ def track_frames(
     """(frame, pose or None, step info) for each of ``frames`` in turn, tracked by ``tracker``.
     ``progress``: a progress bar (odometry takes a second or more per frame on a CPU) with log lines routed
     through it; ``total`` its length (default: ``len(frames)`` where there is one)."""
-    from .progress import progress as progress_bar
-
     if total is None and isinstance(frames, Sized):
         total = len(frames)
     tracked = 0

@@ -49,6 +49,7 @@ from ..config import DataConfig
 from ..errors import DataError
 from .base import FrameRecord, K_from_values, RGBDDataset, numbered_files, read_depth_raw, read_label_png
 from .replica import bad_lines_message, beyond_trajectory, read_traj_lines
+from .replica_semantic import read_info_semantic
 
 log = logging.getLogger(__name__)
 
@@ -126,8 +127,6 @@ def find_class_info(seq: Path) -> Path | None:
 def read_class_names(path: Path) -> dict[int, str]:
     """Class id -> name from ``info_semantic.json``'s ``classes``, without id 0: the renderer writes 0 for
     pixels of no class, and Semantic-NeRF scores 0 as void."""
-    from .replica_semantic import read_info_semantic
-
     classes, _ = read_info_semantic(path)
     classes.pop(VOID_ID, None)
     if not classes:
