@@ -24,7 +24,8 @@ import torch
 from .device import resolve_device
 from .errors import DataError
 from .runs.gaussians_ply import PLY_PROPERTIES, SH_C0, read_gaussians_ply, write_gaussians_ply
-from .runs.map_npz import NPZ_VERSION, corrupt_npz_message, read_map_npz, write_map_npz
+from .runs.map_npz import NPZ_VERSION, pop_npz_version, read_map_npz, write_map_npz
+from .runs.map_npz import corrupt_npz_message as corrupt_npz_message  # mapper.py reads it from here
 
 # Per-Gaussian fields: name -> (trailing shape, dtype).
 FIELDS: dict[str, tuple[tuple[int, ...], torch.dtype]] = {
@@ -301,15 +302,7 @@ class GaussianMap:
         p = Path(path)
         # only the map's arrays: a mapper checkpoint also holds its memory views (hundreds of MB)
         state = read_map_npz(p, lambda k: k in FIELDS or k in ("next_label", "version"))
-        try:
-            version = int(state.pop("version", 1))
-        except (TypeError, ValueError) as e:
-            raise DataError(corrupt_npz_message(p, e)) from e
-        if version > NPZ_VERSION:
-            raise DataError(
-                f"{p}: written by a newer ogscene3d (map format {version}; this one reads up to "
-                f"{NPZ_VERSION}): update ogscene3d to read it"
-            )
+        pop_npz_version(state, p, "map", "read it")
         return cls.from_state_dict(state, device, what=str(p))
 
     def export_ply(self, path: str | Path) -> None:
