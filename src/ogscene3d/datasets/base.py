@@ -62,14 +62,21 @@ def _check_complete(path: Path, data: bytes, what: str) -> None:
             raise DataError(f"{path}: {what} JPEG is truncated (no end-of-image marker)")
 
 
+def _decode_image(path: Path, what: str) -> np.ndarray:
+    """The image file ``path`` decoded as stored (any bit depth and channel count), after the checks every
+    image reader makes: missing, unreadable, empty, truncated, undecodable."""
+    data = _read_bytes(path, what)
+    _check_complete(path, data, what)
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise DataError(f"{path}: cannot decode {what} image (corrupt or unsupported format)")
+    return img
+
+
 def read_rgb(path: str | Path) -> np.ndarray:
     """Read a colour image as uint8 [H, W, 3] RGB (grey images are replicated, alpha is dropped)."""
     path = Path(path)
-    data = _read_bytes(path, "rgb")
-    _check_complete(path, data, "rgb")
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise DataError(f"{path}: cannot decode rgb image (corrupt or unsupported format)")
+    img = _decode_image(path, "rgb")
     if img.dtype != np.uint8:
         raise DataError(f"{path}: rgb image must be 8-bit, got {img.dtype}")
     if img.ndim == 2:
@@ -86,11 +93,7 @@ def read_rgb(path: str | Path) -> np.ndarray:
 def read_depth_raw(path: str | Path) -> np.ndarray:
     """Read a single-channel 16-bit depth PNG as raw uint16 [H, W] (no scaling)."""
     path = Path(path)
-    data = _read_bytes(path, "depth")
-    _check_complete(path, data, "depth")
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise DataError(f"{path}: cannot decode depth image (corrupt or unsupported format)")
+    img = _decode_image(path, "depth")
     if img.ndim != 2:
         raise DataError(f"{path}: depth image must be single-channel, got shape {img.shape}")
     if img.dtype != np.uint16:
@@ -795,11 +798,7 @@ def read_label_png(
     ``shape`` by nearest neighbour (ScanNet's label images have the colour camera's size, and colour is
     resampled to depth's); otherwise the size must be ``shape``.
     """
-    data = _read_bytes(path, what)
-    _check_complete(path, data, what)
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise DataError(f"{path}: cannot decode {what} image")
+    img = _decode_image(path, what)
     if img.ndim != 2:
         raise DataError(f"{path}: {what} image must be single-channel, got shape {img.shape}")
     if img.shape != tuple(shape):
