@@ -28,9 +28,7 @@ log = logging.getLogger(__name__)
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Every option of ``ogscene3d live`` / ``ogscene3d-live``, in the order ``--help`` lists them."""
     _add_session_arguments(p)
-    _add_server_arguments(p)
-    _add_view_arguments(p)
-    _add_screenshot_arguments(p)
+    _add_viewer_arguments(p)
     add_rerun_arguments(p)
 
 
@@ -69,8 +67,8 @@ def _add_session_arguments(p: argparse.ArgumentParser) -> None:
     add_override_argument(p, "mapping.opt_iters=5")
 
 
-def _add_server_arguments(p: argparse.ArgumentParser) -> None:
-    """Where the viewer serves and how often it updates."""
+def _add_viewer_arguments(p: argparse.ArgumentParser) -> None:
+    """Where the viewer serves, how it draws the map, when it stops, and the headless screenshot."""
     p.add_argument(
         "--host", default="127.0.0.1", help="address to bind (0.0.0.0 exposes the viewer to the network)"
     )
@@ -82,9 +80,6 @@ def _add_server_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--rate", type=positive_float, default=4.0, help="maximum viewer updates per second")
 
-
-def _add_view_arguments(p: argparse.ArgumentParser) -> None:
-    """How the map is drawn."""
     p.add_argument("--max-splats", type=positive_int, default=200_000, help="most Gaussians drawn as splats")
     p.add_argument(
         "--max-points", type=positive_int, default=1_000_000, help="most Gaussians drawn as points"
@@ -105,9 +100,6 @@ def _add_view_arguments(p: argparse.ArgumentParser) -> None:
         help="world up direction (default: the config's graph.up_axis)",
     )
 
-
-def _add_screenshot_arguments(p: argparse.ArgumentParser) -> None:
-    """When to stop serving, and the headless screenshot."""
     p.add_argument(
         "--exit-when-done", action="store_true", help="stop serving once live mapping has finished"
     )
