@@ -323,11 +323,17 @@ class _Prepared:
 
 
 class Tracker:
-    """Incremental keyframe-to-frame RGB-D odometry. See the module docstring for the algorithm.
+    """Incremental keyframe-to-frame RGB-D odometry (the algorithm: :mod:`ogscene3d.tracking`).
 
     ``step(frame)`` returns the frame's c2w pose (float64 [4, 4], OpenCV axes) or None when the frame was
     skipped; ``last`` holds the ``StepInfo`` of the latest call. All frames of a sequence must share one
     image size and intrinsics.
+
+    Args:
+        config: the ``tracking`` config section; None: its defaults.
+        device: where Open3D runs the odometry: "cpu", "cuda", "cuda:N", or None (CUDA if Open3D can).
+        frame_step: folder frames per ``step`` call (the data stride): the jump limits are per folder
+            frame.
     """
 
     def __init__(
@@ -818,9 +824,22 @@ def track_sequence(
     frame_step: int = 1,
     progress: bool = False,
 ) -> TrackResult:
-    """Track a whole sequence; see ``TrackResult`` for what skipped frames hold. ``progress``: show a bar.
+    """Track a whole sequence, with each frame's validity and what the tracker did with it.
 
-    Raises OGSceneError when ``frames`` is empty or no frame could be anchored (no usable depth anywhere).
+    Args:
+        frames: the sequence's frames in order (one camera); the first frame's ``pose``, if any, anchors
+            the trajectory.
+        config: the ``tracking`` config section; None: its defaults.
+        device: where Open3D runs: "cpu", "cuda", "cuda:N", or None (CUDA if Open3D can).
+        frame_step: folder frames per frame given (the data stride).
+        progress: show a progress bar.
+
+    Returns:
+        A :class:`TrackResult`: one c2w pose per frame (a skipped frame holds the last good pose), the
+        validity flags and the per-frame :class:`StepInfo`.
+
+    Raises:
+        OGSceneError: ``frames`` is empty, or no frame could be anchored (no usable depth anywhere).
     """
     tracker = Tracker(config, device, frame_step=frame_step)
     raw: list[np.ndarray | None] = []
@@ -858,11 +877,21 @@ def track(
     frame_step: int = 1,
     progress: bool = False,
 ) -> list[np.ndarray]:
-    """c2w float64 [4, 4] poses (OpenCV axes) for every frame, estimated by RGB-D odometry.
+    """Camera poses for every frame of a sequence, estimated by RGB-D odometry.
 
     The first frame's pose is its given ``frame.pose`` or the identity; later given poses are ignored.
-    A frame that could not be tracked holds the last good pose before it (see ``TrackResult``); use
-    ``track_sequence`` to get the validity flags.
+    A frame that could not be tracked holds the last good pose before it; use :func:`track_sequence` to
+    get the validity flags.
+
+    Args:
+        frames: the sequence's frames in order (one camera).
+        config: the ``tracking`` config section; None: its defaults.
+        device: where Open3D runs: "cpu", "cuda", "cuda:N", or None (CUDA if Open3D can).
+        frame_step: folder frames per frame given (the data stride).
+        progress: show a progress bar.
+
+    Returns:
+        One c2w pose per frame, float64 [4, 4], OpenCV axes.
     """
     return track_sequence(frames, config, device, frame_step, progress).poses
 

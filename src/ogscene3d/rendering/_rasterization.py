@@ -183,23 +183,7 @@ def rasterization(
     eps2d: float = 0.3,
     tile_size: int = 16,
 ) -> tuple[torch.Tensor, torch.Tensor, dict]:
-    """Render C views of N Gaussians.
-
-    Args (float32, all on one device; quats wxyz, scales and opacities already activated):
-        means [N, 3], quats [N, 4], scales [N, 3], opacities [N], colors [N, D] or [C, N, D],
-        viewmats [C, 4, 4] world-to-camera (OpenCV axes), Ks [C, 3, 3], backgrounds [C, D] or None.
-        render_mode: "RGB" (colors), "D" (accumulated depth), "ED" (expected depth = D / alpha),
-        "RGB+D", "RGB+ED" (depth appended as the last channel).
-    Returns:
-        colors [C, H, W, D] (+1 channel with depth in the "+D"/"+ED" modes, D = 1 in "D"/"ED"),
-        alphas [C, H, W, 1], meta (projection and binning results under gsplat's names: radii [C, N] (the
-        larger of gsplat's per-axis radii, see below), means2d
-        (retain_grad() it for densification), depths, conics, opacities, tiles_per_gauss, flatten_ids (the
-        sorted intersections' c * N + n), n_cameras, width, height, tile_size, tile_width, tile_height;
-        and ours: tile_start / tile_end [C * tiles] (each tile's range of flatten_ids), n_intersections,
-        last_ids).
-    Differentiable w.r.t. means, quats, scales, opacities, colors and viewmats (camera poses, as in gsplat;
-    not Ks).
+    """Rasterize N 3D Gaussians into C views: any number of channels alpha-blended per pixel.
 
     As gsplat 1.5's ``rasterization`` with its defaults (pinhole, rasterize_mode="classic", radius_clip=0):
     EWA projection with the Jacobian's x/z, y/z clamped to the view +- 0.3 tan(fov), eps2d on the 2D
@@ -218,6 +202,41 @@ def rasterization(
     dimensions, absgrad, sparse_grad, antialiased mode or other camera models; a Gaussian whose 2D
     determinant overflows float32 is culled; a Gaussian exactly at z = near_plane is culled (as gsplat's
     torch reference does; its CUDA kernel keeps it).
+
+    Differentiable w.r.t. means, quats, scales, opacities, colors and viewmats (camera poses, as in gsplat;
+    not Ks). Every tensor is float32, all on one device (CPU or CUDA).
+
+    Args:
+        means: Gaussian centres, world frame. [N, 3]
+        quats: rotations, wxyz (need not be unit length). [N, 4]
+        scales: activated scales, > 0. [N, 3]
+        opacities: activated opacities in [0, 1]. [N]
+        colors: the channels to blend, shared by the views or one set per view. [N, D] or [C, N, D]
+        viewmats: world-to-camera matrices, OpenCV axes (x right, y down, z forward). [C, 4, 4]
+        Ks: pinhole intrinsics, pixel centres at +0.5. [C, 3, 3]
+        width: image width in pixels.
+        height: image height in pixels.
+        near_plane: Gaussians whose centre is not beyond this depth are culled.
+        far_plane: Gaussians whose centre is beyond this depth are culled.
+        backgrounds: added as T * bg where the Gaussians leave the pixel transparent; None: none. [C, D]
+        render_mode: "RGB" (colors), "D" (accumulated depth), "ED" (expected depth = D / alpha),
+            "RGB+D" or "RGB+ED" (colors, then depth as the last channel).
+        eps2d: added to the 2D covariance's diagonal, in pixels squared (a low-pass filter).
+        tile_size: tile side in pixels, 1 to 32.
+
+    Returns:
+        A tuple:
+
+        **render_colors**: the blended channels. [C, H, W, D] (D + 1 in "RGB+D" / "RGB+ED", 1 in "D" / "ED")
+
+        **render_alphas**: accumulated opacity. [C, H, W, 1]
+
+        **meta**: projection and binning results under gsplat's names: ``radii`` [C, N] (the larger of
+        gsplat's per-axis radii), ``means2d`` (``retain_grad()`` it for densification), ``depths``,
+        ``conics``, ``opacities``, ``tiles_per_gauss``, ``flatten_ids`` (the sorted intersections'
+        c * N + n), ``n_cameras``, ``width``, ``height``, ``tile_size``, ``tile_width``, ``tile_height``;
+        and ours: ``tile_start`` / ``tile_end`` [C * tiles] (each tile's range of flatten_ids),
+        ``n_intersections``, ``last_ids``.
     """
     checks = ValueChecks()
     width, height, tile_size = _check_arguments(

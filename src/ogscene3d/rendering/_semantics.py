@@ -30,12 +30,19 @@ DEFAULT_BUFFER_SIZE = 8
 
 @dataclass
 class SemanticRender:
-    """``labels`` [C, H, W] int32 (-1 where no labelled Gaussian votes); ``weights`` [C, H, W] the winning
-    vote max_k R_p[k]. With ``return_buffer``: ``buffer_labels`` / ``buffer_weights`` [C, H, W, B], the
-    per-pixel (label, weight) entries (label -1 = empty). ``meta`` holds ``overflow_pixels`` (pixels that saw
-    more distinct labels than the buffer holds) and ``overflow_votes`` (runs of a label's consecutive votes
-    that met a full buffer: dropped, or in place of the weakest entry) as 0-dim int64 tensors on the
-    render's device (``int()`` reads them; the call itself does not wait for the GPU)."""
+    """The label map of :func:`render_semantics` (and of ``rendering_contribution(return_semantics=True)``).
+
+    Attributes:
+        labels: each pixel's winning label, -1 where no labelled Gaussian votes. int32 [C, H, W]
+        weights: the winning vote max_k R_p[k]. float32 [C, H, W]
+        buffer_labels: with ``return_buffer``, each pixel's (label, weight) entries' labels (-1 = empty);
+            else None. int32 [C, H, W, B]
+        buffer_weights: with ``return_buffer``, those entries' weights; else None. float32 [C, H, W, B]
+        meta: ``buffer_size``; ``overflow_pixels`` (pixels that saw more distinct labels than the buffer
+            holds) and ``overflow_votes`` (runs of a label's consecutive votes that met a full buffer:
+            dropped, or in place of the weakest entry) as 0-dim int64 tensors on the render's device
+            (``int()`` reads them; the call itself does not wait for the GPU); ``n_intersections``.
+    """
 
     labels: torch.Tensor
     weights: torch.Tensor
@@ -229,8 +236,30 @@ def render_semantics(
 ) -> SemanticRender:
     """Per-pixel label argmax_k R_p[k], R_p[k] = sum_{i: l_i = k} conf_i a_ip prod_{j<i} (1 - conf_j a_jp).
 
-    Shapes as in :func:`rasterization`; ``labels`` [N] int32/int64 (-1 = unlabelled), ``confidences`` [N]
-    float32 in [0, 1]. Memory is O(C * H * W * buffer_size), never O(H * W * number of labels).
+    Only labelled Gaussians (label >= 0, confidence > 0) vote and occlude. Memory is
+    O(C * H * W * buffer_size), never O(H * W * number of labels). The projection is
+    :func:`rasterization`'s, with the same conventions.
+
+    Args:
+        means: Gaussian centres, world frame. [N, 3]
+        quats: rotations, wxyz. [N, 4]
+        scales: activated scales, > 0. [N, 3]
+        opacities: activated opacities in [0, 1]. [N]
+        labels: each Gaussian's label, -1 = unlabelled. int32 or int64 [N]
+        confidences: each Gaussian's label confidence in [0, 1]. [N]
+        viewmats: world-to-camera matrices, OpenCV axes. [C, 4, 4]
+        Ks: pinhole intrinsics, pixel centres at +0.5. [C, 3, 3]
+        width: image width in pixels.
+        height: image height in pixels.
+        near_plane: as in :func:`rasterization`.
+        far_plane: as in :func:`rasterization`.
+        eps2d: as in :func:`rasterization`.
+        tile_size: as in :func:`rasterization`.
+        buffer_size: distinct labels each pixel keeps votes for, 1 to 64 (the weakest gives way).
+        return_buffer: also return every pixel's (label, weight) entries.
+
+    Returns:
+        A :class:`SemanticRender`: the label map, the winning votes and (with ``return_buffer``) the buffers.
     """
     checks = ValueChecks()
     scene = _checked_scene(
@@ -263,13 +292,36 @@ def rendering_contribution(
     buffer_size: int = DEFAULT_BUFFER_SIZE,
     return_semantics: bool = False,
 ) -> torch.Tensor | tuple[torch.Tensor, SemanticRender]:
-    """P_conf(i) = sum_p w_ip R_p[l_i] / (sum_p w_ip + eps) over pixels in ``pixel_mask`` (all if None).
+    """Rendering contribution in one view: P_conf(i) = sum_p w_ip R_p[l_i] / (sum_p w_ip + eps).
 
-    ``viewmat`` [4, 4] world-to-camera, ``K`` [3, 3], ``pixel_mask`` [H, W] bool. Returns [N] float32 in
-    [0, 1]; 0 for unlabelled Gaussians and Gaussians that reach no (masked) pixel. Where a pixel's buffer
-    overflowed, R_p of a dropped label is taken as 0 (see ``render_semantics`` meta to detect it).
-    With ``return_semantics`` it also returns the label map of this view (a :class:`SemanticRender` with its
-    buffer), which it computes anyway: one call instead of ``render_semantics`` + ``rendering_contribution``.
+    The sums run over the pixels of ``pixel_mask`` (all if None); w_ip is the Gaussian's blending weight at
+    pixel p and R_p the pixel's votes, as in :func:`render_semantics`. Where a pixel's buffer overflowed,
+    R_p of a dropped label is taken as 0 (``SemanticRender.meta`` counts those pixels).
+
+    Args:
+        means: Gaussian centres, world frame. [N, 3]
+        quats: rotations, wxyz. [N, 4]
+        scales: activated scales, > 0. [N, 3]
+        opacities: activated opacities in [0, 1]. [N]
+        labels: each Gaussian's label, -1 = unlabelled. int32 or int64 [N]
+        confidences: each Gaussian's label confidence in [0, 1]. [N]
+        viewmat: the view's world-to-camera matrix, OpenCV axes. [4, 4] (or [1, 4, 4])
+        K: the view's pinhole intrinsics, pixel centres at +0.5. [3, 3] (or [1, 3, 3])
+        width: image width in pixels.
+        height: image height in pixels.
+        pixel_mask: the pixels to sum over; None: all. bool or uint8 [H, W]
+        eps: added to the denominator, > 0.
+        near_plane: as in :func:`rasterization`.
+        far_plane: as in :func:`rasterization`.
+        eps2d: as in :func:`rasterization`.
+        tile_size: as in :func:`rasterization`.
+        buffer_size: as in :func:`render_semantics`.
+        return_semantics: also return this view's label map, which the call computes anyway (one call
+            instead of ``render_semantics`` + ``rendering_contribution``).
+
+    Returns:
+        P_conf, float32 [N] in [0, 1]: 0 for unlabelled Gaussians and those that reach no (masked) pixel.
+        With ``return_semantics``, the tuple (P_conf, :class:`SemanticRender` with its buffer).
     """
     if isinstance(viewmat, torch.Tensor) and viewmat.dim() == 2:
         viewmat = viewmat.unsqueeze(0)
