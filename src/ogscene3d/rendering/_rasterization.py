@@ -185,26 +185,12 @@ def rasterization(
 ) -> tuple[torch.Tensor, torch.Tensor, dict]:
     """Rasterize N 3D Gaussians into C views: any number of channels alpha-blended per pixel.
 
-    As gsplat 1.5's ``rasterization`` with its defaults (pinhole, rasterize_mode="classic", radius_clip=0):
-    EWA projection with the Jacobian's x/z, y/z clamped to the view +- 0.3 tan(fov), eps2d on the 2D
-    covariance's diagonal, culled where det <= 0, z outside (near, far), opacity < 1/255 or the screen
-    radius box off the image; that box is gsplat's opacity-aware one, per axis
-    ceil(min(3.33, sqrt(2 ln(255 o))) * sqrt(cov2d_ii)), i.e. the alpha >= 1/255 ellipse's, and the tiles
-    are bounded as gsplat's isect_tiles does, so every pixel where alpha >= 1/255 is blended. Pixel
-    centres at +0.5; alpha = min(0.99, o exp(-sigma)), skipped where sigma < 0 or alpha < 1/255; a Gaussian
-    that would take the transmittance to <= 1e-4 is not blended and ends the pixel; background added as
-    T * bg (zeros for the depth channel); "ED" divides by alpha clamped at 1e-10. Deliberate differences:
-    alpha is clamped at 0.99 as in 3DGS and gsplat's main branch (its 1.5.3 release and earlier clamp at
-    0.999); radii are [C, N], the larger of gsplat's two per-axis radii (gsplat: [C, N, 2]), so
-    ``radii > 0`` marks the same Gaussians as gsplat's ``(radii > 0).all(-1)``; always unpacked (gsplat
-    defaults to packed=True, whose meta holds [nnz] entries and camera_ids / gaussian_ids: the images are
-    the same); no isect_ids / isect_offsets (tile_start / tile_end instead), no SH colours, batch
-    dimensions, absgrad, sparse_grad, antialiased mode or other camera models; a Gaussian whose 2D
-    determinant overflows float32 is culled; a Gaussian exactly at z = near_plane is culled (as gsplat's
-    torch reference does; its CUDA kernel keeps it).
-
-    Differentiable w.r.t. means, quats, scales, opacities, colors and viewmats (camera poses, as in gsplat;
-    not Ks). Every tensor is float32, all on one device (CPU or CUDA).
+    As gsplat 1.5's ``rasterization`` with its defaults (pinhole, classic mode, radius_clip=0); the math:
+    docs/design.md, "Kernel math". Deliberate differences ("Differences from gsplat" there): alpha clamped
+    at 0.99 (3DGS, gsplat's main branch); ``meta["radii"]`` [C, N], the larger per-axis radius; always
+    unpacked; ``tile_start`` / ``tile_end`` instead of isect_ids / isect_offsets; no SH colours, batch
+    dimensions, absgrad, sparse_grad, antialiased mode or other camera models. Differentiable w.r.t.
+    means, quats, scales, opacities, colors and viewmats (not Ks). Tensors float32, all on one device.
 
     Args:
         means: Gaussian centres, world frame. [N, 3]
@@ -231,11 +217,10 @@ def rasterization(
 
         **render_alphas**: accumulated opacity. [C, H, W, 1]
 
-        **meta**: projection and binning results under gsplat's names: ``radii`` [C, N] (the larger of
-        gsplat's per-axis radii), ``means2d`` (``retain_grad()`` it for densification), ``depths``,
+        **meta**: gsplat's keys ``radii``, ``means2d`` (``retain_grad()`` it for densification), ``depths``,
         ``conics``, ``opacities``, ``tiles_per_gauss``, ``flatten_ids`` (the sorted intersections'
         c * N + n), ``n_cameras``, ``width``, ``height``, ``tile_size``, ``tile_width``, ``tile_height``;
-        and ours: ``tile_start`` / ``tile_end`` [C * tiles] (each tile's range of flatten_ids),
+        and ``tile_start`` / ``tile_end`` [C * tiles] (each tile's range of flatten_ids),
         ``n_intersections``, ``last_ids``.
     """
     checks = ValueChecks()
