@@ -223,11 +223,11 @@ def rasterization(
         and ``tile_start`` / ``tile_end`` [C * tiles] (each tile's range of flatten_ids),
         ``n_intersections``, ``last_ids``.
     """
-    checks = ValueChecks()
-    width, height, tile_size = _check_arguments(
-        means, quats, scales, opacities, colors, viewmats, Ks, width, height, backgrounds, checks,
-        near_plane=near_plane, far_plane=far_plane, eps2d=eps2d, tile_size=tile_size, render_mode=render_mode,
-    )  # fmt: skip
+    checks = ValueChecks()  # settled by the binning's sync
+    width, height = check_shapes(means, quats, scales, opacities, viewmats, Ks, width, height)
+    tile_size = _check_settings(render_mode, near_plane, far_plane, eps2d, tile_size)
+    _check_colors(colors, backgrounds, means, viewmats)
+    check_values(checks, means, quats, scales, opacities, viewmats, Ks, colors, backgrounds)
     C, N, D = viewmats.shape[0], means.shape[0], colors.shape[-1]
     if colors.dim() == 2:
         colors = colors.unsqueeze(0).expand(C, N, D)
@@ -246,28 +246,10 @@ def rasterization(
     return render, alphas, _meta(projected, opacities, bins, last_ids, C, width, height, tile_size)
 
 
-def _check_arguments(
-    means,
-    quats,
-    scales,
-    opacities,
-    colors,
-    viewmats,
-    Ks,
-    width,
-    height,
-    backgrounds,
-    checks: ValueChecks,
-    *,
-    near_plane,
-    far_plane,
-    eps2d,
-    tile_size,
-    render_mode,
-) -> tuple[int, int, int]:
-    """The shape and setting checks of :func:`rasterization` now, its value checks queued in ``checks``
-    (settled by the binning's sync). -> (width, height, tile_size)."""
-    width, height = check_shapes(means, quats, scales, opacities, viewmats, Ks, width, height)
+def _check_settings(
+    render_mode: str, near_plane: float, far_plane: float, eps2d: float, tile_size: int
+) -> int:
+    """The checks of :func:`rasterization`'s settings. -> tile_size."""
     if render_mode not in RENDER_MODES:
         raise ValueError(f"render_mode must be one of {RENDER_MODES}, got {render_mode!r}")
     tile_size = check_int("tile_size", tile_size, 1, 32)
@@ -277,6 +259,13 @@ def _check_arguments(
         )
     if not eps2d >= 0:
         raise ValueError(f"eps2d must be >= 0, got {eps2d}")
+    return tile_size
+
+
+def _check_colors(
+    colors: torch.Tensor, backgrounds: torch.Tensor | None, means: torch.Tensor, viewmats: torch.Tensor
+) -> None:
+    """Shape checks of the channels to blend, [N, D] or [C, N, D], and of the backgrounds, [C, D]."""
     dev = means.device
     N, C = means.shape[0], viewmats.shape[0]
     check_tensor("colors", colors, (N, None) if colors.dim() == 2 else (C, N, None), dev, finite=False)
@@ -284,8 +273,6 @@ def _check_arguments(
         raise ValueError("colors must have at least one channel")
     if backgrounds is not None:
         check_tensor("backgrounds", backgrounds, (C, colors.shape[-1]), dev, finite=False)
-    check_values(checks, means, quats, scales, opacities, viewmats, Ks, colors, backgrounds)
-    return width, height, tile_size
 
 
 def _blend_channels(

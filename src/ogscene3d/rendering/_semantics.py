@@ -299,12 +299,12 @@ def rendering_contribution(
     R_p of a dropped label is taken as 0 (``SemanticRender.meta`` counts those pixels).
 
     Args:
-        means: Gaussian centres, world frame. [N, 3]
-        quats: rotations, wxyz. [N, 4]
-        scales: activated scales, > 0. [N, 3]
-        opacities: activated opacities in [0, 1]. [N]
-        labels: each Gaussian's label, -1 = unlabelled. int32 or int64 [N]
-        confidences: each Gaussian's label confidence in [0, 1]. [N]
+        means: as in :func:`render_semantics`.
+        quats: as in :func:`render_semantics`.
+        scales: as in :func:`render_semantics`.
+        opacities: as in :func:`render_semantics`.
+        labels: as in :func:`render_semantics`.
+        confidences: as in :func:`render_semantics`.
         viewmat: the view's world-to-camera matrix, OpenCV axes. [4, 4] (or [1, 4, 4])
         K: the view's pinhole intrinsics, pixel centres at +0.5. [3, 3] (or [1, 3, 3])
         width: image width in pixels.
