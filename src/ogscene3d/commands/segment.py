@@ -145,17 +145,20 @@ def _segmentation_settings(args: argparse.Namespace, sc: SegmentationConfig) -> 
 def _frames_to_do(ds, out: Path, overwrite: bool) -> tuple[list[str | None], list[int]]:
     """(each frame's file stem, None where the dataset has no file names; the frames to segment): frames
     whose PNG exists are done, decided from the file names alone, without reading images."""
-    from ..segmentation.precomputed import segments_paths
-
     records = getattr(ds, "records", None)
     stems = [r.rgb_path.stem for r in records] if records is not None else [None] * len(ds)
-    todo = [
-        i for i, s in enumerate(stems) if overwrite or s is None or not segments_paths(out, s)[0].exists()
-    ]
+    todo = [i for i, s in enumerate(stems) if overwrite or s is None or not _segmented(out, s)]
     skipped = len(stems) - len(todo)
     if skipped:
         log.info("%d of %d frames already segmented in %s: skipping them", skipped, len(stems), out)
     return stems, todo
+
+
+def _segmented(out: Path, stem: str) -> bool:
+    """Whether the frame ``stem`` is done: its PNG, written last, is in ``out``."""
+    from ..segmentation.precomputed import segments_paths
+
+    return segments_paths(out, stem)[0].exists()
 
 
 def _segment_frames(
@@ -163,7 +166,6 @@ def _segment_frames(
 ) -> tuple[int, int, int]:
     """Segment and write the ``todo`` frames. -> (frames done, bad frames, segments written)."""
     from ..progress import progress
-    from ..segmentation.precomputed import segments_paths
 
     backend = cfg.segmentation.backend
     # frames the dataset left out as it opened (a broken file, under data.on_bad_frame: skip) are bad ones too
@@ -179,7 +181,7 @@ def _segment_frames(
                     continue
                 raise
             stem = stems[i] or frame.name or f"{frame.index:06d}"
-            if stems[i] is None and not args.overwrite and segments_paths(out, stem)[0].exists():
+            if stems[i] is None and not args.overwrite and _segmented(out, stem):
                 continue
             if backend == "simulated":
                 if frame.gt_instances is None:
