@@ -3,6 +3,7 @@ import json
 import cv2
 import numpy as np
 import pytest
+from layout_scenes import garble_pixels
 
 from ogscene3d.cli import main
 from ogscene3d.segmentation.precomputed import write_segments
@@ -83,7 +84,7 @@ def test_run_errors(tmp_path, capsys):
 
 def test_bad_frames_are_skipped_when_asked_and_resume_goes_on_after_them(tmp_path, capsys):
     scene = _replica_scene(tmp_path / "scene", frames=4)
-    (scene / "results" / "depth000001.png").write_bytes(b"not a png")
+    garble_pixels(scene / "results" / "depth000001.png")
     out = tmp_path / "run"
     common = ["--data", str(scene), "--segments", str(scene / "segs"), "--out", str(out), "--device", "cpu",
               "--no-progress", "--set", "mapping.opt_iters=1", "--set", "graph.enabled=false",
@@ -199,7 +200,7 @@ def test_a_bad_frame_keeps_the_map_built_so_far(tmp_path, capsys):
     scene = _replica_scene(tmp_path / "scene", frames=4)
     depth = scene / "results" / "depth000002.png"
     good = depth.read_bytes()
-    depth.write_bytes(b"not a png")
+    garble_pixels(depth)
     out = tmp_path / "run"
     assert main(["run", *_common(scene, out)]) == 2
     assert "depth000002.png" in capsys.readouterr().err
@@ -454,7 +455,7 @@ def test_a_resume_bounded_short_of_the_map_keeps_the_names_of_the_frames_it_read
     scene = _replica_scene(tmp_path / "scene", frames=4)
     depth = scene / "results" / "depth000002.png"
     good = depth.read_bytes()
-    depth.write_bytes(b"not a png")
+    garble_pixels(depth)
     out = tmp_path / "run"
     assert main(["run", *_common(scene, out)]) == 2  # frames 0 and 1 saved on the way out
     # reads no frame, but finishes and saves the map: still naming both frames it has read
@@ -530,7 +531,7 @@ def test_an_older_map_resumed_short_of_where_it_got_is_resumed_again(tmp_path, c
     scene = _replica_scene(tmp_path / "scene", frames=4)
     depth = scene / "results" / "depth000002.png"
     good = depth.read_bytes()
-    depth.write_bytes(b"not a png")
+    garble_pixels(depth)
     out = tmp_path / "run"
     assert main(["run", *_common(scene, out)]) == 2  # frames 0 and 1 saved on the way out
     with np.load(out / "map.npz", allow_pickle=False) as z:

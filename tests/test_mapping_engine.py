@@ -13,6 +13,7 @@ import time
 import cv2
 import numpy as np
 import pytest
+from layout_scenes import garble_pixels
 from test_mapping_cli import H, W, _common, _replica_scene
 
 from ogscene3d.cli import main
@@ -265,7 +266,7 @@ def test_one_zero_depth_keyframe_is_warned_about_and_the_run_goes_on(tmp_path, c
 def test_a_resume_bounded_at_or_before_the_map_says_so(tmp_path, capsys, caplog):
     scene = _replica_scene(tmp_path / "scene", frames=3)
     depth = scene / "results" / "depth000002.png"
-    depth.write_bytes(b"not a png")
+    garble_pixels(depth)
     out = tmp_path / "run"
     assert main(["run", *_common(scene, out)]) == 2  # frames 0 and 1 saved on the way out
     with caplog.at_level("WARNING"):
@@ -279,7 +280,7 @@ def test_bad_frames_skipped_before_a_failing_frame_are_counted_in_the_saved_map(
     from ogscene3d.mapping.mapper import Mapper
 
     scene = _replica_scene(tmp_path / "scene", frames=4)
-    (scene / "results" / "depth000001.png").write_bytes(b"not a png")
+    garble_pixels(scene / "results" / "depth000001.png")
     out = tmp_path / "run"
     process = Mapper.process
 
@@ -316,6 +317,41 @@ def test_timings_count_the_labels_of_the_final_map(tmp_path):
     counts = json.loads((tmp_path / "run" / "timings.json").read_text())["counts"]
     assert counts["labels"] == len(set(saved.labels[saved.labels >= 0].tolist()))
     assert counts["gaussians"] == len(saved)
+
+
+def test_observers_see_every_keyframe_and_the_end_and_one_that_fails_is_dropped(tmp_path, caplog):
+    """MappingEngine's observers (Rerun logging, the run-time estimate): called after each keyframe with its
+    seconds and after the final pass; one that raises is warned about and dropped, and the run goes on."""
+    from ogscene3d.config import load_config
+    from ogscene3d.datasets import open_dataset
+    from ogscene3d.mapping.engine import MappingEngine
+    from ogscene3d.mapping.mapper import Mapper
+    from ogscene3d.mapping.source import record_data
+
+    class Watcher:
+        def __init__(self, fail: bool = False) -> None:
+            self.fail, self.seen, self.ended = fail, [], False
+
+        def keyframe(self, mapper, frame, seconds):
+            if self.fail:
+                raise RuntimeError("viewer gone")
+            self.seen.append((frame.index, mapper.keyframe_count, seconds))
+
+        def finished(self, mapper):
+            self.ended = True
+
+    scene = _replica_scene(tmp_path / "scene", frames=4)
+    cfg = load_config(None, ["graph.enabled=false", "mapping.opt_iters=1", "mapping.keyframe_every=2"])
+    record_data(cfg, scene, scene / "segs")
+    good, bad = Watcher(), Watcher(fail=True)
+    engine = MappingEngine(Mapper(cfg, "cpu"), tmp_path / "run", scene, observers=[bad, good])
+    engine.open(cfg, open_dataset(config=cfg.data))
+    with caplog.at_level("WARNING", logger="ogscene3d.mapping.engine"):
+        summary = engine.run(open_dataset(config=cfg.data).frames(), total=4)
+    assert summary.status == "finished" and (tmp_path / "run" / "map.npz").is_file()
+    assert [(i, k) for i, k, _ in good.seen] == [(0, 1), (2, 2)] and all(s > 0 for *_, s in good.seen)
+    assert good.ended and engine.observers == [good]
+    assert "Watcher stopped after an error: RuntimeError: viewer gone" in caplog.text
 
 
 # ------------------------------------------------------------------------------------------- #30 live

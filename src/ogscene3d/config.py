@@ -132,9 +132,11 @@ def _check_conf_range(v: Any) -> str | None:
 
 
 def _check_up_axis(v: Any) -> str | None:
+    if v == "auto":
+        return None
     vals = _numbers(v, 3)
     if vals is None or not math.hypot(*vals) > 1e-9:
-        return "must be a finite non-zero 3-vector"
+        return "must be auto or a finite non-zero 3-vector"
     return None
 
 
@@ -219,6 +221,12 @@ class DataConfig:
     )
     intrinsics: list[float] | None = setting(
         None, "[fx, fy, cx, cy] overriding the dataset's", check=_check_intrinsics
+    )
+    scale: float = setting(
+        1.0,
+        "resize factor of the frames (colour, depth, segments and intrinsics alike, as read): 0.5 halves "
+        "width and height, a quarter of the pixels to map (large images on a CPU)",
+        _float(0.0, 1.0, lo_open=True),
     )
     pixel_centers: Literal["auto", "integer", "half"] = setting(
         "auto",
@@ -801,7 +809,12 @@ class GraphConfig:
         _float(0.0, 1.0, hi_open=True),
     )
     min_gaussians: int = setting(20, "labels with fewer Gaussians make no node", _int(1))
-    up_axis: list[float] = setting([0.0, -1.0, 0.0], "the world's up direction", check=_check_up_axis)
+    up_axis: Literal["auto"] | list[float] = setting(
+        "auto",
+        "the world's up direction (on/under relations, floor/wall/ceiling tags): auto (the dataset format's "
+        "world up where it defines one, else the cameras' up over the first frames; logged) or a 3-vector",
+        check=_check_up_axis,
+    )
     edge_voxel: float = setting(
         0.0,
         "a node's points for edges and relations: its Gaussian means thinned to one per voxel of this many "
@@ -951,6 +964,8 @@ def _type_name(tp: Any) -> str:
         return " | ".join(_type_name(a) for a in typing.get_args(tp))
     if origin is list:
         return f"list[{', '.join(_type_name(a) for a in typing.get_args(tp))}]"
+    if origin is Literal:
+        return " | ".join(str(a) for a in typing.get_args(tp))
     if tp is type(None):
         return "null"
     return getattr(tp, "__name__", str(tp))

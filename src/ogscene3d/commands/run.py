@@ -7,9 +7,12 @@ the run :mod:`ogscene3d.mapping.engine`'s (heavy modules are imported inside :fu
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
+from collections.abc import Iterator
 from pathlib import Path
 
+from ..cli_types import add_rerun_arguments
 from ..config import add_override_argument, add_poses_argument, choices, load_config
 from ..errors import DataError
 
@@ -49,6 +52,7 @@ def add_parser(subparsers) -> None:
     add_override_argument(p)
     add_poses_argument(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_rerun_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -77,6 +81,10 @@ def run(args: argparse.Namespace) -> int:
     if args.poses:
         cfg.tracking.poses = args.poses
     resolve_device(cfg.device)  # an unusable device fails before a synthetic scene is generated
+    if args.rerun or args.rerun_save:  # a missing rerun-sdk fails now, before anything is generated or read
+        from ..viewer.rerun_log import rerun_module
+
+        rerun_module()
     data = args.data or cfg.data.path or (recorded_data_path(out) if args.resume else None)
     if data is None and args.resume:
         raise DataError(f"{out}: --resume needs the run's dataset: pass --data (the run records none)")
@@ -92,8 +100,10 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
     ) as session:
         _warn_small_images(cfg, session.dataset)
-        # bad frames raise, or are skipped with a warning under data.on_bad_frame: skip
-        summary = session.run(progress=not args.no_progress)
+        with run_observers(args, cfg, session.data, session.total) as observers:
+            session.engine.observers.extend(observers)
+            # bad frames raise, or are skipped with a warning under data.on_bad_frame: skip
+            summary = session.run(progress=not args.no_progress)
     start, data = session.start, session.data
     if summary.status == "stopped":
         print(stopped_message(summary))
@@ -111,6 +121,30 @@ def run(args: argparse.Namespace) -> int:
     print(summary.line())
     print(session.mapper.timings.table())
     return 0
+
+
+@contextlib.contextmanager
+def run_observers(args: argparse.Namespace, cfg, data, frames: int | None) -> Iterator[list]:
+    """What watches a run (``MappingEngine``'s observers): the run-time estimate over ``frames`` (None: a
+    camera, no end to estimate), and the Rerun logger that ``--rerun`` / ``--rerun-save`` ask for (closed,
+    its file complete, when the block ends)."""
+    from ..progress import RunTimeEstimate
+
+    m = cfg.mapping
+    observers: list = []
+    if frames is not None:
+        observers.append(RunTimeEstimate(frames, m.keyframe_every, cfg.data.scale, m.opt_iters))
+    rerun = None
+    if getattr(args, "rerun", None) or getattr(args, "rerun_save", None):
+        from ..viewer.rerun_log import rerun_logger
+
+        rerun = rerun_logger(args.rerun, args.rerun_save, Path(str(data)).name)
+        observers.append(rerun)
+    try:
+        yield observers
+    finally:
+        if rerun is not None:
+            rerun.close()
 
 
 # The most a Gaussian centre may drift per keyframe (mapping.lr_means x mapping.opt_iters) before small

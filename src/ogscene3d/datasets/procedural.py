@@ -2,8 +2,8 @@
 
 The builder works in a z-up frame (x, y horizontal, z up, floor at z = 0, room centred on the
 origin) because furniture is easiest to reason about there; :func:`build_room` converts the result
-into the ogscene3d world frame, in which **up is -y** (``WORLD_FROM_ZUP``), matching the default
-``graph.up_axis = [0, -1, 0]`` so the synthetic scenes need no config override.
+into the ogscene3d world frame, in which **up is -y** (``WORLD_FROM_ZUP``), as ``gt/instances.json``
+states (``"up"``), which ``graph.up_axis: auto`` reads: the synthetic scenes need no config override.
 
 Placement is collision-free by construction: every object is a set of parts (boxes, cylinders,
 frusta, ellipsoids), and a new object is accepted only if none of its parts' axis-aligned boxes

@@ -5,8 +5,9 @@ with Warp (``kernels/raycast.py``) along a smooth exploring trajectory and write
 the built-in default scene (no dataset can be downloaded in every setting) and it comes with exact
 ground truth for evaluation.
 
-World frame: metres, **up is -y** (the default ``graph.up_axis``), floor at y = 0, the room centred
-on x = z = 0. Poses are camera-to-world 4x4 with OpenCV camera axes, as everywhere in ogscene3d.
+World frame: metres, **up is -y** (``gt/instances.json``'s ``up``, which ``graph.up_axis: auto`` takes),
+floor at y = 0, the room centred on x = z = 0. Poses are camera-to-world 4x4 with OpenCV camera axes, as
+everywhere in ogscene3d.
 
 Layout of a scene folder (the Replica NICE-SLAM layout plus ``gt/`` and ``segments/``)::
 
@@ -657,6 +658,8 @@ class SyntheticDataset(ReplicaDataset):
         if segments_dir is None and (root / "segments").is_dir():
             segments_dir = root / "segments"
         self.gt = load_instances(root / "gt" / "instances.json")
+        self.up_axis = _scene_up(self.gt, root / "gt" / "instances.json")
+        self.up_axis_source = "the synthetic scene's gt/instances.json"
         ids = self.gt["instances"]
         self._class_lut = np.zeros(max(ids, default=0) + 1, dtype=np.int32)
         for k, v in ids.items():
@@ -681,6 +684,18 @@ class SyntheticDataset(ReplicaDataset):
         if inst.max(initial=0) >= len(self._class_lut):
             raise DataError(f"{path}: instance id {inst.max()} is not in gt/instances.json")
         return inst, self._class_lut[inst]
+
+
+def _scene_up(gt: dict, path: Path) -> tuple[float, float, float]:
+    """The world up a scene's ``instances.json`` states (the generator's, -y, in older scenes without it)."""
+    up = gt.get("up", (0.0, -1.0, 0.0))
+    try:
+        x, y, z = (float(v) for v in up)
+    except (TypeError, ValueError):
+        raise DataError(f"{path}: 'up' must be a 3-vector, got {up!r}") from None
+    if not np.isfinite([x, y, z]).all() or not np.linalg.norm([x, y, z]) > 0:
+        raise DataError(f"{path}: 'up' must be a finite non-zero 3-vector, got {up!r}")
+    return x, y, z
 
 
 def configured_scene(out_dir: str | Path, s: SyntheticConfig, **kwargs: Any) -> Path:

@@ -50,6 +50,7 @@ from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame
 from ..runs import RunFolder
 from ..runs.graph_json import read_graph_json, write_graph_json
+from ..up_axis import up_vector
 from .captioner import Captioner, GroundTruthCaptioner, HeuristicCaptioner, build_captioner
 from .confidence import MeanConfidence, NodeConfidence, build_confidence
 from .geometry import directed_ratios, proximate_points, unit_up
@@ -103,7 +104,8 @@ class SceneGraph:
         self.config = config or GraphConfig()
         c = self.config
         try:
-            self.up = unit_up(c.up_axis)
+            # graph.up_axis auto: provisional until the mapper chooses it (set_up_axis) from the cameras
+            self.up = unit_up(up_vector(c.up_axis))
         except ValueError as e:
             raise ConfigError(str(e)) from None
         for key in (
@@ -127,10 +129,10 @@ class SceneGraph:
                 f"(got {c.support_band}, {c.support_ratio})"
             )
         self.captioner: Captioner = captioner or build_captioner(c.captioner, label_names, class_names)
-        self.relations: RelationPredictor = relations or build_relations(c.relations, c.up_axis)
+        self.relations: RelationPredictor = relations or build_relations(c.relations, self.up)
         self.node_confidence: NodeConfidence = node_confidence or build_confidence(c.confidence)
         self._fallback_captioner = HeuristicCaptioner()
-        self._fallback_relations = GeometricRelations(c.relations, c.up_axis)
+        self._fallback_relations = GeometricRelations(c.relations, self.up)
         self.out_path = Path(out_path) if out_path is not None else None
 
         self.nodes: dict[int, SceneNode] = {}
@@ -157,6 +159,16 @@ class SceneGraph:
         self._last_rooms_count = 0
         self._keyframe_frames: dict[int, int] = {}  # keyframe index -> its dataset frame index
         self._llm_query: LLMQuery | None = LLMQuery.from_config(c.query) if c.query.kind == "llm" else None
+
+    def set_up_axis(self, up: Sequence[float]) -> None:
+        """Set the world up direction (``graph.up_axis`` auto, chosen by the mapper from the cameras at its
+        first update): the graph's, its config's and its relation predictors'."""
+        with self._lock:
+            self.up = unit_up(up)
+            self.config.up_axis = [float(v) for v in self.up]
+            for r in (self.relations, getattr(self.relations, "fallback", None), self._fallback_relations):
+                if r is not None and hasattr(r, "up"):
+                    r.up = self.up
 
     # ----------------------------------------------------------------------------------------- observe
 
@@ -748,7 +760,7 @@ class SceneGraph:
         g = cls(
             cfg,
             captioner=HeuristicCaptioner(),
-            relations=GeometricRelations(cfg.relations, cfg.up_axis),
+            relations=GeometricRelations(cfg.relations, up_vector(cfg.up_axis)),
             node_confidence=MeanConfidence(),
         )
         g._read_json(doc, source)
