@@ -165,14 +165,14 @@ def room_scores(
 
 
 def run_up(graph: Mapping[str, Any] | None) -> np.ndarray:
-    """The up vector a run's graph.json was built with (its ``up``; older files: the default up axis)."""
-    from ..config import GraphConfig
+    """The up vector a run's graph.json was built with (its ``up``; files without one: the up direction an
+    upright OpenCV camera's world has, ``ogscene3d.up_axis.PROVISIONAL_UP``)."""
+    from ..up_axis import PROVISIONAL_UP
 
-    up = (graph or {}).get("up")
     try:
-        return unit_up(up if up is not None else GraphConfig().up_axis)
+        return unit_up((graph or {}).get("up") or PROVISIONAL_UP)
     except ValueError:
-        return unit_up(GraphConfig().up_axis)
+        return unit_up(PROVISIONAL_UP)
 
 
 def rooms_block(
