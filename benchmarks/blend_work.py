@@ -24,7 +24,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import SEMANTIC_SCENES, camera, parse_count, positive_int, print_table, run_main  # noqa: E402
 
-from ogscene3d.projection import _Project, bin_gaussians  # noqa: E402
+from ogscene3d.rendering._projection import Project, bin_gaussians  # noqa: E402
 
 TILE = 16
 
@@ -56,7 +56,7 @@ def count(scene: str, n: int, width: int, height: int, semantic: bool, max_tiles
     means, quats, scales, opac, _, labels, conf = SEMANTIC_SCENES[scene](n, torch.device("cpu"))
     vm, K = camera(width, height, torch.device("cpu"))
     with torch.no_grad():
-        m2d, conics, depths, radii = _Project.apply(
+        m2d, conics, depths, radii = Project.apply(
             means, quats, scales, opac, vm, K, width, height, 0.01, 1e10, 0.3
         )
         voters = (labels, conf) if semantic else None

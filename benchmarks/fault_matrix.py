@@ -255,11 +255,11 @@ FRAME_FAULTS: list[tuple[str, Callable[[Path], None], str, str]] = [
     ("pose bad last row", _traj_line("1 0 0 0 0 1 0 0 0 0 1 0 0 0 1 1"), f"traj.txt:{BAD + 1}", "frame"),
     ("traj line non-numeric", _traj_line("1 0 0 x " * 4), f"traj.txt:{BAD + 1}", "frame"),
     ("traj line short", _traj_line("1 0 0 0"), f"traj.txt:{BAD + 1}", "frame"),
-    (
+    (  # the last frame beyond the trajectory: named when the data set opens, an error or a skip
         "traj shorter than frames",
-        lambda s: (s / "traj.txt").write_text("".join((s / "traj.txt").read_text().splitlines(True)[:BAD])),
+        lambda s: (s / "traj.txt").write_text("".join((s / "traj.txt").read_text().splitlines(True)[:-1])),
         "traj.txt",
-        "data",
+        "frame",
     ),
     ("segments corrupt", _write(SEG, b"not a png"), f"frame{STEM}.png", "frame"),
     ("segments wrong size", _img(SEG, lambda s: np.ones((18, 24), np.uint16)), f"frame{STEM}.png", "frame"),

@@ -8,7 +8,7 @@ writer stores the same value, so the race is harmless.
 
 import warp as wp
 
-# flag index -> what failed, in the order render.py reports them (its messages name the argument)
+# flag index -> what failed, in the order the rasterizer reports them (its messages name the argument)
 MEANS = wp.constant(0)
 QUATS = wp.constant(1)
 SCALES = wp.constant(2)

@@ -8,7 +8,7 @@ import pytest
 from ogscene3d.cli import main
 from ogscene3d.commands.batch import protocol_line
 from ogscene3d.errors import ConfigError
-from ogscene3d.render_demo import render_demo
+from ogscene3d.rendering import render_demo
 
 
 @pytest.mark.parametrize(

@@ -17,8 +17,8 @@ from ogscene3d.kernels.semantic import semantic_kernel
 
 from ogscene3d import kernels
 from ogscene3d.device import init_warp
-from ogscene3d.render import MAX_CHANNELS_PER_PASS
-from ogscene3d.semantics import DEFAULT_BUFFER_SIZE
+from ogscene3d.rendering._rasterization import MAX_CHANNELS_PER_PASS
+from ogscene3d.rendering._semantics import DEFAULT_BUFFER_SIZE
 
 wp = init_warp()
 TARGET_ARCHS = (89, 90)
@@ -55,7 +55,7 @@ def test_module_kernels_compile_for_cuda(name: str, arch: int, tmp_path) -> None
 
 @needs_nvrtc
 @pytest.mark.parametrize("arch", ARCHS)
-@pytest.mark.parametrize("channels", [1, 3, MAX_CHANNELS_PER_PASS])  # depth, RGB, a full render.py chunk
+@pytest.mark.parametrize("channels", [1, 3, MAX_CHANNELS_PER_PASS])  # depth, RGB, a full blending chunk
 def test_raster_kernels_compile_for_cuda(channels: int, arch: int, tmp_path) -> None:
     for kernel in raster_kernels(channels):
         _compile(kernel.module, arch, tmp_path)

@@ -158,6 +158,29 @@ def test_config_overrides(tmp_path):
     assert open_dataset(scene, config=DataConfig(path=str(scene)), kind="auto").root == scene
 
 
+def test_data_scale_resizes_every_image_and_the_intrinsics(tmp_path):
+    """data.scale: colour by area, depth and ids by the nearest pixel, K scaled (exact with centres at +0.5);
+    segments at the folder's size are resized, those made at the scaled size read as they are."""
+    scene = make_replica(tmp_path, n=2, w=32, h=24)
+    ids = np.zeros((24, 32), np.int32)
+    ids[:, 16:] = 7
+    write_segments(tmp_path / "segs", "frame000000", ids, {7: 0.9})
+    write_segments(tmp_path / "segs", "frame000001", ids[::2, ::2], {7: 0.8})  # segmented at the scale
+    ds = open_dataset(scene, segments_dir=tmp_path / "segs", config=DataConfig(scale=0.5))
+    np.testing.assert_allclose(ds.K, [[10, 0, 8], [0, 10, 6], [0, 0, 1]])
+    assert (ds.camera.width, ds.camera.height) == (16, 12)
+    full = open_dataset(scene)[0]
+    for i, f in enumerate(ds):
+        assert f.rgb.shape == (12, 16, 3) and f.depth.shape == (12, 16) and np.allclose(f.depth, 2.0)
+        assert f.segments.shape == (12, 16) and (f.segments[:, 8:] == 7).all() and not f.segments[:, :8].any()
+        assert f.segment_scores == {7: 0.9 if i == 0 else 0.8}
+    np.testing.assert_allclose(ds[0].rgb, cv2.resize(full.rgb, (16, 12), interpolation=cv2.INTER_AREA))
+    # the same rays: a pixel centre maps to the same ray through the scaled K
+    assert ds.K[0, 2] / ds.K[0, 0] == pytest.approx(full.K[0, 2] / full.K[0, 0])
+    with pytest.raises(DataError, match=r"data.scale must be in \(0, 1\]"):
+        open_dataset(scene, config=DataConfig(scale=2.0))
+
+
 def test_scannet_layout_resizes_colour_to_depth(tmp_path):
     root = tmp_path / "scene0000_00"
     for i in range(2):
@@ -289,27 +312,62 @@ def _img(name, img):
 @pytest.mark.parametrize(
     "damage, match",
     [
-        (_write("depth000001.png", b"not a png"), r"depth000001\.png: cannot decode"),
-        (_write("frame000001.jpg", b""), r"frame000001\.jpg: rgb file is empty"),
-        (_cut("depth000001.png", slice(0, 60)), r"depth000001\.png: depth PNG is truncated"),
+        (_write("depth000001.png", b"not a png"), r"results/depth000001\.png: depth file is not a PNG image"),
+        (_write("frame000001.jpg", b""), r"results/frame000001\.jpg: rgb file is empty"),
+        (_cut("depth000001.png", slice(0, 60)), r"depth000001\.png: depth PNG is truncated \(no IEND"),
+        (_cut("depth000001.png", slice(0, 20)), r"depth000001\.png: depth PNG is truncated \(no IHDR"),
         (_cut("frame000001.jpg", slice(0, -300)), r"frame000001\.jpg: rgb JPEG is truncated"),
-        (_img("depth000001.png", np.zeros((12, 16), np.uint16)), r"frame000001\.jpg: rgb is 32x24, depth"),
+        (_cut("frame000001.jpg", slice(0, 40)), r"frame000001\.jpg: rgb JPEG is truncated"),
+        (
+            _img("depth000001.png", np.zeros((12, 16), np.uint16)),
+            r"depth000001\.png: depth is 16x12, the other frames' 32x24, "
+            r"results/frame000001\.jpg: rgb is 32x24, its depth image 16x12",
+        ),
         (
             _img("depth000001.png", np.zeros((24, 32), np.uint8)),
-            r"depth000001\.png: depth image must be 16-bit",
+            r"depth000001\.png: depth image must be 16-bit, got 8-bit",
         ),
-        (_img("depth000001.png", np.zeros((24, 32, 3), np.uint16)), r"must be single-channel"),
+        (_img("depth000001.png", np.zeros((24, 32, 3), np.uint16)), r"must be single-channel, got 3"),
         (
-            _write("frame000001.jpg", cv2.imencode(".png", np.zeros((24, 32, 3), np.uint16))[1].tobytes()),
-            r"frame000001\.jpg: rgb image must be 8-bit",
+            _write("frame000001.jpg", cv2.imencode(".png", _rgb(24, 32))[1].tobytes()),
+            r"frame000001\.jpg: rgb file is not a JPEG image",
         ),
     ],
 )
-def test_bad_frame_files(tmp_path, caplog, damage, match):
+def test_broken_files_are_found_when_the_dataset_opens(tmp_path, caplog, damage, match):
+    """Each file's first and last bytes are read when the dataset opens: a broken folder fails at once, naming
+    the file and what is wrong, or under data.on_bad_frame: skip leaves that frame out with a warning."""
     scene = make_replica(tmp_path)
     damage(scene)
+    head = r"1 of the 3 selected frames cannot be mapped \(replica layout\); .*"
+    with pytest.raises(DataError, match=head + match):
+        open_dataset(scene)
+    with caplog.at_level(logging.WARNING, logger="ogscene3d.datasets.base"):
+        skip = open_dataset(scene, config=DataConfig(on_bad_frame="skip"))
+    assert [f.name for f in skip] == ["frame000000", "frame000002"] and skip.frames_left_out == 1
+    (warning,) = [r.getMessage() for r in caplog.records]
+    assert "000001." in warning and "leaving those frames out" in warning
+
+
+def _corrupt_middle(name):
+    """Garble a file's middle: its header and end marker stay, its pixels no longer decode."""
+
+    def damage(s):
+        path = s / "results" / name
+        data = bytearray(path.read_bytes())
+        mid = len(data) // 2
+        data[mid - 8 : mid + 8] = b"\x00" * 16
+        path.write_bytes(bytes(data))
+
+    return damage
+
+
+def test_what_only_decoding_finds_fails_that_frame_naming_the_file(tmp_path, caplog):
+    """Pixels garbled between a sound header and end marker: found when the frame is read, naming the file."""
+    scene = make_replica(tmp_path)
+    _corrupt_middle("depth000001.png")(scene)
+    match = r"depth000001\.png: cannot decode depth image"
     ds = open_dataset(scene)
-    assert len(ds) == 3  # lazy: opening never reads pixels
     ds[0]
     with pytest.raises(DataError, match=match):
         ds[1]
@@ -434,7 +492,7 @@ def test_bad_layouts_and_metadata(tmp_path):
         open_dataset(scene, kind="tum")
     # traj.txt shorter than the frames
     (scene / "traj.txt").write_text((scene / "traj.txt").read_text().splitlines()[0] + "\n")
-    with pytest.raises(DataError, match=r"traj\.txt: 1 poses"):
+    with pytest.raises(DataError, match=r"frame000001\.jpg: no pose: traj\.txt has poses for frames 0 to 0"):
         open_dataset(scene)
     (scene / "traj.txt").write_text("1 2 3\n")
     with pytest.raises(DataError, match=r"traj\.txt:1: expected 16 numbers"):

@@ -121,6 +121,13 @@ def test_bad_captures(tmp_path, scene, caplog):
     with pytest.raises(DataError, match=r"1 of 4 frames lack data: frame 1 \(depth\)"):
         open_dataset(gone)
     assert len(open_dataset(gone, config=DataConfig(on_bad_frame="skip"))) == 3
+    # a frame without its colour image, or with an empty one, is named too (it used to vanish unnamed)
+    for member, lacks in (("rgbd/1.jpg", "colour"), ("rgbd/3.jpg", "empty colour")):
+        gap = None if lacks == "colour" else b""
+        drop = _rewrite(path, tmp_path / "drop.r3d", lambda n, d, m=member, g=gap: g if n == m else d)
+        frame = member[5]
+        with pytest.raises(DataError, match=rf"1 of 4 frames lack data: frame {frame} \({lacks}\)"):
+            open_dataset(drop)
 
     (tmp_path / "zip.r3d").write_bytes(b"not a zip")
     with pytest.raises(DataError, match="an .r3d is a zip file"):

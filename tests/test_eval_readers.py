@@ -83,7 +83,7 @@ def test_run_reader(tmp_path):
     (run / "graph.json").write_text(json.dumps({"nodes": [{"id": 3}], "edges": [{"source": 3}]}))
     with pytest.raises(DataError, match="every edge needs"):
         read_run(run)
-    with pytest.raises(DataError, match="invalid JSON"):
+    with pytest.raises(DataError, match="not valid JSON"):
         (run / "graph.json").write_text("[")
         read_graph_json(run / "graph.json")
     _ply(run / "gaussians.ply", x=[0.0], y=[0.0], z=[0.0])

@@ -213,6 +213,28 @@ def test_heuristic_captioner_structure_and_objects(up):
     assert all(d.source == "heuristic" and "heuristic" in d.caption for d in out.values())
 
 
+def test_detector_names_a_node_only_when_it_named_a_tenth_of_it():
+    """An object's segments given to the wall behind it do not make the wall that object; a node the detector
+    named over a tenth of its pixels or more (a wardrobe's front, a cup) keeps the detector's name."""
+    rng = np.random.default_rng(12)
+    up = (0.0, -1.0, 0.0)
+    wall = _node(3, plane([3, -1, 0], [3, 3, 2.6], rng), up, (0.8, 0.8, 0.75))
+    cup = _node(4, box_surface([0.5, 0.35, 0.75], [0.58, 0.43, 0.83], rng), up, (0.85, 0.1, 0.1))
+    ctx = SceneContext(np.asarray(up, float) / np.linalg.norm(up), 0.0, 2.6)
+    cap = HeuristicCaptioner()
+
+    def tag(node, votes, pixels):
+        r = CaptionRequest(node, ObservationSet(), ctx, detector_name_votes=votes, label_pixels=pixels)
+        return cap.describe_one(r)
+
+    d = tag(wall, {"desk": 300, "chair": 50}, 5000)
+    assert d.tag == "wall" and d.source == "heuristic" and "6% of it detected as desk" in d.caption
+    assert tag(wall, {"wardrobe": 800}, 5000).tag == "wardrobe"
+    assert tag(wall, {"desk": 300}, 0).tag == "desk"  # pixels not counted (an older checkpoint): as before
+    assert tag(cup, {"cup": 1000}, 5000).tag == "cup"  # an object: a tenth of its pixels suffice
+    assert tag(cup, {"cup": 100}, 5000).tag == "red object"
+
+
 @pytest.mark.parametrize("up", UPS)
 def test_door_in_wall_is_attached(up):
     rng = np.random.default_rng(10)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ogscene3d import Frame
-from ogscene3d.config import GraphConfig, load_config
+from ogscene3d.config import GraphConfig, RoomsConfig, load_config
 from ogscene3d.errors import DataError
 from ogscene3d.graph import (
     Description,
@@ -77,7 +77,7 @@ def blob_map(labels_present, n_per=400, seed=0):
 
 
 def test_update_schedule_and_selective_updates(tmp_path):
-    cfg = GraphConfig()
+    cfg = GraphConfig(rooms=RoomsConfig(enabled=False))  # the graph's own schedule (rooms have theirs)
     cap = SpyCaptioner()
     rel = SpyRelations()
     conf = TableConfidence({1: 0.1})  # node 1 stays uncertain: re-captioned at every update
@@ -252,6 +252,8 @@ def test_json_roundtrip_networkx_graphml_and_query(tmp_path):
     g.nodes[0].tag, g.nodes[0].caption = "couch", "a grey fabric couch with two cushions"
     g.nodes[1].tag, g.nodes[1].caption = "coffee table", "a low wooden coffee table"
     g.nodes[2].tag, g.nodes[2].caption = "mug", "a white mug on the table"
+    for n in g.nodes.values():
+        n.caption_source = "vlm"  # (a model's captions: their words count in queries)
     path = tmp_path / "graph.json"
     g.save(path)
     h = SceneGraph.load(path)
@@ -305,7 +307,7 @@ def test_graphml_has_the_node_boxes(tmp_path):
 def test_state_resumes_captions_and_schedule():
     """A graph restored from ``state()`` (through JSON, as in a checkpoint) keeps the captions and the update
     schedule: the next update is the one the original would make, and captions only what it would."""
-    cfg = GraphConfig()
+    cfg = GraphConfig(rooms=RoomsConfig(enabled=False))  # the graph's own schedule (rooms have theirs)
     first, second = SpyCaptioner(), SpyCaptioner()
     g = SceneGraph(cfg, captioner=first, node_confidence=TableConfidence({1: 0.1}))
     for kf in range(15):

@@ -6,9 +6,9 @@ import pytest
 from test_mapping_mapper import _config, _frame
 
 from ogscene3d.errors import DataError
-from ogscene3d.gaussians import NPZ_VERSION
 from ogscene3d.mapping.checkpoint import REQUIRED, read_checkpoint
 from ogscene3d.mapping.mapper import Mapper
+from ogscene3d.runs.map_npz import NPZ_VERSION
 
 
 def _mapped(tmp_path, frames: int = 2) -> tuple[Mapper, dict]:

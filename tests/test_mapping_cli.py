@@ -3,6 +3,7 @@ import json
 import cv2
 import numpy as np
 import pytest
+from layout_scenes import garble_pixels
 
 from ogscene3d.cli import main
 from ogscene3d.segmentation.precomputed import write_segments
@@ -83,7 +84,7 @@ def test_run_errors(tmp_path, capsys):
 
 def test_bad_frames_are_skipped_when_asked_and_resume_goes_on_after_them(tmp_path, capsys):
     scene = _replica_scene(tmp_path / "scene", frames=4)
-    (scene / "results" / "depth000001.png").write_bytes(b"not a png")
+    garble_pixels(scene / "results" / "depth000001.png")
     out = tmp_path / "run"
     common = ["--data", str(scene), "--segments", str(scene / "segs"), "--out", str(out), "--device", "cpu",
               "--no-progress", "--set", "mapping.opt_iters=1", "--set", "graph.enabled=false",
@@ -200,7 +201,7 @@ def test_a_bad_frame_keeps_the_map_built_so_far(tmp_path, capsys):
     scene = _replica_scene(tmp_path / "scene", frames=4)
     depth = scene / "results" / "depth000002.png"
     good = depth.read_bytes()
-    depth.write_bytes(b"not a png")
+    garble_pixels(depth)
     out = tmp_path / "run"
     assert main(["run", *_common(scene, out)]) == 2
     assert "depth000002.png" in capsys.readouterr().err
@@ -383,14 +384,14 @@ def test_the_run_id_check(tmp_path, caplog):
     between writing its id and its config.yaml leaves the earlier config.yaml, which the map matches."""
     from ogscene3d.config import load_config
     from ogscene3d.errors import DataError
-    from ogscene3d.mapping.source import resumed_run_id, start_run_dir
+    from ogscene3d.runs import resumed_run_id, start_run_dir
 
     out = tmp_path / "run"
     record = start_run_dir(out, load_config(None))
     assert resumed_run_id(out, record) == record["run_id"]
     assert resumed_run_id(out, {"path": "/x", "frames": 3}) is None
     (out / "run_id").write_text("another run\n")
-    with caplog.at_level("INFO", logger="ogscene3d.mapping.source"):
+    with caplog.at_level("INFO", logger="ogscene3d.runs.record"):
         assert resumed_run_id(out, record) == record["run_id"]
     assert "mapped by an earlier run with the settings of" in caplog.text
     start_run_dir(out, load_config(None, ["seed=1"]))
@@ -455,7 +456,7 @@ def test_a_resume_bounded_short_of_the_map_keeps_the_names_of_the_frames_it_read
     scene = _replica_scene(tmp_path / "scene", frames=4)
     depth = scene / "results" / "depth000002.png"
     good = depth.read_bytes()
-    depth.write_bytes(b"not a png")
+    garble_pixels(depth)
     out = tmp_path / "run"
     assert main(["run", *_common(scene, out)]) == 2  # frames 0 and 1 saved on the way out
     # reads no frame, but finishes and saves the map: still naming both frames it has read
@@ -531,7 +532,7 @@ def test_an_older_map_resumed_short_of_where_it_got_is_resumed_again(tmp_path, c
     scene = _replica_scene(tmp_path / "scene", frames=4)
     depth = scene / "results" / "depth000002.png"
     good = depth.read_bytes()
-    depth.write_bytes(b"not a png")
+    garble_pixels(depth)
     out = tmp_path / "run"
     assert main(["run", *_common(scene, out)]) == 2  # frames 0 and 1 saved on the way out
     with np.load(out / "map.npz", allow_pickle=False) as z:

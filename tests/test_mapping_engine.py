@@ -13,17 +13,18 @@ import time
 import cv2
 import numpy as np
 import pytest
+from layout_scenes import garble_pixels
 from test_mapping_cli import H, W, _common, _replica_scene
 
 from ogscene3d.cli import main
-from ogscene3d.mapping.engine import LOCK_FILE, RunDirBusyError, RunDirLock, run_directory
+from ogscene3d.runs import LOCK, RunDirBusyError, RunDirLock, run_directory
 
 # ------------------------------------------------------------------------------------------- the lock
 
 _HOLDER = textwrap.dedent(
     """
     import sys, time
-    from ogscene3d.mapping.engine import RunDirLock
+    from ogscene3d.runs import RunDirLock
     lock = RunDirLock(sys.argv[1], "run")
     lock.acquire()
     print("locked", flush=True)
@@ -56,9 +57,9 @@ def test_a_second_writer_is_refused_naming_the_holder_and_a_killed_ones_lock_doe
     finally:
         proc.send_signal(signal.SIGKILL)  # kill -9: the lock file stays, the kernel drops the lock
         proc.wait()
-    assert (out / LOCK_FILE).is_file()
+    assert (out / LOCK).is_file()
     assert main(["run", *_common(scene, out)]) == 0
-    assert (out / "map.npz").is_file() and not (out / LOCK_FILE).exists()  # released at the end
+    assert (out / "map.npz").is_file() and not (out / LOCK).exists()  # released at the end
 
 
 def test_the_lock_is_one_per_folder_and_free_again_after_release(tmp_path):
@@ -83,7 +84,7 @@ def test_a_filesystem_without_locks_warns_and_runs(tmp_path, monkeypatch, caplog
     monkeypatch.setattr(fcntl, "flock", no_locks)
     with caplog.at_level("WARNING"), RunDirLock(tmp_path, "run"):
         pass
-    assert "refuses file locks" in caplog.text and not (tmp_path / LOCK_FILE).exists()
+    assert "refuses file locks" in caplog.text and not (tmp_path / LOCK).exists()
 
 
 def test_run_batch_scenes_and_live_take_the_lock(tmp_path, capsys):
@@ -158,7 +159,7 @@ def test_live_mapping_saves_the_map_on_sigterm(tmp_path, capsys, monkeypatch, st
     assert "the map so far is in" in capsys.readouterr().out
     for name in ("map.npz", "gaussians.ply", "config.yaml", "run_id"):
         assert (out / name).is_file(), name
-    assert not (out / LOCK_FILE).exists()
+    assert not (out / LOCK).exists()
     monkeypatch.setattr(Mapper, "process", process)
     # the live run goes on with `ogscene3d run --resume`
     assert main(["run", "--out", str(out), "--resume", "--no-progress"]) == 0
@@ -265,7 +266,7 @@ def test_one_zero_depth_keyframe_is_warned_about_and_the_run_goes_on(tmp_path, c
 def test_a_resume_bounded_at_or_before_the_map_says_so(tmp_path, capsys, caplog):
     scene = _replica_scene(tmp_path / "scene", frames=3)
     depth = scene / "results" / "depth000002.png"
-    depth.write_bytes(b"not a png")
+    garble_pixels(depth)
     out = tmp_path / "run"
     assert main(["run", *_common(scene, out)]) == 2  # frames 0 and 1 saved on the way out
     with caplog.at_level("WARNING"):
@@ -279,7 +280,7 @@ def test_bad_frames_skipped_before_a_failing_frame_are_counted_in_the_saved_map(
     from ogscene3d.mapping.mapper import Mapper
 
     scene = _replica_scene(tmp_path / "scene", frames=4)
-    (scene / "results" / "depth000001.png").write_bytes(b"not a png")
+    garble_pixels(scene / "results" / "depth000001.png")
     out = tmp_path / "run"
     process = Mapper.process
 
@@ -316,6 +317,41 @@ def test_timings_count_the_labels_of_the_final_map(tmp_path):
     counts = json.loads((tmp_path / "run" / "timings.json").read_text())["counts"]
     assert counts["labels"] == len(set(saved.labels[saved.labels >= 0].tolist()))
     assert counts["gaussians"] == len(saved)
+
+
+def test_observers_see_every_keyframe_and_the_end_and_one_that_fails_is_dropped(tmp_path, caplog):
+    """MappingEngine's observers (Rerun logging, the run-time estimate): called after each keyframe with its
+    seconds and after the final pass; one that raises is warned about and dropped, and the run goes on."""
+    from ogscene3d.config import load_config
+    from ogscene3d.datasets import open_dataset
+    from ogscene3d.mapping.engine import MappingEngine
+    from ogscene3d.mapping.mapper import Mapper
+    from ogscene3d.mapping.source import record_data
+
+    class Watcher:
+        def __init__(self, fail: bool = False) -> None:
+            self.fail, self.seen, self.ended = fail, [], False
+
+        def keyframe(self, mapper, frame, seconds):
+            if self.fail:
+                raise RuntimeError("viewer gone")
+            self.seen.append((frame.index, mapper.keyframe_count, seconds))
+
+        def finished(self, mapper):
+            self.ended = True
+
+    scene = _replica_scene(tmp_path / "scene", frames=4)
+    cfg = load_config(None, ["graph.enabled=false", "mapping.opt_iters=1", "mapping.keyframe_every=2"])
+    record_data(cfg, scene, scene / "segs")
+    good, bad = Watcher(), Watcher(fail=True)
+    engine = MappingEngine(Mapper(cfg, "cpu"), tmp_path / "run", scene, observers=[bad, good])
+    engine.open(cfg, open_dataset(config=cfg.data))
+    with caplog.at_level("WARNING", logger="ogscene3d.mapping.engine"):
+        summary = engine.run(open_dataset(config=cfg.data).frames(), total=4)
+    assert summary.status == "finished" and (tmp_path / "run" / "map.npz").is_file()
+    assert [(i, k) for i, k, _ in good.seen] == [(0, 1), (2, 2)] and all(s > 0 for *_, s in good.seen)
+    assert good.ended and engine.observers == [good]
+    assert "Watcher stopped after an error: RuntimeError: viewer gone" in caplog.text
 
 
 # ------------------------------------------------------------------------------------------- #30 live

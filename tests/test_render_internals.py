@@ -1,13 +1,13 @@
-"""projection.py internals (shared by render.py and semantics.py): the bare Warp array descriptors of
-launch arguments, and the tile sort."""
+"""The rendering package's projection internals (shared by the rasterizer and the semantic renderer): the
+bare Warp array descriptors of launch arguments, and the tile sort."""
 
 from __future__ import annotations
 
 import pytest
 import torch
 
-from ogscene3d import projection
 from ogscene3d.device import init_warp
+from ogscene3d.rendering import _projection as projection
 
 wp = init_warp()
 
@@ -29,16 +29,16 @@ def _fields(arg) -> tuple:
     ],
 )
 def test_descriptor_matches_from_torch(tensor, dtype, count, stride, monkeypatch) -> None:
-    arg = projection._as_wp(tensor, dtype)
+    arg = projection.as_wp(tensor, dtype)
     assert _fields(arg)[2:] == (1, count, stride)
     assert arg.data == arg.tensor.data_ptr() and arg.tensor.is_contiguous()
     monkeypatch.setattr(projection, "_array_descriptor", lambda: None)  # the wp.from_torch path
-    assert _fields(projection._as_wp(tensor, dtype))[1:] == _fields(arg)[1:]
+    assert _fields(projection.as_wp(tensor, dtype))[1:] == _fields(arg)[1:]
 
 
 def test_non_contiguous_tensor_is_copied() -> None:
     t = torch.arange(12, dtype=torch.float32).reshape(3, 4).t()
-    arg = projection._as_wp(t)
+    arg = projection.as_wp(t)
     assert arg.tensor.is_contiguous() and torch.equal(arg.tensor, t)
 
 
@@ -54,7 +54,7 @@ def test_non_contiguous_tensor_is_copied() -> None:
 )
 def test_mismatched_dtype_is_refused(tensor, dtype) -> None:
     with pytest.raises(TypeError, match="cannot pass|trailing dims"):
-        projection._as_wp(tensor, dtype)
+        projection.as_wp(tensor, dtype)
 
 
 @pytest.mark.parametrize("bit_range", [True, False])

@@ -207,6 +207,36 @@ def test_cli_errors(scene, tmp_path, capsys):
     assert "segmentation.points_per_side must be an integer >= 1, got 0" in capsys.readouterr().err
 
 
+def test_each_front_end_reads_its_settings_from_the_section(scene):
+    sam = {
+        "points_per_side": 3,
+        "points_per_batch": 5,
+        "pred_iou_thresh": 0.5,
+        "stability_score_thresh": 0.6,
+        "stability_score_offset": 0.7,
+        "box_nms_thresh": 0.4,
+        "min_region_area": 7,
+        "mask_threshold": 0.1,
+    }
+    det = {"score_thresh": 0.3, "nms_thresh": 0.2, "max_detections": 9}
+    classical = {"k": 50.0, "min_size": 11, "max_side": 64, "depth_weight": 2.0, "normal_weight": 3.0}
+    cfg = SegmentationConfig(
+        sam_encoder=str(scene["enc"]), sam_decoder=str(scene["dec"]), **sam, detector=str(scene["det"]),
+        detector_classes=["chair", "table"], tau_m=0.6, **{f"detector_{k}": v for k, v in det.items()},
+        **{f"classical_{k}": v for k, v in classical.items()},
+    )  # fmt: skip
+
+    def settings(obj, names):
+        return {k: getattr(obj, k) for k in names}
+
+    assert settings(SamOnnx.from_config(cfg), sam) == sam
+    fused = SamDetectorSegmenter.from_config(cfg)
+    assert fused.tau_m == 0.6 and fused.detector.class_names == ["chair", "table"]
+    assert settings(fused.detector, det) == det and settings(fused.sam, sam) == sam
+    seg = ClassicalSegmenter.from_config(cfg, np.diag([200.0, 210.0, 1.0]))
+    assert settings(seg, classical) == classical and (seg.fx, seg.fy) == (200.0, 210.0)
+
+
 def test_make_segmenter(scene):
     cfg = SegmentationConfig(backend="sam", sam_encoder=str(scene["enc"]), sam_decoder=str(scene["dec"]))
     assert isinstance(make_segmenter(cfg), SamOnnx)

@@ -19,7 +19,8 @@ import torch
 from ogscene3d.colors import confidence_colors, label_colors, turbo
 from ogscene3d.errors import ConfigError, DataError
 from ogscene3d.gaussians import GaussianMap
-from ogscene3d.viewer.runs import load_run, read_graph_json
+from ogscene3d.runs.graph_json import read_graph_json
+from ogscene3d.viewer.runs import load_run
 from ogscene3d.viewer.scene import SceneLayers, ViewerSettings, labelled_nodes, legend_html, node_text
 from ogscene3d.viewer.snapshot import (
     MapSnapshot,
@@ -336,13 +337,13 @@ def test_load_run_errors_name_the_file(tmp_path):
     bad = tmp_path / "graph.json"
     bad.write_text('{"nodes": [{"id": 1, "center": [0, 0, 0]}], "edges": [{"source": 1, "target": 2}]}')
     with pytest.raises(DataError, match="edge 0"):
-        read_graph_json(bad)
+        read_graph_json(bad, centers=True)
     bad.write_text('{"nodes": [{"id": 1, "center": [0, 0]}]}')
     with pytest.raises(DataError, match="bad center"):
-        read_graph_json(bad)
+        read_graph_json(bad, centers=True)
     bad.write_text("{not json")
     with pytest.raises(DataError, match="graph.json"):
-        read_graph_json(bad)
+        read_graph_json(bad, centers=True)
 
 
 def test_load_run_tolerates_bad_optional_files(tmp_path, caplog):
@@ -389,7 +390,7 @@ def test_read_graph_json_rejects_bad_node_fields(tmp_path, node, match):
     bad = tmp_path / "graph.json"
     bad.write_text(json.dumps({"nodes": [node], "edges": []}))
     with pytest.raises(DataError, match=match) as exc:
-        read_graph_json(bad)
+        read_graph_json(bad, centers=True)
     assert str(bad) in str(exc.value)
 
 
@@ -399,7 +400,7 @@ def test_read_graph_json_rejects_unhashable_edge_ends(tmp_path):
         json.dumps({"nodes": [{"id": 1, "center": [0, 0, 0]}], "edges": [{"source": [1], "target": 1}]})
     )
     with pytest.raises(DataError, match="edge 0"):
-        read_graph_json(bad)
+        read_graph_json(bad, centers=True)
 
 
 # ------------------------------------------------------------------------------ scene layers
@@ -1112,8 +1113,9 @@ def test_find_box_and_graph_query_are_one_function():
     g = SceneGraph.from_json(graph)
     with LiveViewer(port=0) as viewer:
         for q in ("couch", "table", "object", "#3", "giraffe"):
-            assert viewer.find(graph, q) == ([n.id for n in g.query(q)], "")
+            assert viewer.find(graph, q) == ([n.id for n in g.query(q)], g.ask(q).message)
         assert viewer.find(graph, "couch")[0] == [0]  # the sofa, by synonym (a substring match finds none)
+        assert "no known object, relation or room term" in viewer.find(graph, "giraffe")[1]
         ids, error = viewer.find({"version": 1, "nodes": [{"id": 1, "center": [0, 0, 0]}], "edges": []}, "x")
         assert ids == [] and "Find is unavailable" in error and "bbox_min" in error
 
@@ -1136,3 +1138,58 @@ def test_node_panel_gives_the_captions_size_and_the_box_apart():
     assert "about 78 cm" in text
     assert "size:" not in node_details({"nodes": [{k: v for k, v in node.items() if k != "extent"}]}, 4)
     assert node_details(None, None).startswith("*Pick")
+
+
+def _rooms_graph(snap: MapSnapshot) -> dict:
+    """``snap``'s graph with two rooms: x < 1.8 (the first two objects) and x > 1.9 (the third)."""
+    from ogscene3d.graph.rooms import RoomNode
+
+    def room(i, kind, x0, x1, objects):
+        # on the floor at y = 1 (height -1 along the world up -y), under the objects
+        corners = np.array([[x0, 1, -1], [x1, 1, -1], [x1, 1, 1], [x0, 1, 1]], dtype=np.float64)
+        return RoomNode(i, 0, [corners], (x1 - x0) * 2, corners.mean(0), corners.min(0), corners.max(0),
+                        type=kind, objects=objects).to_dict()  # fmt: skip
+
+    return {
+        **snap.graph,
+        "up": [0.0, -1.0, 0.0],
+        "floors": [{"id": 0, "height": -1.0, "top": None}],
+        "rooms": [room(1, "kitchen", -0.6, 1.8, [0, 1]), room(2, "office", 1.9, 3.0, [2])],
+    }
+
+
+def test_rooms_outlines_room_colours_and_legend(server):
+    from ogscene3d.colors import room_colors
+
+    snap = make_scene(50)
+    graph = _rooms_graph(snap)
+    layers = SceneLayers(server)
+    st = ViewerSettings(color_mode="room")
+    layers.update_map(snap, st, None, graph, np.array([0.0, -1.0, 0.0]))
+    rgb = layers._gauss_handle.rgbs.astype(float) / 255
+    first, third = snap.means[:, 0] < 1.5, snap.means[:, 0] > 2.1
+    np.testing.assert_allclose(rgb[first], np.tile(room_colors(np.array([1])), (first.sum(), 1)), atol=0.01)
+    np.testing.assert_allclose(rgb[third], np.tile(room_colors(np.array([2])), (third.sum(), 1)), atol=0.01)
+    layers.update_rooms(graph, st)
+    assert layers.shown_rooms == 2 and len(layers._room_handles) == 4  # outline + label per room
+    handles = list(layers._room_handles)
+    layers.update_rooms(json.loads(json.dumps(graph)), st)  # same rooms: nothing re-sent
+    assert layers._room_handles == handles
+    layers.apply_visibility(dataclasses.replace(st, show_rooms=False))
+    assert not any(h.visible for h in layers._room_handles)
+    html = legend_html("room", graph)
+    assert "kitchen (room #1, 2 objects)" in html and "office" in html and "in no room" in html
+    assert "no rooms yet" in legend_html("room", snap.graph)
+    layers.update_rooms({**graph, "rooms": [{"id": "bad"}]}, st)  # malformed rooms: none drawn, no error
+    assert layers.shown_rooms == 0
+
+
+def test_find_answers_relations_and_rooms():
+    from ogscene3d.viewer.app import LiveViewer
+
+    graph = _rooms_graph(make_scene(5, objects=3))
+    with LiveViewer(port=0) as viewer:
+        assert viewer.find(graph, "office") == ([2], "")  # a room stands for the nodes in it
+        assert viewer.find(graph, "table in the kitchen")[0][0] == 1
+        answer, error = viewer.answer(graph, "lamp in the office")
+        assert error == "" and answer.hits[0].id == 2 and "room #2 'office'" in answer.hits[0].reason

@@ -29,9 +29,8 @@ __getattr__, __dir__ = lazy_exports(
         ".gaussians": ["GaussianMap"],
         ".graph": ["SceneGraph"],
         ".mapping": ["Mapper"],
-        ".render": ["rasterization"],
+        ".rendering": ["SemanticRender", "rasterization", "render_semantics", "rendering_contribution"],
         ".segmentation": ["Segmentation"],
-        ".semantics": ["SemanticRender", "render_semantics", "rendering_contribution"],
         ".tracking": ["Tracker", "track", "track_sequence"],
     },
 )
@@ -45,9 +44,8 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .gaussians import GaussianMap
     from .graph import SceneGraph
     from .mapping import Mapper
-    from .render import rasterization
+    from .rendering import SemanticRender, rasterization, render_semantics, rendering_contribution
     from .segmentation import Segmentation
-    from .semantics import SemanticRender, render_semantics, rendering_contribution
     from .tracking import Tracker, track, track_sequence
 
 __all__ = [

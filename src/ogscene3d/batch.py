@@ -45,8 +45,10 @@ from typing import Any, Literal
 import yaml
 
 from .atomic import atomic_write_text
+from .config import load_config
 from .errors import ConfigError, DataError
 from .eval.options import EvalOptions
+from .runs import RunFolder, json_safe, write_metrics
 
 log = logging.getLogger(__name__)
 
@@ -231,12 +233,10 @@ def map_scene(
     gaussians, labels, map_seconds (processing + finalize), total_seconds (+ generation, I/O, save),
     fps (frames / map_seconds), peak_rss_mb, peak_cuda_mb (None on CPU).
     """
+    # torch and the mapping inside: `ogscene3d --help` imports this module (run-batch's --executor choices)
     import torch
 
-    from .config import load_config
-    from .datasets import configured_scene
-    from .mapping.engine import MappingEngine, open_frames, run_directory
-    from .mapping.mapper import Mapper
+    from .mapping.session import mapping_session
 
     t_start = time.perf_counter()
     ov = [*overrides, *spec.overrides]
@@ -244,25 +244,20 @@ def map_scene(
         ov.append(f"device={device}")
     cfg = load_config(config, ov)
     run_dir = Path(out_root) / spec.name
-    with run_directory(run_dir, "run-batch"):
-        if spec.synthetic_seed is not None:
-            s = cfg.synthetic
-            s.seed = spec.synthetic_seed
-            data = configured_scene(run_dir / "scene", s, remedy="give a new --out, or remove that folder")
-        else:
-            data = Path(str(spec.data))
-        # recorded in config.yaml: where the frames came from (and where `eval` looks for ground truth)
-        ds = open_frames(cfg, data, spec.segments)
-        mapper = Mapper(cfg, cfg.device)
-        # a scene stopped by a bad frame resumes with `run --resume --out`
-        engine = MappingEngine(mapper, run_dir, data)
-        engine.open(cfg, ds)
+    data = None  # synthetic: the scene of the scene's seed, generated in RUN_DIR/scene
+    if spec.synthetic_seed is not None:
+        cfg.synthetic.seed = spec.synthetic_seed
+    else:
+        data = Path(str(spec.data))
+    # recorded in config.yaml: where the frames came from (and where `eval` looks for ground truth); a scene
+    # stopped by a bad frame resumes with `run --resume --out`
+    with mapping_session(cfg, run_dir, data, command="run-batch", segments=spec.segments) as session:
+        mapper = session.mapper
         dev = mapper.device
         if dev.type == "cuda":
             torch.cuda.reset_peak_memory_stats(dev)
         # bad frames raise, or are skipped with a warning (data.on_bad_frame)
-        with engine.stop.signals():
-            summary = engine.run(ds.frames(), total=len(ds), progress=progress, desc=spec.name)
+        summary = session.run(progress=progress, desc=spec.name)
     if summary.status == "stopped":
         # Ctrl-C / SIGTERM: this scene's map so far is saved (`run --resume --out`); the batch stops
         raise KeyboardInterrupt(f"{run_dir}: stopped after {summary.read} frames")
@@ -290,19 +285,6 @@ def map_scene(
     }
 
 
-def json_safe(x: Any) -> Any:
-    """NaN/inf -> None, numpy scalars -> Python, tuples -> lists (strict JSON), recursively."""
-    if isinstance(x, dict):
-        return {str(k): json_safe(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [json_safe(v) for v in x]
-    if hasattr(x, "item") and callable(x.item) and getattr(x, "ndim", 1) == 0:
-        x = x.item()
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x
-
-
 def evaluate_scene(
     run_dir: str | Path,
     gt: str | Path | None = None,
@@ -318,11 +300,11 @@ def evaluate_scene(
     The record holds, per protocol, ``miou``/``fmiou``/``macc``/``oacc`` (fractions, None when not
     defined) and the protocol text, plus relation recall when the graph was scored.
     """
-    from .eval import evaluate_run, find_ground_truth, iou_bar_chart, write_png
+    from .eval import evaluate_run, find_ground_truth, iou_bar_chart, write_png  # torch: as above
 
     opts = options or EvalOptions()
     run = Path(run_dir)
-    if not (run / "gaussians.ply").is_file():
+    if not RunFolder(run).gaussians.is_file():
         raise DataError(f"{run}: not a run directory (no gaussians.ply)")
     gt_path = Path(gt) if gt is not None else find_ground_truth(run)
     if gt_path is None:
@@ -341,7 +323,7 @@ def evaluate_scene(
                 nan_text=["ignored" if n in m.ignored else "not in GT" for n in m.class_names],
             )
             report["semantic_3d"][proto]["bar_chart"] = write_png(run / f"iou_{proto}.png", chart).name
-    atomic_write_text(run / "metrics.json", json.dumps(json_safe(report), indent=2, allow_nan=False) + "\n")
+    write_metrics(RunFolder(run).metrics, report)
     rec: dict[str, Any] = {
         "name": name or run.name,
         "status": "ok",
@@ -661,8 +643,6 @@ def run_batch(
 ) -> BatchResult:
     """Map every scene (a list or a scenes file) into ``out/<name>``; optionally evaluate each run in
     the same task; write ``out/run_batch.json``. See :func:`execute` for the executors."""
-    from .config import load_config
-
     specs = read_scenes_file(scenes) if isinstance(scenes, (str, Path)) else list(scenes)
     if not specs:
         raise ConfigError("no scenes to run")
@@ -717,13 +697,13 @@ def find_runs(out: str | Path) -> tuple[list[tuple[str, Path, str | None]], list
                 continue
             seen.add(name)
             # run directories are found relative to OUT, so a moved batch folder still works
-            if (root / name / "gaussians.ply").is_file():
+            if RunFolder(root / name).gaussians.is_file():
                 runs.append((name, root / name, s.get("gt")))
             else:
                 why = s.get("error") or "no gaussians.ply in its run directory"
                 unmapped.append({"name": name, "status": "not mapped", "error": f"run-batch: {why}"})
     for d in sorted(p for p in root.iterdir() if p.is_dir() and p.name not in seen):
-        if (d / "gaussians.ply").is_file():
+        if RunFolder(d).gaussians.is_file():
             runs.append((d.name, d, None))
     if not runs and not unmapped:
         raise DataError(f"{root}: no run directories (sub-folders with gaussians.ply) found")

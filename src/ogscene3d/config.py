@@ -132,9 +132,11 @@ def _check_conf_range(v: Any) -> str | None:
 
 
 def _check_up_axis(v: Any) -> str | None:
+    if v == "auto":
+        return None
     vals = _numbers(v, 3)
     if vals is None or not math.hypot(*vals) > 1e-9:
-        return "must be a finite non-zero 3-vector"
+        return "must be auto or a finite non-zero 3-vector"
     return None
 
 
@@ -178,7 +180,15 @@ def section(cls: type, doc: str) -> Any:
 
 # ------------------------------------------------------------------------------------------------- sections
 DatasetKind = Literal[
-    "auto", "replica", "semantic_nerf", "scannet", "tum", "sevenscenes", "labelfusion", "synthetic", "rosbag",
+    "auto",
+    "replica",
+    "semantic_nerf",
+    "scannet",
+    "tum",
+    "sevenscenes",
+    "labelfusion",
+    "synthetic",
+    "rosbag",
     "record3d",
 ]
 # low / default / high err like SAM (objects absorbed into their support, merged with it, cut in two); the
@@ -211,6 +221,12 @@ class DataConfig:
     )
     intrinsics: list[float] | None = setting(
         None, "[fx, fy, cx, cy] overriding the dataset's", check=_check_intrinsics
+    )
+    scale: float = setting(
+        1.0,
+        "resize factor of the frames (colour, depth, segments and intrinsics alike, as read): 0.5 halves "
+        "width and height, a quarter of the pixels to map (large images on a CPU)",
+        _float(0.0, 1.0, lo_open=True),
     )
     pixel_centers: Literal["auto", "integer", "half"] = setting(
         "auto",
@@ -268,18 +284,20 @@ class DataConfig:
 @dataclass
 class SyntheticConfig:
     seed: int = setting(0, "seed of the procedural room", _int(0))
-    frames: int = setting(60, "frames of the camera path", _int(1))
+    frames: int = setting(60, "frames of the camera path (layout apartment: per room)", _int(1))
     width: int = setting(160, "image width in pixels", _int(8))
     height: int = setting(120, "image height in pixels", _int(8))
     noise: NoiseLevel = setting("default", "how far the simulated SAM segments err")
     depth_noise: float = setting(0.0, "std of the depth noise in metres", _NONNEG)
     pose_noise: float = setting(0.0, "std of the translation noise of the given poses in metres", _NONNEG)
-    layout: Literal["room", "scan"] = setting(
+    layout: Literal["room", "scan", "apartment"] = setting(
         "room",
-        "the scene kind: room (one furnished room, a smooth walk around it) | scan (a long scan like a real "
+        "the scene: room (one furnished room, a smooth walk around it) | scan (a long scan like a real "
         "ScanNet one: a larger room whose large furniture stands side by side, a walk that leaves places and "
         "comes back, irregular frame gaps up to 1.5 m / 60 degrees, objects merged with the floor or their "
-        "neighbour in their first views; give it 300 frames or more)",
+        "neighbour in their first views; give it 300 frames or more) | apartment (2-5 rooms of distinct "
+        "types joined by doorways, walked through room by room; gt/instances.json gives every instance's "
+        "room)",
     )
 
 
@@ -708,6 +726,77 @@ class NodeConfidenceConfig:
 
 
 @dataclass
+class RoomsConfig:
+    enabled: bool = setting(
+        True, "segment storeys and rooms from the map and make them graph nodes (objects 'in' rooms)"
+    )
+    update_every: int = setting(
+        4, "keyframes between room updates (rooms also update with every graph update)", _int(1)
+    )
+    cell_size: float = setting(0.1, "metres per cell of the bird's-eye floor plan", _POS)
+    wall_low: float = setting(
+        1.0,
+        "metres above the floor from which Gaussians are walls in the floor plan (above most furniture)",
+        _NONNEG,
+    )
+    wall_high: float = setting(
+        1.9,
+        "metres above the floor up to which Gaussians are walls (below door lintels: doorways stay open)",
+        _POS,
+    )
+    door_width: float = setting(
+        1.0, "metres: openings up to this wide separate rooms (where free space is wider lies a room)", _POS
+    )
+    min_room_area: float = setting(
+        1.5, "square metres below which a segment is no room (its Gaussians go to the nearest room)", _NONNEG
+    )
+    storey_height: float = setting(2.0, "metres: the least height between two storeys' floors", _POS)
+    max_points: int = setting(
+        200_000, "Gaussians a room update reads at most (a fixed random subset of a larger map)", _int(1000)
+    )
+    assign_radius: float = setting(
+        0.5, "metres outside every room's outline beyond which a Gaussian or object is in no room", _NONNEG
+    )
+    typer: Literal["rule", "llm"] = setting(
+        "rule",
+        "room types: rule (from the tags of the objects in the room) | llm (a language model at an "
+        "OpenAI-compatible endpoint, with the rule as fallback)",
+    )
+    base_url: str = setting("http://127.0.0.1:8000/v1", "OpenAI-compatible endpoint")
+    model: str = setting("", "model name sent to the endpoint")
+    api_key_env: str = setting("OPENAI_API_KEY", _LLM_KEY_DOC)
+    timeout_s: float = setting(30.0, "seconds per request", _POS)
+    max_retries: int = setting(2, "retries of a failed request", _int(0))
+    max_tokens: int = setting(
+        200, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request")
+    )
+
+    def cross_check(self) -> str | None:
+        if not self.wall_low < self.wall_high:
+            return f"graph.rooms.wall_low must be < wall_high, got {self.wall_low!r} >= {self.wall_high!r}"
+        return None
+
+
+@dataclass
+class QueryConfig:
+    kind: Literal["offline", "llm"] = setting(
+        "offline",
+        "queries (ogscene3d graph -q, the viewer's Find): offline (a parser of object, relation and room "
+        "terms) | llm (a language model at an OpenAI-compatible endpoint picks node ids from a compact "
+        "graph; offline when it fails)",
+    )
+    base_url: str = setting("http://127.0.0.1:8000/v1", "OpenAI-compatible endpoint")
+    model: str = setting("", "model name sent to the endpoint")
+    api_key_env: str = setting("OPENAI_API_KEY", _LLM_KEY_DOC)
+    timeout_s: float = setting(30.0, "seconds per request", _POS)
+    max_retries: int = setting(2, "retries of a failed request", _int(0))
+    max_tokens: int = setting(
+        500, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request")
+    )
+    max_nodes: int = setting(500, "objects sent to the LLM at most (the largest first)", _int(1))
+
+
+@dataclass
 class GraphConfig:
     enabled: bool = setting(
         True, "build the 3D scene graph; false: the graph.* settings are neither used nor checked"
@@ -724,7 +813,12 @@ class GraphConfig:
         _float(0.0, 1.0, hi_open=True),
     )
     min_gaussians: int = setting(20, "labels with fewer Gaussians make no node", _int(1))
-    up_axis: list[float] = setting([0.0, -1.0, 0.0], "the world's up direction", check=_check_up_axis)
+    up_axis: Literal["auto"] | list[float] = setting(
+        "auto",
+        "the world's up direction (on/under relations, floor/wall/ceiling tags): auto (the dataset format's "
+        "world up where it defines one, else the cameras' up over the first frames; logged) or a 3-vector",
+        check=_check_up_axis,
+    )
     edge_voxel: float = setting(
         0.0,
         "a node's points for edges and relations: its Gaussian means thinned to one per voxel of this many "
@@ -763,6 +857,8 @@ class GraphConfig:
     captioner: CaptionerConfig = section(CaptionerConfig, "node captions")
     relations: RelationsConfig = section(RelationsConfig, "edge relations")
     confidence: NodeConfidenceConfig = section(NodeConfidenceConfig, "node confidence")
+    rooms: RoomsConfig = section(RoomsConfig, "storeys and rooms")
+    query: QueryConfig = section(QueryConfig, "queries over objects, relations and rooms")
 
 
 @dataclass
@@ -872,6 +968,8 @@ def _type_name(tp: Any) -> str:
         return " | ".join(_type_name(a) for a in typing.get_args(tp))
     if origin is list:
         return f"list[{', '.join(_type_name(a) for a in typing.get_args(tp))}]"
+    if origin is Literal:
+        return " | ".join(str(a) for a in typing.get_args(tp))
     if tp is type(None):
         return "null"
     return getattr(tp, "__name__", str(tp))

@@ -5,7 +5,8 @@ The run's ``gaussians.ply`` is a 3DGS file (SH degree 0: colour as ``f_dc_*``), 
 (Open3D, CloudCompare, MeshLab) show grey because they look for ``red``/``green``/``blue``. The clouds
 written here have one vertex per Gaussian mean with standard ``uchar`` ``red``/``green``/``blue`` (the
 Gaussian colour or its semantic label's colour) and the ``label`` (int) and ``confidence`` (float)
-properties. Only file formats are read (gaussians.ply, graph.json), so any run directory can be exported.
+properties. Only file formats are read (gaussians.ply, graph.json, through :mod:`ogscene3d.runs`), so any run
+directory can be exported.
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ import numpy as np
 from .atomic import atomic_path
 from .colors import label_colors
 from .errors import DataError
+from .runs import RunFolder
+from .runs.gaussians_ply import read_gaussians_ply
 
 log = logging.getLogger(__name__)
 
@@ -120,8 +123,6 @@ def export_run(
     ``graph.graphml`` (node boxes included, needs networkx). Gaussians with an opacity below
     ``min_opacity`` are left out of the clouds. DataError when the run lacks a file an export needs.
     """
-    from .viewer.runs import read_gaussians_ply
-
     if colors not in COLOR_SOURCES:
         raise ValueError(f"colors must be one of {COLOR_SOURCES}, got {colors!r}")
     if not 0.0 <= min_opacity <= 1.0:
@@ -137,7 +138,7 @@ def export_run(
 
         graph = SceneGraph.load(root)  # DataError naming the run when graph.json is missing
     if cloud or nodes:
-        arrays = read_gaussians_ply(root / "gaussians.ply")
+        arrays = read_gaussians_ply(RunFolder(root).gaussians).arrays()
         keep = arrays["opacities"] >= min_opacity
         arrays = {k: v[keep] for k, v in arrays.items()}
         rgb = point_colors(arrays, colors)

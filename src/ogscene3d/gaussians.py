@@ -16,17 +16,16 @@ Files: ``save_npz``/``load_npz`` hold everything needed to resume mapping; ``exp
 from __future__ import annotations
 
 import math
-import zipfile
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from .atomic import atomic_path
 from .device import resolve_device
 from .errors import DataError
-
-SH_C0 = 0.28209479177387814
+from .runs.gaussians_ply import PLY_PROPERTIES, SH_C0, read_gaussians_ply, write_gaussians_ply
+from .runs.map_npz import NPZ_VERSION, pop_npz_version, read_map_npz, write_map_npz
+from .runs.map_npz import corrupt_npz_message as corrupt_npz_message  # mapper.py reads it from here
 
 # Per-Gaussian fields: name -> (trailing shape, dtype).
 FIELDS: dict[str, tuple[tuple[int, ...], torch.dtype]] = {
@@ -40,31 +39,6 @@ FIELDS: dict[str, tuple[tuple[int, ...], torch.dtype]] = {
     "origin_kf": ((), torch.int32),
 }
 _FLOAT_FIELDS = [k for k, (_, dt) in FIELDS.items() if dt.is_floating_point]
-#: The format of map.npz. 2: a mapper checkpoint holds every mapper array (``mapping/checkpoint.py``);
-#: 1: older files, which may lack those added over its life (upgraded on load).
-NPZ_VERSION = 2
-
-PLY_PROPERTIES: list[tuple[str, str]] = (
-    [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
-    + [(f"f_dc_{i}", "<f4") for i in range(3)]
-    + [("opacity", "<f4")]
-    + [(f"scale_{i}", "<f4") for i in range(3)]
-    + [(f"rot_{i}", "<f4") for i in range(4)]
-    + [("label", "<i4"), ("confidence", "<f4")]
-)
-
-
-#: What np.load raises on a damaged or truncated npz file (a checkpoint cut short by a full disk or a kill).
-NPZ_READ_ERRORS: tuple[type[Exception], ...] = (OSError, ValueError, EOFError, zipfile.BadZipFile)
-
-
-def corrupt_npz_message(path: Path, error: Exception) -> str:
-    """The error for an npz file np.load cannot read (truncated by a full disk, damaged in a copy)."""
-    # np.load calls any non-zip file "pickled (object) data" and suggests unpickling it: never for a map
-    return (
-        f"{path}: not a readable map npz, corrupt or truncated ({type(error).__name__}); restore a copy or "
-        "start a new run"
-    )
 
 
 def _logit(p: torch.Tensor | float) -> torch.Tensor:
@@ -73,7 +47,15 @@ def _logit(p: torch.Tensor | float) -> torch.Tensor:
 
 
 class GaussianMap:
-    """Struct-of-arrays semantic Gaussians on ``device`` with amortised-capacity growth."""
+    """Struct-of-arrays semantic Gaussians on ``device`` with amortised-capacity growth.
+
+    Each field (``means``, ``quats``, ``log_scales``, ``opacity_logits``, ``colors``, ``labels``,
+    ``confidences``, ``origin_kf``) is a view of the first ``len(map)`` rows of its storage.
+
+    Args:
+        device: "cpu", "cuda", "cuda:N", a torch.device, or None (CUDA when available).
+        capacity: rows allocated up front (the storage doubles as rows are appended).
+    """
 
     def __init__(self, device: str | torch.device = "cpu", capacity: int = 1024) -> None:
         self.device = resolve_device(device)
@@ -314,96 +296,84 @@ class GaussianMap:
         return gm
 
     def save_npz(self, path: str | Path, extra: dict[str, np.ndarray] | None = None) -> None:
-        """Write the map (and optional extra arrays, e.g. mapper state) to an npz file atomically."""
+        """Write the map to an npz file (``map.npz``'s format), atomically.
+
+        Args:
+            path: the file to write.
+            extra: more named arrays to store beside the map's (e.g. a mapper's state); a name may not
+                clash with a map field.
+        """
         arrays = self.state_dict()
         for k, v in (extra or {}).items():
             if k in arrays:
                 raise ValueError(f"save_npz: extra key {k!r} clashes with a map field")
             arrays[k] = np.asarray(v)
-        with atomic_path(path) as tmp:
-            with open(tmp, "wb") as f:
-                np.savez(f, **arrays)
+        write_map_npz(path, arrays)
 
     @classmethod
     def load_npz(cls, path: str | Path, device: str | torch.device = "cpu") -> GaussianMap:
-        """Load a map written by ``save_npz`` (extra arrays are ignored; read them with ``np.load``)."""
+        """Load a map written by :meth:`save_npz` (its extra arrays are left out: read them with ``np.load``).
+
+        Args:
+            path: the npz file.
+            device: where the map's tensors go.
+
+        Returns:
+            The map.
+
+        Raises:
+            DataError: the file is missing, damaged, lacks a field, or was written by a newer ogscene3d.
+        """
         p = Path(path)
-        if not p.is_file():
-            raise DataError(f"{p}: map file does not exist")
-        try:
-            with np.load(p, allow_pickle=False) as z:
-                # only the map's arrays: a mapper checkpoint also holds its memory views (hundreds of MB)
-                state = {k: z[k] for k in z.files if k in FIELDS or k == "next_label"}
-                version = int(z["version"]) if "version" in z.files else 1
-        except NPZ_READ_ERRORS as e:
-            raise DataError(corrupt_npz_message(p, e)) from e
-        if version > NPZ_VERSION:
-            raise DataError(
-                f"{p}: written by a newer ogscene3d (map format {version}; this one reads up to "
-                f"{NPZ_VERSION}): update ogscene3d to read it"
-            )
+        # only the map's arrays: a mapper checkpoint also holds its memory views (hundreds of MB)
+        state = read_map_npz(p, lambda k: k in FIELDS or k in ("next_label", "version"))
+        pop_npz_version(state, p, "map", "read it")
         return cls.from_state_dict(state, device, what=str(p))
 
     def export_ply(self, path: str | Path) -> None:
-        """Write the 3DGS PLY (binary little-endian, SH degree 0, + label int32 + confidence float32)."""
-        n = self._n
-        vert = np.zeros(n, dtype=np.dtype(PLY_PROPERTIES))
-        means = self.means.detach().cpu().numpy()
-        vert["x"], vert["y"], vert["z"] = means[:, 0], means[:, 1], means[:, 2]
-        dc = (self.colors.detach().cpu().numpy() - 0.5) / SH_C0
-        for i in range(3):
-            vert[f"f_dc_{i}"] = dc[:, i]
-            vert[f"scale_{i}"] = self.log_scales[:, i].detach().cpu().numpy()
-        vert["opacity"] = self.opacity_logits.detach().cpu().numpy()
-        q = torch.nn.functional.normalize(self.quats.detach(), dim=1).cpu().numpy()
-        for i in range(4):
-            vert[f"rot_{i}"] = q[:, i]
-        vert["label"] = self.labels.cpu().numpy()
-        vert["confidence"] = self.confidences.detach().cpu().numpy()
-        from plyfile import PlyData, PlyElement
+        """Write the 3DGS PLY that other Gaussian splatting tools open (``ogscene3d.runs.gaussians_ply``).
 
-        ply = PlyData([PlyElement.describe(vert, "vertex")], text=False, byte_order="<")
-        with atomic_path(path) as tmp:
-            ply.write(str(tmp))
+        Binary little-endian, SH degree 0, plus the properties ``label`` (int32) and ``confidence``
+        (float32).
+
+        Args:
+            path: the ``.ply`` file to write.
+        """
+        write_gaussians_ply(
+            path,
+            means=self.means.detach().cpu().numpy(),
+            colors=self.colors.detach().cpu().numpy(),
+            log_scales=self.log_scales.detach().cpu().numpy(),
+            opacity_logits=self.opacity_logits.detach().cpu().numpy(),
+            quats=torch.nn.functional.normalize(self.quats.detach(), dim=1).cpu().numpy(),
+            labels=self.labels.cpu().numpy(),
+            confidences=self.confidences.detach().cpu().numpy(),
+        )
 
     @classmethod
     def read_ply(cls, path: str | Path, device: str | torch.device = "cpu") -> GaussianMap:
-        """Read a PLY written by ``export_ply`` (or any 3DGS PLY; missing label/confidence -> -1 / 0)."""
-        from plyfile import PlyData
+        """Read a PLY written by :meth:`export_ply`, or any 3DGS PLY.
 
-        p = Path(path)
-        if not p.is_file():
-            raise DataError(f"{p}: PLY file does not exist")
-        try:
-            v = PlyData.read(str(p))["vertex"].data
-        except Exception as e:  # plyfile raises several unrelated types on corrupt input
-            raise DataError(f"{p}: cannot read PLY ({e})") from e
-        names = v.dtype.names or ()
-        need = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity"] + [f"scale_{i}" for i in range(3)]
-        need += [f"rot_{i}" for i in range(4)]
-        missing = [k for k in need if k not in names]
-        if missing:
-            raise DataError(f"{p}: PLY vertex lacks 3DGS properties {missing}")
-        n = len(v)
+        Args:
+            path: the ``.ply`` file.
+            device: where the map's tensors go.
 
-        def col(*keys: str) -> np.ndarray:
-            return np.stack([np.asarray(v[k], dtype=np.float32) for k in keys], axis=1)
-
+        Returns:
+            The map; Gaussians without a label / confidence property get -1 / 0.
+        """
+        ply = read_gaussians_ply(path)
+        n = len(ply)
         state = {
-            "means": col("x", "y", "z"),
-            "colors": np.clip(col("f_dc_0", "f_dc_1", "f_dc_2") * SH_C0 + 0.5, 0.0, 1.0),
-            "log_scales": col("scale_0", "scale_1", "scale_2"),
-            "quats": col("rot_0", "rot_1", "rot_2", "rot_3"),
-            "opacity_logits": np.asarray(v["opacity"], dtype=np.float32),
-            "labels": np.asarray(v["label"], dtype=np.int32)
-            if "label" in names
-            else np.full(n, -1, np.int32),
-            "confidences": np.asarray(v["confidence"], dtype=np.float32)
-            if "confidence" in names
-            else np.zeros(n, np.float32),
+            "means": ply.means,
+            "colors": ply.colors(),
+            "log_scales": ply.log_scales,
+            "quats": ply.quats,
+            "opacity_logits": ply.opacity_logits,
+            "labels": ply.labels if ply.labels is not None else np.full(n, -1, np.int32),
+            "confidences": ply.confidences if ply.confidences is not None else np.zeros(n, np.float32),
             "origin_kf": np.zeros(n, np.int32),
         }
-        return cls.from_state_dict(state, device, what=str(p))
+        return cls.from_state_dict(state, device, what=str(ply.path))
 
 
 __all__ = ["GaussianMap", "FIELDS", "SH_C0", "PLY_PROPERTIES"]

@@ -38,6 +38,17 @@ def _add_executor_args(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _executor_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The options of :func:`_add_executor_args`, as ``run_batch`` and ``eval_batch`` take them."""
+    return {
+        "executor": args.executor,
+        "ray_address": args.ray_address,
+        "gpus_per_task": args.gpus_per_task,
+        "cpus_per_task": args.cpus_per_task,
+        "device": args.device,
+    }
+
+
 def add_parser(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "run-batch",
@@ -102,12 +113,8 @@ def _run_batch_cli(args: argparse.Namespace) -> int:
         args.out,
         config=args.config,
         overrides=args.overrides,
-        executor=args.executor,
-        ray_address=args.ray_address,
-        gpus_per_task=args.gpus_per_task,
-        cpus_per_task=args.cpus_per_task,
-        device=args.device,
         evaluate=eval_options_from_args(args) if args.eval else None,
+        **_executor_options(args),
     )
     return _report(res)
 
@@ -115,13 +122,5 @@ def _run_batch_cli(args: argparse.Namespace) -> int:
 def _eval_batch_cli(args: argparse.Namespace) -> int:
     from ..batch import eval_batch
 
-    res = eval_batch(
-        args.out,
-        eval_options_from_args(args),
-        executor=args.executor,
-        ray_address=args.ray_address,
-        gpus_per_task=args.gpus_per_task,
-        cpus_per_task=args.cpus_per_task,
-        device=args.device,
-    )
+    res = eval_batch(args.out, eval_options_from_args(args), **_executor_options(args))
     return _report(res)

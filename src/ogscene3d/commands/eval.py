@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from pathlib import Path
 from typing import Any
 
-from ..atomic import atomic_write_text
 from ..errors import DataError, OGSceneError
 from ..eval.options import add_eval_arguments, eval_options_from_args
 
@@ -59,17 +57,6 @@ def add_parser(subparsers: Any) -> None:
 
 def _pct(x: Any) -> str:
     return "   n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{100 * x:6.2f}"
-
-
-def _json_safe(x: Any) -> Any:
-    """NaN/inf -> None (strict JSON), recursively."""
-    if isinstance(x, dict):
-        return {k: _json_safe(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_json_safe(v) for v in x]
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x
 
 
 def run(args: argparse.Namespace) -> int:
@@ -199,12 +186,47 @@ def _run(args: argparse.Namespace) -> int:
             f"{g['num_no_edge']} no edge, {g['num_wrong_relation']} wrong relation; "
             f"{g['num_matched_nodes']} nodes matched)"
         )
+    _print_rooms_and_queries(report)
     _finish(report, out)
     return 0
 
 
+def _print_rooms_and_queries(report: dict[str, Any]) -> None:
+    """The room segmentation and query accuracy lines (when the report has them)."""
+    r = report.get("rooms")
+    if r:
+        print()
+        print(f"rooms: {r['protocol']}")
+        print(
+            f"room precision {_pct(r['precision'])}   recall {_pct(r['recall'])}   (matched per room: "
+            f"{_pct(r['matched_precision'])} / {_pct(r['matched_recall'])}; {r['num_gt_rooms']} GT rooms, "
+            f"{r['num_pred_rooms']} predicted; types right: {r.get('types_correct', 'n/a')})"
+        )
+        for gid, row in r["per_room"].items():
+            settle = row.get("settle_frames")
+            when = "" if settle is None else f", node {settle:+d} frames after the room was entered"
+            pred = row["pred_room"]
+            name = f"#{pred} {r['pred_types'].get(str(pred), '')}" if pred is not None else "none"
+            print(
+                f"  GT room {gid} ({row.get('gt_type') or '?'}): precision {_pct(row['precision'])} recall "
+                f"{_pct(row['recall'])} (room {name}{when})"
+            )
+    q = report.get("queries")
+    if q:
+        print()
+        print(f"queries: {q['protocol']}")
+        cells = [
+            f"{k} {_pct(v['top1_accuracy'])} ({v['top1']}/{v['queries']}, {v['answerable']} answerable)"
+            for k, v in q["per_kind"].items()
+            if v["queries"]
+        ]
+        print("top-1   " + "   ".join(cells))
+
+
 def _finish(report: dict[str, Any], out: Path) -> None:
     """Print the trajectory line and the notes, and write metrics.json."""
+    from ..runs import METRICS, write_metrics
+
     t = report.get("trajectory")
     if t:
         print()
@@ -214,8 +236,7 @@ def _finish(report: dict[str, Any], out: Path) -> None:
         )
     for note in report.get("notes", []):
         print(f"note: {note}")
-    path = Path(out) / "metrics.json"
-    atomic_write_text(path, json.dumps(_json_safe(report), indent=2, allow_nan=False) + "\n")
+    path = write_metrics(Path(out) / METRICS, report)
     print(f"\nwrote {path}")
 
 

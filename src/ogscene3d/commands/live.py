@@ -10,6 +10,7 @@ The server binds 127.0.0.1 unless ``--host`` says otherwise and prints the URL w
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import signal
 import sys
@@ -17,7 +18,7 @@ import threading
 import time
 from pathlib import Path
 
-from ..cli_types import image_size, port, positive_float, positive_int
+from ..cli_types import add_rerun_arguments, image_size, port, positive_float, positive_int
 from ..config import add_override_argument
 from ..errors import ConfigError, DataError, OGSceneError
 
@@ -25,6 +26,14 @@ log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Every option of ``ogscene3d live`` / ``ogscene3d-live``, in the order ``--help`` lists them."""
+    _add_session_arguments(p)
+    _add_viewer_arguments(p)
+    add_rerun_arguments(p)
+
+
+def _add_session_arguments(p: argparse.ArgumentParser) -> None:
+    """What to show: a saved run, or what to map live (data, the synthetic scene, a camera) and how."""
     p.add_argument(
         "run_dir", nargs="?", default=None, metavar="RUN_DIR", help="saved run directory to browse"
     )
@@ -56,6 +65,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="where --synthetic writes its scene (default: OUT/scene, else outputs/live-synthetic)",
     )
     add_override_argument(p, "mapping.opt_iters=5")
+
+
+def _add_viewer_arguments(p: argparse.ArgumentParser) -> None:
+    """Where the viewer serves, how it draws the map, when it stops, and the headless screenshot."""
     p.add_argument(
         "--host", default="127.0.0.1", help="address to bind (0.0.0.0 exposes the viewer to the network)"
     )
@@ -66,6 +79,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="port to try first (the next free one is used if busy; 0: any free port)",
     )
     p.add_argument("--rate", type=positive_float, default=4.0, help="maximum viewer updates per second")
+
     p.add_argument("--max-splats", type=positive_int, default=200_000, help="most Gaussians drawn as splats")
     p.add_argument(
         "--max-points", type=positive_int, default=1_000_000, help="most Gaussians drawn as points"
@@ -77,7 +91,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="auto: splats up to --max-splats, points beyond",
     )
     p.add_argument(
-        "--color", choices=["rgb", "semantic", "confidence"], default="rgb", help="initial colouring"
+        "--color", choices=["rgb", "semantic", "confidence", "room"], default="rgb", help="initial colouring"
     )
     p.add_argument(
         "--up",
@@ -85,6 +99,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         choices=["+x", "-x", "+y", "-y", "+z", "-z"],
         help="world up direction (default: the config's graph.up_axis)",
     )
+
     p.add_argument(
         "--exit-when-done", action="store_true", help="stop serving once live mapping has finished"
     )
@@ -117,8 +132,11 @@ def add_parser(subparsers) -> None:
 
 
 def _up_from_config(cfg) -> tuple[float, float, float]:
-    # load_config's check_config has made sure it is a finite non-zero 3-vector
-    return tuple(float(v) for v in cfg.graph.up_axis)  # type: ignore[return-value]
+    from ..up_axis import up_vector
+
+    # load_config's check_config has made sure it is auto or a finite non-zero 3-vector; auto not chosen when
+    # the dataset opened (a live camera): an upright first camera's up, as odometry's world has it
+    return up_vector(cfg.graph.up_axis)
 
 
 def _settings(args):
@@ -187,11 +205,19 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.run_dir is None and not args.data and not args.synthetic and not args.source:
         raise ConfigError("nothing to show: give RUN_DIR, --data DATASET, --synthetic or --source CAMERA")
+    if args.rerun or args.rerun_save:
+        if args.run_dir is not None:
+            raise ConfigError(
+                "--rerun and --rerun-save log a mapping session: give --data, --synthetic or --source"
+            )
+        from ..viewer.rerun_log import rerun_module
+
+        rerun_module()  # a missing rerun-sdk fails now, before a server starts
     # before reading a run or building a mapper: a host/port the server cannot bind is an error now
     check_bindable(args.host, args.port)
     if args.run_dir is not None or args.out is None:
         return _serve(args)
-    from ..mapping.engine import run_directory
+    from ..runs import run_directory
 
     with run_directory(args.out, "live"):  # one writer per run directory, as for `ogscene3d run`
         return _serve(args)
@@ -201,6 +227,7 @@ def _serve(args: argparse.Namespace) -> int:
     from ..mapping.engine import stopped_message
 
     stop = threading.Event()
+    watchers = contextlib.ExitStack()  # the session's observers that need closing (a Rerun recording)
     prev = signal.getsignal(signal.SIGTERM)
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -219,7 +246,7 @@ def _serve(args: argparse.Namespace) -> int:
                 f"{len((snap.graph or {}).get('nodes', []))} graph nodes)"
             )
         else:
-            session, viewer = _start_live(args)
+            session, viewer = _start_live(args, watchers)
         if args.screenshot:
             if session is not None:
                 while not session.join(0.5) and not stop.is_set():
@@ -241,6 +268,7 @@ def _serve(args: argparse.Namespace) -> int:
                 session.join()
             # no timeout: a stop saves the map so far (--out), which must not be cut short at exit
             session.stop(timeout=None)
+        watchers.close()
         if viewer is not None:
             viewer.close()
         if threading.current_thread() is threading.main_thread():
@@ -290,6 +318,7 @@ def live_data(args: argparse.Namespace, cfg) -> str | Path:
     import copy
 
     from ..datasets import configured_scene
+    from ..runs import RunFolder
 
     data = args.data
     if args.synthetic:
@@ -298,7 +327,7 @@ def live_data(args: argparse.Namespace, cfg) -> str | Path:
             s.frames = min(s.frames, args.max_frames)
         cache = args.synthetic_dir is None and args.out is None
         scene_dir = Path(
-            args.synthetic_dir or (Path(args.out) / "scene" if args.out else "outputs/live-synthetic")
+            args.synthetic_dir or (RunFolder(args.out).scene if args.out else "outputs/live-synthetic")
         )
         print(
             f"ogscene3d-live: synthetic scene (seed {s.seed}, {s.frames} frames, {s.width}x{s.height}) "
@@ -335,35 +364,38 @@ def _viewer(args: argparse.Namespace, up, name: str):
     )
 
 
-def _start_live(args: argparse.Namespace):
-    from ..mapping.engine import MappingEngine, open_frames
-    from ..mapping.mapper import Mapper
+def _start_live(args: argparse.Namespace, watchers: contextlib.ExitStack):
+    from ..mapping.session import open_session
     from ..viewer.live import LiveSession
+    from .run import run_observers
 
     cfg = live_config(args)
-    stream = ds = data = None
+    stream = data = None
     if args.source:  # a live camera (ogscene3d.streams): no dataset, so no frames to resume by
         from ..streams import stream_for_live
 
         stream = stream_for_live(args.source, cfg, args.max_frames, list(args.overrides))
     else:
         data = live_data(args, cfg)
-        # a saved run records its data, as `run` does
-        ds = open_frames(cfg, data, args.segments, args.max_frames)
-    mapper = Mapper(cfg, cfg.device)
-    engine = MappingEngine(mapper, args.out, data if stream is None else stream.name)
-    engine.open(cfg, ds)  # with --out: config.yaml and run_id, so that `run --resume` goes on from a stop
+    # with --out: config.yaml (with the data, as `run` records it) and run_id, so that `run --resume` goes on
+    # from a stop; the caller holds the run folder's lock
+    mapping = open_session(
+        cfg, args.out, data, segments=args.segments, max_frames=args.max_frames, stream=stream
+    )
+    # what watches the session: the run-time estimate, Rerun (closed by the caller when the session ends)
+    observers = watchers.enter_context(run_observers(args, cfg, mapping.data, mapping.total))
+    mapping.engine.observers.extend(observers)
 
     up = args.up or _up_from_config(cfg)
     viewer = _viewer(args, up, stream.name if stream is not None else Path(str(data)).name)
     session = LiveSession(
-        mapper,
-        stream if stream is not None else ds.frames(),
+        mapping.mapper,
+        mapping.frames,
         viewer,
         budget=max(args.max_points, args.max_splats),
         out_dir=args.out,
-        engine=engine,
-        total=len(ds) if ds is not None else None,
+        engine=mapping.engine,
+        total=mapping.total,
     )
     viewer.set_control(session)
     session.start()

@@ -1,5 +1,5 @@
 """``ogscene3d render-demo``: render a procedural Gaussian scene to a PNG (the library part:
-:mod:`ogscene3d.render_demo`)."""
+:mod:`ogscene3d.rendering`)."""
 
 from __future__ import annotations
 
@@ -45,7 +45,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from ..render_demo import render_demo
+    from ..rendering import render_demo
 
     w, h = args.size
     path = render_demo(args.out, args.gaussians, w, h, args.views, args.device)

@@ -1,16 +1,18 @@
 """``ogscene3d run``: map an RGB-D sequence (or the default synthetic scene) into a run directory.
 
-The options are parsed and the outcome printed here; the run itself is :mod:`ogscene3d.mapping.engine`'s
-(heavy modules are imported inside :func:`run` only, so that ``ogscene3d --help`` stays quick)."""
+The options are parsed and the outcome printed here; the session is :mod:`ogscene3d.mapping.session`'s and
+the run :mod:`ogscene3d.mapping.engine`'s (heavy modules are imported inside :func:`run` only, so that
+``ogscene3d --help`` stays quick)."""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
+from collections.abc import Iterator
 from pathlib import Path
 
-import yaml
-
+from ..cli_types import add_rerun_arguments
 from ..config import add_override_argument, add_poses_argument, choices, load_config
 from ..errors import DataError
 
@@ -50,14 +52,15 @@ def add_parser(subparsers) -> None:
     add_override_argument(p)
     add_poses_argument(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_rerun_arguments(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..datasets import configured_scene
     from ..device import resolve_device
-    from ..mapping.engine import MappingEngine, open_frames, run_directory, stopped_message
-    from ..mapping.mapper import Mapper
+    from ..mapping.engine import stopped_message
+    from ..mapping.session import mapping_session
+    from ..runs import RunFolder, recorded_data_path
 
     overrides = list(args.overrides)
     if args.models:  # the exported models' settings first: --set still overrides them
@@ -69,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     if args.device:
         overrides.append(f"device={args.device}")
     out = Path(args.out)
-    saved = out / "config.yaml"
+    saved = RunFolder(out).config
     base = args.config
     if args.resume and base is None and saved.is_file():
         base = saved  # a resumed run goes on with the settings (and the data) it started with
@@ -78,36 +81,30 @@ def run(args: argparse.Namespace) -> int:
     if args.poses:
         cfg.tracking.poses = args.poses
     resolve_device(cfg.device)  # an unusable device fails before a synthetic scene is generated
-    data = args.data or cfg.data.path or (_recorded_data_path(saved) if args.resume else None)
+    if args.rerun or args.rerun_save:  # a missing rerun-sdk fails now, before anything is generated or read
+        from ..viewer.rerun_log import rerun_module
+
+        rerun_module()
+    data = args.data or cfg.data.path or (recorded_data_path(out) if args.resume else None)
     if data is None and args.resume:
         raise DataError(f"{out}: --resume needs the run's dataset: pass --data (the run records none)")
-    with run_directory(out, "run"):
-        if data is None:
-            s = cfg.synthetic
-            log.info(
-                "no --data: generating the synthetic scene (seed %d, %d frames, %dx%d) in %s",
-                s.seed,
-                s.frames,
-                s.width,
-                s.height,
-                out / "scene",
-            )
-            data = configured_scene(
-                out / "scene",
-                s,
-                progress=not args.no_progress,
-                remedy="give a new --out, or remove that folder to generate the scene there again",
-            )
-        # --max-frames bounds this invocation only (a resume without it goes on to the end)
-        ds = open_frames(cfg, data, args.segments, args.max_frames)
-        _warn_small_images(cfg, ds)
-        engine = MappingEngine(Mapper(cfg, cfg.device), out, data)
-        start = engine.open(cfg, ds, resume=args.resume, bounded=args.max_frames is not None)
-        # bad frames raise, or are skipped with a warning under data.on_bad_frame: skip
-        with engine.stop.signals():
-            summary = engine.run(
-                ds.frames(start), total=max(0, len(ds) - start), progress=not args.no_progress
-            )
+    # no data: the synthetic scene, generated in OUT/scene; --max-frames bounds this invocation only
+    with mapping_session(
+        cfg,
+        out,
+        data,
+        command="run",
+        segments=args.segments,
+        max_frames=args.max_frames,
+        resume=args.resume,
+        progress=not args.no_progress,
+    ) as session:
+        _warn_small_images(cfg, session.dataset)
+        with run_observers(args, cfg, session.data, session.total) as observers:
+            session.engine.observers.extend(observers)
+            # bad frames raise, or are skipped with a warning under data.on_bad_frame: skip
+            summary = session.run(progress=not args.no_progress)
+    start, data = session.start, session.data
     if summary.status == "stopped":
         print(stopped_message(summary))
         return 130
@@ -122,19 +119,32 @@ def run(args: argparse.Namespace) -> int:
             print(f"nothing to do: {out} has mapped every frame of {data} (--resume read no new frame)")
         return 0
     print(summary.line())
-    print(engine.mapper.timings.table())
+    print(session.mapper.timings.table())
     return 0
 
 
-def _recorded_data_path(saved: Path) -> str | None:
-    """data.path from a run's config.yaml (None when absent or unreadable)."""
+@contextlib.contextmanager
+def run_observers(args: argparse.Namespace, cfg, data, frames: int | None) -> Iterator[list]:
+    """What watches a run (``MappingEngine``'s observers): the run-time estimate over ``frames`` (None: a
+    camera, no end to estimate), and the Rerun logger that ``--rerun`` / ``--rerun-save`` ask for (closed,
+    its file complete, when the block ends)."""
+    from ..progress import RunTimeEstimate
+
+    m = cfg.mapping
+    observers: list = []
+    if frames is not None:
+        observers.append(RunTimeEstimate(frames, m.keyframe_every, cfg.data.scale, m.opt_iters))
+    rerun = None
+    if getattr(args, "rerun", None) or getattr(args, "rerun_save", None):
+        from ..viewer.rerun_log import rerun_logger
+
+        rerun = rerun_logger(args.rerun, args.rerun_save, Path(str(data)).name)
+        observers.append(rerun)
     try:
-        loaded = yaml.safe_load(saved.read_text())
-    except (OSError, yaml.YAMLError):
-        return None
-    data = loaded.get("data") if isinstance(loaded, dict) else None
-    path = data.get("path") if isinstance(data, dict) else None
-    return path if isinstance(path, str) else None
+        yield observers
+    finally:
+        if rerun is not None:
+            rerun.close()
 
 
 # The most a Gaussian centre may drift per keyframe (mapping.lr_means x mapping.opt_iters) before small

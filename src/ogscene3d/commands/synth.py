@@ -25,20 +25,20 @@ def add_parser(subparsers) -> None:
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--config", default=None, help="YAML config (its `synthetic` section gives the defaults)")
     p.add_argument("--seed", type=int, default=None, help="scene, trajectory and noise seed")
-    p.add_argument("--frames", type=int, default=None, help="number of frames")
+    p.add_argument("--frames", type=int, default=None, help="number of frames (--layout apartment: per room)")
+    p.add_argument(
+        "--layout",
+        default=None,
+        choices=choices("synthetic.layout"),
+        help="room (one furnished room, a smooth walk) | scan (a long scan like a real ScanNet one; give it "
+        "300 frames or more) | apartment (2-5 rooms walked through room by room)",
+    )
     p.add_argument("--size", type=image_size(8), default=None, metavar="WxH", help="image size, e.g. 160x120")
     p.add_argument(
         "--noise",
         default=None,
         choices=choices("synthetic.noise"),
         help="simulated-SAM level (docs/consistency.md)",
-    )
-    p.add_argument(
-        "--layout",
-        default=None,
-        choices=choices("synthetic.layout"),
-        help="room (default: one room, a smooth walk) | scan (a long scan like a real ScanNet one; "
-        "give it 300 frames or more)",
     )
     p.add_argument("--depth-noise", type=float, default=None, help="depth noise std in metres")
     p.add_argument("--pose-noise", type=float, default=None, help="pose translation noise std in metres")
@@ -61,6 +61,12 @@ def _reusable(out: str | Path, params: dict, overwrite: bool) -> bool:
         return json.loads(marker.read_text()) == _scene_params(**params)
     except (OSError, json.JSONDecodeError):
         return False
+
+
+def _frame_count(out: Path) -> int:
+    """The frames written (an apartment's path has ``frames`` per room): the poses in traj.txt."""
+    with open(Path(out) / "traj.txt") as f:
+        return sum(1 for line in f if line.strip())
 
 
 def run(args: argparse.Namespace) -> int:
@@ -90,9 +96,10 @@ def run(args: argparse.Namespace) -> int:
             raise
         # Bad argument values (frames, size, noise std, device): print them like config errors.
         raise ConfigError(f"synth: {e}") from e
+    what = f"{_frame_count(out)} frames" + (", an apartment" if params["layout"] == "apartment" else "")
     if reused:
-        print(f"synthetic scene reused from {out} ({params['frames']} frames, made with the same arguments)")
+        print(f"synthetic scene reused from {out} ({what}, made with the same arguments)")
     else:
         dt = time.perf_counter() - t0
-        print(f"synthetic scene written to {out} ({params['frames']} frames, {dt:.1f} s)")
+        print(f"synthetic scene written to {out} ({what}, {dt:.1f} s)")
     return 0

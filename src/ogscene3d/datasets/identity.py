@@ -13,6 +13,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
+from ..runs.map_npz import read_map_npz
+from .loader import open_dataset
 
 
 def frame_names(ds: Any) -> list[str]:
@@ -58,8 +60,6 @@ def matching_pixel_centers(ds: Any, K: Any) -> str | None:
     config, read = getattr(ds, "config", None), getattr(ds, "pixel_centers", None)
     if config is None or read not in ("integer", "half"):
         return None
-    from .loader import open_dataset
-
     other = "half" if read == "integer" else "integer"
     try:
         ds_other = open_dataset(
@@ -77,13 +77,11 @@ def matching_pixel_centers(ds: Any, K: Any) -> str | None:
 
 def mapped_intrinsics(ckpt: Path) -> list[float] | None:
     """The 9 values of the K a checkpoint's frames were mapped with (None: not recorded or unreadable)."""
-    from ..gaussians import NPZ_READ_ERRORS  # loads torch: only when a checkpoint is read
-
     try:
-        with np.load(ckpt, allow_pickle=False) as z:
-            if "mapper_source" not in z.files:
-                return None
-            K = json.loads(str(z["mapper_source"])).get("K")
-    except (KeyError, AttributeError, *NPZ_READ_ERRORS):
+        arrays = read_map_npz(ckpt, ("mapper_source",))
+        if "mapper_source" not in arrays:
+            return None
+        K = json.loads(str(arrays["mapper_source"])).get("K")
+    except (DataError, AttributeError, ValueError):
         return None
     return K if isinstance(K, list) and len(K) == 9 else None

@@ -2,8 +2,8 @@
 
 The builder works in a z-up frame (x, y horizontal, z up, floor at z = 0, room centred on the
 origin) because furniture is easiest to reason about there; :func:`build_room` converts the result
-into the ogscene3d world frame, in which **up is -y** (``WORLD_FROM_ZUP``), matching the default
-``graph.up_axis = [0, -1, 0]`` so the synthetic scenes need no config override.
+into the ogscene3d world frame, in which **up is -y** (``WORLD_FROM_ZUP``), as ``gt/instances.json``
+states (``"up"``), which ``graph.up_axis: auto`` reads: the synthetic scenes need no config override.
 
 Placement is collision-free by construction: every object is a set of parts (boxes, cylinders,
 frusta, ellipsoids), and a new object is accepted only if none of its parts' axis-aligned boxes
@@ -249,6 +249,25 @@ class _Builder:
 
 def _structure(b: _Builder, W: float, D: float, H: float) -> dict[str, int]:
     t = 0.05
+    ids = _floor_and_ceiling(b, W, D, H, t)
+    wall_color = b.color((0.78, 0.76, 0.7), 0.1)
+    walls = {
+        "+x": ([W / 2 + t / 2, 0, H / 2], [t, D, H]),
+        "-x": ([-W / 2 - t / 2, 0, H / 2], [t, D, H]),
+        "+y": ([0, D / 2 + t / 2, H / 2], [W, t, H]),
+        "-y": ([0, -D / 2 - t / 2, H / 2], [W, t, H]),
+    }
+    for name, (c, s) in walls.items():
+        part = make_part(
+            "box", c, wall_color * b.rng.uniform(0.93, 1.05), size=s, texture=TEXTURE_NOISE, texture_scale=0.6
+        )
+        ids[name] = b.add("wall", [part]).instance_id
+    return ids
+
+
+def _floor_and_ceiling(b: _Builder, W: float, D: float, H: float, t: float) -> dict[str, int]:
+    """A W x D room's floor (top at z = 0) and ceiling (bottom at z = H), ``t`` thick, reaching under and
+    over its walls; their instance ids by name."""
     ids = {}
     floor = make_part(
         "box",
@@ -263,18 +282,6 @@ def _structure(b: _Builder, W: float, D: float, H: float) -> dict[str, int]:
         "box", [0, 0, H + t / 2], b.color((0.9, 0.9, 0.88), 0.03), size=[W + 2 * t, D + 2 * t, t]
     )
     ids["ceiling"] = b.add("ceiling", [ceiling]).instance_id
-    wall_color = b.color((0.78, 0.76, 0.7), 0.1)
-    walls = {
-        "+x": ([W / 2 + t / 2, 0, H / 2], [t, D, H]),
-        "-x": ([-W / 2 - t / 2, 0, H / 2], [t, D, H]),
-        "+y": ([0, D / 2 + t / 2, H / 2], [W, t, H]),
-        "-y": ([0, -D / 2 - t / 2, H / 2], [W, t, H]),
-    }
-    for name, (c, s) in walls.items():
-        part = make_part(
-            "box", c, wall_color * b.rng.uniform(0.93, 1.05), size=s, texture=TEXTURE_NOISE, texture_scale=0.6
-        )
-        ids[name] = b.add("wall", [part]).instance_id
     return ids
 
 
@@ -373,6 +380,84 @@ def _shelf(center, yaw, size, color, n_boards):
             mid = _local(center, yaw, [t / 2, 0, 0])[:2]
             tops.append((mid - inner, mid + inner, z + t, levels[k + 1] - (z + t)))
     return parts, tops
+
+
+def _cabinet(center, yaw, size, col) -> tuple[list[Part], list]:
+    """A closed cabinet of ``size`` (length along the wall, depth, height) with two door panels on its front
+    (local +x), and its top surface."""
+    body = make_part(
+        "box", center + [0, 0, size[2] / 2], col, size=_rot_size([size[1], size[0], size[2]], yaw)
+    )
+    parts = [body]
+    for k in range(2):
+        fc = _local(center, yaw, [size[1] / 2 + 0.005, 0, size[2] * (0.28 + 0.42 * k)])
+        parts.append(
+            make_part("box", fc, col * 0.9, size=_rot_size([0.01, size[0] * 0.9, size[2] * 0.38], yaw))
+        )
+    half = _rot_size([size[1], size[0], 0], yaw)[:2] / 2
+    return parts, [(center[:2] - half, center[:2] + half, size[2])]
+
+
+def _sofa(center, yaw, size, col) -> tuple[list[Part], list]:
+    """A sofa of ``size`` (length, depth, height) facing local +x (seat, backrest, two arms) and its seat."""
+    L, Dp, Hs = size
+    seat_h, back_t, arm_w = 0.42, 0.2, 0.18
+    parts = [
+        make_part(
+            "box",
+            _local(center, yaw, [back_t / 2, 0, seat_h / 2]),
+            col,
+            size=_rot_size([Dp - back_t, L - 2 * arm_w, seat_h], yaw),
+            texture=TEXTURE_NOISE,
+            texture_scale=0.08,
+        ),
+        make_part(
+            "box",
+            _local(center, yaw, [-Dp / 2 + back_t / 2, 0, Hs / 2]),
+            col * 0.9,
+            size=_rot_size([back_t, L, Hs], yaw),
+        ),
+    ]
+    for s in (-1, 1):
+        parts.append(
+            make_part(
+                "box",
+                _local(center, yaw, [back_t / 2, s * (L / 2 - arm_w / 2), 0.3]),
+                col * 0.95,
+                size=_rot_size([Dp - back_t, arm_w, 0.6], yaw),
+            )
+        )
+    seat_c = _local(center, yaw, [back_t / 2, 0, 0])[:2]
+    half = _rot_size([Dp - back_t - 0.1, L - 2 * arm_w - 0.05, 0], yaw)[:2] / 2
+    return parts, [(seat_c - half, seat_c + half, seat_h)]
+
+
+def _decoration(b: _Builder, cls: str, side: str, W: float, D: float) -> list[Part] | None:
+    """The parts of a wall decoration (door, window, picture or clock) at a random spot of wall ``side``,
+    or None when the wall is too short for it."""
+    rng = b.rng
+    p, n, half_len, yaw = _wall_frame(side, W, D)
+    t_axis = np.array([-n[1], n[0], 0.0])
+    if cls == "door":
+        w, h, z0, thick, col = 0.9, 2.05, 0.0, 0.04, b.color((0.55, 0.4, 0.28))
+    elif cls == "window":
+        w, h, z0, thick, col = rng.uniform(0.9, 1.4), 1.0, 0.95, 0.03, b.color((0.6, 0.75, 0.9), 0.04)
+    elif cls == "picture":
+        w, h = rng.uniform(0.35, 0.7), rng.uniform(0.3, 0.5)
+        z0, thick, col = rng.uniform(1.25, 1.65), 0.03, b.vivid()
+    else:
+        w = h = 0.3
+        z0, thick, col = rng.uniform(1.6, 1.9), 0.04, b.color((0.92, 0.92, 0.9), 0.02)
+    if half_len - w / 2 - 0.15 <= 0:
+        return None
+    along = rng.uniform(-half_len + w / 2 + 0.15, half_len - w / 2 - 0.15)
+    c = p + n * thick / 2 + t_axis * along + [0, 0, z0 + h / 2]
+    if cls == "clock":
+        axis_rot = _yaw_matrix(yaw) @ np.array([[0, 0, 1.0], [0, 1.0, 0], [-1.0, 0, 0]])
+        return [make_part("cylinder", c - n * thick / 2, col, radius=w / 2, height=thick, rotation=axis_rot)]
+    tex = TEXTURE_STRIPES if cls in ("picture", "window") else TEXTURE_PLAIN
+    scale = float(rng.uniform(0.06, 0.2))
+    return [make_part("box", c, col, size=_rot_size([thick, w, h], yaw), texture=tex, texture_scale=scale)]
 
 
 def _place_small(
@@ -479,15 +564,19 @@ def _small_object(b: _Builder, cls: str, clearance: float) -> tuple[list[Part] |
         ]
     elif cls == "monitor":
         w, h = rng.uniform(0.45, 0.6), rng.uniform(0.28, 0.36)
-        dark = b.color((0.08, 0.08, 0.1), 0.02)
-        parts = [
-            make_part("box", [0, 0, 0.01], dark, size=[0.2, 0.15, 0.02]),
-            make_part("box", [0, 0, 0.02 + 0.06], dark, size=[0.04, 0.03, 0.12]),
-            make_part("box", [0, 0, 0.14 + h / 2], dark, size=[w, 0.04, h]),
-        ]
+        parts = _screen(b.color((0.08, 0.08, 0.1), 0.02), w, h, 0.04, [0.2, 0.15], [0.04, 0.03, 0.12])
     elif cls == "pillow":
         s = np.array([0.38, 0.14, 0.34])
         parts = [make_part("box", [0, 0, s[2] / 2], c, size=s, texture=TEXTURE_STRIPES, texture_scale=0.08)]
+    elif cls == "tv":  # a flat screen on a foot (apartments' living rooms)
+        w, h = rng.uniform(0.8, 1.1), rng.uniform(0.48, 0.62)
+        parts = _screen(b.color((0.06, 0.06, 0.08), 0.02), w, h, 0.05, [0.3, 0.2], [0.05, 0.04, 0.1])
+    elif cls == "sink":  # a basin with a tap on a counter or a vanity (apartments)
+        steel = b.color((0.75, 0.77, 0.8), 0.04)
+        parts = [
+            make_part("box", [0, 0, 0.04], steel, size=[0.48, 0.38, 0.08]),
+            make_part("box", [0, 0.15, 0.08 + 0.1], steel * 0.8, size=[0.03, 0.03, 0.2]),
+        ]
     else:
         raise ValueError(f"unknown small object class {cls!r}")
     lo = np.min([p.aabb[0] for p in parts], 0)
@@ -499,6 +588,16 @@ def _small_object(b: _Builder, cls: str, clearance: float) -> tuple[list[Part] |
         parts = [Part(p.vertices @ rot.T, p.triangles, p.color, p.texture, p.texture_scale) for p in parts]
         lo, hi = np.min([p.aabb[0] for p in parts], 0), np.max([p.aabb[1] for p in parts], 0)
     return parts, (hi - lo)[:2]
+
+
+def _screen(color, w: float, h: float, thick: float, foot, stem) -> list[Part]:
+    """A screen ``w`` x ``h`` (``thick`` deep) on a stem ``stem`` (x, y, height) over a 2 cm foot ``foot``
+    (x, y), based at z = 0."""
+    return [
+        make_part("box", [0, 0, 0.01], color, size=[foot[0], foot[1], 0.02]),
+        make_part("box", [0, 0, 0.02 + stem[2] / 2], color, size=stem),
+        make_part("box", [0, 0, 0.02 + stem[2] + h / 2], color, size=[w, thick, h]),
+    ]
 
 
 def _books_in_shelf(b: _Builder, shelf: SceneObject, top) -> None:
@@ -569,52 +668,9 @@ def build_room(seed: int = 0) -> Room:
             if cls == "bookshelf":
                 parts, tops = _shelf(center, yaw, size, b.color((0.55, 0.38, 0.22)), int(rng.integers(3, 5)))
             elif cls == "cabinet":
-                col = b.color((0.85, 0.83, 0.78), 0.1)
-                body = make_part(
-                    "box", center + [0, 0, size[2] / 2], col, size=_rot_size([size[1], size[0], size[2]], yaw)
-                )
-                parts = [body]
-                for k in range(2):
-                    fc = _local(center, yaw, [size[1] / 2 + 0.005, 0, size[2] * (0.28 + 0.42 * k)])
-                    parts.append(
-                        make_part(
-                            "box", fc, col * 0.9, size=_rot_size([0.01, size[0] * 0.9, size[2] * 0.38], yaw)
-                        )
-                    )
-                half = _rot_size([size[1], size[0], 0], yaw)[:2] / 2
-                tops = [(center[:2] - half, center[:2] + half, size[2])]
+                parts, tops = _cabinet(center, yaw, size, b.color((0.85, 0.83, 0.78), 0.1))
             else:
-                col = b.color((0.35, 0.4, 0.55), 0.12)
-                L, Dp, Hs = size
-                seat_h, back_t, arm_w = 0.42, 0.2, 0.18
-                parts = [
-                    make_part(
-                        "box",
-                        _local(center, yaw, [back_t / 2, 0, seat_h / 2]),
-                        col,
-                        size=_rot_size([Dp - back_t, L - 2 * arm_w, seat_h], yaw),
-                        texture=TEXTURE_NOISE,
-                        texture_scale=0.08,
-                    ),
-                    make_part(
-                        "box",
-                        _local(center, yaw, [-Dp / 2 + back_t / 2, 0, Hs / 2]),
-                        col * 0.9,
-                        size=_rot_size([back_t, L, Hs], yaw),
-                    ),
-                ]
-                for s in (-1, 1):
-                    parts.append(
-                        make_part(
-                            "box",
-                            _local(center, yaw, [back_t / 2, s * (L / 2 - arm_w / 2), 0.3]),
-                            col * 0.95,
-                            size=_rot_size([Dp - back_t, arm_w, 0.6], yaw),
-                        )
-                    )
-                seat_c = _local(center, yaw, [back_t / 2, 0, 0])[:2]
-                half = _rot_size([Dp - back_t - 0.1, L - 2 * arm_w - 0.05, 0], yaw)[:2] / 2
-                tops = [(seat_c - half, seat_c + half, seat_h)]
+                parts, tops = _sofa(center, yaw, size, b.color((0.35, 0.4, 0.55), 0.12))
             # Keep 0.9 m clear in front of wall furniture so the camera path never runs into it.
             obj = b.try_add(cls, parts, floor.instance_id, "on", tops, margin=0.15)
             if obj is not None:
@@ -681,37 +737,9 @@ def build_room(seed: int = 0) -> Room:
     for cls in ("door", "window", "picture", "picture", "picture", "clock"):
         for _ in range(30):
             side = sides[rng.integers(4)]
-            p, n, half_len, yaw = _wall_frame(side, W, D)
-            t_axis = np.array([-n[1], n[0], 0.0])
-            if cls == "door":
-                w, h, z0, thick, col = 0.9, 2.05, 0.0, 0.04, b.color((0.55, 0.4, 0.28))
-            elif cls == "window":
-                w, h, z0, thick, col = rng.uniform(0.9, 1.4), 1.0, 0.95, 0.03, b.color((0.6, 0.75, 0.9), 0.04)
-            elif cls == "picture":
-                w, h = rng.uniform(0.35, 0.7), rng.uniform(0.3, 0.5)
-                z0, thick, col = rng.uniform(1.25, 1.65), 0.03, b.vivid()
-            else:
-                w = h = 0.3
-                z0, thick, col = rng.uniform(1.6, 1.9), 0.04, b.color((0.92, 0.92, 0.9), 0.02)
-            if half_len - w / 2 - 0.15 <= 0:
+            parts = _decoration(b, cls, side, W, D)
+            if parts is None:
                 continue
-            along = rng.uniform(-half_len + w / 2 + 0.15, half_len - w / 2 - 0.15)
-            c = p + n * thick / 2 + t_axis * along + [0, 0, z0 + h / 2]
-            if cls == "clock":
-                axis_rot = _yaw_matrix(yaw) @ np.array([[0, 0, 1.0], [0, 1.0, 0], [-1.0, 0, 0]])
-                parts = [
-                    make_part(
-                        "cylinder", c - n * thick / 2, col, radius=w / 2, height=thick, rotation=axis_rot
-                    )
-                ]
-            else:
-                size = _rot_size([thick, w, h], yaw)
-                tex = TEXTURE_STRIPES if cls in ("picture", "window") else TEXTURE_PLAIN
-                parts = [
-                    make_part(
-                        "box", c, col, size=size, texture=tex, texture_scale=float(rng.uniform(0.06, 0.2))
-                    )
-                ]
             wall_id = ids[side]
             obj = b.try_add(cls, parts, wall_id, "attached to", margin=0.05)
             if obj is not None:

@@ -5,8 +5,9 @@ with Warp (``kernels/raycast.py``) along a smooth exploring trajectory and write
 the built-in default scene (no dataset can be downloaded in every setting) and it comes with exact
 ground truth for evaluation.
 
-World frame: metres, **up is -y** (the default ``graph.up_axis``), floor at y = 0, the room centred
-on x = z = 0. Poses are camera-to-world 4x4 with OpenCV camera axes, as everywhere in ogscene3d.
+World frame: metres, **up is -y** (``gt/instances.json``'s ``up``, which ``graph.up_axis: auto`` takes),
+floor at y = 0, the room centred on x = z = 0. Poses are camera-to-world 4x4 with OpenCV camera axes, as
+everywhere in ogscene3d.
 
 Layout of a scene folder (the Replica NICE-SLAM layout plus ``gt/`` and ``segments/``)::
 
@@ -35,7 +36,11 @@ Layout of a scene folder (the Replica NICE-SLAM layout plus ``gt/`` and ``segmen
          "color": [r, g, b],                                     # albedo, 0-255
          "bbox_min": [x, y, z], "bbox_max": [x, y, z], "center": [x, y, z],   # world, metres
          "num_points": 1234,                                     # its points in gt/points.ply
-         "support": 1 | null, "support_relation": "on" | "in" | "attached to" | null}},
+         "support": 1 | null, "support_relation": "on" | "in" | "attached to" | null,
+         "room": 2}},                                            # apartments only: the instance's room
+     "rooms": {"<room id>": {"type": "kitchen", "floor": 0,     # apartments only (layout "apartment")
+         "bbox_min": [x, y, z], "bbox_max": [x, y, z],           # the interior, world, metres
+         "first_frame": 57 | null}},                             # the first frame whose camera is inside
      "relations": [[subject_id, "on", object_id], ...],
      "relation_vocabulary": ["on", "under", "above", "below", "next to", "in", "attached to"],
      "inverse_relations": {"on": "under", "under": "on", "above": "below", "below": "above"},
@@ -77,6 +82,7 @@ import numpy as np
 from ..atomic import atomic_write_bytes, atomic_write_text
 from ..config import DataConfig, SyntheticConfig
 from ..errors import DataError
+from .apartment import Apartment, apartment_camera, build_apartment, rooms_entered
 from .base import FrameRecord, read_label_png
 from .long_scan import (
     build_scan_room,
@@ -108,7 +114,7 @@ SWEEP = 1.6 * np.pi  # radians the camera walks around the room (given enough fr
 MAX_STEP_DEG = 20.0
 MAX_STEP_M = 0.35
 GENERATOR_VERSION = 2  # 2: gt/points.ply carries the per-point "observed" flag
-LAYOUTS = ("room", "scan")  # synthetic.layout
+LAYOUTS = ("room", "scan", "apartment")  # synthetic.layout: what make_synthetic_scene builds
 
 
 # --------------------------------------------------------------------------------------- trajectory
@@ -163,6 +169,16 @@ def exploration_trajectory(room: Room, frames: int, seed: int) -> np.ndarray:
     return poses
 
 
+def apartment_trajectory(apt: Apartment, frames_per_room: int, seed: int) -> np.ndarray:
+    """[frames_per_room x rooms, 4, 4] c2w poses (world frame) of :func:`~.apartment.apartment_camera`: from
+    room to room, turning once around in each, steps within :data:`MAX_STEP_M` and :data:`MAX_STEP_DEG`."""
+    xyz, yaw, pitch = apartment_camera(apt, frames_per_room, seed, MAX_STEP_M, MAX_STEP_DEG)
+    poses = np.tile(np.eye(4), (len(xyz), 1, 1))
+    poses[:, :3, :3] = WORLD_FROM_ZUP @ _look_rotation_zup(yaw, pitch)
+    poses[:, :3, 3] = xyz @ WORLD_FROM_ZUP.T
+    return poses
+
+
 def _sweep(frames: int, radius: float) -> float:
     """The angle (radians) the camera walks around the room: :data:`SWEEP`, or less where ``frames`` are too
     few for it, so that no step between consecutive frames exceeds :data:`MAX_STEP_DEG` of turn or
@@ -195,7 +211,14 @@ def perturb_poses(poses: np.ndarray, sigma: float, rng: np.random.Generator) -> 
 class MeshRenderer:
     """Ray casts a :class:`Room` with Warp: RGB (uint8), depth (float32 m) and instance (int32) images."""
 
-    def __init__(self, room: Room, device: str | None = "cpu", supersample: int = 2, shadows: bool = True):
+    def __init__(
+        self,
+        room: Room,
+        device: str | None = "cpu",
+        supersample: int = 2,
+        shadows: bool = True,
+        light_range: float = 4.0,
+    ):
         import warp as wp
 
         from ..device import resolve_device, warp_device
@@ -207,6 +230,7 @@ class MeshRenderer:
         self.device = warp_device(self.torch_device)
         self.supersample = int(supersample)
         self.shadows = shadows
+        self.light_range = float(light_range)  # metres at which the light's falloff halves its diffuse term
         self.room = room
         self.mesh = wp.Mesh(
             points=wp.array(room.vertices, dtype=wp.vec3, device=self.device),
@@ -243,7 +267,7 @@ class MeshRenderer:
                 self.tri_texture_scale,
                 self.tri_instance,
                 self.light,
-                4.0,
+                self.light_range,
                 0.35,
                 int(self.shadows),
             ],
@@ -410,6 +434,23 @@ def instances_json(room: Room, classes: dict[str, int], num_points: np.ndarray) 
     }
 
 
+def add_rooms(doc: dict, apt: Apartment, entered: dict[int, int]) -> None:
+    """Add an apartment's rooms to an ``instances.json`` document: ``"room"`` per instance and the
+    ``"rooms"`` table (type, storey, interior box in the world, the first frame inside it)."""
+    for key, inst in doc["instances"].items():
+        inst["room"] = apt.instance_room[int(key)]
+    doc["rooms"] = {
+        str(r.id): {
+            "type": r.type,
+            "floor": r.floor,
+            "bbox_min": [round(float(v), 5) for v in r.bbox_min],
+            "bbox_max": [round(float(v), 5) for v in r.bbox_max],
+            "first_frame": entered.get(r.id),
+        }
+        for r in apt.rooms
+    }
+
+
 def load_instances(path: str | Path) -> dict:
     """Read and check ``gt/instances.json``; instance ids become ints: {"instances": {id: {...}}, ...}."""
     path = Path(path)
@@ -423,6 +464,10 @@ def load_instances(path: str | Path) -> dict:
             if not isinstance(v["class"], str) or int(v["class_id"]) not in data["classes"]:
                 raise ValueError(f"instance {k} has a bad class")
         data["relations"] = [(int(s), str(r), int(o)) for s, r, o in data["relations"]]
+        data["rooms"] = {int(k): v for k, v in data.get("rooms", {}).items()}
+        for k, v in data["instances"].items():
+            if v.get("room") is not None and int(v["room"]) not in data["rooms"]:
+                raise ValueError(f"instance {k} is in room {v['room']}, which is not in 'rooms'")
     except (json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError) as e:
         raise DataError(f"{path}: malformed ground-truth instances ({e})") from e
     return data
@@ -442,13 +487,12 @@ def _pose_lines(poses: np.ndarray) -> str:
     return "".join(" ".join(f"{v:.9e}" for v in p.reshape(-1)) + "\n" for p in poses)
 
 
-def _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise, layout="room") -> dict:
+def _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise, layout: str = "room") -> dict:
     from ..segmentation.simulated_detector import SIMULATED_DETECTOR_VERSION
 
-    # the default room's parameters name no layout: a room made before layouts existed is reused as it is
+    # the default layout is left out, so that scenes written before layouts existed are still reused
     extra = {} if layout == "room" else {"layout": str(layout)}
     return {
-        **extra,
         "detector": SIMULATED_DETECTOR_VERSION,  # named segments: a scene made without them is made again
         "generator": "ogscene3d.synthetic",
         "version": GENERATOR_VERSION,
@@ -459,6 +503,7 @@ def _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise, l
         "noise": str(noise),
         "depth_noise": float(depth_noise),
         "pose_noise": float(pose_noise),
+        **extra,
     }
 
 
@@ -483,12 +528,14 @@ def make_synthetic_scene(
     ``noise``: simulated-SAM noise level (none | low | default | high); ``depth_noise``: std of
     additive Gaussian depth noise in metres; ``pose_noise``: std of the translation noise of the
     poses written to traj.txt in metres (rotation noise: half that in radians; gt/traj.txt keeps
-    the true poses). ``layout``: "room" (a furnished room, a smooth walk around it) or "scan" (a long scan
-    like a real ScanNet one, :mod:`.long_scan`). If ``out_dir`` already holds a complete scene made with the
-    same arguments it
+    the true poses). If ``out_dir`` already holds a complete scene made with the same arguments it
     is reused as is; a folder holding anything else is an error unless ``overwrite``.
     ``progress``: True for a tqdm bar, or a wrapper ``iterable -> iterable``. ``remedy``: what the error for
-    a folder holding something else tells the user to do (a command names its own options).
+    a folder holding something else tells the user to do (a command names its own options). ``layout``:
+    "room" (one furnished room, :func:`~.procedural.build_room`, a smooth walk around it), "scan" (a long scan
+    like a real ScanNet one, :mod:`.long_scan`) or "apartment" (2-5 rooms joined by
+    doorways, :func:`~.apartment.build_apartment`; ``frames`` is then per room, and ``gt/instances.json``
+    gives every instance's room).
     """
     from ..segmentation.precomputed import write_segments
     from ..segmentation.simulated import NOISE_LEVELS, SimulatedSegmenter
@@ -528,16 +575,20 @@ def make_synthetic_scene(
         (out / sub).mkdir(parents=True, exist_ok=True)
 
     K = intrinsics_for(width, height)
-    if layout == "scan":
-        room = build_scan_room(seed)
-        poses = scan_trajectory(room, frames, seed)
+    merges = {}
+    if layout == "apartment":
+        room = build_apartment(seed)
+        poses = apartment_trajectory(room, frames, seed)
+        frames = len(poses)
+        # one light for several rooms: no shadows (walls would leave the rooms beyond them dark) and a long
+        # falloff (the rooms far from the middle stay lit)
+        renderer = MeshRenderer(room, device=device, shadows=False, light_range=12.0)
     else:
-        room = build_room(seed)
-        poses = exploration_trajectory(room, frames, seed)
+        room = build_scan_room(seed) if layout == "scan" else build_room(seed)
+        poses = (scan_trajectory if layout == "scan" else exploration_trajectory)(room, frames, seed)
+        renderer = MeshRenderer(room, device=device)
     noise_rng = np.random.default_rng(np.random.SeedSequence([seed, 0xD0152]))
     written_poses = perturb_poses(poses, pose_noise, noise_rng)
-    renderer = MeshRenderer(room, device=device)
-    merges = {}
     if layout == "scan" and NOISE_LEVELS[noise].first_view_merge_prob > 0:
         plan = _first_view_plan(renderer, room, poses, K, width, height, NOISE_LEVELS[noise], seed)
         atomic_write_text(out / "gt" / "first_views.json", json.dumps(_plan_json(plan), indent=1))
@@ -600,9 +651,10 @@ def make_synthetic_scene(
     write_points_ply(out / "gt" / "points.ply", pts, classes_of, observed)
     write_mesh_ply(out / "gt" / "mesh.ply", room, classes_of)
     num_points = np.bincount(pts["instance"], minlength=len(room.objects) + 1)
-    atomic_write_text(
-        out / "gt" / "instances.json", json.dumps(instances_json(room, classes, num_points), indent=1)
-    )
+    doc = instances_json(room, classes, num_points)
+    if isinstance(room, Apartment):
+        add_rooms(doc, room, rooms_entered(room, poses))
+    atomic_write_text(out / "gt" / "instances.json", json.dumps(doc, indent=1))
     atomic_write_text(marker, json.dumps(params, indent=2))
     return out
 
@@ -657,6 +709,8 @@ class SyntheticDataset(ReplicaDataset):
         if segments_dir is None and (root / "segments").is_dir():
             segments_dir = root / "segments"
         self.gt = load_instances(root / "gt" / "instances.json")
+        self.up_axis = _scene_up(self.gt, root / "gt" / "instances.json")
+        self.up_axis_source = "the synthetic scene's gt/instances.json"
         ids = self.gt["instances"]
         self._class_lut = np.zeros(max(ids, default=0) + 1, dtype=np.int32)
         for k, v in ids.items():
@@ -683,8 +737,30 @@ class SyntheticDataset(ReplicaDataset):
         return inst, self._class_lut[inst]
 
 
+def _scene_up(gt: dict, path: Path) -> tuple[float, float, float]:
+    """The world up a scene's ``instances.json`` states (the generator's, -y, in older scenes without it)."""
+    up = gt.get("up", (0.0, -1.0, 0.0))
+    try:
+        x, y, z = (float(v) for v in up)
+    except (TypeError, ValueError):
+        raise DataError(f"{path}: 'up' must be a 3-vector, got {up!r}") from None
+    if not np.isfinite([x, y, z]).all() or not np.linalg.norm([x, y, z]) > 0:
+        raise DataError(f"{path}: 'up' must be a finite non-zero 3-vector, got {up!r}")
+    return x, y, z
+
+
 def configured_scene(out_dir: str | Path, s: SyntheticConfig, **kwargs: Any) -> Path:
     """:func:`make_synthetic_scene` with the settings of a config's ``synthetic`` section (keyword arguments
     as there: ``overwrite``, ``device``, ``progress``, ``remedy``)."""
-    args = (s.seed, s.frames, s.width, s.height, s.noise, s.depth_noise, s.pose_noise)
-    return make_synthetic_scene(out_dir, *args, layout=s.layout, **kwargs)
+    return make_synthetic_scene(
+        out_dir,
+        s.seed,
+        s.frames,
+        s.width,
+        s.height,
+        s.noise,
+        s.depth_noise,
+        s.pose_noise,
+        layout=s.layout,
+        **kwargs,
+    )

@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError, DataError
-from ..gaussians import NPZ_READ_ERRORS
+from ..runs import RunFolder, read_config
+from ..runs.map_npz import read_map_npz
 
 log = logging.getLogger(__name__)
 
@@ -83,14 +84,14 @@ def _mapped_count(run_dir: Path, selection: Any, data: Any) -> tuple[int, str]:
     from ..datasets.identity import frame_names, sequence_change
 
     num_selected = len(selection)
-    ckpt = run_dir / "map.npz"
+    ckpt = RunFolder(run_dir).map
     if not ckpt.is_file():
         return num_selected, "no map.npz: the whole selection is taken as mapped"
     try:
-        with np.load(ckpt, allow_pickle=False) as z:
-            nxt = int(z["mapper_next_index"]) if "mapper_next_index" in z.files else None
-            source = json.loads(str(z["mapper_source"])) if "mapper_source" in z.files else {}
-    except (KeyError, *NPZ_READ_ERRORS) as e:
+        z = read_map_npz(ckpt, ("mapper_next_index", "mapper_source"))
+        nxt = int(z["mapper_next_index"]) if "mapper_next_index" in z else None
+        source = json.loads(str(z["mapper_source"])) if "mapper_source" in z else {}
+    except (DataError, ValueError) as e:
         raise DataError(f"{ckpt}: cannot read how far the run got ({e})") from None
     # its next frame is a position in the selection it was mapped with (recorded since checkpoints say so)
     for key in ("start", "stride"):
@@ -147,18 +148,17 @@ def run_frames(run_dir: str | Path, ds: Any) -> RunFrames:
         DataError: the run has no readable ``config.yaml``, its selection is empty in ``ds``, or its
             ``map.npz`` disagrees with the selection.
     """
-    from ..config import load_config
     from ..datasets import open_dataset
 
     run = Path(run_dir)
-    cfg_path = run / "config.yaml"
+    cfg_path = RunFolder(run).config
     if not cfg_path.is_file():
         raise DataError(
             f"{run}: held-out views need the run's config.yaml (its data.start/stride/max_frames say which "
             "frames it mapped)"
         )
     try:
-        data = load_config(cfg_path).data
+        data = read_config(run).data
     except ConfigError as e:
         raise DataError(f"{cfg_path}: cannot read the run's frame selection ({e})") from None
     # the run's selection of the same folder, read by the same code the mapper used

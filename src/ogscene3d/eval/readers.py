@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import json
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +43,9 @@ import numpy as np
 
 from ..datasets.replica_semantic import class_entries
 from ..errors import DataError
+from ..runs import RunFolder, recorded_data_path
+from ..runs.gaussians_ply import SEMANTIC_FIELDS, read_gaussians_ply
+from ..runs.graph_json import read_graph_json
 from .ground_truth import GroundTruth, reindex_class_ids
 from .replica_gt import load_replica_ground_truth, replica_semantic_files
 
@@ -65,25 +68,6 @@ class RunData:
     graph: dict[str, Any] | None  # parsed graph.json or None
 
 
-def run_data_path(run_dir: str | Path) -> Path | None:
-    """``data.path`` of ``RUN_DIR/config.yaml`` (relative to the run directory when relative), or None."""
-    run = Path(run_dir)
-    cfg = run / "config.yaml"
-    if not cfg.is_file():
-        return None
-    import yaml
-
-    try:
-        data = yaml.safe_load(cfg.read_text()) or {}
-    except yaml.YAMLError as e:
-        raise DataError(f"{cfg}: invalid YAML ({e})") from None
-    path = (data.get("data") or {}).get("path") if isinstance(data, dict) else None
-    if not path:
-        return None
-    p = Path(path)
-    return p if p.is_absolute() else run / p
-
-
 def find_ground_truth(run_dir: str | Path) -> Path | None:
     """The ground truth of the scene a run was made from, if it can be found: ``RUN_DIR/scene`` (where
     ``ogscene3d run`` without ``--data`` generates a synthetic scene) or ``data.path`` of
@@ -91,8 +75,8 @@ def find_ground_truth(run_dir: str | Path) -> Path | None:
     labels PLY or is a sequence whose frames carry class maps (label-fusion; 2D scores only). None when
     none does."""
     run = Path(run_dir)
-    data = run_data_path(run)
-    for c in (run / "scene", data):
+    data = recorded_data_path(run)
+    for c in (RunFolder(run).scene, data):
         if c is not None and (c / "gt" / "instances.json").is_file():
             return c
     if data is not None and data.is_dir() and (_scannet_label_ply(data) is not None or _frame_classes(data)):
@@ -157,57 +141,23 @@ def read_run(run_dir: str | Path) -> RunData:
     run = Path(run_dir)
     if not run.is_dir():
         raise DataError(f"{run}: run directory not found")
-    ply = run / "gaussians.ply"
+    ply = RunFolder(run).gaussians
     if not ply.is_file():
         raise DataError(f"{ply}: missing (a run directory holds gaussians.ply; docs/formats.md)")
-    v = _read_ply_vertices(ply)
-    names = v.dtype.names or ()
-    if "label" not in names:
-        raise DataError(f"{ply}: vertex field 'label' missing: not a semantic Gaussian map")
-    means = _xyz(v, ply)
-    labels = _int_field(v, "label", ply)
-    conf = (
-        np.asarray(v["confidence"], dtype=np.float32)
-        if "confidence" in names
-        else np.ones(len(labels), np.float32)
-    )
-    if not np.all(np.isfinite(conf)):
-        raise DataError(f"{ply}: field 'confidence' has NaN/inf")
-    opac = None
-    if "opacity" in names:
-        logit = np.asarray(v["opacity"], dtype=np.float64)
-        opac = (1.0 / (1.0 + np.exp(-np.clip(logit, -60, 60)))).astype(np.float32)
+    gaussians = read_gaussians_ply(ply, SEMANTIC_FIELDS)
+    labels = gaussians.labels
+    assert labels is not None  # a required field
+    conf = gaussians.confidences
+    if conf is None:
+        conf = np.ones(len(labels), np.float32)
+    opac = gaussians.opacities() if gaussians.opacity_logits is not None else None
+    means = gaussians.means.astype(np.float64)
+    labels = labels.astype(np.int64)
     graph = None
-    gpath = run / "graph.json"
+    gpath = RunFolder(run).graph
     if gpath.is_file():
         graph = read_graph_json(gpath)
     return RunData(means=means, labels=labels, confidences=conf, opacities=opac, graph=graph)
-
-
-def read_graph_json(path: str | Path) -> dict[str, Any]:
-    """Parse and sanity-check ``graph.json`` ({"nodes": [...], "edges": [...]})."""
-    path = Path(path)
-    try:
-        g = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise DataError(f"{path}: file not found") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise DataError(f"{path}: invalid JSON ({e})") from None
-    if (
-        not isinstance(g, dict)
-        or not isinstance(g.get("nodes", []), list)
-        or not isinstance(g.get("edges", []), list)
-    ):
-        raise DataError(f"{path}: expected an object with 'nodes' and 'edges' lists")
-    for n in g.get("nodes", []):
-        if not isinstance(n, dict) or "id" not in n:
-            raise DataError(f"{path}: every node needs an 'id' (got {n!r:.80})")
-    for e in g.get("edges", []):
-        if not isinstance(e, dict) or not {"source", "target", "relation"} <= set(e):
-            raise DataError(f"{path}: every edge needs 'source', 'target', 'relation' (got {e!r:.80})")
-    g.setdefault("nodes", [])
-    g.setdefault("edges", [])
-    return g
 
 
 def _load_json(path: Path) -> Any:
@@ -256,6 +206,8 @@ class _InstanceTable:
     relations: list[tuple[int, str, int]]
     symmetric: list[str] | None
     inverses: list[tuple[str, str]] | None
+    instance_rooms: dict[int, int] = field(default_factory=dict)
+    rooms: dict[int, dict[str, Any]] = field(default_factory=dict)
 
 
 def _read_instances_json(path: Path) -> _InstanceTable:
@@ -296,13 +248,44 @@ def _read_instances_json(path: Path) -> _InstanceTable:
             raise DataError(f"{path}: relation {r!r}: subject/object must be instance ids") from None
     sym = data.get("symmetric_relations")
     inv = data.get("inverse_relations")
+    rooms, instance_rooms = _read_rooms(path, data, entries)
     return _InstanceTable(
         instance_class=inst,
         class_table=table,
         relations=rels,
         symmetric=[str(x) for x in sym] if isinstance(sym, list) else None,
         inverses=[(str(a), str(b)) for a, b in inv.items()] if isinstance(inv, dict) else None,
+        instance_rooms=instance_rooms,
+        rooms=rooms,
     )
+
+
+def _read_rooms(path: Path, data: dict, entries: dict) -> tuple[dict[int, dict[str, Any]], dict[int, int]]:
+    """The rooms of an apartment's instances.json ({} without): {room id: {"type", "floor", "first_frame"}}
+    and {instance id: room id}."""
+    raw = data.get("rooms") or {}
+    if not isinstance(raw, dict):
+        raise DataError(f"{path}: 'rooms' must map room ids to rooms")
+    try:
+        rooms = {
+            int(k): {
+                "type": str(v.get("type", "room")),
+                "floor": int(v.get("floor", 0)),
+                "first_frame": None if v.get("first_frame") is None else int(v["first_frame"]),
+            }
+            for k, v in raw.items()
+        }
+        inst_room = {
+            int(k): int(v["room"])
+            for k, v in entries.items()
+            if isinstance(v, dict) and v.get("room") is not None
+        }
+    except (AttributeError, TypeError, ValueError) as e:
+        raise DataError(f"{path}: malformed rooms ({type(e).__name__}: {e})") from None
+    unknown = sorted({r for r in inst_room.values() if r not in rooms})
+    if unknown:
+        raise DataError(f"{path}: instances are in rooms {unknown}, which are not in 'rooms'")
+    return rooms, inst_room
 
 
 def _find_gt_ply(folder: Path) -> Path:
@@ -399,6 +382,8 @@ def _load_instance_gt(folder: Path, inst_json: Path) -> GroundTruth:
         class_ids=class_ids,
         source=str(folder),
         observed=observed,
+        instance_rooms=table.instance_rooms,
+        rooms=table.rooms,
     )
 
 

@@ -336,6 +336,8 @@ def evaluate_run(
         )
         graph_block = rr.to_dict()
 
+    rooms_block, queries_block = _rooms_and_queries(run, scored, gt, assoc, gt_block, min_node_iou, notes)
+
     semantic_2d: dict[str, Any] | None = None
     views: SegmentationMetrics | None = None
     if rendered is not None:
@@ -357,9 +359,63 @@ def evaluate_run(
         "semantic_3d": {p: m.to_dict() for p, m in semantic.items()},
         "semantic_2d": semantic_2d,
         "scene_graph": graph_block,
+        "rooms": rooms_block,
+        "queries": queries_block,
         "notes": notes,
     }
     return EvalResult(report=report, semantic=semantic, label_to_class=label_to_class, views=views)
+
+
+def _rooms_and_queries(
+    run: RunData,
+    scored: RunData,
+    gt: GroundTruth,
+    assoc: np.ndarray | None,
+    gt_block: dict[str, Any] | None,
+    min_node_iou: float,
+    notes: list[str],
+) -> tuple[dict[str, Any] | None, dict[str, Any] | None]:
+    """Room segmentation (when the GT has rooms) and query accuracy (when it has instances), each None when
+    it cannot be scored (a note says why)."""
+    from .queries import queries_block
+    from .rooms import rooms_block
+
+    if not gt.has_3d or run.graph is None or gt.instances is None or assoc is None:
+        return None, None
+    observed = gt.observed if gt_block is not None and gt_block["points"] == "observed" else None
+    keep = observed if observed is not None else np.ones(len(gt.points), bool)
+    rooms = None
+    if not gt.rooms:
+        notes.append("rooms not scored: the ground truth has no rooms (an apartment's has)")
+    elif "rooms" not in run.graph:
+        notes.append(
+            "rooms not scored: graph.json has no rooms (graph.rooms.enabled was off, or an older run)"
+        )
+    else:
+        # every surface point of a room, seen or not, as HOV-SG's ground-truth room is its whole region: the
+        # floor under the camera's path or behind furniture is the room's, and its outline may hold it
+        lut = gt.instance_rooms
+        point_rooms = np.array([lut.get(int(i), -1) for i in gt.instances], dtype=np.int64)
+        entered = {k: v.get("first_frame") for k, v in gt.rooms.items()}
+        try:
+            types = {k: str(v["type"]) for k, v in gt.rooms.items()}
+            rooms = rooms_block(run.graph, scored.means, gt.points, point_rooms, entered, types)
+        except DataError as e:
+            notes.append(f"rooms not scored: {e}")
+    gt_inst = np.where(assoc >= 0, gt.instances[np.maximum(assoc, 0)], -1)
+    names = {i: gt.class_names[c] for i, c in gt.instance_classes.items()}
+    present = {int(i) for i in np.unique(gt.instances[keep]) if i >= 0}
+    room_types = {k: str(v["type"]) for k, v in gt.rooms.items()}
+    symmetric = gt.symmetric_relations if gt.symmetric_relations is not None else ("next to",)
+    try:
+        queries = queries_block(
+            run.graph, run.labels, gt_inst, names, gt.relations, gt.instance_rooms, room_types, present,
+            min_node_iou, symmetric,
+        )  # fmt: skip
+    except DataError as e:  # a graph.json with too little in it to answer queries (no node geometry)
+        notes.append(f"queries not scored: {e}")
+        queries = None
+    return rooms, queries
 
 
 def _hovsg_scannet_mismatch(ignore: Iterable[str], class_names: Sequence[str]) -> str | None:

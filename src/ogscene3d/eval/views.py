@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
+from ..runs import RunFolder, read_config, recorded_data_path
 from .held_out import HeldOut, check_held_out, naming_frames, pick_frames, pick_held_out, run_frames
 from .label_mapping import majority_overlap_mapping
 from .metrics import SegmentationMetrics
@@ -39,7 +40,7 @@ from .protocols import (
     label_lookup,
     rendered_view_metrics,
 )
-from .readers import GroundTruth, run_data_path
+from .readers import GroundTruth
 
 log = logging.getLogger(__name__)
 
@@ -83,13 +84,12 @@ def open_view_dataset(scene_dir: str | Path, run_dir: str | Path | None = None) 
 
     cfg = DataConfig()
     if run_dir is not None:
-        recorded = run_data_path(run_dir)
+        recorded = recorded_data_path(run_dir)
         if recorded is not None and same_sequence(recorded, scene_dir):
-            from ..config import load_config
             from ..errors import ConfigError
 
             try:
-                data = load_config(Path(run_dir) / "config.yaml").data
+                data = read_config(run_dir).data
                 # eval renders the map and reads no segments (a frame the run did not map may have none)
                 cfg = dataclasses.replace(data, start=0, stride=1, max_frames=None, segments_dir=None)
             except ConfigError as e:  # e.g. written by another version: the files' own settings then
@@ -99,7 +99,7 @@ def open_view_dataset(scene_dir: str | Path, run_dir: str | Path | None = None) 
     if run_dir is not None:
         from ..datasets.identity import mapped_intrinsics, matching_pixel_centers
 
-        mapped_K = mapped_intrinsics(Path(run_dir) / "map.npz")
+        mapped_K = mapped_intrinsics(RunFolder(run_dir).map)
         if mapped_K is not None and not np.allclose(mapped_K, np.asarray(ds.K).reshape(-1), atol=1e-3):
             setting = matching_pixel_centers(ds, mapped_K)
             if setting is not None:
@@ -153,13 +153,13 @@ def render_views(
     import torch
 
     from ..gaussians import GaussianMap
-    from ..semantics import render_semantics
+    from ..rendering import render_semantics
 
     idx = sorted(set(frames))
     for i in idx:
         if not 0 <= i < len(ds):
             raise DataError(f"{ds.root}: view frame {i} out of range [0, {len(ds)})")
-    gm = GaussianMap.read_ply(Path(run_dir) / "gaussians.ply", device=device)
+    gm = GaussianMap.read_ply(RunFolder(run_dir).gaussians, device=device)
     out: dict[int, RenderedView] = {}
     for i in idx:
         frame = ds[i]
@@ -253,7 +253,7 @@ def prepare_views(
         return None, "the ground truth has no class-id table to read per-frame class maps with"
     gt_path = Path(gt_path)
     candidates = [gt_path] if gt_path.is_dir() else []
-    data = run_data_path(run_dir)
+    data = recorded_data_path(run_dir)
     if data is not None and gt_path.resolve().is_relative_to(data.resolve()):
         candidates.append(data)
     for folder in candidates:
@@ -297,7 +297,7 @@ def prepare_views(
 def _scored_mapped(run_dir: str | Path, ds: Any, frames: Sequence[int]) -> list[int] | None:
     """Which of ``frames`` the run mapped, when its config.yaml tells and names this sequence (None
     otherwise): the report of an ordinary 2D eval says how many of its views the mapper saw."""
-    recorded = run_data_path(run_dir)
+    recorded = recorded_data_path(run_dir)
     if recorded is None or not same_sequence(recorded, ds.root):
         return None
     try:

@@ -295,11 +295,19 @@ class HeuristicCaptioner:
     * wall: a vertical sheet at least ``wall_min_height`` high and 1 m wide;
     * otherwise "<size> <colour> [flat horizontal | flat vertical] object, about <largest extent>" with
       size small (< 0.3 m), medium (< 1 m) or large.
+
+    Where a detector named the node's segments, its majority class is the tag, unless that class named less
+    than ``min_share`` of the node's pixels in the keyframes seen: an object's segments that the mapping gave
+    to the surface behind it do not make the surface that object (on a synthetic apartment such names
+    covered 0-3 % of a wall, a right name 10 % and more of its node).
     """
 
-    def __init__(self, structure_band: float = 0.2, wall_min_height: float = 1.2) -> None:
+    def __init__(
+        self, structure_band: float = 0.2, wall_min_height: float = 1.2, min_share: float = 0.1
+    ) -> None:
         self.structure_band = structure_band
         self.wall_min_height = wall_min_height
+        self.min_share = min_share
 
     def describe(self, requests: Sequence[CaptionRequest]) -> dict[int, Description]:
         return {r.node.id: self.describe_one(r) for r in requests}
@@ -310,7 +318,10 @@ class HeuristicCaptioner:
         desc = self._geometric(req)
         if not req.detector_name_votes:
             return desc
-        name, _ = max(req.detector_name_votes.items(), key=lambda kv: (kv[1], kv[0]))
+        name, pixels = max(req.detector_name_votes.items(), key=lambda kv: (kv[1], kv[0]))
+        if pixels < self.min_share * req.label_pixels:
+            share = pixels / req.label_pixels
+            return Description(f"{desc.caption}; {share:.0%} of it detected as {name}", desc.tag, desc.source)
         return Description(f"{name} (detector class); {desc.caption}", name, "detector")
 
     def _geometric(self, req: CaptionRequest) -> Description:

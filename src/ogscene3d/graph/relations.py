@@ -150,6 +150,9 @@ for _w, _rel in {
 }.items():
     _SYNONYMS[_w] = (_rel, True)
 
+#: Every phrase :func:`normalize_relation` knows, longest first (queries look for them in their text).
+RELATION_PHRASES: tuple[str, ...] = tuple(sorted(_SYNONYMS, key=lambda w: (-len(w.split()), w)))
+
 
 def normalize_relation(text: str) -> tuple[str, bool] | None:
     """Map a free-form relation phrase onto the vocabulary: ``(relation, swapped)`` or None if unknown.

@@ -1,35 +1,49 @@
 """The paper's ablation (Tab. "Ablation study") on any scene with ground truth: map the same sequence with
 the naive baseline, local only, + global refinement and + long-term, and score each run's 3D semantic
 segmentation with the evaluation protocols of ``ogscene3d.eval`` (HOV-SG by default).
+
+Each run is a session of :mod:`ogscene3d.mapping.session`, as ``ogscene3d run`` makes it: its folder records
+the run's id and the data it mapped, so ``ogscene3d eval RUN`` finds the ground truth and ``run --resume``
+the frames.
 """
 
 from __future__ import annotations
 
 import copy
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from ..config import Config
-from .engine import MappingEngine, run_directory
 from .mapper import ABLATIONS, Mapper
+from .session import mapping_session
 
 
 def map_sequence(
     config: Config,
-    frames,
+    data: str | Path | Any,
     out_dir: str | Path,
     device: str | None = None,
-    progress: Callable | None = None,
+    max_frames: int | None = None,
+    progress: bool = False,
 ) -> Mapper:
-    """Map every frame of ``frames`` (an iterable of Frame), finalize and save to ``out_dir`` (locked for
-    the run, as every run directory is: :mod:`ogscene3d.mapping.engine`)."""
-    mapper = Mapper(config, device)
-    with run_directory(out_dir, "ablation"):
-        MappingEngine(mapper, out_dir, getattr(frames, "root", "")).run(
-            frames if progress is None else progress(frames)
-        )
-    return mapper
+    """Map the sequence ``data`` (a dataset folder, or a dataset opened from one: its folder, read again
+    with ``config.data``), finalize and save to ``out_dir``, in a session as ``ogscene3d run`` makes it
+    (:func:`ogscene3d.mapping.session.mapping_session`). ``config`` is changed: it records the data (and
+    ``device``, when given).
+
+    Raises:
+        KeyboardInterrupt: Ctrl-C or SIGTERM stopped the run (the map so far is saved, for ``--resume``).
+    """
+    if device is not None:
+        config.device = device
+    folder = data if isinstance(data, str | Path) else data.root  # (a Path's own .root is "/")
+    with mapping_session(config, out_dir, folder, command="ablation", max_frames=max_frames) as s:
+        summary = s.run(progress=progress)
+    if summary.status == "stopped":
+        raise KeyboardInterrupt(f"{out_dir}: stopped after {summary.read} frames")
+    return s.mapper
 
 
 def run_ablation(
@@ -51,7 +65,6 @@ def run_ablation(
     Scene labels are named by majority overlap with the GT instances (an oracle naming that is the same
     for every ablation, so differences come from the mapping alone).
     """
-    from ..datasets import open_dataset
     from ..eval.run_eval import evaluate_run
 
     results: dict[str, dict] = {}
@@ -61,10 +74,9 @@ def run_ablation(
         cfg = copy.deepcopy(config)
         cfg.mapping.ablation = abl
         cfg.graph.enabled = False  # the graph does not change the semantic map
-        ds = open_dataset(data, max_frames=max_frames, config=cfg.data)
         out = Path(out_root) / abl.replace("+", "_")
         t0 = time.perf_counter()
-        mapper = map_sequence(cfg, ds, out, device)
+        mapper = map_sequence(cfg, data, out, device, max_frames)
         seconds = time.perf_counter() - t0
         row: dict = {
             "seconds": seconds,

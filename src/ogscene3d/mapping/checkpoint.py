@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
-from ..gaussians import FIELDS, NPZ_READ_ERRORS, NPZ_VERSION, corrupt_npz_message
+from ..gaussians import FIELDS
+from ..runs.map_npz import NPZ_VERSION, corrupt_npz_message, read_map_npz
 from .longterm import MemoryEntry
 
 #: The arrays every version-2 checkpoint holds (the tracker's ``trk_*``, ``graph_state`` and the view lists
@@ -56,12 +57,11 @@ def read_checkpoint(path: str | Path, seed: int | None = None) -> CheckpointArra
         DataError: unreadable or damaged, written by a newer version, or not a mapper checkpoint.
     """
     p = Path(path)
+    arrays = read_map_npz(p, lambda k: k not in FIELDS and k != "next_label")
     try:
-        with np.load(p, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files if k not in FIELDS and k != "next_label"}
-    except NPZ_READ_ERRORS as e:
+        version = int(arrays.pop("version", 1))
+    except (TypeError, ValueError) as e:
         raise DataError(corrupt_npz_message(p, e)) from e
-    version = int(arrays.pop("version", 1))
     if version > NPZ_VERSION:
         raise DataError(
             f"{p}: written by a newer ogscene3d (checkpoint format {version}; this one reads up to "

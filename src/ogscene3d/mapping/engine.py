@@ -2,9 +2,7 @@
 
 The commands parse their options and print; what a run does between its first and last frame is here:
 
-- :func:`run_directory` holds a lock on the run directory (one writer per folder; the kernel releases it
-  when the process dies, so a killed run never blocks the next), and removes a folder it created for a
-  run that failed before writing anything into it;
+- the caller holds the run folder's lock (:func:`ogscene3d.runs.run_directory`: one writer per folder);
 - :meth:`MappingEngine.open` checks a resume against the run's recorded source and settings, and writes
   the run's ``config.yaml`` and ``run_id``;
 - :meth:`MappingEngine.run` is the frame loop: progress, a stop request (Ctrl-C, SIGTERM, the viewer)
@@ -15,191 +13,21 @@ The commands parse their options and print; what a run does between its first an
 from __future__ import annotations
 
 import contextlib
-import datetime
 import errno
-import json
 import logging
-import os
-import signal
-import socket
-import sys
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from ..config import Config
 from ..errors import DataError, OGSceneError
+from ..runs import EXPORTS, RunFolder, SaveError, StopRequest, resumed_run_id, start_run_dir
 from .pose_jump import PoseJumpError
-from .source import (
-    check_same_source,
-    dataset_source,
-    matching_pixel_centers,
-    record_data,
-    remove_run_temps,
-    resumed_run_id,
-    start_run_dir,
-)
+from .source import check_same_source, dataset_source, matching_pixel_centers, remove_run_temps
 
 log = logging.getLogger(__name__)
-
-LOCK_FILE = ".ogscene3d.lock"
-# what a finished run's exports are; a resume of a finished map writes again any that are missing or older
-# than its map.npz (a save stopped between the two by a full disk or a kill)
-EXPORTS = ("gaussians.ply", "graph.json", "timings.json")
-
-
-# ----------------------------------------------------------------------------------------- run directory
-class RunDirBusyError(OGSceneError):
-    """Another live process is writing the run directory."""
-
-
-class RunDirLock:
-    """An exclusive ``flock`` on ``OUT/.ogscene3d.lock``, which names its holder (pid, host, command, start).
-
-    The kernel drops the lock when its process ends in any way (kill -9 included), so a lock file left
-    by a killed run is taken over, never obeyed. The file is removed on release (under the lock; a
-    process that opened the old file finds it unlinked and opens the new one)."""
-
-    def __init__(self, out: str | Path, command: str) -> None:
-        self.out = Path(out)
-        self.path = self.out / LOCK_FILE
-        self.command = command
-        self._fd: int | None = None
-
-    def acquire(self) -> None:
-        try:
-            import fcntl
-        except ImportError:  # not a POSIX system
-            log.warning("%s: no file locks here: a second run writing there is not detected", self.out)
-            return
-        while True:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError as e:
-                os.close(fd)
-                if e.errno in (errno.ENOLCK, errno.ENOTSUP, errno.EOPNOTSUPP):
-                    # a filesystem without locks (some network mounts): the run goes on unguarded
-                    log.warning(
-                        "%s: the filesystem refuses file locks (%s): a second run writing there is not "
-                        "detected",
-                        self.out,
-                        e.strerror,
-                    )
-                    with contextlib.suppress(OSError):
-                        self.path.unlink()
-                    return
-                if e.errno not in (errno.EAGAIN, errno.EACCES, errno.EWOULDBLOCK):
-                    raise
-                raise RunDirBusyError(self._busy_message()) from None
-            try:
-                same = os.fstat(fd).st_ino == os.stat(self.path).st_ino
-            except FileNotFoundError:
-                same = False
-            if same:
-                break
-            os.close(fd)  # the holder released (and removed) the file meanwhile: lock the new one
-        holder = {
-            "pid": os.getpid(),
-            "host": socket.gethostname(),
-            "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]) if sys.argv else self.command,
-            "started": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
-            "run": self.command,
-        }
-        os.ftruncate(fd, 0)
-        os.write(fd, (json.dumps(holder) + "\n").encode())
-        self._fd = fd
-
-    def _busy_message(self) -> str:
-        try:
-            holder = json.loads(self.path.read_text() or "{}")
-        except (OSError, ValueError):
-            holder = {}
-        get = holder.get
-        who = (
-            f"pid {get('pid', '?')} on {get('host', '?')}, started {get('started', '?')}: "
-            f"{get('command', '?')}"
-            if holder
-            else "a process that has not named itself yet"
-        )
-        return (
-            f"{self.out} is being written by another run ({who}); two runs in one folder overwrite each "
-            "other's map: wait for that run to end (or stop it), or give another --out"
-        )
-
-    def release(self) -> None:
-        if self._fd is None:
-            return
-        with contextlib.suppress(OSError):
-            self.path.unlink()
-        os.close(self._fd)  # closing drops the flock
-        self._fd = None
-
-    def __enter__(self) -> RunDirLock:
-        self.acquire()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.release()
-
-
-@contextlib.contextmanager
-def run_directory(out: str | Path, command: str) -> Iterator[Path]:
-    """Create ``out`` if needed and hold its :class:`RunDirLock` for the block. A folder created here and
-    still empty at the end (a run refused before writing anything: no dataset, a bad option) is removed."""
-    out = Path(out)
-    created = not out.exists()
-    out.mkdir(parents=True, exist_ok=True)
-    lock = RunDirLock(out, command)
-    try:
-        lock.acquire()
-    except BaseException:
-        if created:
-            with contextlib.suppress(OSError):
-                out.rmdir()
-        raise
-    try:
-        yield out
-    finally:
-        lock.release()
-        if created:
-            with contextlib.suppress(OSError):  # not empty: the run wrote something, which stays
-                out.rmdir()
-
-
-# ------------------------------------------------------------------------------------------------- stop
-class StopRequest:
-    """A request to end mapping after the frame in progress (saving from inside a frame could write a
-    half-updated state): from another thread (:meth:`request`) or, within :meth:`signals`, from Ctrl-C
-    or SIGTERM, where a second signal stops at once."""
-
-    def __init__(self) -> None:
-        self.requested = False
-
-    def request(self) -> None:
-        self.requested = True
-
-    @contextlib.contextmanager
-    def signals(self) -> Iterator[StopRequest]:
-        previous: dict[int, Any] = {}
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            try:
-                previous[sig] = signal.signal(sig, self._handle)
-            except ValueError:  # not the main thread (an embedding application): its handlers stay
-                break
-        try:
-            yield self
-        finally:
-            for sig, handler in previous.items():
-                signal.signal(sig, handler)
-
-    def _handle(self, signum: int, frame: Any) -> None:
-        if self.requested:
-            raise KeyboardInterrupt
-        self.request()
-        log.warning("stopping after this frame to save the map (again to stop at once, losing it)")
 
 
 # ---------------------------------------------------------------------------------------------- summary
@@ -238,20 +66,6 @@ class MapSaveFailed(OGSceneError):
 
 
 # ----------------------------------------------------------------------------------------------- engine
-def open_frames(
-    cfg: Config, data: str | Path, segments: str | Path | None = None, max_frames: int | None = None
-):
-    """The dataset of a run (its path, and ``segments`` when given, recorded in ``cfg``: the run's
-    ``config.yaml`` then tells ``eval`` the ground truth and ``--resume`` the frames)."""
-    from ..datasets import open_dataset
-
-    record_data(cfg, data, segments)
-    ds = open_dataset(max_frames=max_frames, config=cfg.data)
-    if len(ds) == 0:
-        raise DataError(f"{data}: the dataset has no frames")
-    return ds
-
-
 def _counts(mapper: Any) -> dict:
     return dict(getattr(getattr(mapper, "timings", None), "counts", {}) or {})
 
@@ -263,7 +77,12 @@ class MappingEngine:
 
     ``hooks``, called from the loop's thread: ``before_frame()`` (may block, e.g. while paused),
     ``after_frame(frame, is_keyframe)``, ``status_changed(text)``; ``guard``: a context manager held
-    around each change of the mapper and each save (the live viewer's lock against its GUI's saves)."""
+    around each change of the mapper and each save (the live viewer's lock against its GUI's saves).
+
+    ``observers`` watch the run without steering it (Rerun logging, the run-time estimate): each has
+    ``keyframe(mapper, frame, seconds)``, called after every keyframe with the seconds its ``process`` took,
+    and ``finished(mapper)``, after the final pass. One that raises is dropped with a warning: an observer
+    never costs the run its map."""
 
     def __init__(
         self,
@@ -273,8 +92,10 @@ class MappingEngine:
         *,
         hooks: Any = None,
         guard: Callable[[], contextlib.AbstractContextManager] | None = None,
+        observers: Iterable[Any] = (),
     ) -> None:
         self.mapper = mapper
+        self.observers = list(observers)
         self.out = Path(out) if out is not None else None
         self.data = str(data)
         self.hooks = hooks
@@ -307,7 +128,7 @@ class MappingEngine:
         run_id = None
         if resume:
             run_id = self._resume(cfg, ds, source)
-        elif (out / "map.npz").is_file():
+        elif RunFolder(out).map.is_file():
             # config.yaml is rewritten now: should this run die before its first save, --resume refuses the
             # old map beside the new settings (resumed_run_id), so say so while the old map can still be kept
             log.warning(
@@ -322,7 +143,7 @@ class MappingEngine:
     def _resume(self, cfg: Config, ds: Any, source: dict) -> str | None:
         mapper, out = self.mapper, self.out
         assert out is not None
-        ckpt = out / "map.npz"
+        ckpt = RunFolder(out).map
         if not ckpt.is_file():
             raise DataError(f"{ckpt}: --resume needs a checkpoint from an earlier run in --out")
         mapper.load_checkpoint(ckpt)
@@ -405,8 +226,11 @@ class MappingEngine:
             self._before_frame()
             if self.stop.requested:
                 break
+            t0 = time.perf_counter()
             with self.guard():
                 is_kf = mapper.process(frame)
+            if is_kf:
+                self._observe("keyframe", mapper, frame, time.perf_counter() - t0)
             self._given += 1
             self._last_index = getattr(frame, "index", None)
             if hasattr(it, "set_postfix"):
@@ -434,6 +258,15 @@ class MappingEngine:
             with self.guard():
                 mapper.finalize()
         self._check_not_empty()
+        self._observe("finished", mapper)
+
+    def _observe(self, event: str, *args: Any) -> None:
+        for obs in list(self.observers):
+            try:
+                getattr(obs, event)(*args)
+            except Exception as e:  # noqa: BLE001 - watching the run must not end it
+                log.warning("%s stopped after an error: %s: %s", type(obs).__name__, type(e).__name__, e)
+                self.observers.remove(obs)
 
     def _before_frame(self) -> None:
         if self.hooks is not None:
@@ -506,7 +339,7 @@ class MappingEngine:
             if isinstance(e, PoseJumpError)
             else "fix the frame (or --set data.on_bad_frame=skip)"
         )
-        log.error("the map so far is in %s: %s, then --resume", self.out / "map.npz", fix)
+        log.error("the map so far is in %s: %s, then --resume", RunFolder(self.out).map, fix)
 
     def _save_partial(self) -> bool:
         """After a stop: the map so far, with the files ``eval`` and the viewer read (not finalized: a
@@ -518,19 +351,18 @@ class MappingEngine:
         return True
 
     def _save(self, out: Path) -> None:
-        from .mapper import SaveError
-
         try:
             with self.guard():
                 self.mapper.save(out)
         except SaveError as e:
             saved = ", ".join(e.written) if e.written else "nothing"
             fix = "free some space" if e.cause.errno in (errno.ENOSPC, errno.EDQUOT) else "fix that"
-            if "map.npz" in e.written:
+            ckpt = RunFolder(out).map
+            if ckpt.name in e.written:
                 go_on = f"{fix}, then `ogscene3d run --resume --out {out}` writes the rest"
-            elif (out / "map.npz").is_file():
+            elif ckpt.is_file():
                 go_on = (
-                    f"{out / 'map.npz'} holds an earlier checkpoint: {fix}, then `ogscene3d run --resume "
+                    f"{ckpt} holds an earlier checkpoint: {fix}, then `ogscene3d run --resume "
                     f"--out {out}` goes on from it"
                 )
             else:
@@ -545,7 +377,7 @@ class MappingEngine:
         out = self.out
         if out is None:
             return
-        ckpt = out / "map.npz"
+        ckpt = RunFolder(out).map
         stale = [
             name for name in EXPORTS if not (out / name).is_file()
             or (out / name).stat().st_mtime_ns < ckpt.stat().st_mtime_ns

@@ -266,7 +266,7 @@ def longterm_view_update(
     ``skip_edges``: leave out pixels on a boundary of the stored segments or of the rendered labels.
     ``same_class``: a pixel reaches only Gaussians of its rendered label (see ``associate_pixels``); False
     is the paper's rule, its nearest Gaussians whatever their label."""
-    from ..render import rendering_contribution
+    from ..rendering import rendering_contribution
 
     stats = LongTermStats(views=1)
     if len(gm) == 0 or entry.segments is None:

@@ -49,12 +49,13 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..atomic import atomic_write_text
-from ..config import Config, check_config, choices, save_config
+from ..config import Config, check_config, choices
 from ..device import resolve_device
 from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame, implausible_median_depth
 from ..gaussians import GaussianMap, corrupt_npz_message
+from ..runs import RunFolder, save_run
+from ..up_axis import AGREE_DEG, CameraUp, angle_deg, axis_name, is_auto
 from .checkpoint import CheckpointArrays, read_checkpoint
 from .evidence import SegmentEvidence
 from .init import make_probes
@@ -206,17 +207,6 @@ def _ran_at(keyframe_count: int, every: int) -> bool:
     return every > 0 and keyframe_count % every == 0
 
 
-class SaveError(OGSceneError, OSError):
-    """A write of :meth:`Mapper.save` failed: ``failed`` (a file name in the run directory), ``written``
-    (the names written before it), ``cause`` (the OSError, e.g. ENOSPC)."""
-
-    def __init__(self, failed: str, written: list[str], cause: OSError) -> None:
-        self.failed, self.written, self.cause = failed, list(written), cause
-        self.reason = cause.strerror or str(cause)
-        done = ", ".join(written) if written else "nothing"
-        super().__init__(f"could not write {failed}: {self.reason} (written before it: {done})")
-
-
 @dataclass
 class _Keyframe:
     """What the stages of one keyframe hand on to each other."""
@@ -278,8 +268,8 @@ class Mapper:
         # what the frames come from (set by the caller, e.g. {"path", "frames", "first"}), kept in
         # checkpoints so that a resume can tell another sequence from the same one
         self.source: dict = {}
-        # sum of the mapped cameras' up vectors in the world (-y of an OpenCV camera): checks graph.up_axis
-        self._camera_up_sum = np.zeros(3)
+        # the mapped cameras' up direction in the world: chooses graph.up_axis auto, or checks a given one
+        self._camera_up = CameraUp()
 
     # ------------------------------------------------------------------ switches
     @property
@@ -311,27 +301,40 @@ class Mapper:
         return SceneGraph(self.config.graph)
 
     def _check_up_axis(self) -> None:
-        """Warn (once, at the first graph update: the mean over the keyframes until then) when graph.up_axis
-        is far from where the cameras' up points on average: relations (on, under) and floor / wall /
-        ceiling tags would then use a wrong vertical (worlds differ: Replica's and ScanNet's are z-up, an
-        OpenCV camera's first frame is -y up). 75 deg leaves room for cameras pitched down at a table."""
+        """At the first graph update (the cameras over the frames mapped until then): choose graph.up_axis
+        when it is still auto (nothing told it when the run opened: a recording tracked by odometry, a live
+        camera), logged; else warn (once) when the given one is far from where the cameras' up points:
+        relations (on, under) and floor / wall / ceiling tags would then use a wrong vertical (worlds differ:
+        Replica's and ScanNet's are z-up, an OpenCV camera's first frame is -y up).
+        :data:`~ogscene3d.up_axis.AGREE_DEG` leaves room for cameras pitched down at a table."""
         if self._up_checked:
             return
         self._up_checked = True
-        norm = float(np.linalg.norm(self._camera_up_sum))
-        up = np.asarray(self.config.graph.up_axis, dtype=np.float64)
-        if norm < 1e-9 or up.shape != (3,) or not np.linalg.norm(up) > 0:
+        cam_up = self._camera_up.estimate()
+        if is_auto(self.config.graph.up_axis):
+            if cam_up is None:
+                return  # no camera mapped yet: the provisional up stays
+            self.config.graph.up_axis = [float(v) for v in cam_up]
+            if self._graph is not None:
+                self._graph.set_up_axis(cam_up)
+            log.info(
+                "graph.up_axis auto: %s (the cameras' up direction over the %d frames mapped)",
+                axis_name(cam_up),
+                self._camera_up.count,
+            )
             return
-        cam_up = self._camera_up_sum / norm
-        angle = math.degrees(math.acos(float(np.clip(cam_up @ up / np.linalg.norm(up), -1.0, 1.0))))
-        if angle > 75.0:
+        up = np.asarray(self.config.graph.up_axis, dtype=np.float64)
+        if cam_up is None or up.shape != (3,) or not np.linalg.norm(up) > 0:
+            return
+        angle = angle_deg(up, cam_up)
+        if angle > AGREE_DEG:
             axis = int(np.argmax(np.abs(cam_up)))
             guess = [0.0, 0.0, 0.0]
             guess[axis] = 1.0 if cam_up[axis] > 0 else -1.0
             log.warning(
                 "graph.up_axis %s is %.0f deg from the cameras' mean up direction %s over %d frames: the "
                 "scene graph's on/under relations and floor/wall/ceiling tags would use a wrong vertical; if "
-                "this world is %s-up, set --set graph.up_axis=%s",
+                "this world is %s-up, set --set graph.up_axis=%s (or leave graph.up_axis auto)",
                 up.tolist(),
                 angle,
                 np.round(cam_up, 2).tolist(),
@@ -448,7 +451,7 @@ class Mapper:
             self.trajectory.append(np.array(frame.pose, dtype=np.float64) if tracked else None)
         if not tracked or jumped:
             return False
-        self._camera_up_sum -= np.asarray(frame.pose, dtype=np.float64)[:3, 1]
+        self._camera_up.add(frame.pose)
         self._check_depth_range(frame)
         self.frames_seen += 1
         self.timings.add("frames")
@@ -489,7 +492,7 @@ class Mapper:
 
     def _render_check(self, k: _Keyframe) -> None:
         """The map rendered at the keyframe's pose (alpha + expected depth): the pixels it explains."""
-        from ..render import rasterization
+        from ..rendering import rasterization
 
         with self.timings.section("render_check"):
             if len(self.map) == 0:
@@ -669,7 +672,7 @@ class Mapper:
             return
         with self.timings.section("checkpoint"):
             try:
-                self.save_checkpoint(self._checkpoint_dir / "map.npz")
+                self.save_checkpoint(RunFolder(self._checkpoint_dir).map)
             except OSError as e:
                 # a safety net: a full disk must not stop the mapping (the previous checkpoint stays)
                 log.warning(
@@ -867,7 +870,7 @@ class Mapper:
 
     def _render_labels(self, frame: Frame) -> np.ndarray:
         """The map's label per pixel [H,W] int32 (-1 where nothing labelled renders) at the frame's pose."""
-        from ..render import render_semantics
+        from ..rendering import render_semantics
 
         gm = self.map
         viewmat = torch.as_tensor(np.linalg.inv(frame.pose), dtype=torch.float32, device=self.device)[None]
@@ -1115,52 +1118,37 @@ class Mapper:
         which is what a resume needs, then the exports: gaussians.ply, timings.json, under odometry traj.txt
         (the tracked poses, one row-major c2w 4x4 per frame read) and graph.json. A save cut short (a full
         disk) thus leaves a map that ``run --resume`` writes the exports from. Saved outside a run that
-        records its id (``source["run_id"]``), an earlier run's ``run_id`` file there is removed.
+        records its id (``source["run_id"]``), an earlier run's ``run_id`` file there is removed. The run
+        folder's files and their order are :func:`ogscene3d.runs.save_run`'s.
 
         Raises:
             SaveError: a write failed; it names the file and those written before it.
         """
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        if "run_id" not in self.source:
-            from .source import RUN_ID_FILE
+        return save_run(
+            out_dir,
+            config=self.config,
+            checkpoint=self.save_checkpoint,
+            gaussians=self.map.export_ply,
+            timings=self._timings_doc,
+            trajectory=self._trajectory_text,
+            graph=self._graph_doc,
+            keeps_run_id="run_id" in self.source,
+        )
 
-            # saved outside a run that names itself (the live viewer, the ablation runner): an earlier run's
-            # id left here would vouch for this config.yaml beside that run's map.npz should this save stop
-            # before its map.npz, and --resume would go on with the old map and these settings
-            (out / RUN_ID_FILE).unlink(missing_ok=True)
-        steps: list[tuple[str, Any]] = [
-            ("config.yaml", lambda: save_config(self.config, out / "config.yaml")),
-            ("map.npz", lambda: self.save_checkpoint(out / "map.npz")),
-            ("gaussians.ply", lambda: self.map.export_ply(out / "gaussians.ply")),
-            ("timings.json", lambda: self._save_timings(out / "timings.json")),
-            ("traj.txt", lambda: self._save_trajectory(out / "traj.txt")),
-            ("graph.json", lambda: self._save_graph(out / "graph.json")),
-        ]
-        written: list[str] = []
-        for name, write in steps:
-            try:
-                write()
-            except OSError as e:
-                raise SaveError(name, written, e) from e
-            written.append(name)
-        return out
-
-    def _save_timings(self, path: Path) -> None:
+    def _timings_doc(self) -> dict:
         timings = self.timings.as_dict()
         timings["device"] = str(self.device)
         timings["ablation"] = self.cfg.ablation
         timings["finalized"] = self.finalized  # False: the map of a stopped run, which --resume goes on from
-        atomic_write_text(path, json.dumps(timings, indent=2))
+        return timings
 
-    def _save_trajectory(self, path: Path) -> None:
+    def _trajectory_text(self) -> str | None:
         from ..tracking import hold_last_good, trajectory_text
 
         filled = hold_last_good(self.trajectory)  # as `ogscene3d track` writes it: one pose per frame read
-        if filled:
-            atomic_write_text(path, trajectory_text(filled))
+        return trajectory_text(filled) if filled else None
 
-    def _save_graph(self, path: Path) -> None:
+    def _graph_doc(self) -> dict:
         graph = None
         if self._graph is not None and not self._graph_failed:
             try:
@@ -1169,7 +1157,7 @@ class Mapper:
                 log.warning("could not serialise the scene graph: %s: %s", type(e).__name__, e)
         if graph is None:
             graph = {"version": 1, "nodes": self._label_nodes(), "edges": []}
-        atomic_write_text(path, json.dumps(graph, indent=1))
+        return graph
 
     def _label_nodes(self) -> list[dict]:
         """Graph nodes straight from the map's labels (used when no scene graph was built)."""

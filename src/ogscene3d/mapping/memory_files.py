@@ -31,7 +31,7 @@ import numpy as np
 
 from ..atomic import atomic_write_bytes
 from ..errors import DataError
-from ..gaussians import NPZ_READ_ERRORS
+from ..runs.map_npz import NPZ_READ_ERRORS, CorruptMapError, read_map_npz
 from .longterm import MemoryEntry
 
 log = logging.getLogger(__name__)
@@ -128,7 +128,7 @@ def _check_name(checkpoint: Path, name: str) -> None:
 def read_manifest(z, checkpoint: Path, prefix: str = "mem") -> list[ViewRecord]:
     """The views listed under ``prefix`` (``manifest``) by an opened ``map.npz`` ``z``: none when it has no
     such list (raises KeyError for a missing array of one)."""
-    if f"{prefix}_file" not in z.files:
+    if f"{prefix}_file" not in z:
         return []
     names = [str(n) for n in z[f"{prefix}_file"]]
     keyframes, nbytes, crcs = z[f"{prefix}_keyframe"], z[f"{prefix}_bytes"], z[f"{prefix}_crc32"]
@@ -223,9 +223,10 @@ def remove_leftovers(checkpoint: Path) -> list[Path]:
     keep: list[ViewFile] = []
     if checkpoint.is_file():
         try:
-            with np.load(checkpoint, allow_pickle=False) as z:
-                keep = [r.file for prefix in VIEW_LISTS for r in read_manifest(z, checkpoint, prefix)]
-        except (KeyError, *NPZ_READ_ERRORS) as e:
-            log.warning("%s: unreadable (%s), its memory views are left alone", checkpoint, type(e).__name__)
+            lists = read_map_npz(checkpoint, lambda k: k.startswith(tuple(f"{p}_" for p in VIEW_LISTS)))
+            keep = [r.file for prefix in VIEW_LISTS for r in read_manifest(lists, checkpoint, prefix)]
+        except (KeyError, CorruptMapError, *NPZ_READ_ERRORS) as e:
+            cause = type(e.__cause__ or e).__name__
+            log.warning("%s: unreadable (%s), its memory views are left alone", checkpoint, cause)
             return _remove(views_dir(checkpoint), lambda name: bool(VIEW_TEMP.fullmatch(name)))
     return remove_unreferenced(checkpoint, keep)

@@ -87,7 +87,7 @@ def mapping_loss(
 def optimize_map(gm, views: list[View], cfg: MappingConfig, iters: int | None = None) -> dict[str, float]:
     """Run ``iters`` (default ``cfg.opt_iters``) Adam steps on ``gm`` (a GaussianMap) over ``views``
     (all of one image size). Writes the optimised parameters back into the map. Returns first/last loss."""
-    from ..render import rasterization
+    from ..rendering import rasterization
 
     iters = cfg.opt_iters if iters is None else int(iters)
     out = {"iters": 0, "loss_first": float("nan"), "loss_last": float("nan"), "optimized": 0}

@@ -1,25 +1,24 @@
-"""What a run's frames come from, recorded the same way by ``run``, ``run-batch`` and the live viewer: in
-``config.yaml`` (``eval`` finds the ground truth there, ``run --resume`` the frames) and in the checkpoint
-(a resume refuses another sequence's frames, or a map that another run's ``config.yaml`` now sits beside)."""
+"""What a run's frames come from, recorded the same way by ``run``, ``run-batch``, the ablation and the live
+viewer: in ``config.yaml`` (``eval`` finds the ground truth there, ``run --resume`` the frames) and in the
+checkpoint (a resume refuses another sequence's frames; the run's id and settings are
+:mod:`ogscene3d.runs.record`'s)."""
 
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
-import uuid
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..atomic import atomic_write_text, remove_stale_temps
-from ..config import Config, config_to_dict, load_config, save_config
+from ..atomic import remove_stale_temps
+from ..config import Config
 from ..datasets.identity import file_digest, frame_names, sequence_change
 from ..datasets.identity import mapped_intrinsics as mapped_intrinsics
 from ..datasets.identity import matching_pixel_centers as matching_pixel_centers
 from ..errors import DataError
+from ..runs import RUN_FILES, RunFolder
 from .memory_files import remove_leftovers
 
 log = logging.getLogger(__name__)
@@ -50,87 +49,14 @@ def dataset_source(cfg: Config, ds: Any) -> dict:
     }
 
 
-RUN_ID_FILE = "run_id"
-RUN_FILES = ("map.npz", "gaussians.ply", "graph.json", "timings.json", "config.yaml", "traj.txt", RUN_ID_FILE)
-
-
 def remove_run_temps(out: Path) -> None:
     """Remove the temporary files that a killed run's writes left in ``out``, and the memory view files
     that its ``map.npz`` does not name (a killed checkpoint's)."""
     for name in RUN_FILES:
         for tmp in remove_stale_temps(out / name):
             log.info("removed %s, a killed write's leftover", tmp)
-    for f in remove_leftovers(out / "map.npz"):
+    for f in remove_leftovers(RunFolder(out).map):
         log.info("removed %s, a killed checkpoint's leftover", f)
-
-
-def config_digest(cfg: Config) -> str:
-    """A digest of the settings ``cfg`` holds: the same for ``cfg`` and for its ``config.yaml`` read back
-    (YAML layout, comments and key order do not count)."""
-    return hashlib.sha256(json.dumps(config_to_dict(cfg), sort_keys=True).encode()).hexdigest()
-
-
-def _read_run_id(out: Path) -> str | None:
-    try:
-        return (out / RUN_ID_FILE).read_text().strip() or None
-    except OSError:
-        return None
-
-
-def start_run_dir(out: Path, cfg: Config, run_id: str | None = None) -> dict[str, str]:
-    """Before the first frame (after a resume was accepted): write the config with the data it records, so
-    that a run stopped before its end can be resumed with its settings, and beside it the run's id (new
-    unless given: a resume goes on with its map's). -> ``{"run_id", "config"}`` (the id and the settings'
-    digest) for ``Mapper.source``: each checkpoint then names the run it belongs to (see
-    :func:`resumed_run_id`).
-    """
-    out.mkdir(parents=True, exist_ok=True)
-    run_id = run_id or uuid.uuid4().hex
-    # the id first: killed between the two writes, the old config.yaml is left with the new id, and an old map
-    # is then refused (ids differ) unless it was made with that very config.yaml, instead of the other way
-    # round, where the old id would vouch for an old map beside a new config.yaml
-    atomic_write_text(out / RUN_ID_FILE, run_id + "\n")
-    save_config(cfg, out / "config.yaml")
-    return {"run_id": run_id, "config": config_digest(cfg)}
-
-
-def resumed_run_id(out: Path, recorded: dict, cfg: Config | None = None) -> str | None:
-    """The run id a resume of ``out`` goes on with: that of the run that wrote ``out/map.npz`` (whose
-    ``Mapper.source`` is ``recorded``); None for a map that records none (an older version's: it is
-    resumed unchecked, as it always was). ``cfg``: the settings the resume would map with (``--config``
-    and ``--set`` applied), when known.
-
-    Raises:
-        DataError: the map was written by another run than the one whose ``config.yaml`` is in ``out``
-            (a run started there after the map was saved, then stopped before saving its own), and with
-            other settings, and ``cfg`` is not the map's either: resuming would continue the earlier map
-            with a later run's settings.
-    """
-    map_id, map_config = recorded.get("run_id"), recorded.get("config")
-    if map_id is None and map_config is None:
-        return None
-    if map_id is not None and map_id == _read_run_id(out):
-        return map_id
-    if cfg is not None and map_config == config_digest(cfg):
-        # the map's own settings given back (--config): whatever config.yaml holds, they replace it
-        log.info("%s goes on with the settings it was mapped with", out / "map.npz")
-        return map_id
-    saved = out / "config.yaml"
-    if not saved.is_file():  # no other run's settings to pair the map with
-        return map_id
-    if map_config == config_digest(load_config(saved)):
-        # another run wrote config.yaml, but with this map's very settings: resuming the map is harmless
-        log.info(
-            "%s was mapped by an earlier run with the settings of %s: resuming it", out / "map.npz", saved
-        )
-        return map_id
-    raise DataError(
-        f"{out / 'map.npz'} was not written by the run whose {saved} is there (run ids and settings "
-        f"differ): a later run started in {out} and stopped before saving a map, so the map is an earlier "
-        "run's, made with other settings, and resuming would go on with the later run's. Run again without "
-        "--resume to map with the settings in config.yaml (this replaces the earlier map), or, to go on with "
-        "the earlier map, resume with its run's settings (put its config.yaml back, or pass it with --config)"
-    )
 
 
 def check_same_source(

@@ -40,6 +40,7 @@ import logging
 import cv2
 import numpy as np
 
+from ..config import SegmentationConfig
 from .base import Segmentation
 from .sam_onnx import check_rgb
 
@@ -343,6 +344,34 @@ class ClassicalSegmenter:
             raise ValueError(f"focal lengths must be positive, got fx={fx}, fy={fy}")
         self.fx = None if fx is None else float(fx)
         self.fy = None if fy is None else float(fy)
+
+    @classmethod
+    def from_config(cls, config: SegmentationConfig, K: np.ndarray | None = None) -> ClassicalSegmenter:
+        """The classical segmenter that a ``segmentation`` config section describes.
+
+        Args:
+            config: the section; read are ``classical_k``, ``classical_min_size``, ``classical_max_side``,
+                ``classical_depth_weight`` and ``classical_normal_weight``.
+            K: 3x3 intrinsics (optional): their focal lengths, for the normals.
+
+        Returns:
+            The segmenter.
+        """
+        fx = fy = None
+        if K is not None:
+            K = np.asarray(K, dtype=np.float64)
+            if K.shape != (3, 3):
+                raise ValueError(f"K must be 3x3, got shape {K.shape}")
+            fx, fy = float(K[0, 0]), float(K[1, 1])
+        return cls(
+            k=config.classical_k,
+            min_size=config.classical_min_size,
+            max_side=config.classical_max_side,
+            depth_weight=config.classical_depth_weight,
+            normal_weight=config.classical_normal_weight,
+            fx=fx,
+            fy=fy,
+        )
 
     def __call__(
         self,

@@ -13,12 +13,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..colors import UNLABELED_RGB, confidence_colors, dim, label_color_uint8, label_colors, turbo
+from ..colors import (
+    UNLABELED_RGB,
+    confidence_colors,
+    dim,
+    label_color_uint8,
+    label_colors,
+    room_colors,
+    turbo,
+)
 from .snapshot import MapSnapshot, covariances, decimate_indices, rotmat_to_wxyz
 
 log = logging.getLogger(__name__)
 
-COLOR_MODES = ("rgb", "semantic", "confidence")
+COLOR_MODES = ("rgb", "semantic", "confidence", "room")
 RENDER_MODES = ("auto", "splats", "points")
 HIGHLIGHT_RGB = (255, 196, 0)
 EDGE_RGB = (70, 70, 70)
@@ -31,7 +39,9 @@ class ViewerSettings:
     ``max_splats``: at most this many Gaussians are sent as splats; ``max_points``: as points. In
     ``render="auto"`` a map up to ``max_splats`` is drawn as splats, a larger one as points.
     ``point_size`` is in metres (0 = from the median Gaussian scale). ``show_edge_labels``: every
-    relation's label (otherwise only those of the selected node's relations). ``label_spacing``: a node
+    relation's label (otherwise only those of the selected node's relations). ``show_rooms``: the rooms'
+    outlines at floor height with their type. Colour mode "room": every Gaussian in its room's colour (the
+    room whose outline holds it, as ``ogscene3d eval`` counts it), grey outside all. ``label_spacing``: a node
     label is left out where a larger node's label is nearer than this fraction of the map's size (the
     selected node and Find matches are always labelled; 0 labels every node).
     """
@@ -47,6 +57,7 @@ class ViewerSettings:
     show_nodes: bool = True
     show_edges: bool = True
     show_edge_labels: bool = False
+    show_rooms: bool = True
     max_edge_labels: int = 300
     label_spacing: float = 0.08
 
@@ -117,10 +128,47 @@ def _swatch(rgb: tuple[int, int, int] | np.ndarray, text: str) -> str:
     )
 
 
+def shown_rooms(graph: dict | None):
+    """(up, floors, rooms) of a graph document for drawing (:func:`~ogscene3d.graph.rooms.read_rooms`);
+    no rooms when it has none or they are malformed (a live graph half-way through an update must not
+    break the viewer)."""
+    from ..errors import OGSceneError
+    from ..graph.rooms import read_rooms
+
+    if not isinstance(graph, dict) or not graph.get("rooms"):
+        return None, [], []
+    try:
+        return read_rooms(graph, "the shown graph")
+    except OGSceneError as e:
+        log.debug("rooms not drawn: %s", e)
+        return None, [], []
+
+
+def gaussian_rooms(means: np.ndarray, graph: dict | None, up: np.ndarray) -> np.ndarray:
+    """The room id of every Gaussian (-1: none), by the rooms' outlines."""
+    from ..graph.rooms import assign_rooms
+
+    doc_up, floors, rooms = shown_rooms(graph)
+    if not rooms:
+        return np.full(len(means), -1, dtype=np.int64)
+    return assign_rooms(means, doc_up if doc_up is not None else up, floors, rooms)
+
+
 def legend_html(color_mode: str, graph: dict | None, max_rows: int = 40) -> str:
     """The colour legend of ``color_mode`` as HTML: per scene-graph node its label colour and text
-    (largest nodes first) in "semantic" mode, the colour ramp in "confidence" mode, "" in "rgb"."""
+    (largest nodes first) in "semantic" mode, per room its colour and type in "room" mode, the colour ramp
+    in "confidence" mode, "" in "rgb"."""
     grey = tuple(int(round(float(v) * 255)) for v in UNLABELED_RGB)
+    if color_mode == "room":
+        _, _, rooms = shown_rooms(graph)
+        rows = [
+            _swatch(tuple(int(round(float(v) * 255)) for v in room_colors(np.array([r.id]))[0]),
+                    f"{r.type} (room #{r.id}, {len(r.objects)} objects)")
+            for r in rooms[:max_rows]
+        ]  # fmt: skip
+        if not rooms:
+            rows.append("<div><i>no rooms yet</i></div>")
+        return "".join(rows) + _swatch(grey, "in no room")
     if color_mode == "confidence":
         ts = np.linspace(0.0, 1.0, 6)
         ramp = np.round(turbo(ts) * 255).astype(int)
@@ -215,13 +263,23 @@ class SceneLayers:
         self._edge_labels_key: tuple | None = None
         self._highlight_handle = None
         self._highlight_key: tuple | None = None
+        self._rooms_key: tuple | None = None
+        self._room_handles: list = []
 
     # ------------------------------------------------------------------ Gaussians
     def update_bounds(self, snap: MapSnapshot) -> None:
         self.center, self.extent = scene_bounds(snap.means)
 
-    def update_map(self, snap: MapSnapshot, st: ViewerSettings, highlight_labels: set[int] | None) -> None:
-        """(Re)send the Gaussians with the current colour mode, render mode and budgets."""
+    def update_map(
+        self,
+        snap: MapSnapshot,
+        st: ViewerSettings,
+        highlight_labels: set[int] | None,
+        graph: dict | None = None,
+        up: np.ndarray | None = None,
+    ) -> None:
+        """(Re)send the Gaussians with the current colour mode, render mode and budgets (``graph`` and the
+        world ``up``: the rooms of colour mode "room")."""
         n = len(snap)
         kind = st.render
         if kind == "auto":
@@ -233,6 +291,9 @@ class SceneLayers:
             rgb = label_colors(s.labels)
         elif st.color_mode == "confidence":
             rgb = confidence_colors(s.confidences, s.labels)
+        elif st.color_mode == "room":
+            default_up = np.array([0.0, -1.0, 0.0]) if up is None else up
+            rgb = room_colors(gaussian_rooms(s.means, graph, default_up))
         else:
             rgb = np.clip(s.colors, 0.0, 1.0)
         if highlight_labels:
@@ -484,6 +545,48 @@ class SceneLayers:
                 "/graph/highlight", points=seg, colors=HIGHLIGHT_RGB, thickness=3.0, thickness_units="screen"
             )
 
+    # ------------------------------------------------------------------ rooms
+    def update_rooms(self, graph: dict | None, st: ViewerSettings) -> None:
+        """Each room's outline at its floor's height, in its colour, with its type at its centre."""
+        _, _, rooms = shown_rooms(graph)
+        key = tuple((r.id, r.type, tuple(np.round(np.concatenate(r.outline), 4).ravel())) for r in rooms
+                    if r.outline)  # fmt: skip
+        if key == self._rooms_key:
+            return
+        for h in self._room_handles:
+            h.remove()
+        self._room_handles = []
+        self._rooms_key = key
+        for r in rooms:
+            if not r.outline:
+                continue
+            seg = np.concatenate([np.stack([p, np.roll(p, -1, axis=0)], axis=1) for p in r.outline])
+            color = tuple(int(round(float(v) * 255)) for v in room_colors(np.array([r.id]))[0])
+            self._room_handles.append(
+                self.scene.add_line_segments(
+                    f"/rooms/{r.id}/outline",
+                    points=seg.astype(np.float32),
+                    colors=color,
+                    thickness=3.0,
+                    thickness_units="screen",
+                    visible=st.show_rooms,
+                )
+            )
+            self._room_handles.append(
+                self.scene.add_label(
+                    f"/rooms/{r.id}/label",
+                    f"{r.type} #{r.id}",
+                    position=np.concatenate(r.outline).mean(axis=0),
+                    anchor="center-center",
+                    font_screen_scale=1.1,
+                    visible=st.show_rooms,
+                )
+            )
+
+    @property
+    def shown_rooms(self) -> int:
+        return len(self._rooms_key or ())
+
     @property
     def shown_nodes(self) -> int:
         return len(self._node_handles)
@@ -508,6 +611,8 @@ class SceneLayers:
             self._edge_segments.visible = st.show_edges
         for h in self._edge_labels:
             h.visible = st.show_edges
+        for h in self._room_handles:
+            h.visible = st.show_rooms
 
 
 __all__ = [

@@ -1,6 +1,6 @@
 """Projection of 3D Gaussians to 2D (EWA) and their binning into screen tiles: the steps the colour
-rasterizer (:mod:`ogscene3d.render`) and the semantic renderer (:mod:`ogscene3d.semantics`) share, with the
-Warp interop (torch tensors as Warp arrays, on torch's stream) and the input checks both run.
+rasterizer (``_rasterization``) and the semantic renderer (``_semantics``) share, with the Warp interop
+(torch tensors as Warp arrays, on torch's stream) and the input checks both run.
 """
 
 from __future__ import annotations
@@ -13,18 +13,30 @@ from typing import Any
 
 import torch
 
-from ._validate import ValueChecks, check_image_size, check_tensor
-from .device import init_warp, warp_stream
+from .._validate import ValueChecks, check_image_size, check_tensor
+from ..device import init_warp, warp_stream
 
 
-def _wp():
+def warp_module():
     return init_warp()
 
 
-def _kernels():
-    from ogscene3d.kernels import binning, projection, raster
+@dataclass(frozen=True)
+class KernelModules:
+    projection: Any
+    binning: Any
+    raster: Any
+    semantic: Any
+    validate: Any
 
-    return projection, binning, raster
+
+@functools.cache
+def kernel_modules() -> KernelModules:
+    """The Warp kernel modules the renderers launch, imported on first use: they import Warp, which
+    importing the renderers (and the mapping, which imports them) does not load."""
+    from ogscene3d.kernels import binning, projection, raster, semantic, validate
+
+    return KernelModules(projection, binning, raster, semantic, validate)
 
 
 # torch dtype -> the Warp scalar type a launch argument of that tensor holds
@@ -40,7 +52,7 @@ _SCALARS = {
 @functools.cache
 def _array_descriptor() -> Any:
     """Warp's bare array descriptor type (``warp.types.array_t``; private in newer Warp), or None."""
-    wp = _wp()
+    wp = warp_module()
     found = getattr(wp.types, "array_t", None)
     if found is None:
         try:
@@ -56,12 +68,12 @@ def _item_layout(torch_dtype: torch.dtype, dtype: Any) -> tuple[int, tuple[int, 
     viewing a tensor of ``torch_dtype``; TypeError where the scalar types differ."""
     scalar = _SCALARS.get(torch_dtype)
     expected = getattr(dtype, "_wp_scalar_type_", dtype)
-    if scalar is None or (expected is not None and _wp().types.type_repr(expected) != scalar):
+    if scalar is None or (expected is not None and warp_module().types.type_repr(expected) != scalar):
         raise TypeError(f"cannot pass a {torch_dtype} tensor as a Warp {dtype} array")
     return getattr(dtype, "_length_", 1), tuple(getattr(dtype, "_shape_", ()))
 
 
-def _as_wp(t: torch.Tensor, dtype: Any = None):
+def as_wp(t: torch.Tensor, dtype: Any = None):
     """A flat (1D) Warp launch argument viewing a contiguous tensor; vector/matrix dtypes consume the
     trailing dims. It is Warp's bare array descriptor, built directly where Warp exposes its type (a few
     microseconds less than ``wp.from_torch`` per argument, and a forward+backward passes about 60): it
@@ -74,14 +86,14 @@ def _as_wp(t: torch.Tensor, dtype: Any = None):
     descriptor = _array_descriptor()
     if descriptor is None:
         view = t.reshape(-1, *shape) if shape else t.reshape(-1)
-        arg = _wp().from_torch(view, dtype=dtype, requires_grad=False, return_ctype=True)
+        arg = warp_module().from_torch(view, dtype=dtype, requires_grad=False, return_ctype=True)
     else:
         arg = descriptor(t.data_ptr(), 0, 1, (t.numel() // per_item,), (t.element_size() * per_item,))
     arg.tensor = t
     return arg
 
 
-def _on_torch_stream(fn):
+def on_torch_stream(fn):
     """Run a public render function inside one ``warp_stream`` (a stream switch costs a few driver calls;
     the entries of its steps then nest for free)."""
 
@@ -95,15 +107,15 @@ def _on_torch_stream(fn):
     return wrapper
 
 
-class _Project(torch.autograd.Function):
+class Project(torch.autograd.Function):
     @staticmethod
     def forward(
         ctx, means, quats, scales, opacities, viewmats, Ks, width, height, near_plane, far_plane, eps2d
     ):
         """``opacities`` (not differentiated here) give gsplat's opacity-aware screen radius (see
         kernels/projection.py)."""
-        wp = _wp()
-        projection, _, _ = _kernels()
+        wp = warp_module()
+        projection = kernel_modules().projection
         C, N = viewmats.shape[0], means.shape[0]
         dev = means.device
         # the kernel writes every entry (zeros where it culls)
@@ -137,8 +149,8 @@ class _Project(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, v_means2d, v_conics, v_depths, _v_radii):
-        wp = _wp()
-        projection, _, _ = _kernels()
+        wp = warp_module()
+        projection = kernel_modules().projection
         means, quats, scales, viewmats, Ks, means2d, conics, depths, radii = ctx.saved_tensors
         N, width, height, near_plane, far_plane, eps2d = ctx.params
         C = viewmats.shape[0]
@@ -167,11 +179,11 @@ class _Project(torch.autograd.Function):
                         torch.empty_like(radii),
                     ),
                     adj_inputs=[
-                        _as_wp(v_means, wp.vec3),
-                        _as_wp(v_quats, wp.vec4),
-                        _as_wp(v_scales, wp.vec3),
+                        as_wp(v_means, wp.vec3),
+                        as_wp(v_quats, wp.vec4),
+                        as_wp(v_scales, wp.vec3),
                         None,
-                        None if v_viewmats is None else _as_wp(v_viewmats, wp.mat44),
+                        None if v_viewmats is None else as_wp(v_viewmats, wp.mat44),
                         None,
                         0,
                         0,
@@ -181,9 +193,9 @@ class _Project(torch.autograd.Function):
                         0.0,
                     ],
                     adj_outputs=[
-                        _as_wp(grads_out[0], wp.vec2),
-                        _as_wp(grads_out[1], wp.vec3),
-                        _as_wp(grads_out[2]),
+                        as_wp(grads_out[0], wp.vec2),
+                        as_wp(grads_out[1], wp.vec3),
+                        as_wp(grads_out[2]),
                         None,
                     ],
                     adjoint=True,
@@ -193,15 +205,15 @@ class _Project(torch.autograd.Function):
 
 
 def _project_inputs(args, opacities, N, width, height, near_plane, far_plane, eps2d):
-    wp = _wp()
+    wp = warp_module()
     means, quats, scales, viewmats, Ks = args
     return [
-        _as_wp(means, wp.vec3),
-        _as_wp(quats, wp.vec4),
-        _as_wp(scales, wp.vec3),
-        _as_wp(opacities),
-        _as_wp(viewmats, wp.mat44),
-        _as_wp(Ks, wp.mat33),
+        as_wp(means, wp.vec3),
+        as_wp(quats, wp.vec4),
+        as_wp(scales, wp.vec3),
+        as_wp(opacities),
+        as_wp(viewmats, wp.mat44),
+        as_wp(Ks, wp.mat33),
         N,
         width,
         height,
@@ -212,8 +224,8 @@ def _project_inputs(args, opacities, N, width, height, near_plane, far_plane, ep
 
 
 def _project_outputs(means2d, conics, depths, radii):
-    wp = _wp()
-    return [_as_wp(means2d, wp.vec2), _as_wp(conics, wp.vec3), _as_wp(depths), _as_wp(radii)]
+    wp = warp_module()
+    return [as_wp(means2d, wp.vec2), as_wp(conics, wp.vec3), as_wp(depths), as_wp(radii)]
 
 
 @dataclass
@@ -246,7 +258,7 @@ class TileBins:
 
 @functools.cache
 def _sort_takes_bit_range() -> bool:
-    return "end_bit" in inspect.signature(_wp().utils.radix_sort_pairs).parameters
+    return "end_bit" in inspect.signature(warp_module().utils.radix_sort_pairs).parameters
 
 
 def _sort_keys(keys, values, count: int, n_tiles: int) -> None:
@@ -255,9 +267,9 @@ def _sort_keys(keys, values, count: int, n_tiles: int) -> None:
     takes a bit range."""
     if _sort_takes_bit_range():
         end_bit = 32 + max(1, (n_tiles - 1).bit_length())
-        _wp().utils.radix_sort_pairs(keys, values, count, 0, end_bit)
+        warp_module().utils.radix_sort_pairs(keys, values, count, 0, end_bit)
     else:
-        _wp().utils.radix_sort_pairs(keys, values, count)
+        warp_module().utils.radix_sort_pairs(keys, values, count)
 
 
 def bin_gaussians(
@@ -280,8 +292,8 @@ def bin_gaussians(
     ``checks``: the caller's pending input checks, settled on the sync this function makes anyway.
     ``voters``: (labels [N] int32, confidences [N]) to bin only the Gaussians that vote (label >= 0,
     confidence > 0), as the semantic kernels need (the others neither vote nor occlude)."""
-    wp = _wp()
-    _, binning, _ = _kernels()
+    wp = warp_module()
+    binning = kernel_modules().binning
     C, N = radii.shape
     dev = radii.device
     tiles_x = (width + tile_size - 1) // tile_size
@@ -295,22 +307,22 @@ def bin_gaussians(
             checks.settle()
         empty = torch.zeros(0, dtype=torch.int32, device=dev)
         return TileBins(tile_size, tiles_x, tiles_y, tile_start, tile_end, empty, counts, extents)
-    m2d = _as_wp(means2d.detach(), wp.vec2)
-    rad = _as_wp(radii)
+    m2d = as_wp(means2d.detach(), wp.vec2)
+    rad = as_wp(radii)
     if voters is None:
         voters = (torch.empty(0, dtype=torch.int32, device=dev), torch.empty(0, device=dev))
-    footprint = [m2d, rad, _as_wp(conics.detach(), wp.vec3), _as_wp(opacities.detach())]
-    votes = [_as_wp(voters[0].to(torch.int32)), _as_wp(voters[1].detach())]
+    footprint = [m2d, rad, as_wp(conics.detach(), wp.vec3), as_wp(opacities.detach())]
+    votes = [as_wp(voters[0].to(torch.int32)), as_wp(voters[1].detach())]
     grid = [N, tile_size, tiles_x, tiles_y]
-    ext = _as_wp(extents, wp.vec2)
+    ext = as_wp(extents, wp.vec2)
     # which tiles of its rectangle each Gaussian's ellipse meets, decided once for count and emission
-    reached = _as_wp(torch.empty(C * N, dtype=torch.uint64, device=dev))
+    reached = as_wp(torch.empty(C * N, dtype=torch.uint64, device=dev))
     with warp_stream(dev) as wdev:
         wp.launch(
             binning.count_tiles,
             dim=C * N,
             inputs=[*footprint, *votes, *grid],
-            outputs=[_as_wp(counts), ext, reached],
+            outputs=[as_wp(counts), ext, reached],
             device=wdev,
         )
         offsets = torch.cumsum(counts.reshape(-1), 0, dtype=torch.int64)
@@ -320,12 +332,12 @@ def bin_gaussians(
         values = torch.empty(2 * max(total, 1), dtype=torch.int32, device=dev)
         if total > 0:
             depth_bits = depths.detach().contiguous().view(torch.int32)
-            wk = _wp().from_torch(keys, requires_grad=False)  # radix_sort_pairs takes wp.arrays
-            wv = _wp().from_torch(values, requires_grad=False)
+            wk = warp_module().from_torch(keys, requires_grad=False)  # radix_sort_pairs takes wp.arrays
+            wv = warp_module().from_torch(values, requires_grad=False)
             wp.launch(
                 binning.emit_intersections,
                 dim=C * N,
-                inputs=[m2d, rad, ext, reached, _as_wp(depth_bits), _as_wp(offsets), _as_wp(counts), *grid],
+                inputs=[m2d, rad, ext, reached, as_wp(depth_bits), as_wp(offsets), as_wp(counts), *grid],
                 outputs=[wk, wv],
                 device=wdev,
             )
@@ -334,10 +346,39 @@ def bin_gaussians(
                 binning.tile_ranges,
                 dim=total,
                 inputs=[wk, total],
-                outputs=[_as_wp(tile_start), _as_wp(tile_end)],
+                outputs=[as_wp(tile_start), as_wp(tile_end)],
                 device=wdev,
             )
     return TileBins(tile_size, tiles_x, tiles_y, tile_start, tile_end, values[:total], counts, extents)
+
+
+def project_and_bin(
+    means: torch.Tensor,
+    quats: torch.Tensor,
+    scales: torch.Tensor,
+    opacities: torch.Tensor,
+    viewmats: torch.Tensor,
+    Ks: torch.Tensor,
+    width: int,
+    height: int,
+    near_plane: float,
+    far_plane: float,
+    eps2d: float,
+    tile_size: int,
+    checks: ValueChecks,
+    voters: tuple[torch.Tensor, torch.Tensor] | None = None,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, TileBins]:
+    """The step both renderers start with: project every Gaussian into every camera (differentiable where
+    autograd records) and bin them into tiles (``voters``: only those, see :func:`bin_gaussians`), which
+    settles the pending input ``checks``. -> (means2d, conics, depths, radii, bins)."""
+    means2d, conics, depths, radii = Project.apply(
+        means, quats, scales, opacities, viewmats, Ks, width, height, near_plane, far_plane, eps2d
+    )
+    with torch.no_grad():
+        bins = bin_gaussians(
+            means2d, conics, opacities, radii, depths, width, height, tile_size, checks, voters
+        )
+    return means2d, conics, depths, radii, bins
 
 
 # kernels/validate.py flag order
@@ -358,8 +399,8 @@ _VALUE_MESSAGES = [
 ]
 
 
-def _check_shapes(means, quats, scales, opacities, viewmats, Ks, width, height):
-    """Shape, dtype and device checks (no device work); the values are checked by ``_check_values``."""
+def check_shapes(means, quats, scales, opacities, viewmats, Ks, width, height):
+    """Shape, dtype and device checks (no device work); the values are checked by ``check_values``."""
     check_tensor("means", means, (None, 3), finite=False)
     dev = means.device
     N = means.shape[0]
@@ -374,7 +415,7 @@ def _check_shapes(means, quats, scales, opacities, viewmats, Ks, width, height):
     return check_image_size(width, height)
 
 
-def _check_values(
+def check_values(
     checks: ValueChecks,
     means,
     quats,
@@ -387,9 +428,8 @@ def _check_values(
     confidences=None,
 ) -> None:
     """Queue every value check of the rendering inputs (one kernel); ``checks`` settles them later."""
-    wp = _wp()
-    from ogscene3d.kernels import validate
-
+    wp = warp_module()
+    validate = kernel_modules().validate
     dev = means.device
     flags = torch.zeros(validate.NUM_FLAGS, dtype=torch.int32, device=dev)
     none = torch.zeros(0, device=dev)
@@ -400,15 +440,15 @@ def _check_values(
             validate.check_inputs,
             dim=max(dim, 1),
             inputs=[
-                _as_wp(means.detach(), wp.vec3),
-                _as_wp(quats.detach(), wp.vec4),
-                _as_wp(scales.detach(), wp.vec3),
-                _as_wp(opacities.detach()),
-                _as_wp(viewmats.detach(), wp.mat44),
-                _as_wp(Ks.detach(), wp.mat33),
-                *(_as_wp(t) for t in flat),
+                as_wp(means.detach(), wp.vec3),
+                as_wp(quats.detach(), wp.vec4),
+                as_wp(scales.detach(), wp.vec3),
+                as_wp(opacities.detach()),
+                as_wp(viewmats.detach(), wp.mat44),
+                as_wp(Ks.detach(), wp.mat33),
+                *(as_wp(t) for t in flat),
             ],
-            outputs=[_as_wp(flags)],
+            outputs=[as_wp(flags)],
             device=wdev,
         )
     checks.fail_if_flags(flags, _VALUE_MESSAGES)

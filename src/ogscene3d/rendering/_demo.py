@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .device import resolve_device
-from .errors import ConfigError, DataError
+from ..device import resolve_device
+from ..errors import ConfigError, DataError
+from ._rasterization import rasterization
 
 
 def procedural_scene(n: int, seed: int = 0, device: torch.device | str = "cpu") -> list[torch.Tensor]:
@@ -72,8 +73,6 @@ def render_demo(
 ) -> Path:
     """Render ``views`` orbit views of :func:`procedural_scene` side by side into the image file ``out``."""
     import cv2
-
-    from .render import rasterization
 
     out = Path(out)
     check_demo_args(out, n, width, height, views)
