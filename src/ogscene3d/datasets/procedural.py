@@ -335,6 +335,19 @@ def _table(center, yaw, size, color) -> tuple[list[Part], list]:
     return parts, [top]
 
 
+def _chair_slots(lo: np.ndarray, hi: np.ndarray, gap) -> list[tuple[np.ndarray, float]]:
+    """The four places (floor point, yaw) of a chair facing a table's sides (its box ``lo``, ``hi``), each
+    ``gap()`` metres out (a draw per side, in this order)."""
+    slots = []
+    for axis in (0, 1):
+        for sgn in (-1, 1):
+            c = (lo + hi) / 2
+            c[2] = 0.0
+            c[axis] = (hi if sgn > 0 else lo)[axis] + sgn * gap()
+            slots.append((c, np.arctan2(0, -sgn) if axis == 0 else np.arctan2(-sgn, 0)))
+    return slots
+
+
 def _chair(center, yaw, color) -> list[Part]:
     s, seat_h, back_h = 0.44, 0.45, 0.45
     parts = [make_part("box", center + [0, 0, seat_h - 0.025], color, size=[s, s, 0.05])]
@@ -693,15 +706,7 @@ def build_room(seed: int = 0) -> Room:
     if table is not None:
         lo, hi = table.aabb
         chair_color = b.color((0.3, 0.22, 0.15), 0.08)
-        slots = []
-        for side_axis in (0, 1):
-            for sgn in (-1, 1):
-                c = (lo + hi) / 2
-                c = c.copy()
-                c[2] = 0.0
-                c[side_axis] = (hi if sgn > 0 else lo)[side_axis] + sgn * (0.22 + rng.uniform(0.05, 0.12))
-                yaw = np.arctan2(0, -sgn) if side_axis == 0 else np.arctan2(-sgn, 0)
-                slots.append((c, yaw))
+        slots = _chair_slots(lo, hi, lambda: 0.22 + rng.uniform(0.05, 0.12))
         rng.shuffle(slots)
         for c, yaw in slots[: int(rng.integers(2, 5))]:
             obj = b.try_add("chair", _chair(c, yaw, chair_color), floor.instance_id, "on", margin=0.05)
