@@ -19,11 +19,12 @@ separation rule) is ``_maskclustering.py`` (``--weak``).
   mask holds ``SPLIT_PART`` of it) in more than ``SPLIT`` of the frames that see it lies over two objects (a
   first view that merged a refrigerator with the floor): it is no node, holds nothing and has no vote.
 * **Separation** (rule a): a frame separates two masks when it holds one by a mask that holds at most
-  ``APART`` (a fifth) of the other's voxels seen there, a mask that is small beside the other (at most
-  ``SEP_SIZE`` of the other's voxels: a cup's own segment beside the table; a random cut through a wall is no
-  evidence). Two clusters are *apart* when at least ``SEP_MIN`` frames, and ``SEP_SHARE`` of the frames that
-  hold both, separate a mask of one from a mask of the other. SAM merges a small object into its support in
-  most far views; the few views that show it apart are the evidence.
+  ``APART`` (a fifth) of the other's voxels seen there, and either that mask is small beside the other (at
+  most ``SEP_SIZE`` of the other's voxels: a cup's own segment beside the table) or the other is held there
+  by a mask of its own (a cabinet's segment beside the floor's). Two clusters are *apart* when at least
+  ``SEP_MIN`` frames, and ``SEP_SHARE`` of the frames that hold both, separate a mask of one from a mask of
+  the other: SAM merges an object with its support in some views and shows it apart in others, and a random
+  cut through a wall separates two of its pieces in few of the views that see both.
 * **Levels** (:func:`schedule`): at the first threshold of ``THRESHOLDS``, MaskClustering's falling observer
   counts (the ``OBSERVER_PERCENTILES`` of the pairs' shared frames down to ``MIN_VIEWS``), then each further
   threshold at ``MIN_VIEWS``: the cluster pairs whose consensus reaches it are joined, best consensus first,
@@ -64,7 +65,7 @@ MIN_MASK_VOXELS = 2
 SPLIT = 0.3  # a mask split in more than this share of the frames that see it is under-segmented
 SEP_SIZE: float | None = 0.3
 SEP_MIN = 2  # ... in at least this many frames
-SEP_SHARE = 0.3  # ... and this share of the frames that hold both
+SEP_SHARE = 0.5  # ... and this share of the frames that hold both
 SPLIT_PART = 0.3  # ... where a second mask holds this share of it
 THRESHOLDS = (0.9, 0.8, 0.7)
 OBSERVER_PERCENTILES = (95, 85, 75, 65, 50)
@@ -277,7 +278,9 @@ def _separating_frames(
             k = h.held[xs]  # the mask holding x in each frame
             look = (k >= 0) & h.seen[ys] & (h.n_in[ys] > 0)
             if SEP_SIZE is not None:  # the mask that holds x is small beside y: a cup's, beside the table
-                look &= h.mask_size[np.maximum(k, 0)] <= SEP_SIZE * h.size[ys][:, None]
+                small = h.mask_size[np.maximum(k, 0)] <= SEP_SIZE * h.size[ys][:, None]
+                ky = h.held[ys]  # ... or y has a mask of its own there: a cabinet's beside the floor's
+                look &= small | ((ky >= 0) & (ky != k))
             e, g = np.nonzero(look)
             if e.size == 0:
                 continue
@@ -287,14 +290,6 @@ def _separating_frames(
     keys = np.unique(np.concatenate(hit)) if hit else np.zeros(0, np.int64)  # a frame counts once
     F = h.held.shape[1]
     return keys // F, keys % F
-
-
-def _separated(h: Holding, a: np.ndarray, b: np.ndarray, observers: np.ndarray | None = None) -> np.ndarray:
-    """[E] bool: pairs that at least ``SEP_MIN`` frames, and ``SEP_SHARE`` of the frames holding both,
-    clearly separate (rule a)."""
-    n = np.bincount(_separating_frames(h, a, b)[0], minlength=len(a))
-    obs = _observers(h, a, b) if observers is None else observers
-    return (n >= SEP_MIN) & (n >= SEP_SHARE * obs)
 
 
 class _Union:
