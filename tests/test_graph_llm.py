@@ -18,7 +18,7 @@ import pytest
 from test_graph_helpers import box_surface, plane, table, to_world
 
 from ogscene3d import Frame
-from ogscene3d.config import GraphConfig, RelationsConfig
+from ogscene3d.config import EndpointConfig, GraphConfig, RelationsConfig
 from ogscene3d.errors import ModelError
 from ogscene3d.graph import (
     ChatClient,
@@ -343,7 +343,7 @@ def test_query_with_openai_embeddings(server_factory):
 
     srv = server_factory(respond)
     cfg = GraphConfig(query_embedding="openai", embedding_model="emb", query_min_similarity=0.8)
-    cfg.captioner.base_url = srv.base_url
+    cfg.endpoint.base_url = srv.base_url
     g = SceneGraph(cfg, node_confidence=MeanConfidence())
     for i, (tag, cap) in enumerate([("seat", "a big couch"), ("light", "a floor lamp")]):
         n = SceneNode.from_points(i, np.zeros((3, 3)))
@@ -644,11 +644,13 @@ def test_edge_entries_naming_other_nodes_fall_back_to_geometry(entry, caplog):
 
 
 def test_query_embedding_without_a_model_names_its_key(caplog):
-    """The query embeddings read graph.embedding_model (else the captioner's model): the error says so,
-    not the captioner's / relations' keys."""
+    """The query embeddings read graph.embedding_model (else the captioner's model, else the endpoint's): the
+    error says so, not the captioner's / relations' keys."""
     with pytest.raises(ModelError, match=r"set graph\.embedding_model\)"):
         ChatClient("http://127.0.0.1:9/v1", "", model_setting="graph.embedding_model")
-    with pytest.raises(ModelError, match=r"graph\.captioner\.model / graph\.relations\.model"):
+    with pytest.raises(ModelError, match=r"set graph\.embedding_model or graph\.endpoint\.model\)"):
+        ChatClient.from_config(EndpointConfig(), "", "graph.embedding_model")
+    with pytest.raises(ModelError, match=r"\(set graph\.endpoint\.model\)"):
         ChatClient("http://127.0.0.1:9/v1", "")
     g = SceneGraph(GraphConfig(query_embedding="openai"), node_confidence=MeanConfidence())
     n = SceneNode.from_points(0, np.zeros((3, 3)))

@@ -166,8 +166,8 @@ def fake_llm():
 def _llm_graph(url) -> SceneGraph:
     g = apartment_graph()
     cfg = GraphConfig()
-    cfg.query.kind, cfg.query.base_url, cfg.query.model, cfg.query.api_key_env = "llm", url, "m", ""
-    cfg.query.max_retries = 0
+    cfg.query.kind, cfg.endpoint.base_url, cfg.query.model, cfg.endpoint.api_key_env = "llm", url, "m", ""
+    cfg.endpoint.max_retries = 0
     h = SceneGraph.from_json(g.to_json(), cfg)
     return h
 
@@ -203,13 +203,13 @@ def test_llm_query_end_to_end_and_reply_validation(fake_llm):
 
 
 def test_llm_room_types_with_the_rule_as_fallback(fake_llm):
-    from ogscene3d.config import RoomsConfig
+    from ogscene3d.config import EndpointConfig, RoomsConfig
     from ogscene3d.graph.rooms import LLMRoomTyper
 
     replies = iter(['{"type": "Study", "reason": "a desk"}', '{"type": "garage"}', '{"type": "room"}'])
     srv = fake_llm(lambda body, n: (200, next(replies), 0))
-    cfg = RoomsConfig(typer="llm", base_url=srv.base_url, model="m", api_key_env="")
-    t = LLMRoomTyper.from_config(cfg)
+    cfg = RoomsConfig(typer="llm", model="m")
+    t = LLMRoomTyper.from_config(cfg, EndpointConfig(base_url=srv.base_url, api_key_env=""))
     assert t.describe_with_source(["desk", "chair"]) == ("office", "a desk", "llm")
     assert t.describe_with_source(["desk", "chair"])[2] == "llm" and len(srv.requests) == 1  # cached
     kind, _, source = t.describe_with_source(["bed", "pillow"])  # "garage": the rule answers
@@ -222,7 +222,7 @@ def test_graph_command_answers_through_the_configured_endpoint(fake_llm, tmp_pat
     srv = fake_llm(lambda body, n: (200, '{"ids": [8], "reason": "the living room chair"}', 0))
     apartment_graph().save(tmp_path / "graph.json")
     argv = ["graph", str(tmp_path), "-q", "chair where I watch TV", "--json", "--set", "graph.query.kind=llm",
-            "--set", f"graph.query.base_url={srv.base_url}", "--set", "graph.query.model=m"]  # fmt: skip
+            "--set", f"graph.endpoint.base_url={srv.base_url}", "--set", "graph.query.model=m"]  # fmt: skip
     assert main(argv) == 0
     (answer,) = json.loads(capsys.readouterr().out)
     assert answer["source"] == "llm" and answer["hits"][0]["id"] == 8

@@ -581,12 +581,13 @@ class LLMQuery:
         self.max_nodes = max_nodes
 
     @classmethod
-    def from_config(cls, config) -> LLMQuery:
-        """From ``graph.query`` (a :class:`~ogscene3d.config.QueryConfig`)."""
+    def from_config(cls, config, endpoint=None) -> LLMQuery:
+        """From ``graph.query`` (a :class:`~ogscene3d.config.QueryConfig`) and the endpoint it calls
+        (``graph.endpoint``, an :class:`~ogscene3d.config.EndpointConfig`; None: the defaults)."""
+        from ..config import EndpointConfig
         from .openai_client import ChatClient
 
-        client = ChatClient(config.base_url, config.model, config.api_key_env, config.timeout_s,
-                            config.max_retries, model_setting="graph.query.model")  # fmt: skip
+        client = ChatClient.from_config(endpoint or EndpointConfig(), config.model, "graph.query.model")
         return cls(client, config.max_tokens, config.max_nodes)
 
     def answer(self, text: str, ctx: QueryContext, top_k: int | None = None) -> QueryAnswer:

@@ -56,7 +56,7 @@ from .confidence import MeanConfidence, NodeConfidence, build_confidence
 from .geometry import directed_ratios, proximate_points, unit_up
 from .query import LLMQuery, QueryAnswer, QueryContext, QueryHit, answer_offline
 from .relations import GeometricRelations, RelationPredictor, build_relations
-from .rooms import Floor, RoomMap, RoomNode
+from .rooms import Floor, RoomMap, RoomNode, build_room_typer
 from .terms import SYNONYM_GROUPS, text_score
 
 __all__ = ["SYNONYM_GROUPS", "SceneGraph"]  # SYNONYM_GROUPS: the offline synonyms, from .terms
@@ -128,8 +128,10 @@ class SceneGraph:
                 f"graph: need support_band > 0 and 0 < support_ratio <= 1 "
                 f"(got {c.support_band}, {c.support_ratio})"
             )
-        self.captioner: Captioner = captioner or build_captioner(c.captioner, label_names, class_names)
-        self.relations: RelationPredictor = relations or build_relations(c.relations, self.up)
+        self.captioner: Captioner = captioner or build_captioner(
+            c.captioner, label_names, class_names, c.endpoint
+        )
+        self.relations: RelationPredictor = relations or build_relations(c.relations, self.up, c.endpoint)
         self.node_confidence: NodeConfidence = node_confidence or build_confidence(c.confidence)
         self._fallback_captioner = HeuristicCaptioner()
         self._fallback_relations = GeometricRelations(c.relations, self.up)
@@ -155,10 +157,14 @@ class SceneGraph:
         self._embed_cache: dict[str, np.ndarray] = {}
         self._query_encoder: Any = None
         # storeys and rooms (graph.rooms), updated with the graph and every rooms.update_every keyframes
-        self.room_map: RoomMap | None = RoomMap(c.rooms) if c.rooms.enabled else None
+        self.room_map: RoomMap | None = (
+            RoomMap(c.rooms, build_room_typer(c.rooms, c.endpoint)) if c.rooms.enabled else None
+        )
         self._last_rooms_count = 0
         self._keyframe_frames: dict[int, int] = {}  # keyframe index -> its dataset frame index
-        self._llm_query: LLMQuery | None = LLMQuery.from_config(c.query) if c.query.kind == "llm" else None
+        self._llm_query: LLMQuery | None = (
+            LLMQuery.from_config(c.query, c.endpoint) if c.query.kind == "llm" else None
+        )
 
     def set_up_axis(self, up: Sequence[float]) -> None:
         """Set the world up direction (``graph.up_axis`` auto, chosen by the mapper from the cameras at its
@@ -1048,14 +1054,9 @@ class SceneGraph:
             elif kind == "openai":
                 from .openai_client import ChatClient
 
-                cc = self.config.captioner
-                self._query_encoder = ChatClient(
-                    cc.base_url,
-                    self.config.embedding_model or cc.model,
-                    cc.api_key_env,
-                    cc.timeout_s,
-                    cc.max_retries,
-                    model_setting="graph.embedding_model",
+                model = self.config.embedding_model or self.config.captioner.model
+                self._query_encoder = ChatClient.from_config(
+                    self.config.endpoint, model, "graph.embedding_model"
                 )
             else:
                 raise ConfigError(f"graph.query_embedding must be none, clip or openai, got {kind!r}")
