@@ -108,6 +108,7 @@ def _numbers(value: Any, count: int | None = None, integer: bool = False) -> lis
     return list(value)
 
 
+# the checks of the numeric list settings (``check=`` on their fields): what is wrong, None when fine
 def _check_intrinsics(v: Any) -> str | None:
     if v is None:
         return None
@@ -145,16 +146,6 @@ def _check_iterations(v: Any) -> str | None:
     if not vals or not all(n >= 1 for n in vals):
         return "must be a non-empty list of integers >= 1 (one per pyramid level)"
     return None
-
-
-# the numeric list settings: a check returns what is wrong (None: fine)
-LIST_CHECKS: dict[str, Callable[[Any], str | None]] = {
-    "data.intrinsics": _check_intrinsics,
-    "segmentation.sam_score_range": _check_score_range,
-    "segmentation.conf_range": _check_conf_range,
-    "graph.up_axis": _check_up_axis,
-    "tracking.iterations": _check_iterations,
-}
 
 
 def setting(
