@@ -1296,31 +1296,6 @@ def load_config(path: str | Path | None = None, overrides: list[str] | None = No
     return cfg
 
 
-def add_override_argument(parser: Any, example: str = "mapping.opt_iters=5") -> None:
-    """The ``--set KEY=VALUE`` option every command that reads a config offers (parsed by ``load_config``)."""
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help=f"config override, repeatable (e.g. --set {example})",
-    )
-
-
-def add_poses_argument(parser: Any) -> None:
-    """Add ``--poses gt|odometry`` (the choices of ``tracking.poses``) to a subcommand.
-
-    The command then does ``if args.poses: cfg.tracking.poses = args.poses``.
-    """
-    parser.add_argument(
-        "--poses",
-        choices=choices("tracking.poses"),
-        default=None,
-        help="camera poses: the dataset's (gt) or RGB-D odometry (odometry); default: config tracking.poses",
-    )
-
-
 def config_to_dict(cfg: Any) -> dict:
     return dataclasses.asdict(cfg)
 

@@ -9,9 +9,9 @@ from pathlib import Path
 from typing import Any
 
 from ..batch import EXECUTORS
-from ..config import add_override_argument
 from ..errors import OGSceneError
 from ..eval.options import add_eval_arguments, eval_options_from_args
+from .options import add_override_argument
 
 
 def _add_executor_args(p: argparse.ArgumentParser) -> None:

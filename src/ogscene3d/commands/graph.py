@@ -9,8 +9,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..cli_types import positive_int
-from ..config import add_override_argument, load_config
+from ..config import load_config
 from ..errors import DataError
+from .options import add_override_argument
 
 if TYPE_CHECKING:
     from ..graph.scenegraph import SceneGraph

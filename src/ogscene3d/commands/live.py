@@ -19,8 +19,8 @@ import time
 from pathlib import Path
 
 from ..cli_types import add_rerun_arguments, image_size, port, positive_float, positive_int
-from ..config import add_override_argument
 from ..errors import ConfigError, DataError, OGSceneError
+from .options import add_override_argument
 
 log = logging.getLogger(__name__)
 

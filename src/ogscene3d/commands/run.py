@@ -13,8 +13,9 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from ..cli_types import add_rerun_arguments
-from ..config import add_override_argument, add_poses_argument, choices, load_config
+from ..config import choices, load_config
 from ..errors import DataError
+from .options import add_override_argument, add_poses_argument
 
 log = logging.getLogger(__name__)
 

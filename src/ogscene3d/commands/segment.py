@@ -16,8 +16,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..cli_types import positive_int
-from ..config import add_override_argument, load_config
+from ..config import load_config
 from ..errors import ConfigError, DataError
+from .options import add_override_argument
 
 if TYPE_CHECKING:
     from ..config import SegmentationConfig

@@ -6,8 +6,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from ..config import add_override_argument
 from ..errors import ConfigError, OGSceneError
+from .options import add_override_argument
 
 
 def add_parser(subparsers: Any) -> None:
