@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_datasets import _png, _pose, _rgb, make_replica
+from dataset_files import _png, _pose, _rgb, make_replica
 
 from ogscene3d.config import DataConfig
 from ogscene3d.datasets import base, open_dataset

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_datasets import _png
+from dataset_files import _png
 
 from ogscene3d.config import DataConfig
 from ogscene3d.datasets import detect_kind, open_dataset

@@ -4,27 +4,17 @@ import json
 
 import numpy as np
 import pytest
-from plyfile import PlyData, PlyElement
+from eval_runs import GAUSSIAN_DTYPE, _main, _run_from_ground_truth, _write_ply
+from plyfile import PlyData
 
 from ogscene3d import cli
 from ogscene3d.errors import DataError
 from ogscene3d.eval import evaluate_run, find_ground_truth, load_ground_truth, pick_frames
 
-GAUSSIAN_DTYPE = (
-    [(n, "<f4") for n in ("x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", "opacity")]
-    + [(f"scale_{i}", "<f4") for i in range(3)]
-    + [(f"rot_{i}", "<f4") for i in range(4)]
-    + [("label", "<i4"), ("confidence", "<f4")]
-)
-
 
 def _line(xs):
     xs = np.asarray(xs, dtype=np.float64)
     return np.stack([xs, np.ones_like(xs), np.zeros_like(xs)], axis=1)
-
-
-def _write_ply(path, arr, extra=()):
-    PlyData([PlyElement.describe(arr, "vertex"), *extra], byte_order="<").write(str(path))
 
 
 @pytest.fixture
@@ -75,11 +65,6 @@ def scene(tmp_path):
     edges = [{"source": 8, "target": 7, "relation": "next to", "score": 1.0}]
     (run / "graph.json").write_text(json.dumps({"version": 1, "nodes": nodes, "edges": edges}))
     return run, tmp_path / "scene"
-
-
-def _main(argv, monkeypatch):
-    monkeypatch.setattr(cli, "COMMAND_MODULES", ["ogscene3d.commands.eval"])
-    return cli.main(argv)
 
 
 def test_eval_module_is_registered():
@@ -192,24 +177,6 @@ def test_pick_frames():
     assert pick_frames(10, 3) == [0, 4, 9]
     assert pick_frames(2, 5) == [0, 1]
     assert pick_frames(0, 3) == [] and pick_frames(5, 0) == []
-
-
-def _run_from_ground_truth(gt, run, scale=0.02):
-    """A 'perfect' run: a Gaussian per GT point, labelled 100 + its instance id, tagged by class."""
-    n = gt.points.shape[0]
-    g = np.zeros(n, dtype=GAUSSIAN_DTYPE)
-    g["x"], g["y"], g["z"] = gt.points.T
-    g["opacity"] = 4.0
-    g["rot_0"] = 1.0
-    for i in range(3):
-        g[f"scale_{i}"] = np.log(scale)
-    g["label"] = gt.instances + 100
-    g["confidence"] = 0.9
-    run.mkdir()
-    _write_ply(run / "gaussians.ply", g)
-    nodes = [{"id": i + 100, "tag": gt.class_names[c]} for i, c in gt.instance_classes.items()]
-    edges = [{"source": s + 100, "target": o + 100, "relation": r} for s, r, o in gt.relations]
-    (run / "graph.json").write_text(json.dumps({"version": 1, "nodes": nodes, "edges": edges}))
 
 
 def test_eval_cli_on_a_generated_synthetic_scene(tmp_path, monkeypatch, capsys):

@@ -9,8 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_eval_cli import _main
-from test_eval_frames_2d import make_labelfusion, write_wall_run
+from eval_runs import _main, make_labelfusion, write_wall_run
 
 from ogscene3d.datasets import open_dataset
 from ogscene3d.errors import DataError
@@ -168,7 +167,7 @@ def test_eval_batch_scores_held_out_views(tmp_path, capsys):
 def test_held_out_views_of_a_synthetic_run_with_3d_ground_truth(tmp_path, monkeypatch):
     """With 3D ground truth (and graph tags) nothing is named from renders: only held-out views render."""
     synthetic = pytest.importorskip("ogscene3d.datasets.synthetic")
-    from test_eval_cli import _run_from_ground_truth
+    from eval_runs import _run_from_ground_truth
 
     from ogscene3d.eval import load_ground_truth
 

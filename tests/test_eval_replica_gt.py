@@ -6,7 +6,7 @@ import logging
 
 import numpy as np
 import pytest
-from test_eval_cli import GAUSSIAN_DTYPE, _main, _write_ply
+from eval_runs import GAUSSIAN_DTYPE, _main, _write_ply
 
 from ogscene3d.errors import DataError
 from ogscene3d.eval import evaluate_run, load_ground_truth

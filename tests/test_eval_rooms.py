@@ -5,10 +5,9 @@ import json
 
 import numpy as np
 import pytest
+from eval_runs import GAUSSIAN_DTYPE
+from graph_scenes import box_surface, plane, to_world, walls_with_doors
 from plyfile import PlyData, PlyElement
-from test_eval_cli import GAUSSIAN_DTYPE
-from test_graph_helpers import box_surface, plane, to_world
-from test_graph_rooms import walls_with_doors
 
 from ogscene3d.cli import main
 from ogscene3d.config import GraphConfig

@@ -6,8 +6,8 @@ import json
 
 import numpy as np
 import pytest
-from test_graph_helpers import box_surface, to_world
-from test_graph_llm import FakeServer
+from fake_llm import FakeServer
+from graph_scenes import box_surface, to_world
 
 from ogscene3d.cli import main
 from ogscene3d.config import GraphConfig
@@ -152,7 +152,7 @@ def test_graph_command_prints_reasons_and_json(tmp_path, capsys):
 
 @pytest.fixture
 def fake_llm():
-    """``make(respond)`` -> a running :class:`FakeServer` (test_graph_llm.py), closed after the test."""
+    """``make(respond)`` -> a running :class:`FakeServer` (helpers/fake_llm.py), closed after the test."""
     with contextlib.ExitStack() as stack:
 
         def make(respond):

@@ -4,7 +4,7 @@ import re
 
 import numpy as np
 import pytest
-from test_graph_helpers import box_surface, plane, shelf, table, to_world
+from graph_scenes import box_surface, plane, shelf, table, to_world
 
 from ogscene3d.config import RelationsConfig
 from ogscene3d.graph import GeometricRelations, SceneNode, normalize_relation, proximity_ratios

@@ -5,8 +5,7 @@ import json
 
 import numpy as np
 import pytest
-from test_graph_helpers import box_surface, plane, to_world
-from test_graph_scenegraph import blob_map
+from graph_scenes import blob_map, box_surface, plane, to_world, walls_with_doors
 
 from ogscene3d.config import GraphConfig, RoomsConfig
 from ogscene3d.errors import DataError
@@ -22,30 +21,6 @@ from ogscene3d.graph.rooms import (
 )
 
 UPS = [(0.0, 0.0, 1.0), (0.0, -1.0, 0.0)]
-
-
-def walls_with_doors(x0, x1, y0, y1, H, rng, doors=(), t=0.05, density=300.0):
-    """The inner faces of a rectangular room's four walls (z-up), with doorways ``doors`` = [(side, centre
-    along the wall)] 0.9 m wide and 2.05 m high left open."""
-    out = []
-    for side in ("-x", "+x", "-y", "+y"):
-        fixed = {"-x": x0, "+x": x1, "-y": y0, "+y": y1}[side]
-        a0, a1 = (y0, y1) if side in ("-x", "+x") else (x0, x1)
-        cuts = sorted(c for s, c in doors if s == side)
-        pieces, start = [], a0
-        for c in cuts:
-            pieces.append((start, c - 0.45, 0.0, H))
-            pieces.append((c - 0.45, c + 0.45, 2.05, H))
-            start = c + 0.45
-        pieces.append((start, a1, 0.0, H))
-        for lo, hi, z0, z1 in pieces:
-            if hi - lo < 1e-6:
-                continue
-            if side in ("-x", "+x"):
-                out.append(plane([fixed, lo, z0], [fixed, hi, z1], rng, density))
-            else:
-                out.append(plane([lo, fixed, z0], [hi, fixed, z1], rng, density))
-    return np.concatenate(out)
 
 
 def room_points(x0, x1, y0, y1, rng, H=2.6, doors=(), z=0.0, furniture=True):

@@ -6,6 +6,7 @@ import time
 
 import numpy as np
 import pytest
+from graph_scenes import blob_map
 
 from ogscene3d import Frame
 from ogscene3d.config import GraphConfig, RoomsConfig, load_config
@@ -60,20 +61,6 @@ class SpyRelations:
         if self.fail:
             raise ConnectionError("LLM down")
         return self.inner.predict(pairs)
-
-
-def blob_map(labels_present, n_per=400, seed=0):
-    """Gaussian means: label k is a 0.3 m cube of points at x = 0.3 k (touching)."""
-    rng = np.random.default_rng(seed)
-    means, labels = [], []
-    for k in labels_present:
-        means.append(rng.uniform(0, 0.3, (n_per, 3)) + np.array([0.3 * k, 0.0, 0.0]))
-        labels.append(np.full(n_per, k, np.int32))
-    means = np.concatenate(means)
-    labels = np.concatenate(labels)
-    conf = np.full(len(means), 0.8, np.float32)
-    colors = np.tile(np.array([[0.8, 0.1, 0.1]]), (len(means), 1))
-    return means, labels, conf, colors
 
 
 def test_update_schedule_and_selective_updates(tmp_path):

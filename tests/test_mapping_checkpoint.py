@@ -3,7 +3,7 @@ old meaning (mapping/checkpoint.py)."""
 
 import numpy as np
 import pytest
-from test_mapping_mapper import _config, _frame
+from mapping_scenes import _config, _frame
 
 from ogscene3d.errors import DataError
 from ogscene3d.mapping.checkpoint import REQUIRED, read_checkpoint

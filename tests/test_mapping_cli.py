@@ -4,35 +4,9 @@ import cv2
 import numpy as np
 import pytest
 from layout_scenes import garble_pixels
+from mapping_scenes import H, W, _common, _replica_scene
 
 from ogscene3d.cli import main
-from ogscene3d.segmentation.precomputed import write_segments
-
-W, H = 32, 24
-
-
-def _replica_scene(root, frames: int = 3):
-    """A tiny Replica-layout scene: a two-coloured wall 2 m ahead, camera moving 0.2 m per frame."""
-    res = root / "results"
-    res.mkdir(parents=True)
-    f = 24.0
-    cam = {"camera": {"w": W, "h": H, "fx": f, "fy": f, "cx": W / 2, "cy": H / 2, "scale": 6553.5}}
-    (root / "cam_params.json").write_text(json.dumps(cam))
-    lines = []
-    for i in range(frames):
-        pose = np.eye(4)
-        pose[0, 3] = 0.2 * i
-        lines.append(" ".join(f"{v:.6f}" for v in pose.reshape(-1)))
-        u = (np.arange(W) + 0.5 - W / 2) / f * 2.0 + pose[0, 3]
-        left = np.broadcast_to(u[None, :] < 0, (H, W))
-        rgb = np.where(left[..., None], np.uint8([30, 30, 200]), np.uint8([200, 30, 30])).astype(np.uint8)
-        cv2.imwrite(str(res / f"frame{i:06d}.jpg"), rgb)
-        cv2.imwrite(str(res / f"depth{i:06d}.png"), np.full((H, W), round(2.0 * 6553.5), np.uint16))
-        write_segments(
-            root / "segs", f"frame{i:06d}", np.where(left, 1 + i, 10 + i), {1 + i: 0.95, 10 + i: 0.9}
-        )
-    (root / "traj.txt").write_text("\n".join(lines) + "\n")
-    return root
 
 
 def test_run_and_resume(tmp_path, capsys):
@@ -117,12 +91,6 @@ def test_unusable_device_is_a_clean_error(tmp_path, capsys):
     if not torch.cuda.is_available():
         assert main(["run", "--out", str(tmp_path / "o"), "--device", "cuda", "--no-progress"]) == 2
         assert "sees no CUDA GPU" in capsys.readouterr().err
-
-
-def _common(scene, out):
-    return ["--out", str(out), "--device", "cpu", "--no-progress", "--data", str(scene),
-            "--segments", str(scene / "segs"), "--set", "mapping.opt_iters=1", "--set", "graph.enabled=false",
-            "--set", "mapping.knn_radius=0.1"]  # fmt: skip
 
 
 def test_resume_goes_on_with_the_runs_own_data_and_settings(tmp_path, capsys):

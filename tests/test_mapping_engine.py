@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 import pytest
 from layout_scenes import garble_pixels
-from test_mapping_cli import H, W, _common, _replica_scene
+from mapping_scenes import H, W, _common, _replica_scene
 
 from ogscene3d.cli import main
 from ogscene3d.runs import LOCK, RunDirBusyError, RunDirLock, run_directory

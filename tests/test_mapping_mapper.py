@@ -4,43 +4,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from mapping_scenes import F, H, W, _config, _frame
 
 from ogscene3d.config import load_config
 from ogscene3d.errors import ConfigError, DataError, OGSceneError
 from ogscene3d.frame import Frame
 from ogscene3d.mapping.keyframes import KeyframeSelector
 from ogscene3d.mapping.mapper import Mapper
-
-W, H, F = 32, 24, 24.0
-K = np.array([[F, 0, W / 2], [0, F, H / 2], [0, 0, 1]], dtype=np.float32)
-
-
-def _frame(i: int, ids: tuple[int, int] = (1, 2), with_segments: bool = True) -> Frame:
-    """A fronto-parallel wall 2 m ahead: a red object left of x = 0 and a blue one right of it, seen from
-    a camera shifted 20 cm per frame along x."""
-    tx = 0.2 * i
-    pose = np.eye(4)
-    pose[0, 3] = tx
-    u = (np.arange(W) + 0.5 - W / 2) / F * 2.0 + tx  # world x of each column on the wall
-    left = np.broadcast_to(u[None, :] < 0, (H, W))
-    rgb = np.where(left[..., None], np.array([200, 30, 30], np.uint8), np.array([30, 30, 200], np.uint8))
-    seg = np.where(left, ids[0], ids[1]).astype(np.int32)
-    return Frame(
-        i,
-        np.ascontiguousarray(rgb),
-        np.full((H, W), 2.0, np.float32),
-        K,
-        pose,
-        name=f"f{i}",
-        segments=seg if with_segments else None,
-        segment_scores={ids[0]: 0.97, ids[1]: 0.91},
-    )
-
-
-def _config(*overrides: str):
-    return load_config(
-        None, ["graph.enabled=false", "mapping.opt_iters=2", "mapping.knn_radius=0.1", *overrides]
-    )
 
 
 def test_labels_stay_consistent_across_frames(device):

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from test_mapping_cli import _common, _replica_scene
+from mapping_scenes import _common, _replica_scene
 
 from ogscene3d.cli import main
 from ogscene3d.config import load_config

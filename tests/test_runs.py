@@ -2,8 +2,8 @@
 each file kind has one reader that every consumer shares.
 
 ``data/run_folder_03e44a8`` was written by main at 03e44a8, before ``ogscene3d.runs``: the tiny Replica-layout
-scene of ``test_mapping_cli._replica_scene`` (3 frames, 32x24, with segments) in ``scene/``, and in ``run/``
-``ogscene3d run`` of its first two frames (``test_mapping_cli._common`` with ``--max-frames 2``).
+scene of ``mapping_scenes._replica_scene`` (3 frames, 32x24, with segments) in ``scene/``, and in ``run/``
+``ogscene3d run`` of its first two frames (``mapping_scenes._common`` with ``--max-frames 2``).
 """
 
 from __future__ import annotations

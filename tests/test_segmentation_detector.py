@@ -1,4 +1,4 @@
-"""DetectorOnnx on tiny detector exports in the common output layouts (tests/onnx_models.py)."""
+"""DetectorOnnx on tiny detector exports in the common output layouts (tests/helpers/onnx_models.py)."""
 
 from __future__ import annotations
 

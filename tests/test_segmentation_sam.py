@@ -1,4 +1,5 @@
-"""SamOnnx against tiny ONNX models with SAM's interface (tests/onnx_models.py): closed-form answers."""
+"""SamOnnx against tiny ONNX models with SAM's interface (tests/helpers/onnx_models.py): closed-form
+answers."""
 
 from __future__ import annotations
 

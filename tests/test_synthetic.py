@@ -10,8 +10,8 @@ import cv2
 import numpy as np
 import pytest
 import torch
+from dataset_files import reprojection_error
 from plyfile import PlyData
-from test_datasets import reprojection_error
 
 from ogscene3d.datasets import load_instances, make_synthetic_scene, open_dataset
 from ogscene3d.datasets.procedural import RELATION_VOCABULARY, STRUCTURAL_CLASSES, build_room

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_viewer import make_scene
+from viewer_runs import make_scene
 
 from ogscene3d.viewer.headless import HeadlessBrowser, find_chromium
 

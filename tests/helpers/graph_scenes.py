@@ -70,3 +70,41 @@ def shelf(rng, x0=0.0, y0=0.0, w=0.8, d=0.3, h=0.84, t=0.02) -> np.ndarray:
 
 def to_world(points: np.ndarray, up) -> np.ndarray:
     return points @ rotation_to_up(up).T
+
+
+def walls_with_doors(x0, x1, y0, y1, H, rng, doors=(), t=0.05, density=300.0):
+    """The inner faces of a rectangular room's four walls (z-up), with doorways ``doors`` = [(side, centre
+    along the wall)] 0.9 m wide and 2.05 m high left open."""
+    out = []
+    for side in ("-x", "+x", "-y", "+y"):
+        fixed = {"-x": x0, "+x": x1, "-y": y0, "+y": y1}[side]
+        a0, a1 = (y0, y1) if side in ("-x", "+x") else (x0, x1)
+        cuts = sorted(c for s, c in doors if s == side)
+        pieces, start = [], a0
+        for c in cuts:
+            pieces.append((start, c - 0.45, 0.0, H))
+            pieces.append((c - 0.45, c + 0.45, 2.05, H))
+            start = c + 0.45
+        pieces.append((start, a1, 0.0, H))
+        for lo, hi, z0, z1 in pieces:
+            if hi - lo < 1e-6:
+                continue
+            if side in ("-x", "+x"):
+                out.append(plane([fixed, lo, z0], [fixed, hi, z1], rng, density))
+            else:
+                out.append(plane([lo, fixed, z0], [hi, fixed, z1], rng, density))
+    return np.concatenate(out)
+
+
+def blob_map(labels_present, n_per=400, seed=0):
+    """Gaussian means: label k is a 0.3 m cube of points at x = 0.3 k (touching)."""
+    rng = np.random.default_rng(seed)
+    means, labels = [], []
+    for k in labels_present:
+        means.append(rng.uniform(0, 0.3, (n_per, 3)) + np.array([0.3 * k, 0.0, 0.0]))
+        labels.append(np.full(n_per, k, np.int32))
+    means = np.concatenate(means)
+    labels = np.concatenate(labels)
+    conf = np.full(len(means), 0.8, np.float32)
+    colors = np.tile(np.array([[0.8, 0.1, 0.1]]), (len(means), 1))
+    return means, labels, conf, colors
