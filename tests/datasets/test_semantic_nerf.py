@@ -361,7 +361,7 @@ def test_run_then_2d_only_eval(tmp_path, monkeypatch):
 
     scene = make_release(tmp_path / "Replica_Dataset", n=4)
     run = tmp_path / "run"
-    config = Path(__file__).resolve().parents[1] / "configs" / "replica_semantic_nerf.yaml"
+    config = Path(__file__).resolve().parents[2] / "configs" / "replica_semantic_nerf.yaml"
     argv = ["run", "--config", str(config), "--data", str(scene), "--out", str(run)]
     argv += ["--device", "cpu", "--no-progress", "--set", "segmentation.backend=classical"]
     argv += ["--set", "mapping.keyframe_every=1", "--set", "mapping.pixels_per_gaussian=4"]

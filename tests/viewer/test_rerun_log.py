@@ -19,7 +19,7 @@ import tomllib
 
 from ogscene3d.cli import main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 ENTITIES = (
     "/world/camera", "/world/camera/image", "/world/trajectory", "/world/map", "/world/graph/nodes",
     "/world/graph/edges",

@@ -19,7 +19,7 @@ from ogscene3d.cli import main
 from ogscene3d.errors import DataError
 from ogscene3d.runs import RunFolder, read_gaussians_ply, read_graph_json, read_run_id, recorded_data_path
 
-FIXTURE = Path(__file__).parent / "data" / "run_folder_03e44a8"
+FIXTURE = Path(__file__).resolve().parents[1] / "data" / "run_folder_03e44a8"
 
 
 @pytest.fixture

@@ -80,7 +80,7 @@ def _kernel_resources_module():
     import importlib.util
     from pathlib import Path
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "kernel_resources.py"
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "kernel_resources.py"
     spec = importlib.util.spec_from_file_location("kernel_resources", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
