@@ -20,6 +20,7 @@ from typing import Any, Literal
 import numpy as np
 import torch
 
+from ..datasets.scannet import SCANNET20_CLASSES
 from ..device import resolve_device
 from ..errors import DataError
 from .graph_metrics import match_nodes_by_overlap, relation_recall
@@ -31,7 +32,9 @@ from .protocols import (
     label_lookup,
     nearest_neighbors,
 )
+from .queries import queries_block
 from .readers import GroundTruth, RunData, load_ground_truth, read_run
+from .rooms import rooms_block
 from .views import ViewSet, overlap_mapping_2d, prepare_views, score_views
 
 log = logging.getLogger(__name__)
@@ -448,9 +451,6 @@ def _rooms_and_queries(
 ) -> tuple[dict[str, Any] | None, dict[str, Any] | None]:
     """Room segmentation (when the GT has rooms) and query accuracy (when it has instances), each None when
     it cannot be scored (a note says why)."""
-    from .queries import queries_block
-    from .rooms import rooms_block
-
     if not gt.has_3d or run.graph is None or gt.instances is None or assoc is None:
         return None, None
     observed = gt.observed if gt_block is not None and gt_block["points"] == "observed" else None
@@ -494,8 +494,6 @@ def _hovsg_scannet_mismatch(ignore: Iterable[str], class_names: Sequence[str]) -
 
     HOV-SG scores ScanNet's 20 benchmark classes (plus a background); over the 40 NYU40 classes of a
     ScanNet labels PLY the same ignore list leaves ceiling, otherprop, pillow, ... in the means."""
-    from ..datasets.scannet import SCANNET20_CLASSES
-
     if not any(str(i).strip().lower() == "preset:hovsg-scannet" for i in ignore):
         return None
     allowed = {n.lower() for n in SCANNET20_CLASSES.values()} | {"background", "furniture"}

@@ -32,6 +32,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from ..config import EndpointConfig, RelationsConfig, check_section
+from ..errors import ConfigError
 from .geometry import Shape, unit_up
 from .openai_client import ChatClient, extract_json
 from .types import SceneNode
@@ -544,6 +545,5 @@ def build_relations(
         return GeometricRelations(config, up)
     if config.kind == "llm":
         return LLMRelations.from_config(config, up, endpoint)
-    from ..errors import ConfigError
 
     raise ConfigError(f"graph.relations.kind must be 'geometric' or 'llm', got {config.kind!r}")

@@ -38,6 +38,7 @@ import numpy as np
 from ..config import EndpointConfig, RoomsConfig
 from ..errors import DataError
 from .geometry import horizontal_basis, unit_up
+from .openai_client import ChatClient, extract_json
 
 log = logging.getLogger(__name__)
 
@@ -504,8 +505,6 @@ class LLMRoomTyper:
     @classmethod
     def from_config(cls, config: RoomsConfig, endpoint: EndpointConfig | None = None) -> LLMRoomTyper:
         """From ``graph.rooms`` and the endpoint it calls (``graph.endpoint``; None: the defaults)."""
-        from .openai_client import ChatClient
-
         client = ChatClient.from_config(endpoint or EndpointConfig(), config.model, "graph.rooms.model")
         return cls(client, config.max_tokens)
 
@@ -528,8 +527,6 @@ class LLMRoomTyper:
             'Answer with JSON only: {"type": "<type>", "reason": "<a few words>"}'
         )
         try:
-            from .openai_client import extract_json
-
             reply = extract_json(self.client.chat([{"role": "user", "content": prompt}], self.max_tokens))
             kind = room_type_of(str(reply.get("type", ""))) if isinstance(reply, dict) else None
             if (

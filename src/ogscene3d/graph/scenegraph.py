@@ -60,6 +60,8 @@ from .rooms import Floor, RoomMap, RoomNode, build_room_typer
 from .terms import SYNONYM_GROUPS, text_score
 
 __all__ = ["SYNONYM_GROUPS", "SceneGraph"]  # SYNONYM_GROUPS: the offline synonyms, from .terms
+from .confidence import ClipConfidence
+from .openai_client import ChatClient
 from .types import (
     OFFLINE_SOURCES,
     VLM_CAPTION_SOURCES,
@@ -1047,13 +1049,9 @@ class SceneGraph:
         kind = self.config.query_embedding
         if self._query_encoder is None:
             if kind == "clip":
-                from .confidence import ClipConfidence
-
                 enc = self.node_confidence if isinstance(self.node_confidence, ClipConfidence) else None
                 self._query_encoder = enc or ClipConfidence.from_config(self.config.confidence)
             elif kind == "openai":
-                from .openai_client import ChatClient
-
                 model = self.config.embedding_model or self.config.captioner.model
                 self._query_encoder = ChatClient.from_config(
                     self.config.endpoint, model, "graph.embedding_model"
