@@ -15,6 +15,8 @@ from pathlib import Path
 from ..cli_types import add_rerun_arguments
 from ..config import choices, load_config
 from ..errors import DataError
+from ..models.manifest import manifest_overrides
+from ..runs import RunFolder, recorded_data_path
 from .options import add_override_argument, add_poses_argument
 
 log = logging.getLogger(__name__)
@@ -61,12 +63,9 @@ def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
     from ..mapping.engine import stopped_message
     from ..mapping.session import mapping_session
-    from ..runs import RunFolder, recorded_data_path
 
     overrides = list(args.overrides)
     if args.models:  # the exported models' settings first: --set still overrides them
-        from ..models.manifest import manifest_overrides
-
         overrides = manifest_overrides(args.models) + overrides
     if args.ablation:
         overrides.append(f"mapping.ablation={args.ablation}")
