@@ -84,6 +84,38 @@ def _to_numpy(x: Any, name: str) -> np.ndarray:
     return np.array(x, copy=True)
 
 
+def _label_regions(
+    lm: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The labelled regions of a label map ``lm`` [H, W] (-1: none): the labelled pixels (flat indices),
+    the labels present (sorted), each labelled pixel's index into them, each label's area in pixels and its
+    bounding box [L, 4] (y0, y1, x0, x1; ends exclusive). None when no pixel is labelled."""
+    H, W = lm.shape
+    flat = lm.reshape(-1)
+    pix = np.nonzero(flat >= 0)[0]
+    if len(pix) == 0:
+        return None
+    vals = flat[pix].astype(np.int64)
+    top = int(vals.max())
+    if top < 4 * len(flat) + 1024:  # labels small enough for counting (the usual case): no sort
+        counts = np.bincount(vals, minlength=top + 1)
+        labs = np.nonzero(counts)[0]
+        area = counts[labs]
+        lut = np.zeros(top + 1, np.int64)
+        lut[labs] = np.arange(len(labs))
+        inv = lut[vals]
+    else:
+        labs, inv, area = np.unique(vals, return_inverse=True, return_counts=True)
+    ys, xs = np.divmod(pix, W)
+    # Bounding boxes from per-(label, row) and per-(label, column) occupancy: two bincounts.
+    L = len(labs)
+    rows = np.bincount(inv * H + ys, minlength=L * H).reshape(L, H) > 0
+    cols = np.bincount(inv * W + xs, minlength=L * W).reshape(L, W) > 0
+    r0, r1 = rows.argmax(axis=1), H - rows[:, ::-1].argmax(axis=1)
+    c0, c1 = cols.argmax(axis=1), W - cols[:, ::-1].argmax(axis=1)
+    return pix, labs, inv, area, np.stack([r0, r1, c0, c1], axis=1)
+
+
 class SceneGraph:
     """Nodes (one per scene label with at least ``min_gaussians`` Gaussians) and directed relation edges.
 
@@ -214,67 +246,69 @@ class SceneGraph:
         if not np.issubdtype(lm.dtype, np.integer):
             raise ValueError(f"SceneGraph.observe: label_map must be an integer array, got {lm.dtype}")
         t0 = time.perf_counter()
-        flat = lm.reshape(-1)
-        pix = np.nonzero(flat >= 0)[0]
-        if len(pix) == 0:
+        regions = _label_regions(lm)
+        if regions is None:
             return
-        vals = flat[pix].astype(np.int64)
-        top = int(vals.max())
-        if top < 4 * len(flat) + 1024:  # labels small enough for counting (the usual case): no sort
-            counts = np.bincount(vals, minlength=top + 1)
-            labs = np.nonzero(counts)[0]
-            area = counts[labs]
-            lut = np.zeros(top + 1, np.int64)
-            lut[labs] = np.arange(len(labs))
-            inv = lut[vals]
-        else:
-            labs, inv, area = np.unique(vals, return_inverse=True, return_counts=True)
-        ys, xs = np.divmod(pix, W)
-        # Bounding boxes from per-(label, row) and per-(label, column) occupancy: two bincounts.
-        L = len(labs)
-        rows = np.bincount(inv * H + ys, minlength=L * H).reshape(L, H) > 0
-        cols = np.bincount(inv * W + xs, minlength=L * W).reshape(L, W) > 0
-        r0, r1 = rows.argmax(axis=1), H - 1 - rows[:, ::-1].argmax(axis=1)
-        c0, c1 = cols.argmax(axis=1), W - 1 - cols[:, ::-1].argmax(axis=1)
-        c = self.config
+        pix, labs, inv, area, boxes = regions
         with self._lock:
             for lab, a in zip(labs.tolist(), area.tolist()):
                 self._label_pixels[lab] = self._label_pixels.get(lab, 0) + a
-            for k in np.nonzero(area >= c.min_obs_pixels)[0]:
-                lab, a = int(labs[k]), int(area[k])
-                obs = self._obs.setdefault(lab, ObservationSet())
-                want_ctx, want_mask = obs.wants(keyframe_index, a, c.max_masked_views)
-                if not (want_ctx or want_mask):
-                    continue
-                y0, y1, x0, x1 = int(r0[k]), int(r1[k]) + 1, int(c0[k]), int(c1[k]) + 1
-                ctx = masked = None
-                if want_ctx:
-                    py, px = round(c.context_pad * (y1 - y0)), round(c.context_pad * (x1 - x0))
-                    ctx = self._downscale(
-                        frame.rgb[max(0, y0 - py) : min(H, y1 + py), max(0, x0 - px) : min(W, x1 + px)]
-                    )
-                if want_mask:
-                    sub = frame.rgb[y0:y1, x0:x1].copy()
-                    sub[lm[y0:y1, x0:x1] != lab] = 0
-                    masked = self._downscale(sub)
-                obs.add(keyframe_index, a, ctx, masked, c.max_masked_views)
-            for gt, votes in (
-                (frame.gt_classes, self._gt_class_votes),
-                (frame.gt_instances, self._gt_instance_votes),
-            ):
-                if gt is None or gt.shape != (H, W):
-                    continue
-                g = np.asarray(gt).reshape(-1)[pix].astype(np.int64)
-                ok = g >= 0
-                if not ok.any():
-                    continue
-                gmax = int(g[ok].max()) + 1
-                codes, counts = np.unique(inv[ok].astype(np.int64) * gmax + g[ok], return_counts=True)
-                for code, n in zip(codes.tolist(), counts.tolist()):
-                    li, gi = divmod(code, gmax)
-                    d = votes.setdefault(int(labs[li]), {})
-                    d[gi] = d.get(gi, 0) + n
+            self._add_views(keyframe_index, frame, lm, labs, area, boxes)
+            self._add_gt_votes(frame, pix, labs, inv)
         self._time("observe", time.perf_counter() - t0)
+
+    def _add_views(
+        self,
+        keyframe_index: int,
+        frame: Frame,
+        lm: np.ndarray,
+        labs: np.ndarray,
+        area: np.ndarray,
+        boxes: np.ndarray,
+    ) -> None:
+        """Put the keyframe's context crop and masked view of each region large enough into its
+        observation set, where the set wants them. Call with the lock held."""
+        c = self.config
+        H, W = lm.shape
+        for k in np.nonzero(area >= c.min_obs_pixels)[0]:
+            lab, a = int(labs[k]), int(area[k])
+            obs = self._obs.setdefault(lab, ObservationSet())
+            want_ctx, want_mask = obs.wants(keyframe_index, a, c.max_masked_views)
+            if not (want_ctx or want_mask):
+                continue
+            y0, y1, x0, x1 = (int(v) for v in boxes[k])
+            ctx = masked = None
+            if want_ctx:
+                py, px = round(c.context_pad * (y1 - y0)), round(c.context_pad * (x1 - x0))
+                ctx = self._downscale(
+                    frame.rgb[max(0, y0 - py) : min(H, y1 + py), max(0, x0 - px) : min(W, x1 + px)]
+                )
+            if want_mask:
+                sub = frame.rgb[y0:y1, x0:x1].copy()
+                sub[lm[y0:y1, x0:x1] != lab] = 0
+                masked = self._downscale(sub)
+            obs.add(keyframe_index, a, ctx, masked, c.max_masked_views)
+
+    def _add_gt_votes(self, frame: Frame, pix: np.ndarray, labs: np.ndarray, inv: np.ndarray) -> None:
+        """Accumulate the overlap votes label -> GT class / instance of a frame with ground-truth maps
+        (synthetic scenes). Call with the lock held."""
+        H, W = frame.rgb.shape[:2]
+        for gt, votes in (
+            (frame.gt_classes, self._gt_class_votes),
+            (frame.gt_instances, self._gt_instance_votes),
+        ):
+            if gt is None or gt.shape != (H, W):
+                continue
+            g = np.asarray(gt).reshape(-1)[pix].astype(np.int64)
+            ok = g >= 0
+            if not ok.any():
+                continue
+            gmax = int(g[ok].max()) + 1
+            codes, counts = np.unique(inv[ok].astype(np.int64) * gmax + g[ok], return_counts=True)
+            for code, n in zip(codes.tolist(), counts.tolist()):
+                li, gi = divmod(code, gmax)
+                d = votes.setdefault(int(labs[li]), {})
+                d[gi] = d.get(gi, 0) + n
 
     def _downscale(self, img: np.ndarray) -> np.ndarray:
         import cv2
@@ -513,50 +547,97 @@ class SceneGraph:
         t_start = time.perf_counter()
         geo = self._geometry(kf, means, labels, confs, colors)
         with self._lock:
-            gone = [i for i in self.nodes if i not in geo]
-            for i in gone:
-                del self.nodes[i]
-            if gone:
-                self.edges = {
-                    k: e for k, e in self.edges.items() if k[0] in self.nodes and k[1] in self.nodes
-                }
-                log.info("scene graph: %d node(s) left the map: %s", len(gone), gone[:10])
-            new = []
-            for lab, g in geo.items():
-                node = self.nodes.get(lab)
-                if node is None:
-                    self.nodes[lab] = SceneNode(id=lab, first_seen=kf, last_updated=kf, **g)
-                    new.append(lab)
-                else:
-                    for k, v in g.items():
-                        setattr(node, k, v)
-                    node._shape = None
-            retry: set[int] = set()
-            if not self._initialized:
-                todo = sorted(self.nodes)
-            else:
-                low = [
-                    i for i, n in self.nodes.items() if n.confidence < self.config.tau_update and i not in new
-                ]
-                retry = self._awaiting_caption() - set(new) - set(low)
-                todo = sorted(set(new) | set(low) | retry)
-            ctx = self._scene_context()
-            requests = [
-                CaptionRequest(
-                    node=self.nodes[i],
-                    observations=self._obs[i].copy() if i in self._obs else ObservationSet(),
-                    context=ctx,
-                    gt_class_votes=dict(self._gt_class_votes.get(i, {})),
-                    gt_instance_votes=dict(self._gt_instance_votes.get(i, {})),
-                    detector_name_votes=dict(self._name_votes.get(i, {})),
-                    label_pixels=self._label_pixels.get(i, 0),
-                )
-                for i in todo
-            ]
+            new = self._merge_geometry(kf, geo)
+            requests, retry, ctx = self._caption_requests(new)
         self._time("graph_geometry", time.perf_counter() - t_start)
 
-        # Node captioning (slow, possibly remote) outside the lock.
         t0 = time.perf_counter()
+        self._caption(kf, requests, ctx)
+        self._time("graph_caption", time.perf_counter() - t0, len(requests))
+
+        t0 = time.perf_counter()
+        self._score_confidence(requests)
+        self._time("graph_confidence", time.perf_counter() - t0, len(requests))
+
+        t0 = time.perf_counter()
+        self._update_edges([r.node.id for r in requests])
+        self._time("graph_edges", time.perf_counter() - t0)
+        if self.room_map is not None:
+            self._last_rooms_count = kf + 1
+            try:
+                self._update_rooms(kf, means)
+            except Exception:
+                log.exception("room update at keyframe %d failed; the graph keeps its previous rooms", kf)
+
+        self._initialized = True
+        self.num_updates += 1
+        self.last_update_keyframe = kf
+        log.info(
+            "scene graph update at keyframe %d: %d nodes (%d new, %d re-captioned%s), %d edges, %.2f s",
+            kf,
+            len(self.nodes),
+            len(new),
+            len(requests) - len(new),
+            f", {len(retry)} of them after a fallback caption" if retry else "",
+            len(self.edges),
+            time.perf_counter() - t_start,
+        )
+        if self.out_path is not None:
+            try:
+                self.save(self.out_path)
+            except Exception as e:
+                log.warning("scene graph: could not write %s (%s)", self.out_path, e)
+
+    def _merge_geometry(self, kf: int, geo: dict[int, dict]) -> list[int]:
+        """Nodes from this update's geometry: those whose label left the map go (with their edges), the
+        others are made or updated. -> the new node ids. Call with the lock held."""
+        gone = [i for i in self.nodes if i not in geo]
+        for i in gone:
+            del self.nodes[i]
+        if gone:
+            self.edges = {k: e for k, e in self.edges.items() if k[0] in self.nodes and k[1] in self.nodes}
+            log.info("scene graph: %d node(s) left the map: %s", len(gone), gone[:10])
+        new = []
+        for lab, g in geo.items():
+            node = self.nodes.get(lab)
+            if node is None:
+                self.nodes[lab] = SceneNode(id=lab, first_seen=kf, last_updated=kf, **g)
+                new.append(lab)
+            else:
+                for k, v in g.items():
+                    setattr(node, k, v)
+                node._shape = None
+        return new
+
+    def _caption_requests(self, new: list[int]) -> tuple[list[CaptionRequest], set[int], SceneContext]:
+        """The nodes to describe at this update (all at the first; then the new ones, those under
+        tau_update and those awaiting a real caption) as caption requests, the ones awaiting a caption, and
+        the scene context. Call with the lock held."""
+        retry: set[int] = set()
+        if not self._initialized:
+            todo = sorted(self.nodes)
+        else:
+            low = [i for i, n in self.nodes.items() if n.confidence < self.config.tau_update and i not in new]
+            retry = self._awaiting_caption() - set(new) - set(low)
+            todo = sorted(set(new) | set(low) | retry)
+        ctx = self._scene_context()
+        requests = [
+            CaptionRequest(
+                node=self.nodes[i],
+                observations=self._obs[i].copy() if i in self._obs else ObservationSet(),
+                context=ctx,
+                gt_class_votes=dict(self._gt_class_votes.get(i, {})),
+                gt_instance_votes=dict(self._gt_instance_votes.get(i, {})),
+                detector_name_votes=dict(self._name_votes.get(i, {})),
+                label_pixels=self._label_pixels.get(i, 0),
+            )
+            for i in todo
+        ]
+        return requests, retry, ctx
+
+    def _caption(self, kf: int, requests: list[CaptionRequest], ctx: SceneContext) -> None:
+        """Describe the requested nodes (slow, possibly remote: outside the lock); nodes left without an
+        answer get (or refresh) the heuristic caption, and every heuristic caption follows its geometry."""
         try:
             descs = self.captioner.describe(requests) if requests else {}
         except Exception as e:
@@ -598,9 +679,9 @@ class SceneGraph:
                 for n in stale:
                     d = fresh[n.id]
                     n.caption, n.tag, n.caption_source = d.caption, d.tag, d.source
-        self._time("graph_caption", time.perf_counter() - t0, len(requests))
 
-        t0 = time.perf_counter()
+    def _score_confidence(self, requests: list[CaptionRequest]) -> None:
+        """The node confidence of the described nodes (the mean Gaussian confidence when the scorer fails)."""
         try:
             scores = self.node_confidence.score(requests) if requests else {}
         except Exception as e:
@@ -611,36 +692,6 @@ class SceneGraph:
                 s = scores.get(r.node.id)
                 if s is not None and math.isfinite(s):
                     r.node.confidence = float(s)
-        self._time("graph_confidence", time.perf_counter() - t0, len(requests))
-
-        t0 = time.perf_counter()
-        self._update_edges([r.node.id for r in requests])
-        self._time("graph_edges", time.perf_counter() - t0)
-        if self.room_map is not None:
-            self._last_rooms_count = kf + 1
-            try:
-                self._update_rooms(kf, means)
-            except Exception:
-                log.exception("room update at keyframe %d failed; the graph keeps its previous rooms", kf)
-
-        self._initialized = True
-        self.num_updates += 1
-        self.last_update_keyframe = kf
-        log.info(
-            "scene graph update at keyframe %d: %d nodes (%d new, %d re-captioned%s), %d edges, %.2f s",
-            kf,
-            len(self.nodes),
-            len(new),
-            len(requests) - len(new),
-            f", {len(retry)} of them after a fallback caption" if retry else "",
-            len(self.edges),
-            time.perf_counter() - t_start,
-        )
-        if self.out_path is not None:
-            try:
-                self.save(self.out_path)
-            except Exception as e:
-                log.warning("scene graph: could not write %s (%s)", self.out_path, e)
 
     def _awaiting_caption(self) -> set[int]:
         """Nodes whose heuristic caption stands in for the configured captioner's: its request failed or
