@@ -24,7 +24,7 @@ from ..datasets.scannet import SCANNET20_CLASSES
 from ..device import resolve_device
 from ..errors import DataError
 from .graph_metrics import match_nodes_by_overlap, relation_recall
-from .label_mapping import TextEmbedder, majority_overlap_mapping, text_label_mapping
+from .label_mapping import TextEmbedder, TextMatch, majority_overlap_mapping, text_label_mapping
 from .metrics import SegmentationMetrics, warn_unknown_ignore
 from .options import EvalOptions
 from .protocols import (
@@ -85,15 +85,7 @@ def build_label_mapping(
     point index, -1 = none) or, without 3D ground truth, ``overlap_2d``: the mapping
     :func:`~ogscene3d.eval.views.overlap_mapping_2d` made from renders, and the frames it used.
     """
-    tags: dict[int, str] = {}
-    heuristic: set[int] = set()
-    if run.graph is not None:
-        for n in run.graph["nodes"]:
-            tag = n.get("tag") or ""
-            if isinstance(tag, str) and tag.strip():
-                tags[int(n["id"])] = tag
-                if n.get("caption_source") == "heuristic":  # ("detector" tags are class names: they count)
-                    heuristic.add(int(n["id"]))
+    tags, heuristic = _node_tags(run.graph)
     labels_present = np.unique(run.labels[run.labels >= 0])
     text = text_label_mapping(tags, gt.class_names, embedder=embedder) if tags else {}
     n_text = sum(1 for k, m in text.items() if m.class_index >= 0 and k not in heuristic)
@@ -102,26 +94,7 @@ def build_label_mapping(
     if method == "text":
         if run.graph is None:
             raise DataError("label mapping 'text' needs graph.json with node tags in the run directory")
-        mapping = {k: m.class_index for k, m in text.items() if m.class_index >= 0}
-        methods: dict[str, int] = {}
-        for m in text.values():
-            methods[m.method] = methods.get(m.method, 0) + 1
-        info = {
-            "method": "text",
-            "description": "graph node tags matched to class names (exact / synonym / head noun"
-            + (" / embedding" if embedder is not None else "")
-            + ")",
-            "num_tags": len(tags),
-            "matches_by_method": methods,
-            "per_label": {
-                str(k): {
-                    "tag": m.tag,
-                    "class": gt.class_names[m.class_index] if m.class_index >= 0 else None,
-                    "method": m.method,
-                }
-                for k, m in sorted(text.items())
-            },
-        }
+        mapping, info = _text_naming(text, len(tags), gt, embedder is not None)
     elif method == "overlap" and assoc is None and overlap_2d is not None:
         mapping = dict(overlap_2d[0])
         info = {
@@ -134,27 +107,77 @@ def build_label_mapping(
     elif method == "overlap":
         if assoc is None:
             raise ValueError("overlap label mapping needs the Gaussian -> GT point association")
-        ok = assoc >= 0
-        if gt.instances is not None and gt.instance_classes:
-            gt_ids = np.where(ok, gt.instances[np.maximum(assoc, 0)], -1)
-            mapping = majority_overlap_mapping(run.labels, gt_ids, id_to_class=gt.instance_classes)
-            desc = "majority overlap with GT instances (class-agnostic), then the instance's class"
-        else:
-            gt_ids = np.where(ok, gt.classes[np.maximum(assoc, 0)], -1)
-            mapping = majority_overlap_mapping(run.labels, gt_ids)
-            desc = "majority overlap with GT classes"
-        mapping = {k: v for k, v in mapping.items() if v >= 0}
-        info = {
-            "method": "overlap",
-            "description": desc + " (uses the ground truth: an oracle naming)",
-            "space": "3d",
-        }
+        mapping, info = _overlap_naming_3d(run, gt, assoc)
     else:
         raise ValueError(f"unknown label mapping method {method!r}; expected auto, text or overlap")
     info["num_scene_labels"] = int(labels_present.size)
     info["num_mapped_labels"] = (
         int(np.isin(labels_present, np.fromiter(mapping, np.int64)).sum()) if mapping else 0
     )
+    return mapping, info
+
+
+def _node_tags(graph: dict[str, Any] | None) -> tuple[dict[int, str], set[int]]:
+    """The tag of each graph node that has one, and the nodes whose tag is the offline heuristic
+    captioner's ("detector" tags are class names: they count)."""
+    tags: dict[int, str] = {}
+    heuristic: set[int] = set()
+    for n in graph["nodes"] if graph is not None else ():
+        tag = n.get("tag") or ""
+        if isinstance(tag, str) and tag.strip():
+            tags[int(n["id"])] = tag
+            if n.get("caption_source") == "heuristic":
+                heuristic.add(int(n["id"]))
+    return tags, heuristic
+
+
+def _text_naming(
+    text: dict[int, TextMatch], num_tags: int, gt: GroundTruth, with_embedder: bool
+) -> tuple[dict[int, int], dict[str, Any]]:
+    """The text matches of the node tags as a mapping, and its description."""
+    mapping = {k: m.class_index for k, m in text.items() if m.class_index >= 0}
+    methods: dict[str, int] = {}
+    for m in text.values():
+        methods[m.method] = methods.get(m.method, 0) + 1
+    info = {
+        "method": "text",
+        "description": "graph node tags matched to class names (exact / synonym / head noun"
+        + (" / embedding" if with_embedder else "")
+        + ")",
+        "num_tags": num_tags,
+        "matches_by_method": methods,
+        "per_label": {
+            str(k): {
+                "tag": m.tag,
+                "class": gt.class_names[m.class_index] if m.class_index >= 0 else None,
+                "method": m.method,
+            }
+            for k, m in sorted(text.items())
+        },
+    }
+    return mapping, info
+
+
+def _overlap_naming_3d(
+    run: RunData, gt: GroundTruth, assoc: np.ndarray
+) -> tuple[dict[int, int], dict[str, Any]]:
+    """Scene labels named by majority overlap with the GT instances (then their class) or classes of the
+    Gaussians' nearest GT points, and its description."""
+    ok = assoc >= 0
+    if gt.instances is not None and gt.instance_classes:
+        gt_ids = np.where(ok, gt.instances[np.maximum(assoc, 0)], -1)
+        mapping = majority_overlap_mapping(run.labels, gt_ids, id_to_class=gt.instance_classes)
+        desc = "majority overlap with GT instances (class-agnostic), then the instance's class"
+    else:
+        gt_ids = np.where(ok, gt.classes[np.maximum(assoc, 0)], -1)
+        mapping = majority_overlap_mapping(run.labels, gt_ids)
+        desc = "majority overlap with GT classes"
+    mapping = {k: v for k, v in mapping.items() if v >= 0}
+    info = {
+        "method": "overlap",
+        "description": desc + " (uses the ground truth: an oracle naming)",
+        "space": "3d",
+    }
     return mapping, info
 
 
