@@ -919,6 +919,20 @@ class TrackingConfig:
 
 @dataclass
 class Config:
+    """Every setting of a run: :func:`load_config` reads it from YAML, ``ogscene3d config`` lists each key
+    with its default, allowed values and doc.
+
+    Attributes:
+        device: ``cpu``, ``cuda`` or ``cuda:N``; None: CUDA when available.
+        seed: random seed of the run.
+        data: the RGB-D input (:class:`DataConfig`).
+        synthetic: the procedural scene of ``--synthetic`` (:class:`SyntheticConfig`).
+        segmentation: open-set 2D segmentation (:class:`SegmentationConfig`).
+        mapping: semantic mapping (:class:`MappingConfig`).
+        graph: the 3D scene graph, its LLM endpoint among its sections (:class:`GraphConfig`).
+        tracking: camera poses (:class:`TrackingConfig`).
+    """
+
     device: str | None = setting(None, "cpu | cuda | cuda:N; null: CUDA when available")
     seed: int = setting(0, "random seed of the run", _int(0))
     data: DataConfig = section(DataConfig, "the RGB-D input")
@@ -1265,8 +1279,22 @@ def config_from_dict(values: dict) -> Config:
 
 
 def load_config(path: str | Path | None = None, overrides: list[str] | None = None) -> Config:
-    """Load a YAML config (None: all defaults; a bare name such as ``"replica"``: the config shipped with the
-    package) and apply ``key=value`` overrides."""
+    """Load a YAML config and apply ``key=value`` overrides, then check every setting.
+
+    Keys that moved (:data:`MOVED`) are read at their new place, with one notice.
+
+    Args:
+        path: a YAML file, a bare name such as ``"replica"`` (the config shipped with the package), or None
+            for all defaults.
+        overrides: ``key=value`` strings (the value is parsed as YAML), e.g. ``"mapping.tau_p=0.2"``.
+
+    Returns:
+        The checked config.
+
+    Raises:
+        ConfigError: a missing or unreadable file, an unknown key, or a value outside its rules (the message
+            names the key, the value and what is allowed).
+    """
     values: dict = {}
     if path is not None:
         p = resolve_config_path(path)

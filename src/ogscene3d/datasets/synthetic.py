@@ -513,16 +513,34 @@ def make_synthetic_scene(
 ) -> Path:
     """Generate (or reuse) a synthetic scene in ``out_dir`` and return its path.
 
-    ``noise``: simulated-SAM noise level (none | low | default | high); ``depth_noise``: std of
-    additive Gaussian depth noise in metres; ``pose_noise``: std of the translation noise of the
-    poses written to traj.txt in metres (rotation noise: half that in radians; gt/traj.txt keeps
-    the true poses). If ``out_dir`` already holds a complete scene made with the same arguments it
-    is reused as is; a folder holding anything else is an error unless ``overwrite``.
-    ``progress``: True for a tqdm bar, or a wrapper ``iterable -> iterable``. ``remedy``: what the error for
-    a folder holding something else tells the user to do (a command names its own options). ``layout``:
-    "room" (one furnished room, :func:`~.procedural.build_room`) or "apartment" (2-5 rooms joined by
-    doorways, :func:`~.apartment.build_apartment`; ``frames`` is then per room, and ``gt/instances.json``
-    gives every instance's room).
+    If ``out_dir`` already holds a complete scene made with the same arguments it is reused as is; a folder
+    holding anything else is an error unless ``overwrite``.
+
+    Args:
+        out_dir: the scene folder (Replica layout, with ``gt/`` and ``segments/``).
+        seed: seed of the procedural room (or apartment) and of every noise.
+        frames: frames of the camera path (``layout="apartment"``: per room).
+        width: image width in pixels (at least 8).
+        height: image height in pixels (at least 8).
+        noise: simulated-SAM noise level (none | low | default | high | legacy-*).
+        depth_noise: std of additive Gaussian depth noise in metres.
+        pose_noise: std of the translation noise of the poses written to traj.txt in metres (rotation noise:
+            half that in radians; gt/traj.txt keeps the true poses).
+        overwrite: replace what ``out_dir`` holds.
+        device: Warp device of the ray caster.
+        progress: True for a tqdm bar, or a wrapper ``iterable -> iterable``.
+        remedy: what the error for a folder holding something else tells the user to do (a command names
+            its own options).
+        layout: "room" (one furnished room, :func:`~.procedural.build_room`) or "apartment" (2-5 rooms
+            joined by doorways, :func:`~.apartment.build_apartment`; ``gt/instances.json`` gives every
+            instance's room).
+
+    Returns:
+        ``out_dir`` as a path.
+
+    Raises:
+        ValueError: an argument out of its range.
+        DataError: ``out_dir`` holds something else and ``overwrite`` is false.
     """
     from ..segmentation.precomputed import write_segments
     from ..segmentation.simulated import NOISE_LEVELS, SimulatedSegmenter

@@ -220,6 +220,14 @@ def evaluate_run(
         embedder: text embeddings for the text label mapping (None: words only).
         out_dir: where the side-by-side view PNGs go (None = no pictures).
         device: rendering device.
+
+    Returns:
+        The report (what ``metrics.json`` holds: every block states its protocol, None where it could not
+        be scored, with a note saying why), the metrics per protocol, the label naming and the 2D metrics.
+
+    Raises:
+        DataError: an unreadable run or ground truth, no labelled Gaussian, or nothing that can be scored.
+        ConfigError: options out of their rules.
     """
     opts = (options or EvalOptions()).replace(**settings)
     opts.check()

@@ -119,10 +119,19 @@ def _label_regions(
 class SceneGraph:
     """Nodes (one per scene label with at least ``min_gaussians`` Gaussians) and directed relation edges.
 
-    ``captioner``, ``relations`` and ``node_confidence`` default to what ``config`` selects
-    (``graph.captioner.kind``, ``graph.relations.kind``, ``graph.confidence.kind``); ``label_names`` /
-    ``class_names`` feed the ground-truth captioner. ``out_path``: graph.json rewritten (atomically) after
-    every update. Thread-safe: ``observe`` may run while a background update is in flight.
+    Thread-safe: ``observe`` may run while a background update is in flight.
+
+    Args:
+        config: the ``graph`` section (its defaults when None).
+        captioner: node captions; None: what ``graph.captioner.kind`` selects.
+        relations: edge relations; None: what ``graph.relations.kind`` selects.
+        node_confidence: node confidence; None: what ``graph.confidence.kind`` selects.
+        out_path: graph.json, rewritten (atomically) after every update; None: not written.
+        label_names: scene label -> name, for the ground-truth captioner.
+        class_names: class id -> name, for the ground-truth captioner.
+
+    Raises:
+        ConfigError: settings of ``config`` out of their rules.
     """
 
     def __init__(
