@@ -16,6 +16,7 @@ from ..cli_types import add_rerun_arguments
 from ..config import choices, load_config
 from ..errors import DataError
 from ..models.manifest import manifest_overrides
+from ..progress import RunTimeEstimate
 from ..runs import RunFolder, recorded_data_path
 from .options import add_override_argument, add_poses_argument
 
@@ -128,8 +129,6 @@ def run_observers(args: argparse.Namespace, cfg, data, frames: int | None) -> It
     """What watches a run (``MappingEngine``'s observers): the run-time estimate over ``frames`` (None: a
     camera, no end to estimate), and the Rerun logger that ``--rerun`` / ``--rerun-save`` ask for (closed,
     its file complete, when the block ends)."""
-    from ..progress import RunTimeEstimate
-
     m = cfg.mapping
     observers: list = []
     if frames is not None:

@@ -81,6 +81,10 @@ import numpy as np
 from ..atomic import atomic_write_bytes, atomic_write_text
 from ..config import DataConfig, SyntheticConfig
 from ..errors import DataError
+from ..progress import progress as progress_bar
+from ..segmentation.precomputed import write_segments
+from ..segmentation.simulated import NOISE_LEVELS, SimulatedSegmenter
+from ..segmentation.simulated_detector import SIMULATED_DETECTOR_VERSION, SimulatedDetector
 from .apartment import Apartment, apartment_camera, build_apartment, rooms_entered
 from .base import FrameRecord, read_label_png
 from .procedural import (
@@ -476,8 +480,6 @@ def _pose_lines(poses: np.ndarray) -> str:
 
 
 def _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise, layout: str = "room") -> dict:
-    from ..segmentation.simulated_detector import SIMULATED_DETECTOR_VERSION
-
     # the default layout is left out, so that scenes written before layouts existed are still reused
     extra = {} if layout == "room" else {"layout": str(layout)}
     return {
@@ -542,10 +544,6 @@ def make_synthetic_scene(
         ValueError: an argument out of its range.
         DataError: ``out_dir`` holds something else and ``overwrite`` is false.
     """
-    from ..segmentation.precomputed import write_segments
-    from ..segmentation.simulated import NOISE_LEVELS, SimulatedSegmenter
-    from ..segmentation.simulated_detector import SimulatedDetector
-
     if frames < 1:
         raise ValueError(f"frames must be >= 1, got {frames}")
     if layout not in LAYOUTS:
@@ -614,8 +612,6 @@ def make_synthetic_scene(
     steps: Iterator = iter(range(frames))
     bars = contextlib.ExitStack()
     if progress is True:
-        from ..progress import progress as progress_bar
-
         steps = iter(bars.enter_context(progress_bar(range(frames), desc="synth", total=frames)))
     elif callable(progress):
         steps = iter(progress(range(frames)))
