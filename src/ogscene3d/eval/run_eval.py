@@ -231,8 +231,7 @@ def evaluate_run(
     """
     opts = (options or EvalOptions()).replace(**settings)
     opts.check()
-    if not opts.plots:
-        out_dir = None
+    out_dir = out_dir if opts.plots else None
     device = resolve_device(device)
     run_data = read_run(run_dir)
     gt = load_ground_truth(gt_path, opts.classes)
@@ -246,26 +245,21 @@ def evaluate_run(
     notes: list[str] = []
     mapping_frames = _mapping_frames(gt, gt_path, opts.mapping_frames, notes)
     # Rendered before the naming: without 3D ground truth the overlap naming reads the renders.
-    rendered = (
-        _render_views(run_dir, gt_path, gt, opts, mapping_frames, device, notes) if want_views else None
-    )
+    rendered = _render_views(run_dir, gt_path, gt, opts, mapping_frames, device, notes)
     assoc = _associate(run, gt, opts.assoc_radius) if gt.has_3d else None
     label_to_class, mapping_info = _name_labels(run, gt, opts, assoc, embedder, rendered, notes)
-    if opts.ignore is not None:
-        _check_ignore(opts.ignore, gt, notes)
+    _check_ignore(opts.ignore, gt, notes)
     gt_classes, gt_block = _scored_gt_points(gt, opts.gt_points, notes)
     semantic = _semantic_3d(scored, labelled, gt, gt_classes, gt_block, label_to_class, opts)
     graph_block = _graph_block(run, gt, assoc, opts, notes)
-    rooms_block, queries_block = _rooms_and_queries(
-        run, scored, gt, assoc, gt_block, opts.min_node_iou, notes
-    )
+    rooms, queries = _rooms_and_queries(run, scored, gt, assoc, gt_block, opts.min_node_iou, notes)
     semantic_2d, views = (None, None) if rendered is None else _views_block(
         rendered, gt, label_to_class, out_dir, opts.ignore, mapping_info.get("space") == "2d"
     )  # fmt: skip
     semantic_3d = {p: m.to_dict() for p, m in semantic.items()}
     report = _report(run_dir, gt, scored, labelled, gt_points=gt_block, label_mapping=mapping_info,
                      semantic_3d=semantic_3d, semantic_2d=semantic_2d, scene_graph=graph_block,
-                     rooms=rooms_block, queries=queries_block, notes=notes)  # fmt: skip
+                     rooms=rooms, queries=queries, notes=notes)  # fmt: skip
     return EvalResult(report=report, semantic=semantic, label_to_class=label_to_class, views=views)
 
 
@@ -322,8 +316,10 @@ def _render_views(
     device: torch.device,
     notes: list[str],
 ) -> ViewSet | None:
-    """The map rendered at the scored (and naming) frames; None, with a note, when it cannot be (an error
-    when nothing else could be scored)."""
+    """The map rendered at the scored (and naming) frames; None when no views are asked for, or, with a
+    note, when they cannot be rendered (an error when nothing else could be scored)."""
+    if not (opts.num_views > 0 or opts.view_frames):
+        return None
     rendered, why = prepare_views(
         run_dir, gt_path, gt, opts.num_views, opts.view_frames, mapping_frames, device, opts.held_out
     )
@@ -368,9 +364,11 @@ def _name_labels(
     return label_to_class, mapping_info
 
 
-def _check_ignore(ignore: Sequence[str], gt: GroundTruth, notes: list[str]) -> None:
+def _check_ignore(ignore: Sequence[str] | None, gt: GroundTruth, notes: list[str]) -> None:
     """Warn about names of the ignore list that are no class (a typo would otherwise leave that class in
     the means without a word) and about a HOV-SG ScanNet preset over other classes."""
+    if ignore is None:
+        return
     warn_unknown_ignore(ignore, gt.class_names)
     # (classes without a 3D point never enter the 3D means; without 3D GT every class may)
     present = [n for i, n in enumerate(gt.class_names) if not gt.has_3d or np.any(gt.classes == i)]
