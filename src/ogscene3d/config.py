@@ -647,8 +647,13 @@ class EndpointConfig:
     ``openai``, relations ``llm``, rooms typer ``llm``, query ``llm``, ``query_embedding: openai``); a
     component's own ``model`` replaces ``model`` here."""
 
-    base_url: str = setting("http://127.0.0.1:8000/v1", "OpenAI-compatible endpoint")
-    model: str = setting("", "model name sent to the endpoint")
+    base_url: str = setting(
+        "http://127.0.0.1:8000/v1",
+        "the OpenAI-compatible API root, with its version (OpenAI, vLLM, Ollama: /v1)",
+    )
+    model: str = setting(
+        "", "model name every component asks for, unless its own section names one (its model setting)"
+    )
     api_key_env: str = setting("OPENAI_API_KEY", _LLM_KEY_DOC)
     timeout_s: float = setting(30.0, "seconds per request", _POS)
     max_retries: int = setting(2, "retries of a failed request", _int(0))
@@ -839,7 +844,8 @@ class GraphConfig:
         0.25, "cosine similarity below which a node does not answer a query", _float(-1.0, 1.0)
     )
     endpoint: EndpointConfig = section(
-        EndpointConfig, "the OpenAI-compatible endpoint of the captioner, relations, rooms typer and queries"
+        EndpointConfig,
+        "the OpenAI-compatible endpoint of the captioner, relations, room typer, queries, query embeddings",
     )
     captioner: CaptionerConfig = section(CaptionerConfig, "node captions")
     relations: RelationsConfig = section(RelationsConfig, "edge relations")
