@@ -487,12 +487,12 @@ def model_server(status: int) -> Callable[[Path], tuple[str, bool | None]]:
         threading.Thread(target=srv.serve_forever, daemon=True).start()
         try:
             url = f"http://127.0.0.1:{srv.server_address[1]}/v1"
-            sets = ["graph.captioner.kind=openai", f"graph.captioner.base_url={url}"]
-            sets += ["graph.captioner.model=fault-matrix", "graph.captioner.api_key_env=OGS_FAULT_MATRIX_KEY"]
+            sets = ["graph.captioner.kind=openai", f"graph.endpoint.base_url={url}"]
+            sets += ["graph.endpoint.model=fault-matrix", "graph.endpoint.api_key_env=OGS_FAULT_MATRIX_KEY"]
             # one graph update (the final one), one request at a time: the breaker opens after 3 failed
             # nodes, each asked 1 + max_retries times, so at most 9 requests (with N requests in parallel,
             # up to N - 1 more nodes are already under way when it opens)
-            sets += ["graph.captioner.max_retries=2", "graph.captioner.timeout_s=5"]
+            sets += ["graph.endpoint.max_retries=2", "graph.endpoint.timeout_s=5"]
             sets += ["graph.init_keyframes=1000", "graph.captioner.concurrency=1"]
             args = _run_args(SCENES["base"], tmp / "run")
             for s in sets:

@@ -1,4 +1,5 @@
-"""The central range check of every numeric setting (config.RANGES, config.LIST_CHECKS, check_config)."""
+"""The central range check of every numeric setting (config.RANGES, config.LIST_CHECKS: views of the rules on
+the fields; check_config)."""
 
 import copy
 import dataclasses
@@ -95,7 +96,7 @@ def test_every_numeric_setting_has_a_range():
     for key, (base, optional) in numeric.items():
         assert RANGES[key].integer == (base is int), key
         assert RANGES[key].optional == optional, key
-    assert lists == set(LIST_CHECKS), "numeric list settings and config.LIST_CHECKS differ"
+    assert lists == set(LIST_CHECKS), "numeric list settings and the check= on fields differ"
     assert len(RANGES) >= 120
 
 

@@ -108,6 +108,7 @@ def _numbers(value: Any, count: int | None = None, integer: bool = False) -> lis
     return list(value)
 
 
+# the checks of the numeric list settings (``check=`` on their fields): what is wrong, None when fine
 def _check_intrinsics(v: Any) -> str | None:
     if v is None:
         return None
@@ -145,16 +146,6 @@ def _check_iterations(v: Any) -> str | None:
     if not vals or not all(n >= 1 for n in vals):
         return "must be a non-empty list of integers >= 1 (one per pyramid level)"
     return None
-
-
-# the numeric list settings: a check returns what is wrong (None: fine)
-LIST_CHECKS: dict[str, Callable[[Any], str | None]] = {
-    "data.intrinsics": _check_intrinsics,
-    "segmentation.sam_score_range": _check_score_range,
-    "segmentation.conf_range": _check_conf_range,
-    "graph.up_axis": _check_up_axis,
-    "tracking.iterations": _check_iterations,
-}
 
 
 def setting(
@@ -655,17 +646,31 @@ class MappingConfig:
 
 
 @dataclass
+class EndpointConfig:
+    """The OpenAI-compatible endpoint that every language-model component of the graph calls (captioner
+    ``openai``, relations ``llm``, rooms typer ``llm``, query ``llm``, ``query_embedding: openai``); a
+    component's own ``model`` replaces ``model`` here."""
+
+    base_url: str = setting(
+        "http://127.0.0.1:8000/v1",
+        "the OpenAI-compatible API root, with its version (OpenAI, vLLM, Ollama: /v1)",
+    )
+    model: str = setting(
+        "", "model name every component asks for, unless its own section names one (its model setting)"
+    )
+    api_key_env: str = setting("OPENAI_API_KEY", _LLM_KEY_DOC)
+    timeout_s: float = setting(30.0, "seconds per request", _POS)
+    max_retries: int = setting(2, "retries of a failed request", _int(0))
+
+
+@dataclass
 class CaptionerConfig:
     kind: Literal["heuristic", "openai", "groundtruth"] = setting(
         "heuristic",
         "node captions: heuristic (from labels and geometry) | openai (a vision-language model at "
         "an OpenAI-compatible endpoint) | groundtruth (synthetic scenes' instance names)",
     )
-    base_url: str = setting("http://127.0.0.1:8000/v1", "OpenAI-compatible endpoint")
-    model: str = setting("", "model name sent to the endpoint")
-    api_key_env: str = setting("OPENAI_API_KEY", _LLM_KEY_DOC)
-    timeout_s: float = setting(30.0, "seconds per request", _POS)
-    max_retries: int = setting(2, "retries of a failed request", _int(0))
+    model: str = setting("", 'model name for the captions (a vision model); "" = graph.endpoint.model')
     max_tokens: int = setting(
         300, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request")
     )
@@ -679,11 +684,7 @@ class RelationsConfig:
         "edge relations: geometric (rules on boxes and points) | llm (a language model, with the "
         "geometric rules as per-pair fallback)",
     )
-    base_url: str = setting("http://127.0.0.1:8000/v1", "OpenAI-compatible endpoint")
-    model: str = setting("", "model name sent to the endpoint")
-    api_key_env: str = setting("OPENAI_API_KEY", _LLM_KEY_DOC)
-    timeout_s: float = setting(30.0, "seconds per request", _POS)
-    max_retries: int = setting(2, "retries of a failed request", _int(0))
+    model: str = setting("", 'model name for the relations; "" = graph.endpoint.model')
     max_tokens: int = setting(
         2000, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request")
     )
@@ -762,11 +763,7 @@ class RoomsConfig:
         "room types: rule (from the tags of the objects in the room) | llm (a language model at an "
         "OpenAI-compatible endpoint, with the rule as fallback)",
     )
-    base_url: str = setting("http://127.0.0.1:8000/v1", "OpenAI-compatible endpoint")
-    model: str = setting("", "model name sent to the endpoint")
-    api_key_env: str = setting("OPENAI_API_KEY", _LLM_KEY_DOC)
-    timeout_s: float = setting(30.0, "seconds per request", _POS)
-    max_retries: int = setting(2, "retries of a failed request", _int(0))
+    model: str = setting("", 'model name for room types; "" = graph.endpoint.model')
     max_tokens: int = setting(
         200, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request")
     )
@@ -785,11 +782,7 @@ class QueryConfig:
         "terms) | llm (a language model at an OpenAI-compatible endpoint picks node ids from a compact "
         "graph; offline when it fails)",
     )
-    base_url: str = setting("http://127.0.0.1:8000/v1", "OpenAI-compatible endpoint")
-    model: str = setting("", "model name sent to the endpoint")
-    api_key_env: str = setting("OPENAI_API_KEY", _LLM_KEY_DOC)
-    timeout_s: float = setting(30.0, "seconds per request", _POS)
-    max_retries: int = setting(2, "retries of a failed request", _int(0))
+    model: str = setting("", 'model name for queries; "" = graph.endpoint.model')
     max_tokens: int = setting(
         500, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request")
     )
@@ -853,6 +846,10 @@ class GraphConfig:
     embedding_model: str = setting("", "model name for query_embedding=openai")
     query_min_similarity: float = setting(
         0.25, "cosine similarity below which a node does not answer a query", _float(-1.0, 1.0)
+    )
+    endpoint: EndpointConfig = section(
+        EndpointConfig,
+        "the OpenAI-compatible endpoint of the captioner, relations, room typer, queries, query embeddings",
     )
     captioner: CaptionerConfig = section(CaptionerConfig, "node captions")
     relations: RelationsConfig = section(RelationsConfig, "edge relations")
@@ -932,6 +929,20 @@ class TrackingConfig:
 
 @dataclass
 class Config:
+    """Every setting of a run: :func:`load_config` reads it from YAML, ``ogscene3d config`` lists each key
+    with its default, allowed values and doc.
+
+    Attributes:
+        device: ``cpu``, ``cuda`` or ``cuda:N``; None: CUDA when available.
+        seed: random seed of the run.
+        data: the RGB-D input (:class:`DataConfig`).
+        synthetic: the procedural scene of ``--synthetic`` (:class:`SyntheticConfig`).
+        segmentation: open-set 2D segmentation (:class:`SegmentationConfig`).
+        mapping: semantic mapping (:class:`MappingConfig`).
+        graph: the 3D scene graph, its LLM endpoint among its sections (:class:`GraphConfig`).
+        tracking: camera poses (:class:`TrackingConfig`).
+    """
+
     device: str | None = setting(None, "cpu | cuda | cuda:N; null: CUDA when available")
     seed: int = setting(0, "random seed of the run", _int(0))
     data: DataConfig = section(DataConfig, "the RGB-D input")
@@ -1156,6 +1167,80 @@ RETIRED: dict[str, str] = {
 }
 
 
+# Settings that moved: read at their new key (with one notice naming them) so that the YAML files and run
+# folders written before still load. Several old keys can move to one new key (each LLM component of the
+# graph had its own endpoint settings): set to different values, they conflict, unless the new key is given.
+_ENDPOINT_KEYS = ("base_url", "api_key_env", "timeout_s", "max_retries")
+MOVED: dict[str, str] = {
+    f"graph.{part}.{key}": f"graph.endpoint.{key}"
+    for part in ("captioner", "relations", "rooms", "query")
+    for key in _ENDPOINT_KEYS
+}
+
+
+def _pop_key(values: dict, key: str) -> tuple[dict, Any]:
+    """``values`` without the dotted ``key`` (a copy where it changes) and the value it held
+    (``dataclasses.MISSING``: none)."""
+    head, _, rest = key.partition(".")
+    if head not in values:
+        return values, dataclasses.MISSING
+    if not rest:
+        return {k: v for k, v in values.items() if k != head}, values[head]
+    if not isinstance(values[head], dict):
+        return values, dataclasses.MISSING
+    inner, value = _pop_key(values[head], rest)
+    return {**values, head: inner}, value
+
+
+def _put_key(values: dict, key: str, value: Any) -> dict:
+    head, _, rest = key.partition(".")
+    if not rest:
+        return {**values, head: value}
+    inner = values.get(head)
+    return {**values, head: _put_key(inner if isinstance(inner, dict) else {}, rest, value)}
+
+
+def _move_keys(values: dict) -> dict:
+    """``values`` (a config as nested dicts) with the keys of :data:`MOVED` at their new place."""
+    found: dict[str, list[tuple[str, Any]]] = {}
+    for old, new in MOVED.items():
+        values, value = _pop_key(values, old)
+        if value is not dataclasses.MISSING:
+            found.setdefault(new, []).append((old, value))
+    if not found:
+        return values
+    defaults = {s.key: s.default for s in settings() if s.key in found}
+    for new, olds in found.items():
+        values, given = _pop_key(values, new)
+        if given is dataclasses.MISSING:
+            # the old keys that say something beyond the default must agree
+            said: list[tuple[str, Any]] = []
+            for k, v in olds:
+                if v != defaults[new] and all(v != w for _, w in said):
+                    said.append((k, v))
+            if len(said) > 1:
+                raise ConfigError(
+                    f"{' and '.join(f'{k}={v!r}' for k, v in said)} differ, but one endpoint "
+                    f"({new.rpartition('.')[0]}) now serves them all: set {new} instead"
+                )
+            given = said[0][1] if said else defaults[new]
+        values = _put_key(values, new, given)
+    # one line: the old keys by section (graph.captioner.{base_url,timeout_s}), then where they went
+    by_section: dict[str, list[str]] = {}
+    for olds in found.values():
+        for k, _ in olds:
+            head, _, name = k.rpartition(".")
+            by_section.setdefault(head, []).append(name)
+    old_keys = ", ".join(
+        f"{h}.{{{','.join(n)}}}" if len(n) > 1 else f"{h}.{n[0]}" for h, n in by_section.items()
+    )
+    targets = ", ".join(dict.fromkeys(new.rpartition(".")[0] for new in found))
+    logging.getLogger(__name__).info(
+        "config keys %s moved to %s (read there; update the file)", old_keys, targets
+    )
+    return values
+
+
 def _build(cls: type, values: dict, prefix: str = "") -> Any:
     hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}
@@ -1199,12 +1284,27 @@ def parse_override(text: str) -> dict:
 
 
 def config_from_dict(values: dict) -> Config:
-    return _build(Config, values)
+    """A :class:`Config` from nested dicts (a YAML file's), moved keys read at their new place."""
+    return _build(Config, _move_keys(values))
 
 
 def load_config(path: str | Path | None = None, overrides: list[str] | None = None) -> Config:
-    """Load a YAML config (None: all defaults; a bare name such as ``"replica"``: the config shipped with the
-    package) and apply ``key=value`` overrides."""
+    """Load a YAML config and apply ``key=value`` overrides, then check every setting.
+
+    Keys that moved (:data:`MOVED`) are read at their new place, with one notice.
+
+    Args:
+        path: a YAML file, a bare name such as ``"replica"`` (the config shipped with the package), or None
+            for all defaults.
+        overrides: ``key=value`` strings (the value is parsed as YAML), e.g. ``"mapping.tau_p=0.2"``.
+
+    Returns:
+        The checked config.
+
+    Raises:
+        ConfigError: a missing or unreadable file, an unknown key, or a value outside its rules (the message
+            names the key, the value and what is allowed).
+    """
     values: dict = {}
     if path is not None:
         p = resolve_config_path(path)
@@ -1232,31 +1332,6 @@ def load_config(path: str | Path | None = None, overrides: list[str] | None = No
     cfg = config_from_dict(values)
     check_config(cfg)
     return cfg
-
-
-def add_override_argument(parser: Any, example: str = "mapping.opt_iters=5") -> None:
-    """The ``--set KEY=VALUE`` option every command that reads a config offers (parsed by ``load_config``)."""
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help=f"config override, repeatable (e.g. --set {example})",
-    )
-
-
-def add_poses_argument(parser: Any) -> None:
-    """Add ``--poses gt|odometry`` (the choices of ``tracking.poses``) to a subcommand.
-
-    The command then does ``if args.poses: cfg.tracking.poses = args.poses``.
-    """
-    parser.add_argument(
-        "--poses",
-        choices=choices("tracking.poses"),
-        default=None,
-        help="camera poses: the dataset's (gt) or RGB-D odometry (odometry); default: config tracking.poses",
-    )
 
 
 def config_to_dict(cfg: Any) -> dict:

@@ -64,7 +64,7 @@ Use by the mapper (``config.tracking.poses == "odometry"``)::
 
 With ``poses == "gt"`` the mapper uses ``frame.pose`` from the dataset and never builds a Tracker. For a
 whole sequence at once use ``track`` (poses only) or ``track_sequence`` (poses + validity + per-frame info).
-A command that maps offers ``--poses`` with ``add_poses_argument(parser)`` and then does
+A command that maps offers ``--poses`` (``ogscene3d.commands.options.add_poses_argument``) and then does
 ``if args.poses: cfg.tracking.poses = args.poses``. ``ogscene3d track --data DIR --out OUT`` writes
 ``OUT/traj.txt`` and ``OUT/tracking.json`` (per-frame status, ATE against the dataset's poses if any).
 
@@ -86,7 +86,6 @@ import numpy as np
 
 from .camera import Camera
 from .config import TrackingConfig, check_section, choices
-from .config import add_poses_argument as add_poses_argument  # the option lives with the config
 from .errors import OGSceneError
 from .frame import Frame, check_pose
 from .progress import progress as progress_bar

@@ -8,10 +8,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..batch import EXECUTORS
-from ..config import add_override_argument
+from ..batch import EXECUTORS, eval_batch, run_batch
 from ..errors import OGSceneError
 from ..eval.options import add_eval_arguments, eval_options_from_args
+from .options import add_override_argument
 
 
 def _add_executor_args(p: argparse.ArgumentParser) -> None:
@@ -106,8 +106,6 @@ def _report(res: Any) -> int:
 
 
 def _run_batch_cli(args: argparse.Namespace) -> int:
-    from ..batch import run_batch
-
     res = run_batch(
         args.scenes_file,
         args.out,
@@ -120,7 +118,5 @@ def _run_batch_cli(args: argparse.Namespace) -> int:
 
 
 def _eval_batch_cli(args: argparse.Namespace) -> int:
-    from ..batch import eval_batch
-
     res = eval_batch(args.out, eval_options_from_args(args), **_executor_options(args))
     return _report(res)

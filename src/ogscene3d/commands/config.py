@@ -9,8 +9,9 @@ from typing import Any
 
 import yaml
 
-from ..config import Setting, add_override_argument, load_config, sections, settings
+from ..config import Setting, load_config, sections, settings
 from ..errors import ConfigError
+from .options import add_override_argument
 
 
 def add_parser(subparsers: Any) -> None:

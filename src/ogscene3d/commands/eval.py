@@ -9,6 +9,7 @@ from typing import Any
 
 from ..errors import DataError, OGSceneError
 from ..eval.options import add_eval_arguments, eval_options_from_args
+from ..runs import METRICS, write_metrics
 
 
 def add_parser(subparsers: Any) -> None:
@@ -225,8 +226,6 @@ def _print_rooms_and_queries(report: dict[str, Any]) -> None:
 
 def _finish(report: dict[str, Any], out: Path) -> None:
     """Print the trajectory line and the notes, and write metrics.json."""
-    from ..runs import METRICS, write_metrics
-
     t = report.get("trajectory")
     if t:
         print()

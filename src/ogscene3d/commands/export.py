@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..cli_types import unit_interval
+from ..errors import ConfigError
 
 
 def add_parser(subparsers) -> None:
@@ -37,7 +38,6 @@ def add_parser(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..errors import ConfigError
     from ..export import export_run
 
     if args.no_cloud and args.no_nodes and args.no_graphml:

@@ -9,8 +9,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..cli_types import positive_int
-from ..config import add_override_argument, load_config
+from ..config import load_config
 from ..errors import DataError
+from ..runs import RunFolder
+from .options import add_override_argument
 
 if TYPE_CHECKING:
     from ..graph.scenegraph import SceneGraph
@@ -83,7 +85,6 @@ def node_line(n: SceneNode, caption_width: int = 60) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from ..graph.scenegraph import SceneGraph
-    from ..runs import RunFolder
 
     path = Path(args.path)
     if path.is_dir():

@@ -18,9 +18,13 @@ import threading
 import time
 from pathlib import Path
 
+from ..atomic import atomic_write_bytes
 from ..cli_types import add_rerun_arguments, image_size, port, positive_float, positive_int
-from ..config import add_override_argument
+from ..config import load_config
 from ..errors import ConfigError, DataError, OGSceneError
+from ..runs import RunFolder, run_directory
+from .options import add_override_argument
+from .run import run_observers
 
 log = logging.getLogger(__name__)
 
@@ -171,7 +175,6 @@ def take_screenshot(
     sorted and faded in; software WebGL can take tens of seconds for the first full frame) or
     ``timeout`` seconds have passed.
     """
-    from ..atomic import atomic_write_bytes
     from ..viewer.headless import HeadlessBrowser, find_chromium
 
     if find_chromium() is None:
@@ -217,7 +220,6 @@ def run(args: argparse.Namespace) -> int:
     check_bindable(args.host, args.port)
     if args.run_dir is not None or args.out is None:
         return _serve(args)
-    from ..runs import run_directory
 
     with run_directory(args.out, "live"):  # one writer per run directory, as for `ogscene3d run`
         return _serve(args)
@@ -297,8 +299,6 @@ def _synthetic_config() -> Path | None:
 def live_config(args: argparse.Namespace):
     """The config live mapping runs with: ``--config`` (for ``--synthetic`` by default the shipped
     ``synthetic.yaml``), ``--set`` and ``--device``."""
-    from ..config import load_config
-
     overrides = list(args.overrides)
     if args.device:
         overrides.append(f"device={args.device}")
@@ -318,7 +318,6 @@ def live_data(args: argparse.Namespace, cfg) -> str | Path:
     import copy
 
     from ..datasets import configured_scene
-    from ..runs import RunFolder
 
     data = args.data
     if args.synthetic:
@@ -367,7 +366,6 @@ def _viewer(args: argparse.Namespace, up, name: str):
 def _start_live(args: argparse.Namespace, watchers: contextlib.ExitStack):
     from ..mapping.session import open_session
     from ..viewer.live import LiveSession
-    from .run import run_observers
 
     cfg = live_config(args)
     stream = data = None

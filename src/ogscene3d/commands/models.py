@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import argparse
 
+from ..models.export import KINDS, export_models
+
 
 def add_parser(subparsers) -> None:
-    from ..models.export import KINDS
-
     p = subparsers.add_parser(
         "models",
         help="export SAM / MobileSAM / CLIP / YOLO-World checkpoints to the ONNX files the mapper reads",
@@ -44,8 +44,6 @@ def add_parser(subparsers) -> None:
 
 
 def run_export(args: argparse.Namespace) -> int:
-    from ..models.export import export_models
-
     classes = [c.strip() for c in args.classes.split(",") if c.strip()] if args.classes else None
     path = export_models(
         args.kind,

@@ -13,8 +13,12 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from ..cli_types import add_rerun_arguments
-from ..config import add_override_argument, add_poses_argument, choices, load_config
+from ..config import choices, load_config
 from ..errors import DataError
+from ..models.manifest import manifest_overrides
+from ..progress import RunTimeEstimate
+from ..runs import RunFolder, recorded_data_path
+from .options import add_override_argument, add_poses_argument
 
 log = logging.getLogger(__name__)
 
@@ -60,12 +64,9 @@ def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
     from ..mapping.engine import stopped_message
     from ..mapping.session import mapping_session
-    from ..runs import RunFolder, recorded_data_path
 
     overrides = list(args.overrides)
     if args.models:  # the exported models' settings first: --set still overrides them
-        from ..models.manifest import manifest_overrides
-
         overrides = manifest_overrides(args.models) + overrides
     if args.ablation:
         overrides.append(f"mapping.ablation={args.ablation}")
@@ -128,8 +129,6 @@ def run_observers(args: argparse.Namespace, cfg, data, frames: int | None) -> It
     """What watches a run (``MappingEngine``'s observers): the run-time estimate over ``frames`` (None: a
     camera, no end to estimate), and the Rerun logger that ``--rerun`` / ``--rerun-save`` ask for (closed,
     its file complete, when the block ends)."""
-    from ..progress import RunTimeEstimate
-
     m = cfg.mapping
     observers: list = []
     if frames is not None:

@@ -16,8 +16,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..cli_types import positive_int
-from ..config import add_override_argument, load_config
+from ..config import load_config
 from ..errors import ConfigError, DataError
+from ..progress import progress
+from .options import add_override_argument
 
 if TYPE_CHECKING:
     from ..config import SegmentationConfig
@@ -165,8 +167,6 @@ def _segment_frames(
     args: argparse.Namespace, cfg, ds, segmenter, out: Path, stems: list[str | None], todo: list[int]
 ) -> tuple[int, int, int]:
     """Segment and write the ``todo`` frames. -> (frames done, bad frames, segments written)."""
-    from ..progress import progress
-
     backend = cfg.segmentation.backend
     # frames the dataset left out as it opened (a broken file, under data.on_bad_frame: skip) are bad ones too
     done, bad, n_segments = 0, int(getattr(ds, "frames_left_out", 0) or 0), 0

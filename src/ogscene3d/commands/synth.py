@@ -9,8 +9,9 @@ import time
 from pathlib import Path
 
 from ..cli_types import image_size
-from ..config import add_override_argument, choices, load_config
+from ..config import choices, load_config
 from ..errors import ConfigError, OGSceneError
+from .options import add_override_argument
 
 log = logging.getLogger(__name__)
 

@@ -6,8 +6,10 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from ..config import add_override_argument
+from ..atomic import atomic_write_text
+from ..config import load_config
 from ..errors import ConfigError, OGSceneError
+from .options import add_override_argument
 
 
 def add_parser(subparsers: Any) -> None:
@@ -38,8 +40,6 @@ def run(args: Any) -> int:
 
     import numpy as np
 
-    from ..atomic import atomic_write_text
-    from ..config import load_config
     from ..datasets import open_dataset
     from ..eval.trajectory import ate
     from ..tracking import Tracker, hold_last_good, track_frames, trajectory_text, validate_tracking_config

@@ -660,7 +660,25 @@ def build_room(seed: int = 0) -> Room:
     floor = b.objects[ids["floor"] - 1]
     sides = ["+x", "-x", "+y", "-y"]
 
-    # Wall furniture first (shelf, cabinet, sofa), then the central table with chairs.
+    wall_objs = _wall_furniture(b, sides, W, D, floor)
+    table = _central_table(b, W, D, floor)
+    if table is not None:
+        _chairs(b, table, floor)
+    _floor_items(b, sides, W, D, floor)
+    _wall_decorations(b, sides, W, D, ids)
+    light = _ceiling_lamp(b, ids, H, table)
+    _small_objects(b, table, wall_objs)
+    _light_switches(b, ids, W, D, seed)
+    _floor_lamp(b, ids, W, D)
+
+    return _finish(b, (W, D, H), light)
+
+
+def _wall_furniture(
+    b: _Builder, sides: list[str], W: float, D: float, floor: SceneObject
+) -> list[SceneObject]:
+    """Shelves, cabinets and a sofa against the walls, placed first."""
+    rng = b.rng
     wall_items = ["bookshelf", "cabinet", "sofa"]
     if rng.uniform() < 0.6:
         wall_items.append("cabinet")
@@ -689,8 +707,12 @@ def build_room(seed: int = 0) -> Room:
             if obj is not None:
                 wall_objs.append(obj)
                 break
+    return wall_objs
 
-    # Central table and chairs around it.
+
+def _central_table(b: _Builder, W: float, D: float, floor: SceneObject) -> SceneObject | None:
+    """The central table (None when it found no free spot)."""
+    rng = b.rng
     table = None
     for _ in range(30):
         size = np.array([rng.uniform(1.0, 1.5), rng.uniform(0.7, 0.9), rng.uniform(0.72, 0.78)])
@@ -702,18 +724,23 @@ def build_room(seed: int = 0) -> Room:
         table = b.try_add("table", parts, floor.instance_id, "on", tops, margin=0.6)
         if table is not None:
             break
-    chairs = []
-    if table is not None:
-        lo, hi = table.aabb
-        chair_color = b.color((0.3, 0.22, 0.15), 0.08)
-        slots = _chair_slots(lo, hi, lambda: 0.22 + rng.uniform(0.05, 0.12))
-        rng.shuffle(slots)
-        for c, yaw in slots[: int(rng.integers(2, 5))]:
-            obj = b.try_add("chair", _chair(c, yaw, chair_color), floor.instance_id, "on", margin=0.05)
-            if obj is not None:
-                chairs.append(obj)
+    return table
 
-    # Floor items in free spots near walls.
+
+def _chairs(b: _Builder, table: SceneObject, floor: SceneObject) -> None:
+    """Two to four chairs around the table."""
+    rng = b.rng
+    lo, hi = table.aabb
+    chair_color = b.color((0.3, 0.22, 0.15), 0.08)
+    slots = _chair_slots(lo, hi, lambda: 0.22 + rng.uniform(0.05, 0.12))
+    rng.shuffle(slots)
+    for c, yaw in slots[: int(rng.integers(2, 5))]:
+        b.try_add("chair", _chair(c, yaw, chair_color), floor.instance_id, "on", margin=0.05)
+
+
+def _floor_items(b: _Builder, sides: list[str], W: float, D: float, floor: SceneObject) -> None:
+    """A plant and a trash can in free spots near the walls."""
+    rng = b.rng
     for cls in ("plant", "trash can"):
         for _ in range(30):
             side = sides[rng.integers(4)]
@@ -738,7 +765,10 @@ def build_room(seed: int = 0) -> Room:
             if b.try_add(cls, parts, floor.instance_id, "on", margin=0.1) is not None:
                 break
 
-    # Wall decorations: door, window, pictures, clock.
+
+def _wall_decorations(b: _Builder, sides: list[str], W: float, D: float, ids: dict[str, int]) -> None:
+    """A door, a window, pictures and a clock on the walls."""
+    rng = b.rng
     for cls in ("door", "window", "picture", "picture", "picture", "clock"):
         for _ in range(30):
             side = sides[rng.integers(4)]
@@ -752,7 +782,9 @@ def build_room(seed: int = 0) -> Room:
                     b.extra_relations.append((obj.instance_id, "on", ids["floor"]))
                 break
 
-    # Ceiling lamp above the table, with the scene's point light just below it.
+
+def _ceiling_lamp(b: _Builder, ids: dict[str, int], H: float, table: SceneObject | None) -> np.ndarray:
+    """A ceiling lamp above the table. -> where the scene's point light is (just below the lamp)."""
     light = np.array([0.0, 0.0, H - 0.45])
     if table is not None:
         lo, hi = table.aabb
@@ -772,7 +804,12 @@ def build_room(seed: int = 0) -> Room:
         if lamp is not None:
             b.extra_relations.append((lamp.instance_id, "above", table.instance_id))
             light = c - [0, 0, 0.5]
+    return light
 
+
+def _small_objects(b: _Builder, table: SceneObject | None, wall_objs: list[SceneObject]) -> None:
+    """Small objects on the top surfaces: the table, shelves, cabinets, sofa, then on some lying books."""
+    rng = b.rng
     # Small objects on top surfaces.
     if table is not None:
         for cls in rng.choice(
@@ -807,10 +844,6 @@ def build_room(seed: int = 0) -> Room:
             and rng.uniform() < 0.7
         ):
             _place_small(b, str(rng.choice(["cup", "book"])), obj, obj.top_surfaces[0])
-    _light_switches(b, ids, W, D, seed)
-    _floor_lamp(b, ids, W, D)
-
-    return _finish(b, (W, D, H), light)
 
 
 def _light_switches(b: _Builder, ids: dict[str, int], W: float, D: float, seed: int) -> None:

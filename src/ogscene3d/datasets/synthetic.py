@@ -82,6 +82,10 @@ import numpy as np
 from ..atomic import atomic_write_bytes, atomic_write_text
 from ..config import DataConfig, SyntheticConfig
 from ..errors import DataError
+from ..progress import progress as progress_bar
+from ..segmentation.precomputed import write_segments
+from ..segmentation.simulated import NOISE_LEVELS, SimulatedSegmenter
+from ..segmentation.simulated_detector import SIMULATED_DETECTOR_VERSION, SimulatedDetector
 from .apartment import Apartment, apartment_camera, build_apartment, rooms_entered
 from .base import FrameRecord, read_label_png
 from .long_scan import (
@@ -488,8 +492,6 @@ def _pose_lines(poses: np.ndarray) -> str:
 
 
 def _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise, layout: str = "room") -> dict:
-    from ..segmentation.simulated_detector import SIMULATED_DETECTOR_VERSION
-
     # the default layout is left out, so that scenes written before layouts existed are still reused
     extra = {} if layout == "room" else {"layout": str(layout)}
     return {
@@ -525,22 +527,71 @@ def make_synthetic_scene(
 ) -> Path:
     """Generate (or reuse) a synthetic scene in ``out_dir`` and return its path.
 
-    ``noise``: simulated-SAM noise level (none | low | default | high); ``depth_noise``: std of
-    additive Gaussian depth noise in metres; ``pose_noise``: std of the translation noise of the
-    poses written to traj.txt in metres (rotation noise: half that in radians; gt/traj.txt keeps
-    the true poses). If ``out_dir`` already holds a complete scene made with the same arguments it
-    is reused as is; a folder holding anything else is an error unless ``overwrite``.
-    ``progress``: True for a tqdm bar, or a wrapper ``iterable -> iterable``. ``remedy``: what the error for
-    a folder holding something else tells the user to do (a command names its own options). ``layout``:
-    "room" (one furnished room, :func:`~.procedural.build_room`, a smooth walk around it), "scan" (a long scan
-    like a real ScanNet one, :mod:`.long_scan`) or "apartment" (2-5 rooms joined by
-    doorways, :func:`~.apartment.build_apartment`; ``frames`` is then per room, and ``gt/instances.json``
-    gives every instance's room).
-    """
-    from ..segmentation.precomputed import write_segments
-    from ..segmentation.simulated import NOISE_LEVELS, SimulatedSegmenter
-    from ..segmentation.simulated_detector import SimulatedDetector
+    If ``out_dir`` already holds a complete scene made with the same arguments it is reused as is; a folder
+    holding anything else is an error unless ``overwrite``.
 
+    Args:
+        out_dir: the scene folder (Replica layout, with ``gt/`` and ``segments/``).
+        seed: seed of the procedural room (or apartment) and of every noise.
+        frames: frames of the camera path (``layout="apartment"``: per room).
+        width: image width in pixels (at least 8).
+        height: image height in pixels (at least 8).
+        noise: simulated-SAM noise level (none | low | default | high | legacy-*).
+        depth_noise: std of additive Gaussian depth noise in metres.
+        pose_noise: std of the translation noise of the poses written to traj.txt in metres (rotation noise:
+            half that in radians; gt/traj.txt keeps the true poses).
+        overwrite: replace what ``out_dir`` holds.
+        device: Warp device of the ray caster.
+        progress: True for a tqdm bar, or a wrapper ``iterable -> iterable``.
+        remedy: what the error for a folder holding something else tells the user to do (a command names
+            its own options).
+        layout: "room" (one furnished room, :func:`~.procedural.build_room`, a smooth walk around it),
+            "scan" (a long scan like a real ScanNet one, :mod:`.long_scan`; its first-view merge plan in
+            ``gt/first_views.json``) or "apartment" (2-5 rooms joined by doorways,
+            :func:`~.apartment.build_apartment`; ``gt/instances.json`` gives every instance's room).
+
+    Returns:
+        ``out_dir`` as a path.
+
+    Raises:
+        ValueError: an argument out of its range.
+        DataError: ``out_dir`` holds something else and ``overwrite`` is false.
+    """
+    _check_scene_args(frames, layout, width, height, noise, depth_noise, pose_noise)
+    out = Path(out_dir)
+    params = _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise, layout)
+    if _reuse_or_clear(out, params, overwrite, remedy):
+        log.info("reusing synthetic scene %s", out)
+        return out
+    K = intrinsics_for(width, height)
+    room, poses, renderer = _scene_and_path(layout, seed, frames, device)
+    merges = _first_view_merges(out, layout, renderer, room, poses, K, (width, height), noise, seed)
+    noise_rng = np.random.default_rng(np.random.SeedSequence([seed, 0xD0152]))
+    written_poses = perturb_poses(poses, pose_noise, noise_rng)
+    cam = {"camera": {"w": width, "h": height, "fx": float(K[0, 0]), "fy": float(K[1, 1]),
+                      "cx": float(K[0, 2]), "cy": float(K[1, 2]), "scale": REPLICA_DEPTH_SCALE}}  # fmt: skip
+    atomic_write_text(out / "cam_params.json", json.dumps(cam, indent=2))
+    atomic_write_text(out / "traj.txt", _pose_lines(written_poses))
+    atomic_write_text(out / "gt" / "traj.txt", _pose_lines(poses))
+    classes = class_table(room)
+    classes_of = np.zeros(len(room.objects) + 1, dtype=np.int32)
+    for obj in room.objects:
+        classes_of[obj.instance_id] = classes[obj.class_name]
+    pts = sample_surface_points(room, seed)
+    noises = (noise, seed, depth_noise, noise_rng)
+    observed = _write_frames(out, room, renderer, poses, K, (width, height), pts, noises, merges, progress)
+    write_points_ply(out / "gt" / "points.ply", pts, classes_of, observed)
+    write_mesh_ply(out / "gt" / "mesh.ply", room, classes_of)
+    num_points = np.bincount(pts["instance"], minlength=len(room.objects) + 1)
+    doc = instances_json(room, classes, num_points)
+    if isinstance(room, Apartment):
+        add_rooms(doc, room, rooms_entered(room, poses))
+    atomic_write_text(out / "gt" / "instances.json", json.dumps(doc, indent=1))
+    atomic_write_text(out / "scene.json", json.dumps(params, indent=2))
+    return out
+
+
+def _check_scene_args(frames, layout, width, height, noise, depth_noise, pose_noise) -> None:
     if frames < 1:
         raise ValueError(f"frames must be >= 1, got {frames}")
     if width < 8 or height < 8:
@@ -552,8 +603,12 @@ def make_synthetic_scene(
     for name, val in (("depth_noise", depth_noise), ("pose_noise", pose_noise)):
         if not np.isfinite(val) or val < 0:
             raise ValueError(f"{name} must be a finite number >= 0, got {val}")
-    out = Path(out_dir)
-    params = _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise, layout)
+
+
+def _reuse_or_clear(out: Path, params: dict, overwrite: bool, remedy: str) -> bool:
+    """True when ``out`` holds a complete scene made with ``params`` (and no ``overwrite``); else ``out`` is
+    made ready for a new scene (emptied of an earlier one with ``overwrite``; an error when it holds
+    something else)."""
     marker = out / "scene.json"
     if marker.is_file():
         try:
@@ -561,8 +616,7 @@ def make_synthetic_scene(
         except json.JSONDecodeError:
             same = False
         if same and not overwrite:
-            log.info("reusing synthetic scene %s", out)
-            return out
+            return True
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise DataError(f"{out}: folder is not empty and holds no synthetic scene made with these arguments "
                         f"(an earlier one?); {remedy}")  # fmt: skip
@@ -573,26 +627,53 @@ def make_synthetic_scene(
                 shutil.rmtree(out / sub)
     for sub in ("results", "segments", "gt"):
         (out / sub).mkdir(parents=True, exist_ok=True)
+    return False
 
-    K = intrinsics_for(width, height)
-    merges = {}
+
+def _scene_and_path(layout: str, seed: int, frames: int, device: str | None):
+    """The procedural room or apartment, the camera path through it ([N, 4, 4]) and its renderer."""
     if layout == "apartment":
         room = build_apartment(seed)
         poses = apartment_trajectory(room, frames, seed)
-        frames = len(poses)
         # one light for several rooms: no shadows (walls would leave the rooms beyond them dark) and a long
         # falloff (the rooms far from the middle stay lit)
-        renderer = MeshRenderer(room, device=device, shadows=False, light_range=12.0)
-    else:
-        room = build_scan_room(seed) if layout == "scan" else build_room(seed)
-        poses = (scan_trajectory if layout == "scan" else exploration_trajectory)(room, frames, seed)
-        renderer = MeshRenderer(room, device=device)
-    noise_rng = np.random.default_rng(np.random.SeedSequence([seed, 0xD0152]))
-    written_poses = perturb_poses(poses, pose_noise, noise_rng)
-    if layout == "scan" and NOISE_LEVELS[noise].first_view_merge_prob > 0:
-        plan = _first_view_plan(renderer, room, poses, K, width, height, NOISE_LEVELS[noise], seed)
-        atomic_write_text(out / "gt" / "first_views.json", json.dumps(_plan_json(plan), indent=1))
-        merges = merges_by_frame(plan)
+        return room, poses, MeshRenderer(room, device=device, shadows=False, light_range=12.0)
+    if layout == "scan":
+        room = build_scan_room(seed)
+        return room, scan_trajectory(room, frames, seed), MeshRenderer(room, device=device)
+    room = build_room(seed)
+    return room, exploration_trajectory(room, frames, seed), MeshRenderer(room, device=device)
+
+
+def _first_view_merges(out: Path, layout: str, renderer, room, poses, K, size, noise: str, seed: int) -> dict:
+    """A long scan's first-view merge plan, written to ``gt/first_views.json``, as {frame: {instance:
+    partner}} for the simulated SAM ({} for other layouts and levels without first-view merges)."""
+    level = NOISE_LEVELS[noise]
+    if layout != "scan" or level.first_view_merge_prob <= 0:
+        return {}
+    plan = _first_view_plan(renderer, room, poses, K, *size, level, seed)
+    atomic_write_text(out / "gt" / "first_views.json", json.dumps(_plan_json(plan), indent=1))
+    return merges_by_frame(plan)
+
+
+def _write_frames(
+    out: Path,
+    room,
+    renderer: MeshRenderer,
+    poses: np.ndarray,
+    K: np.ndarray,
+    size: tuple[int, int],
+    pts: dict[str, np.ndarray],
+    noises: tuple[str, int, float, np.random.Generator],
+    merges: dict,
+    progress: Callable[[Iterator], Iterator] | bool,
+) -> np.ndarray:
+    """Render every pose and write its colour, depth, instance map and simulated segments (``noises``:
+    the SAM noise level, the seed, the depth noise and its generator; ``merges``: a long scan's first-view
+    plan). -> which surface points some frame observed."""
+    width, height = size
+    noise, seed, depth_noise, noise_rng = noises
+    frames = len(poses)
     # support relations let the simulated SAM merge an object with what it stands or hangs on
     segmenter = SimulatedSegmenter(noise, seed=seed, support={o.instance_id: o.support for o in room.objects},
                                    first_view_merges=merges)  # fmt: skip
@@ -600,28 +681,13 @@ def make_synthetic_scene(
     detector = SimulatedDetector({o.instance_id: o.class_name for o in room.objects},
                                  noise=noise.removeprefix("legacy-"), seed=seed,
                                  min_area=NOISE_LEVELS[noise].min_area)  # fmt: skip
-
-    cam = {"camera": {"w": width, "h": height, "fx": float(K[0, 0]), "fy": float(K[1, 1]),
-                      "cx": float(K[0, 2]), "cy": float(K[1, 2]), "scale": REPLICA_DEPTH_SCALE}}  # fmt: skip
-    atomic_write_text(out / "cam_params.json", json.dumps(cam, indent=2))
-    atomic_write_text(out / "traj.txt", _pose_lines(written_poses))
-    atomic_write_text(out / "gt" / "traj.txt", _pose_lines(poses))
-
-    classes = class_table(room)
-    classes_of = np.zeros(len(room.objects) + 1, dtype=np.int32)
-    for obj in room.objects:
-        classes_of[obj.instance_id] = classes[obj.class_name]
-
     steps: Iterator = iter(range(frames))
     bars = contextlib.ExitStack()
     if progress is True:
-        from ..progress import progress as progress_bar
-
         steps = iter(bars.enter_context(progress_bar(range(frames), desc="synth", total=frames)))
     elif callable(progress):
         steps = iter(progress(range(frames)))
     max_depth = 65535.0 / REPLICA_DEPTH_SCALE
-    pts = sample_surface_points(room, seed)
     observed = np.zeros(len(pts["xyz"]), dtype=bool)
     with bars:  # the bar's log routing ends with the loop
         for i in steps:
@@ -647,16 +713,7 @@ def make_synthetic_scene(
             _encode(out / "gt" / f"instance{stem}.png", inst.astype(np.uint16))
             seg = detector(seg, inst, frame_index=i)  # fused with named detector masks, as sam+detector does
             write_segments(out / "segments", f"frame{stem}", seg.ids, seg.scores, seg.names)
-
-    write_points_ply(out / "gt" / "points.ply", pts, classes_of, observed)
-    write_mesh_ply(out / "gt" / "mesh.ply", room, classes_of)
-    num_points = np.bincount(pts["instance"], minlength=len(room.objects) + 1)
-    doc = instances_json(room, classes, num_points)
-    if isinstance(room, Apartment):
-        add_rooms(doc, room, rooms_entered(room, poses))
-    atomic_write_text(out / "gt" / "instances.json", json.dumps(doc, indent=1))
-    atomic_write_text(marker, json.dumps(params, indent=2))
-    return out
+    return observed
 
 
 def _first_view_plan(

@@ -25,6 +25,9 @@ from typing import Any
 
 import numpy as np
 
+from ..graph.scenegraph import SceneGraph
+from .graph_metrics import node_overlap_iou
+
 STRUCTURAL = frozenset({"floor", "wall", "ceiling"})
 KINDS = ("object", "relation", "room")
 
@@ -117,8 +120,6 @@ class NodeOverlap:
     Gaussian), for :func:`query_accuracy`."""
 
     def __init__(self, labels: np.ndarray, gt_instances: np.ndarray) -> None:
-        from .graph_metrics import node_overlap_iou
-
         self.labels, self.instances, self.iou = node_overlap_iou(labels, gt_instances)
         self._row = {int(v): k for k, v in enumerate(self.labels)}
         self._col = {int(v): k for k, v in enumerate(self.instances)}
@@ -149,8 +150,6 @@ def queries_block(
     """The ``queries`` block of ``metrics.json``: the generated queries answered offline by the run's graph
     (graph.json), scored against the instances the labelled Gaussians overlap (``labels`` and the GT
     instance of each one's nearest GT point, -1 = none)."""
-    from ..graph.scenegraph import SceneGraph
-
     graph = SceneGraph.from_json(graph_doc, source=source)
     node_ids = np.array(sorted(graph.nodes), dtype=np.int64)
     node_labels = np.where(np.isin(labels, node_ids), labels, -1)

@@ -24,8 +24,10 @@ from typing import Any
 
 import numpy as np
 
+from ..config import RoomsConfig
 from ..graph.geometry import horizontal_basis, unit_up
-from ..graph.rooms import raster_outline
+from ..graph.rooms import assign_rooms, raster_outline, read_rooms
+from ..up_axis import PROVISIONAL_UP
 
 
 @dataclass
@@ -167,8 +169,6 @@ def room_scores(
 def run_up(graph: Mapping[str, Any] | None) -> np.ndarray:
     """The up vector a run's graph.json was built with (its ``up``; files without one: the up direction an
     upright OpenCV camera's world has, ``ogscene3d.up_axis.PROVISIONAL_UP``)."""
-    from ..up_axis import PROVISIONAL_UP
-
     try:
         return unit_up((graph or {}).get("up") or PROVISIONAL_UP)
     except ValueError:
@@ -188,9 +188,6 @@ def rooms_block(
     ``gt_points`` (``gt_point_rooms``: -1 = none), with the Gaussians ``means`` put in rooms by their
     outlines; with ``gt_types`` (GT room id -> type) each matched room's type is checked too
     (``types_correct``)."""
-    from ..config import RoomsConfig
-    from ..graph.rooms import assign_rooms, read_rooms
-
     up = run_up(graph)
     _, floors, rooms = read_rooms(graph, source)
     pred = assign_rooms(means, up, floors, rooms, RoomsConfig().assign_radius)

@@ -25,7 +25,7 @@ from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Protocol, runtime_checkable
 
-from ..config import CaptionerConfig
+from ..config import CaptionerConfig, EndpointConfig
 from ..errors import ConfigError
 from .geometry import color_name, format_length
 from .openai_client import (
@@ -187,14 +187,9 @@ class OpenAICaptioner:
         self._lock = threading.Lock()
 
     @classmethod
-    def from_config(cls, config: CaptionerConfig) -> OpenAICaptioner:
-        client = ChatClient(
-            config.base_url,
-            config.model,
-            config.api_key_env,
-            config.timeout_s,
-            config.max_retries,
-        )
+    def from_config(cls, config: CaptionerConfig, endpoint: EndpointConfig | None = None) -> OpenAICaptioner:
+        """From ``graph.captioner`` and the endpoint it calls (``graph.endpoint``; None: the defaults)."""
+        client = ChatClient.from_config(endpoint or EndpointConfig(), config.model, "graph.captioner.model")
         return cls(client, config.max_tokens, config.concurrency)
 
     def caption_messages(self, req: CaptionRequest) -> list[dict]:
@@ -391,12 +386,14 @@ def build_captioner(
     config: CaptionerConfig,
     label_names: Mapping[int, str] | None = None,
     class_names: Mapping[int, str] | None = None,
+    endpoint: EndpointConfig | None = None,
 ) -> Captioner:
-    """The captioner selected by ``graph.captioner.kind`` (heuristic | openai | groundtruth)."""
+    """The captioner selected by ``graph.captioner.kind`` (heuristic | openai | groundtruth); ``endpoint``:
+    the one ``openai`` calls (``graph.endpoint``; None: the defaults)."""
     if config.kind == "heuristic":
         return HeuristicCaptioner()
     if config.kind == "openai":
-        return OpenAICaptioner.from_config(config)
+        return OpenAICaptioner.from_config(config, endpoint)
     if config.kind == "groundtruth":
         return GroundTruthCaptioner(label_names, class_names)
     raise ConfigError(f"graph.captioner.kind must be heuristic, openai or groundtruth, got {config.kind!r}")

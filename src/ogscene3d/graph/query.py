@@ -28,7 +28,9 @@ from typing import Any
 
 import numpy as np
 
+from ..config import EndpointConfig, QueryConfig
 from .geometry import horizontal_basis, unit_up
+from .openai_client import ChatClient, extract_json
 from .relations import RELATION_PHRASES, normalize_relation
 from .rooms import ROOM_SYNONYMS, ROOM_TYPE_CUES, UNKNOWN_ROOM, RoomNode, room_type_of
 from .terms import known_terms
@@ -544,8 +546,6 @@ def _ids(value: Any) -> list[int] | None:
 
 def parse_query_reply(reply: str, ctx: QueryContext, text: str) -> QueryAnswer | str:
     """Validate an LLM reply against the graph: the answer, or what is wrong with the reply."""
-    from .openai_client import extract_json
-
     try:
         data = extract_json(reply)
     except ValueError as e:
@@ -581,12 +581,9 @@ class LLMQuery:
         self.max_nodes = max_nodes
 
     @classmethod
-    def from_config(cls, config) -> LLMQuery:
-        """From ``graph.query`` (a :class:`~ogscene3d.config.QueryConfig`)."""
-        from .openai_client import ChatClient
-
-        client = ChatClient(config.base_url, config.model, config.api_key_env, config.timeout_s,
-                            config.max_retries, model_setting="graph.query.model")  # fmt: skip
+    def from_config(cls, config: QueryConfig, endpoint: EndpointConfig | None = None) -> LLMQuery:
+        """From ``graph.query`` and the endpoint it calls (``graph.endpoint``; None: the defaults)."""
+        client = ChatClient.from_config(endpoint or EndpointConfig(), config.model, "graph.query.model")
         return cls(client, config.max_tokens, config.max_nodes)
 
     def answer(self, text: str, ctx: QueryContext, top_k: int | None = None) -> QueryAnswer:

@@ -35,9 +35,10 @@ from typing import Any
 
 import numpy as np
 
-from ..config import RoomsConfig
+from ..config import EndpointConfig, RoomsConfig
 from ..errors import DataError
 from .geometry import horizontal_basis, unit_up
+from .openai_client import ChatClient, extract_json
 
 log = logging.getLogger(__name__)
 
@@ -502,11 +503,9 @@ class LLMRoomTyper:
         self._cache: dict[tuple[str, ...], tuple[str, str, str]] = {}
 
     @classmethod
-    def from_config(cls, config: RoomsConfig) -> LLMRoomTyper:
-        from .openai_client import ChatClient
-
-        client = ChatClient(config.base_url, config.model, config.api_key_env, config.timeout_s,
-                            config.max_retries, model_setting="graph.rooms.model")  # fmt: skip
+    def from_config(cls, config: RoomsConfig, endpoint: EndpointConfig | None = None) -> LLMRoomTyper:
+        """From ``graph.rooms`` and the endpoint it calls (``graph.endpoint``; None: the defaults)."""
+        client = ChatClient.from_config(endpoint or EndpointConfig(), config.model, "graph.rooms.model")
         return cls(client, config.max_tokens)
 
     def describe_with_source(
@@ -528,8 +527,6 @@ class LLMRoomTyper:
             'Answer with JSON only: {"type": "<type>", "reason": "<a few words>"}'
         )
         try:
-            from .openai_client import extract_json
-
             reply = extract_json(self.client.chat([{"role": "user", "content": prompt}], self.max_tokens))
             kind = room_type_of(str(reply.get("type", ""))) if isinstance(reply, dict) else None
             if (
@@ -553,9 +550,10 @@ class LLMRoomTyper:
         return t, why
 
 
-def build_room_typer(config: RoomsConfig):
-    """The typer ``graph.rooms.typer`` selects."""
-    return LLMRoomTyper.from_config(config) if config.typer == "llm" else RuleRoomTyper()
+def build_room_typer(config: RoomsConfig, endpoint: EndpointConfig | None = None):
+    """The typer ``graph.rooms.typer`` selects; ``endpoint``: the one ``llm`` calls (``graph.endpoint``;
+    None: the defaults)."""
+    return LLMRoomTyper.from_config(config, endpoint) if config.typer == "llm" else RuleRoomTyper()
 
 
 def read_rooms(doc: Mapping[str, Any], source: str = "graph.json") -> tuple[np.ndarray | None, list[Floor],

@@ -56,10 +56,12 @@ from .confidence import MeanConfidence, NodeConfidence, build_confidence
 from .geometry import directed_ratios, proximate_points, unit_up
 from .query import LLMQuery, QueryAnswer, QueryContext, QueryHit, answer_offline
 from .relations import GeometricRelations, RelationPredictor, build_relations
-from .rooms import Floor, RoomMap, RoomNode
+from .rooms import Floor, RoomMap, RoomNode, build_room_typer
 from .terms import SYNONYM_GROUPS, text_score
 
 __all__ = ["SYNONYM_GROUPS", "SceneGraph"]  # SYNONYM_GROUPS: the offline synonyms, from .terms
+from .confidence import ClipConfidence
+from .openai_client import ChatClient
 from .types import (
     OFFLINE_SOURCES,
     VLM_CAPTION_SOURCES,
@@ -82,13 +84,54 @@ def _to_numpy(x: Any, name: str) -> np.ndarray:
     return np.array(x, copy=True)
 
 
+def _label_regions(
+    lm: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The labelled regions of a label map ``lm`` [H, W] (-1: none): the labelled pixels (flat indices),
+    the labels present (sorted), each labelled pixel's index into them, each label's area in pixels and its
+    bounding box [L, 4] (y0, y1, x0, x1; ends exclusive). None when no pixel is labelled."""
+    H, W = lm.shape
+    flat = lm.reshape(-1)
+    pix = np.nonzero(flat >= 0)[0]
+    if len(pix) == 0:
+        return None
+    vals = flat[pix].astype(np.int64)
+    top = int(vals.max())
+    if top < 4 * len(flat) + 1024:  # labels small enough for counting (the usual case): no sort
+        counts = np.bincount(vals, minlength=top + 1)
+        labs = np.nonzero(counts)[0]
+        area = counts[labs]
+        lut = np.zeros(top + 1, np.int64)
+        lut[labs] = np.arange(len(labs))
+        inv = lut[vals]
+    else:
+        labs, inv, area = np.unique(vals, return_inverse=True, return_counts=True)
+    ys, xs = np.divmod(pix, W)
+    # Bounding boxes from per-(label, row) and per-(label, column) occupancy: two bincounts.
+    L = len(labs)
+    rows = np.bincount(inv * H + ys, minlength=L * H).reshape(L, H) > 0
+    cols = np.bincount(inv * W + xs, minlength=L * W).reshape(L, W) > 0
+    r0, r1 = rows.argmax(axis=1), H - rows[:, ::-1].argmax(axis=1)
+    c0, c1 = cols.argmax(axis=1), W - cols[:, ::-1].argmax(axis=1)
+    return pix, labs, inv, area, np.stack([r0, r1, c0, c1], axis=1)
+
+
 class SceneGraph:
     """Nodes (one per scene label with at least ``min_gaussians`` Gaussians) and directed relation edges.
 
-    ``captioner``, ``relations`` and ``node_confidence`` default to what ``config`` selects
-    (``graph.captioner.kind``, ``graph.relations.kind``, ``graph.confidence.kind``); ``label_names`` /
-    ``class_names`` feed the ground-truth captioner. ``out_path``: graph.json rewritten (atomically) after
-    every update. Thread-safe: ``observe`` may run while a background update is in flight.
+    Thread-safe: ``observe`` may run while a background update is in flight.
+
+    Args:
+        config: the ``graph`` section (its defaults when None).
+        captioner: node captions; None: what ``graph.captioner.kind`` selects.
+        relations: edge relations; None: what ``graph.relations.kind`` selects.
+        node_confidence: node confidence; None: what ``graph.confidence.kind`` selects.
+        out_path: graph.json, rewritten (atomically) after every update; None: not written.
+        label_names: scene label -> name, for the ground-truth captioner.
+        class_names: class id -> name, for the ground-truth captioner.
+
+    Raises:
+        ConfigError: settings of ``config`` out of their rules.
     """
 
     def __init__(
@@ -128,8 +171,10 @@ class SceneGraph:
                 f"graph: need support_band > 0 and 0 < support_ratio <= 1 "
                 f"(got {c.support_band}, {c.support_ratio})"
             )
-        self.captioner: Captioner = captioner or build_captioner(c.captioner, label_names, class_names)
-        self.relations: RelationPredictor = relations or build_relations(c.relations, self.up)
+        self.captioner: Captioner = captioner or build_captioner(
+            c.captioner, label_names, class_names, c.endpoint
+        )
+        self.relations: RelationPredictor = relations or build_relations(c.relations, self.up, c.endpoint)
         self.node_confidence: NodeConfidence = node_confidence or build_confidence(c.confidence)
         self._fallback_captioner = HeuristicCaptioner()
         self._fallback_relations = GeometricRelations(c.relations, self.up)
@@ -155,10 +200,14 @@ class SceneGraph:
         self._embed_cache: dict[str, np.ndarray] = {}
         self._query_encoder: Any = None
         # storeys and rooms (graph.rooms), updated with the graph and every rooms.update_every keyframes
-        self.room_map: RoomMap | None = RoomMap(c.rooms) if c.rooms.enabled else None
+        self.room_map: RoomMap | None = (
+            RoomMap(c.rooms, build_room_typer(c.rooms, c.endpoint)) if c.rooms.enabled else None
+        )
         self._last_rooms_count = 0
         self._keyframe_frames: dict[int, int] = {}  # keyframe index -> its dataset frame index
-        self._llm_query: LLMQuery | None = LLMQuery.from_config(c.query) if c.query.kind == "llm" else None
+        self._llm_query: LLMQuery | None = (
+            LLMQuery.from_config(c.query, c.endpoint) if c.query.kind == "llm" else None
+        )
 
     def set_up_axis(self, up: Sequence[float]) -> None:
         """Set the world up direction (``graph.up_axis`` auto, chosen by the mapper from the cameras at its
@@ -206,67 +255,69 @@ class SceneGraph:
         if not np.issubdtype(lm.dtype, np.integer):
             raise ValueError(f"SceneGraph.observe: label_map must be an integer array, got {lm.dtype}")
         t0 = time.perf_counter()
-        flat = lm.reshape(-1)
-        pix = np.nonzero(flat >= 0)[0]
-        if len(pix) == 0:
+        regions = _label_regions(lm)
+        if regions is None:
             return
-        vals = flat[pix].astype(np.int64)
-        top = int(vals.max())
-        if top < 4 * len(flat) + 1024:  # labels small enough for counting (the usual case): no sort
-            counts = np.bincount(vals, minlength=top + 1)
-            labs = np.nonzero(counts)[0]
-            area = counts[labs]
-            lut = np.zeros(top + 1, np.int64)
-            lut[labs] = np.arange(len(labs))
-            inv = lut[vals]
-        else:
-            labs, inv, area = np.unique(vals, return_inverse=True, return_counts=True)
-        ys, xs = np.divmod(pix, W)
-        # Bounding boxes from per-(label, row) and per-(label, column) occupancy: two bincounts.
-        L = len(labs)
-        rows = np.bincount(inv * H + ys, minlength=L * H).reshape(L, H) > 0
-        cols = np.bincount(inv * W + xs, minlength=L * W).reshape(L, W) > 0
-        r0, r1 = rows.argmax(axis=1), H - 1 - rows[:, ::-1].argmax(axis=1)
-        c0, c1 = cols.argmax(axis=1), W - 1 - cols[:, ::-1].argmax(axis=1)
-        c = self.config
+        pix, labs, inv, area, boxes = regions
         with self._lock:
             for lab, a in zip(labs.tolist(), area.tolist()):
                 self._label_pixels[lab] = self._label_pixels.get(lab, 0) + a
-            for k in np.nonzero(area >= c.min_obs_pixels)[0]:
-                lab, a = int(labs[k]), int(area[k])
-                obs = self._obs.setdefault(lab, ObservationSet())
-                want_ctx, want_mask = obs.wants(keyframe_index, a, c.max_masked_views)
-                if not (want_ctx or want_mask):
-                    continue
-                y0, y1, x0, x1 = int(r0[k]), int(r1[k]) + 1, int(c0[k]), int(c1[k]) + 1
-                ctx = masked = None
-                if want_ctx:
-                    py, px = round(c.context_pad * (y1 - y0)), round(c.context_pad * (x1 - x0))
-                    ctx = self._downscale(
-                        frame.rgb[max(0, y0 - py) : min(H, y1 + py), max(0, x0 - px) : min(W, x1 + px)]
-                    )
-                if want_mask:
-                    sub = frame.rgb[y0:y1, x0:x1].copy()
-                    sub[lm[y0:y1, x0:x1] != lab] = 0
-                    masked = self._downscale(sub)
-                obs.add(keyframe_index, a, ctx, masked, c.max_masked_views)
-            for gt, votes in (
-                (frame.gt_classes, self._gt_class_votes),
-                (frame.gt_instances, self._gt_instance_votes),
-            ):
-                if gt is None or gt.shape != (H, W):
-                    continue
-                g = np.asarray(gt).reshape(-1)[pix].astype(np.int64)
-                ok = g >= 0
-                if not ok.any():
-                    continue
-                gmax = int(g[ok].max()) + 1
-                codes, counts = np.unique(inv[ok].astype(np.int64) * gmax + g[ok], return_counts=True)
-                for code, n in zip(codes.tolist(), counts.tolist()):
-                    li, gi = divmod(code, gmax)
-                    d = votes.setdefault(int(labs[li]), {})
-                    d[gi] = d.get(gi, 0) + n
+            self._add_views(keyframe_index, frame, lm, labs, area, boxes)
+            self._add_gt_votes(frame, pix, labs, inv)
         self._time("observe", time.perf_counter() - t0)
+
+    def _add_views(
+        self,
+        keyframe_index: int,
+        frame: Frame,
+        lm: np.ndarray,
+        labs: np.ndarray,
+        area: np.ndarray,
+        boxes: np.ndarray,
+    ) -> None:
+        """Put the keyframe's context crop and masked view of each region large enough into its
+        observation set, where the set wants them. Call with the lock held."""
+        c = self.config
+        H, W = lm.shape
+        for k in np.nonzero(area >= c.min_obs_pixels)[0]:
+            lab, a = int(labs[k]), int(area[k])
+            obs = self._obs.setdefault(lab, ObservationSet())
+            want_ctx, want_mask = obs.wants(keyframe_index, a, c.max_masked_views)
+            if not (want_ctx or want_mask):
+                continue
+            y0, y1, x0, x1 = (int(v) for v in boxes[k])
+            ctx = masked = None
+            if want_ctx:
+                py, px = round(c.context_pad * (y1 - y0)), round(c.context_pad * (x1 - x0))
+                ctx = self._downscale(
+                    frame.rgb[max(0, y0 - py) : min(H, y1 + py), max(0, x0 - px) : min(W, x1 + px)]
+                )
+            if want_mask:
+                sub = frame.rgb[y0:y1, x0:x1].copy()
+                sub[lm[y0:y1, x0:x1] != lab] = 0
+                masked = self._downscale(sub)
+            obs.add(keyframe_index, a, ctx, masked, c.max_masked_views)
+
+    def _add_gt_votes(self, frame: Frame, pix: np.ndarray, labs: np.ndarray, inv: np.ndarray) -> None:
+        """Accumulate the overlap votes label -> GT class / instance of a frame with ground-truth maps
+        (synthetic scenes). Call with the lock held."""
+        H, W = frame.rgb.shape[:2]
+        for gt, votes in (
+            (frame.gt_classes, self._gt_class_votes),
+            (frame.gt_instances, self._gt_instance_votes),
+        ):
+            if gt is None or gt.shape != (H, W):
+                continue
+            g = np.asarray(gt).reshape(-1)[pix].astype(np.int64)
+            ok = g >= 0
+            if not ok.any():
+                continue
+            gmax = int(g[ok].max()) + 1
+            codes, counts = np.unique(inv[ok].astype(np.int64) * gmax + g[ok], return_counts=True)
+            for code, n in zip(codes.tolist(), counts.tolist()):
+                li, gi = divmod(code, gmax)
+                d = votes.setdefault(int(labs[li]), {})
+                d[gi] = d.get(gi, 0) + n
 
     def _downscale(self, img: np.ndarray) -> np.ndarray:
         import cv2
@@ -505,50 +556,97 @@ class SceneGraph:
         t_start = time.perf_counter()
         geo = self._geometry(kf, means, labels, confs, colors)
         with self._lock:
-            gone = [i for i in self.nodes if i not in geo]
-            for i in gone:
-                del self.nodes[i]
-            if gone:
-                self.edges = {
-                    k: e for k, e in self.edges.items() if k[0] in self.nodes and k[1] in self.nodes
-                }
-                log.info("scene graph: %d node(s) left the map: %s", len(gone), gone[:10])
-            new = []
-            for lab, g in geo.items():
-                node = self.nodes.get(lab)
-                if node is None:
-                    self.nodes[lab] = SceneNode(id=lab, first_seen=kf, last_updated=kf, **g)
-                    new.append(lab)
-                else:
-                    for k, v in g.items():
-                        setattr(node, k, v)
-                    node._shape = None
-            retry: set[int] = set()
-            if not self._initialized:
-                todo = sorted(self.nodes)
-            else:
-                low = [
-                    i for i, n in self.nodes.items() if n.confidence < self.config.tau_update and i not in new
-                ]
-                retry = self._awaiting_caption() - set(new) - set(low)
-                todo = sorted(set(new) | set(low) | retry)
-            ctx = self._scene_context()
-            requests = [
-                CaptionRequest(
-                    node=self.nodes[i],
-                    observations=self._obs[i].copy() if i in self._obs else ObservationSet(),
-                    context=ctx,
-                    gt_class_votes=dict(self._gt_class_votes.get(i, {})),
-                    gt_instance_votes=dict(self._gt_instance_votes.get(i, {})),
-                    detector_name_votes=dict(self._name_votes.get(i, {})),
-                    label_pixels=self._label_pixels.get(i, 0),
-                )
-                for i in todo
-            ]
+            new = self._merge_geometry(kf, geo)
+            requests, retry, ctx = self._caption_requests(new)
         self._time("graph_geometry", time.perf_counter() - t_start)
 
-        # Node captioning (slow, possibly remote) outside the lock.
         t0 = time.perf_counter()
+        self._caption(kf, requests, ctx)
+        self._time("graph_caption", time.perf_counter() - t0, len(requests))
+
+        t0 = time.perf_counter()
+        self._score_confidence(requests)
+        self._time("graph_confidence", time.perf_counter() - t0, len(requests))
+
+        t0 = time.perf_counter()
+        self._update_edges([r.node.id for r in requests])
+        self._time("graph_edges", time.perf_counter() - t0)
+        if self.room_map is not None:
+            self._last_rooms_count = kf + 1
+            try:
+                self._update_rooms(kf, means)
+            except Exception:
+                log.exception("room update at keyframe %d failed; the graph keeps its previous rooms", kf)
+
+        self._initialized = True
+        self.num_updates += 1
+        self.last_update_keyframe = kf
+        log.info(
+            "scene graph update at keyframe %d: %d nodes (%d new, %d re-captioned%s), %d edges, %.2f s",
+            kf,
+            len(self.nodes),
+            len(new),
+            len(requests) - len(new),
+            f", {len(retry)} of them after a fallback caption" if retry else "",
+            len(self.edges),
+            time.perf_counter() - t_start,
+        )
+        if self.out_path is not None:
+            try:
+                self.save(self.out_path)
+            except Exception as e:
+                log.warning("scene graph: could not write %s (%s)", self.out_path, e)
+
+    def _merge_geometry(self, kf: int, geo: dict[int, dict]) -> list[int]:
+        """Nodes from this update's geometry: those whose label left the map go (with their edges), the
+        others are made or updated. -> the new node ids. Call with the lock held."""
+        gone = [i for i in self.nodes if i not in geo]
+        for i in gone:
+            del self.nodes[i]
+        if gone:
+            self.edges = {k: e for k, e in self.edges.items() if k[0] in self.nodes and k[1] in self.nodes}
+            log.info("scene graph: %d node(s) left the map: %s", len(gone), gone[:10])
+        new = []
+        for lab, g in geo.items():
+            node = self.nodes.get(lab)
+            if node is None:
+                self.nodes[lab] = SceneNode(id=lab, first_seen=kf, last_updated=kf, **g)
+                new.append(lab)
+            else:
+                for k, v in g.items():
+                    setattr(node, k, v)
+                node._shape = None
+        return new
+
+    def _caption_requests(self, new: list[int]) -> tuple[list[CaptionRequest], set[int], SceneContext]:
+        """The nodes to describe at this update (all at the first; then the new ones, those under
+        tau_update and those awaiting a real caption) as caption requests, the ones awaiting a caption, and
+        the scene context. Call with the lock held."""
+        retry: set[int] = set()
+        if not self._initialized:
+            todo = sorted(self.nodes)
+        else:
+            low = [i for i, n in self.nodes.items() if n.confidence < self.config.tau_update and i not in new]
+            retry = self._awaiting_caption() - set(new) - set(low)
+            todo = sorted(set(new) | set(low) | retry)
+        ctx = self._scene_context()
+        requests = [
+            CaptionRequest(
+                node=self.nodes[i],
+                observations=self._obs[i].copy() if i in self._obs else ObservationSet(),
+                context=ctx,
+                gt_class_votes=dict(self._gt_class_votes.get(i, {})),
+                gt_instance_votes=dict(self._gt_instance_votes.get(i, {})),
+                detector_name_votes=dict(self._name_votes.get(i, {})),
+                label_pixels=self._label_pixels.get(i, 0),
+            )
+            for i in todo
+        ]
+        return requests, retry, ctx
+
+    def _caption(self, kf: int, requests: list[CaptionRequest], ctx: SceneContext) -> None:
+        """Describe the requested nodes (slow, possibly remote: outside the lock); nodes left without an
+        answer get (or refresh) the heuristic caption, and every heuristic caption follows its geometry."""
         try:
             descs = self.captioner.describe(requests) if requests else {}
         except Exception as e:
@@ -590,9 +688,9 @@ class SceneGraph:
                 for n in stale:
                     d = fresh[n.id]
                     n.caption, n.tag, n.caption_source = d.caption, d.tag, d.source
-        self._time("graph_caption", time.perf_counter() - t0, len(requests))
 
-        t0 = time.perf_counter()
+    def _score_confidence(self, requests: list[CaptionRequest]) -> None:
+        """The node confidence of the described nodes (the mean Gaussian confidence when the scorer fails)."""
         try:
             scores = self.node_confidence.score(requests) if requests else {}
         except Exception as e:
@@ -603,36 +701,6 @@ class SceneGraph:
                 s = scores.get(r.node.id)
                 if s is not None and math.isfinite(s):
                     r.node.confidence = float(s)
-        self._time("graph_confidence", time.perf_counter() - t0, len(requests))
-
-        t0 = time.perf_counter()
-        self._update_edges([r.node.id for r in requests])
-        self._time("graph_edges", time.perf_counter() - t0)
-        if self.room_map is not None:
-            self._last_rooms_count = kf + 1
-            try:
-                self._update_rooms(kf, means)
-            except Exception:
-                log.exception("room update at keyframe %d failed; the graph keeps its previous rooms", kf)
-
-        self._initialized = True
-        self.num_updates += 1
-        self.last_update_keyframe = kf
-        log.info(
-            "scene graph update at keyframe %d: %d nodes (%d new, %d re-captioned%s), %d edges, %.2f s",
-            kf,
-            len(self.nodes),
-            len(new),
-            len(requests) - len(new),
-            f", {len(retry)} of them after a fallback caption" if retry else "",
-            len(self.edges),
-            time.perf_counter() - t_start,
-        )
-        if self.out_path is not None:
-            try:
-                self.save(self.out_path)
-            except Exception as e:
-                log.warning("scene graph: could not write %s (%s)", self.out_path, e)
 
     def _awaiting_caption(self) -> set[int]:
         """Nodes whose heuristic caption stands in for the configured captioner's: its request failed or
@@ -1041,21 +1109,12 @@ class SceneGraph:
         kind = self.config.query_embedding
         if self._query_encoder is None:
             if kind == "clip":
-                from .confidence import ClipConfidence
-
                 enc = self.node_confidence if isinstance(self.node_confidence, ClipConfidence) else None
                 self._query_encoder = enc or ClipConfidence.from_config(self.config.confidence)
             elif kind == "openai":
-                from .openai_client import ChatClient
-
-                cc = self.config.captioner
-                self._query_encoder = ChatClient(
-                    cc.base_url,
-                    self.config.embedding_model or cc.model,
-                    cc.api_key_env,
-                    cc.timeout_s,
-                    cc.max_retries,
-                    model_setting="graph.embedding_model",
+                model = self.config.embedding_model or self.config.captioner.model
+                self._query_encoder = ChatClient.from_config(
+                    self.config.endpoint, model, "graph.embedding_model"
                 )
             else:
                 raise ConfigError(f"graph.query_embedding must be none, clip or openai, got {kind!r}")

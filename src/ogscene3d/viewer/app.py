@@ -38,6 +38,7 @@ from .scene import (
     drawable_graph,
     legend_html,
     node_text,
+    scene_bounds,
 )
 from .snapshot import MapSnapshot
 
@@ -455,7 +456,6 @@ class LiveViewer:
         following them as the map grows."""
         if not len(snap):
             return
-        from .scene import scene_bounds
 
         c, ext = scene_bounds(snap.means)
         if self._framed is not None:

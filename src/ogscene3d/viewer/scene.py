@@ -22,6 +22,8 @@ from ..colors import (
     room_colors,
     turbo,
 )
+from ..errors import OGSceneError
+from ..graph.rooms import assign_rooms, read_rooms
 from .snapshot import MapSnapshot, covariances, decimate_indices, rotmat_to_wxyz
 
 log = logging.getLogger(__name__)
@@ -132,9 +134,6 @@ def shown_rooms(graph: dict | None):
     """(up, floors, rooms) of a graph document for drawing (:func:`~ogscene3d.graph.rooms.read_rooms`);
     no rooms when it has none or they are malformed (a live graph half-way through an update must not
     break the viewer)."""
-    from ..errors import OGSceneError
-    from ..graph.rooms import read_rooms
-
     if not isinstance(graph, dict) or not graph.get("rooms"):
         return None, [], []
     try:
@@ -146,8 +145,6 @@ def shown_rooms(graph: dict | None):
 
 def gaussian_rooms(means: np.ndarray, graph: dict | None, up: np.ndarray) -> np.ndarray:
     """The room id of every Gaussian (-1: none), by the rooms' outlines."""
-    from ..graph.rooms import assign_rooms
-
     doc_up, floors, rooms = shown_rooms(graph)
     if not rooms:
         return np.full(len(means), -1, dtype=np.int64)
