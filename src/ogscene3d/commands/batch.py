@@ -11,7 +11,7 @@ from typing import Any
 from ..batch import EXECUTORS, eval_batch, run_batch
 from ..errors import OGSceneError
 from ..eval.options import add_eval_arguments, eval_options_from_args
-from .options import add_override_argument
+from .options import add_override_argument, add_shared_arguments
 
 
 def _add_executor_args(p: argparse.ArgumentParser) -> None:
@@ -33,8 +33,8 @@ def _add_executor_args(p: argparse.ArgumentParser) -> None:
         help="GPUs per Ray task when the cluster has GPUs (default 1)",
     )
     p.add_argument("--cpus-per-task", type=float, default=1.0, help="CPUs per Ray task (default 1)")
-    p.add_argument(
-        "--device", default=None, help="sequential executor: cpu, cuda or cuda:N (default: config, else CUDA)"
+    add_shared_arguments(
+        p, "--device", device="sequential executor: cpu, cuda or cuda:N (default: config, else CUDA)"
     )
 
 
@@ -59,10 +59,13 @@ def add_parser(subparsers: Any) -> None:
         "gt, segments, set}).",
     )
     p.add_argument("scenes_file", metavar="SCENES_FILE", type=Path, help="text or YAML list of scenes")
-    p.add_argument(
-        "--out", required=True, type=Path, help="batch output folder (one run directory per scene)"
+    add_shared_arguments(
+        p,
+        "--out",
+        "--config",
+        out={"type": Path, "help": "batch output folder (one run directory per scene)"},
+        config="YAML config for every scene (e.g. configs/replica.yaml)",
     )
-    p.add_argument("--config", default=None, help="YAML config for every scene (e.g. configs/replica.yaml)")
     add_override_argument(p, "mapping.opt_iters=5")
     _add_executor_args(p)
     g = p.add_argument_group("evaluation (with --eval)")

@@ -11,7 +11,7 @@ import yaml
 
 from ..config import Setting, load_config, sections, settings
 from ..errors import ConfigError
-from .options import add_override_argument
+from .options import add_override_argument, add_shared_arguments
 
 
 def add_parser(subparsers: Any) -> None:
@@ -27,7 +27,7 @@ def add_parser(subparsers: Any) -> None:
         "prefix", nargs="?", default="", help="show only the keys that start with this (e.g. mapping.tau)"
     )
     p.add_argument("--format", choices=["yaml", "table"], default="yaml", help="output form (default yaml)")
-    p.add_argument("--config", default=None, help="YAML config whose values to show instead of the defaults")
+    add_shared_arguments(p, "--config", config="YAML config whose values to show instead of the defaults")
     add_override_argument(p, "mapping.tau_p=0.2")
     p.set_defaults(func=run)
 

@@ -6,6 +6,7 @@ import argparse
 
 from ..cli_types import unit_interval
 from ..errors import ConfigError
+from .options import add_shared_arguments
 
 
 def add_parser(subparsers) -> None:
@@ -17,7 +18,7 @@ def add_parser(subparsers) -> None:
         "per scene-graph node, and the scene graph as GraphML with each node's boxes.",
     )
     p.add_argument("run", help="run directory (with gaussians.ply and graph.json)")
-    p.add_argument("--out", help="output directory (default RUN/export)")
+    add_shared_arguments(p, "--out", out={"required": False, "help": "output directory (default RUN/export)"})
     p.add_argument(
         "--colors",
         choices=("rgb", "semantic"),

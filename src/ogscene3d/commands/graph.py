@@ -12,7 +12,7 @@ from ..cli_types import positive_int
 from ..config import load_config
 from ..errors import DataError
 from ..runs import RunFolder
-from .options import add_override_argument
+from .options import add_override_argument, add_shared_arguments
 
 if TYPE_CHECKING:
     from ..graph.scenegraph import SceneGraph
@@ -45,7 +45,7 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("--top-k", type=positive_int, default=5, help="results per query (default 5)")
     p.add_argument("--graphml", help="write the graph as GraphML to this path (needs networkx)")
-    p.add_argument("--config", help="YAML config (for graph.query_embedding and its endpoint)")
+    add_shared_arguments(p, "--config", config="YAML config (for graph.query_embedding and its endpoint)")
     add_override_argument(p, "graph.query_embedding=openai --set graph.embedding_model=MODEL")
     p.add_argument(
         "--nodes",

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 
 from ..models.export import KINDS, export_models
+from .options import add_shared_arguments
 
 
 def add_parser(subparsers) -> None:
@@ -26,7 +27,7 @@ def add_parser(subparsers) -> None:
         help="the official checkpoint: SAM/MobileSAM .pth, open_clip weights file, Hugging Face CLIP folder, "
         "YOLO-World .pt",
     )
-    e.add_argument("--out", required=True, help="models folder to write (models.json is updated)")
+    add_shared_arguments(e, "--out", out="models folder to write (models.json is updated)")
     e.add_argument("--arch", default=None, help="open-clip: the model name, e.g. ViT-B-32")
     e.add_argument(
         "--classes", default=None, help="yolo-world: the vocabulary, comma-separated (chair,table,lamp)"

@@ -1,11 +1,46 @@
-"""argparse options shared by the commands: ``--set KEY=VALUE`` of every command that reads a config and
-``--poses`` of those that map. Their values go to :func:`ogscene3d.config.load_config` and the config."""
+"""argparse options shared by the commands: ``--config``, ``--data``, ``--out``, ``--device`` and the others
+that several commands take (:data:`SHARED_OPTIONS`, added by :func:`add_shared_arguments`), ``--set
+KEY=VALUE`` of every command that reads a config and ``--poses`` of those that map. Their values go to
+:func:`ogscene3d.config.load_config` and the config."""
 
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from ..config import choices
+
+#: The options several commands take, flag -> ``add_argument`` keywords: what each means is written once
+#: here; a command changes only what differs for it (its own help, a default, a type).
+SHARED_OPTIONS: dict[str, dict[str, Any]] = {
+    "--config": {"default": None, "help": "YAML config (e.g. configs/replica.yaml); defaults otherwise"},
+    "--data": {"default": None, "help": "dataset folder (Replica, ScanNet, TUM, 7-Scenes, synthetic)"},
+    "--segments": {"default": None, "help": "folder of precomputed segments (<rgb stem>.png/.json)"},
+    "--out": {"required": True, "help": "output folder"},
+    "--device": {"default": None, "help": "cpu, cuda or cuda:N (default: config, else CUDA if present)"},
+    "--seed": {"type": int, "default": None, "help": "scene, trajectory and noise seed"},
+    "--max-frames": {"type": int, "default": None, "help": "map at most this many frames"},
+    "--no-progress": {"action": "store_true", "help": "no progress bar"},
+}
+
+
+def add_shared_arguments(parser: Any, *flags: str, **changes: str | dict[str, Any]) -> None:
+    """Add the shared options ``flags`` (keys of :data:`SHARED_OPTIONS`), in that order.
+
+    Args:
+        parser: the subcommand's parser (or an argument group of it).
+        flags: the options to add, e.g. ``"--config", "--out"``.
+        changes: what differs for this command, by the option's dest (``max_frames``): its help (a string)
+            or ``add_argument`` keywords that replace the shared ones.
+    """
+    dests = {flag.lstrip("-").replace("-", "_"): flag for flag in flags}
+    unknown = set(changes) - set(dests)
+    if unknown:
+        raise ValueError(f"changes for options not added: {sorted(unknown)} (added: {list(flags)})")
+    for dest, flag in dests.items():
+        change = changes.get(dest, {})
+        kwargs = {**SHARED_OPTIONS[flag], **({"help": change} if isinstance(change, str) else change)}
+        parser.add_argument(flag, **kwargs)
 
 
 def add_override_argument(parser: argparse.ArgumentParser, example: str = "mapping.opt_iters=5") -> None:

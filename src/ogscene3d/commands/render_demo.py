@@ -7,6 +7,7 @@ import argparse
 from pathlib import Path
 
 from ..cli_types import image_size, positive_int
+from .options import add_shared_arguments
 
 # argparse types: the CLI names the option in its message (the library checks again, naming the argument)
 
@@ -25,11 +26,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "render-demo", help="render a procedural Gaussian scene to a PNG (rasterizer smoke test)"
     )
-    p.add_argument(
+    add_shared_arguments(
+        p,
         "--out",
-        type=_image_path,
-        default=Path("outputs/render_demo.png"),
-        help="image file to write, e.g. render.png (default outputs/render_demo.png)",
+        out={
+            "required": False,
+            "type": _image_path,
+            "default": Path("outputs/render_demo.png"),
+            "help": "image file to write, e.g. render.png (default outputs/render_demo.png)",
+        },
     )
     p.add_argument("--gaussians", type=positive_int, default=20000, help="Gaussians (default 20000)")
     p.add_argument(
@@ -40,7 +45,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="each view's size (320x240)",
     )
     p.add_argument("--views", type=positive_int, default=4, help="orbit views side by side (default 4)")
-    p.add_argument("--device", default=None, help="cpu, cuda or cuda:N (default: cuda when available)")
+    add_shared_arguments(p, "--device", device="cpu, cuda or cuda:N (default: cuda when available)")
     p.set_defaults(func=_run)
 
 

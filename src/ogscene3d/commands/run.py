@@ -18,7 +18,7 @@ from ..errors import DataError
 from ..models.manifest import manifest_overrides
 from ..progress import RunTimeEstimate
 from ..runs import RunFolder, recorded_data_path
-from .options import add_override_argument, add_poses_argument
+from .options import add_override_argument, add_poses_argument, add_shared_arguments
 
 log = logging.getLogger(__name__)
 
@@ -33,19 +33,11 @@ def add_parser(subparsers) -> None:
         "--data a synthetic scene is generated (in OUT/scene) from the config's `synthetic` section and "
         "mapped.",
     )
-    p.add_argument(
-        "--config", default=None, help="YAML config (e.g. configs/replica.yaml); defaults otherwise"
-    )
-    p.add_argument("--data", default=None, help="dataset folder (Replica, ScanNet, TUM, 7-Scenes, synthetic)")
-    p.add_argument("--segments", default=None, help="folder of precomputed segments (<rgb stem>.png/.json)")
+    add_shared_arguments(p, "--config", "--data", "--segments")
     p.add_argument(
         "--models", default=None, help="models folder from `ogscene3d models export` (its models.json)"
     )
-    p.add_argument("--out", required=True, help="run directory to write")
-    p.add_argument(
-        "--device", default=None, help="cpu, cuda or cuda:N (default: config, else CUDA if present)"
-    )
-    p.add_argument("--max-frames", type=int, default=None, help="map at most this many frames")
+    add_shared_arguments(p, "--out", "--device", "--max-frames", out="run directory to write")
     p.add_argument(
         "--ablation",
         default=None,
@@ -55,7 +47,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--resume", action="store_true", help="continue from OUT/map.npz")
     add_override_argument(p)
     add_poses_argument(p)
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_shared_arguments(p, "--no-progress")
     add_rerun_arguments(p)
     p.set_defaults(func=run)
 

@@ -19,7 +19,7 @@ from ..cli_types import positive_int
 from ..config import load_config
 from ..errors import ConfigError, DataError
 from ..progress import progress
-from .options import add_override_argument
+from .options import add_override_argument, add_shared_arguments
 
 if TYPE_CHECKING:
     from ..config import SegmentationConfig
@@ -38,10 +38,9 @@ def add_parser(subparsers) -> None:
         "SAM masks), classical (weight-free graph segmentation, lower quality), simulated (synthetic "
         "scenes with ground truth only).",
     )
-    p.add_argument(
-        "--data", required=True, help="dataset folder (Replica, ScanNet, TUM, 7-Scenes, synthetic)"
+    add_shared_arguments(
+        p, "--data", "--out", data={"required": True}, out="folder to write <rgb stem>.png / .json into"
     )
-    p.add_argument("--out", required=True, help="folder to write <rgb stem>.png / .json into")
     p.add_argument(
         "--backend",
         default=None,
@@ -60,13 +59,13 @@ def add_parser(subparsers) -> None:
         "--points-per-side", type=positive_int, default=None, help="SAM grid prompts per side (default 32)"
     )
     p.add_argument("--provider", default=None, choices=["auto", "cpu", "cuda"], help="onnxruntime provider")
-    p.add_argument("--config", default=None, help="YAML config; its `segmentation` and `data` sections apply")
+    add_shared_arguments(p, "--config", config="YAML config; its `segmentation` and `data` sections apply")
     add_override_argument(p, "segmentation.pred_iou_thresh=0.9")
     p.add_argument("--kind", default="auto", help="dataset layout (default: detected)")
     p.add_argument("--stride", type=int, default=None, help="use every N-th frame")
-    p.add_argument("--max-frames", type=int, default=None, help="segment at most this many frames")
+    add_shared_arguments(p, "--max-frames", max_frames="segment at most this many frames")
     p.add_argument("--overwrite", action="store_true", help="recompute frames that already have segments")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_shared_arguments(p, "--no-progress")
     p.set_defaults(func=run)
 
 

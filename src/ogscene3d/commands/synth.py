@@ -11,7 +11,7 @@ from pathlib import Path
 from ..cli_types import image_size
 from ..config import choices, load_config
 from ..errors import ConfigError, OGSceneError
-from .options import add_override_argument
+from .options import add_override_argument, add_shared_arguments
 
 log = logging.getLogger(__name__)
 
@@ -23,9 +23,9 @@ def add_parser(subparsers) -> None:
         description="Render a procedural furnished room along an exploring trajectory (Replica layout "
         "plus gt/ and segments/). Defaults come from the config's `synthetic` section.",
     )
-    p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--config", default=None, help="YAML config (its `synthetic` section gives the defaults)")
-    p.add_argument("--seed", type=int, default=None, help="scene, trajectory and noise seed")
+    add_shared_arguments(
+        p, "--out", "--config", "--seed", config="YAML config (its `synthetic` section gives the defaults)"
+    )
     p.add_argument("--frames", type=int, default=None, help="number of frames (--layout apartment: per room)")
     p.add_argument(
         "--layout",
@@ -42,7 +42,9 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("--depth-noise", type=float, default=None, help="depth noise std in metres")
     p.add_argument("--pose-noise", type=float, default=None, help="pose translation noise std in metres")
-    p.add_argument("--device", default="cpu", help="Warp device for ray casting (cpu, cuda, cuda:0)")
+    add_shared_arguments(
+        p, "--device", device={"default": "cpu", "help": "Warp device for ray casting (cpu, cuda, cuda:0)"}
+    )
     p.add_argument("--force", action="store_true", help="overwrite a non-empty output folder")
     add_override_argument(p, "synthetic.frames=30")
     p.set_defaults(func=run)
