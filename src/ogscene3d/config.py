@@ -16,7 +16,7 @@ import math
 import numbers
 import types
 import typing
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -1284,6 +1284,20 @@ def parse_override(text: str) -> dict:
 def config_from_dict(values: dict) -> Config:
     """A :class:`Config` from nested dicts (a YAML file's), moved keys read at their new place."""
     return _build(Config, _move_keys(values))
+
+
+def section_values(section: Any, names: Iterable[str], prefix: str = "") -> dict[str, Any]:
+    """A component's keyword arguments from its config section: ``{name: section.<prefix><name>}``.
+
+    Args:
+        section: the config section (e.g. ``cfg.segmentation``).
+        names: the component's parameters that the section holds.
+        prefix: what the section's keys add to the parameter names (``"detector_"``), if anything.
+
+    Returns:
+        The keyword arguments, in the order of ``names``.
+    """
+    return {name: getattr(section, prefix + name) for name in names}
 
 
 def load_config(path: str | Path | None = None, overrides: list[str] | None = None) -> Config:
