@@ -6,6 +6,8 @@ KEY=VALUE`` of every command that reads a config and ``--poses`` of those that m
 from __future__ import annotations
 
 import argparse
+import re
+from collections.abc import Callable
 from typing import Any
 
 from ..config import choices
@@ -74,3 +76,31 @@ def add_poses_argument(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="camera poses: the dataset's (gt) or RGB-D odometry (odometry); default: config tracking.poses",
     )
+
+
+def add_command(subparsers: Any, doc: str | None, func: Callable[[argparse.Namespace], int]) -> Any:
+    """Register the subcommand that ``doc`` describes, run by ``func``; its ``--help`` text comes from
+    ``doc``, which is written once, as the command module's docstring::
+
+        ``ogscene3d NAME``: what it does (the one-line help in ``ogscene3d --help``).
+
+        What ``ogscene3d NAME --help`` says about it (the description; optional).
+
+        Further paragraphs, for the code's readers only.
+
+    Args:
+        subparsers: ``ogscene3d``'s subparsers.
+        doc: the command's docstring, as above.
+        func: ``args -> exit code``.
+
+    Returns:
+        The subcommand's parser, for its options.
+    """
+    head, _, rest = (doc or "").strip().partition("\n\n")
+    match = re.fullmatch(r"``ogscene3d ([a-z-]+)``: (.+)\.", " ".join(head.split()))
+    if match is None:
+        raise ValueError(f"a command's docstring starts with '``ogscene3d NAME``: help.', got {head!r}")
+    description = " ".join(rest.partition("\n\n")[0].split()) or None
+    parser = subparsers.add_parser(match[1], help=match[2], description=description)
+    parser.set_defaults(func=func)
+    return parser

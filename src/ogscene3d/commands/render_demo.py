@@ -1,5 +1,4 @@
-"""``ogscene3d render-demo``: render a procedural Gaussian scene to a PNG (the library part:
-:mod:`ogscene3d.rendering`)."""
+"""``ogscene3d render-demo``: render a procedural Gaussian scene to a PNG (rasterizer smoke test)."""
 
 from __future__ import annotations
 
@@ -7,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from ..cli_types import image_size, positive_int
-from .options import add_shared_arguments
+from .options import add_command, add_shared_arguments
 
 # argparse types: the CLI names the option in its message (the library checks again, naming the argument)
 
@@ -23,9 +22,7 @@ def _image_path(text: str) -> Path:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "render-demo", help="render a procedural Gaussian scene to a PNG (rasterizer smoke test)"
-    )
+    p = add_command(sub, __doc__, _run)
     add_shared_arguments(
         p,
         "--out",
@@ -46,7 +43,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--views", type=positive_int, default=4, help="orbit views side by side (default 4)")
     add_shared_arguments(p, "--device", device="cpu, cuda or cuda:N (default: cuda when available)")
-    p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:

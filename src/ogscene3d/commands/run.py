@@ -1,8 +1,14 @@
-"""``ogscene3d run``: map an RGB-D sequence (or the default synthetic scene) into a run directory.
+"""``ogscene3d run``: map an RGB-D sequence into semantic Gaussians and a scene graph.
+
+Incremental semantic mapping (paper Sec. III). Writes gaussians.ply, map.npz (and its memory views in
+map_memory/), graph.json, timings.json, config.yaml and run_id (the run's id, which --resume checks map.npz
+against) to --out. Without --data a synthetic scene is generated (in OUT/scene) from the config's `synthetic`
+section and mapped.
 
 The options are parsed and the outcome printed here; the session is :mod:`ogscene3d.mapping.session`'s and
 the run :mod:`ogscene3d.mapping.engine`'s (heavy modules are imported inside :func:`run` only, so that
-``ogscene3d --help`` stays quick)."""
+``ogscene3d --help`` stays quick).
+"""
 
 from __future__ import annotations
 
@@ -18,21 +24,13 @@ from ..errors import DataError
 from ..models.manifest import manifest_overrides
 from ..progress import RunTimeEstimate
 from ..runs import RunFolder, recorded_data_path
-from .options import add_override_argument, add_poses_argument, add_shared_arguments
+from .options import add_command, add_override_argument, add_poses_argument, add_shared_arguments
 
 log = logging.getLogger(__name__)
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser(
-        "run",
-        help="map an RGB-D sequence into semantic Gaussians and a scene graph",
-        description="Incremental semantic mapping (paper Sec. III). Writes gaussians.ply, map.npz (and "
-        "its memory views in map_memory/), graph.json, timings.json, config.yaml and run_id (the run's id, "
-        "which --resume checks map.npz against) to --out. Without "
-        "--data a synthetic scene is generated (in OUT/scene) from the config's `synthetic` section and "
-        "mapped.",
-    )
+    p = add_command(subparsers, __doc__, run)
     add_shared_arguments(p, "--config", "--data", "--segments")
     p.add_argument(
         "--models", default=None, help="models folder from `ogscene3d models export` (its models.json)"
@@ -49,7 +47,6 @@ def add_parser(subparsers) -> None:
     add_poses_argument(p)
     add_shared_arguments(p, "--no-progress")
     add_rerun_arguments(p)
-    p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -1,4 +1,8 @@
-"""``ogscene3d synth``: generate a synthetic scene with ground truth and simulated SAM segments."""
+"""``ogscene3d synth``: generate a synthetic RGB-D scene with ground truth and simulated segments.
+
+Render a procedural furnished room along an exploring trajectory (Replica layout plus gt/ and segments/).
+Defaults come from the config's `synthetic` section.
+"""
 
 from __future__ import annotations
 
@@ -11,18 +15,13 @@ from pathlib import Path
 from ..cli_types import image_size
 from ..config import choices, load_config
 from ..errors import ConfigError, OGSceneError
-from .options import add_override_argument, add_shared_arguments
+from .options import add_command, add_override_argument, add_shared_arguments
 
 log = logging.getLogger(__name__)
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser(
-        "synth",
-        help="generate a synthetic RGB-D scene with ground truth and simulated segments",
-        description="Render a procedural furnished room along an exploring trajectory (Replica layout "
-        "plus gt/ and segments/). Defaults come from the config's `synthetic` section.",
-    )
+    p = add_command(subparsers, __doc__, run)
     add_shared_arguments(
         p, "--out", "--config", "--seed", config="YAML config (its `synthetic` section gives the defaults)"
     )
@@ -47,7 +46,6 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("--force", action="store_true", help="overwrite a non-empty output folder")
     add_override_argument(p, "synthetic.frames=30")
-    p.set_defaults(func=run)
 
 
 def _reusable(out: str | Path, params: dict, overwrite: bool) -> bool:

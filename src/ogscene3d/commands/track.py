@@ -1,5 +1,11 @@
-"""``ogscene3d track``: camera poses of an RGB-D sequence by RGB-D odometry (the tracker:
-:mod:`ogscene3d.tracking`)."""
+"""``ogscene3d track``: estimate camera poses of an RGB-D sequence with Open3D RGB-D odometry.
+
+Track a dataset with keyframe-to-frame RGB-D odometry (config section `tracking`). Writes OUT/traj.txt (one
+row-major c2w 4x4 per frame; a skipped frame repeats the last good pose) and OUT/tracking.json (per-frame
+status, and the ATE against the dataset's poses when it has them).
+
+The tracker: :mod:`ogscene3d.tracking`.
+"""
 
 from __future__ import annotations
 
@@ -9,18 +15,11 @@ from typing import Any
 from ..atomic import atomic_write_text
 from ..config import load_config
 from ..errors import ConfigError, OGSceneError
-from .options import add_override_argument, add_shared_arguments
+from .options import add_command, add_override_argument, add_shared_arguments
 
 
 def add_parser(subparsers: Any) -> None:
-    p = subparsers.add_parser(
-        "track",
-        help="estimate camera poses of an RGB-D sequence with Open3D RGB-D odometry",
-        description="Track a dataset with keyframe-to-frame RGB-D odometry (config section `tracking`). "
-        "Writes OUT/traj.txt (one row-major c2w 4x4 per frame; a skipped frame repeats the last good "
-        "pose) and OUT/tracking.json (per-frame status, and the ATE against the dataset's poses when it "
-        "has them).",
-    )
+    p = add_command(subparsers, __doc__, run)
     add_shared_arguments(
         p,
         "--data",
@@ -35,7 +34,6 @@ def add_parser(subparsers: Any) -> None:
         max_frames="track at most this many frames",
     )
     add_override_argument(p, "tracking.max_width=320")
-    p.set_defaults(func=run)
 
 
 def run(args: Any) -> int:
