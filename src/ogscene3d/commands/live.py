@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from ..atomic import atomic_write_bytes
-from ..cli_types import add_rerun_arguments, image_size, port, positive_float, positive_int
+from ..cli_types import add_rerun_arguments, add_size_argument, port, positive_float, positive_int
 from ..config import load_config
 from ..errors import ConfigError, DataError, OGSceneError
 from ..runs import RunFolder, run_directory
@@ -119,13 +119,7 @@ def _add_viewer_arguments(p: argparse.ArgumentParser) -> None:
         metavar="PNG",
         help="render the view in headless chromium into PNG and exit (after mapping, in live mode)",
     )
-    p.add_argument(
-        "--screenshot-size",
-        type=image_size(64, "1280x800"),
-        default=(1280, 800),
-        metavar="WxH",
-        help="screenshot size",
-    )
+    add_size_argument(p, "--screenshot-size", "screenshot size", minimum=64, default=(1280, 800))
     p.add_argument(
         "--screenshot-wait", type=positive_float, default=8.0, help="seconds to let the browser draw first"
     )

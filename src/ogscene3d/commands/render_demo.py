@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..cli_types import image_size, positive_int
+from ..cli_types import add_size_argument, positive_int
 from .options import add_command, add_shared_arguments
 
 # argparse types: the CLI names the option in its message (the library checks again, naming the argument)
@@ -34,13 +34,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         },
     )
     p.add_argument("--gaussians", type=positive_int, default=20000, help="Gaussians (default 20000)")
-    p.add_argument(
-        "--size",
-        type=image_size(1, "320x240"),
-        default=(320, 240),
-        metavar="WxH",
-        help="each view's size (320x240)",
-    )
+    add_size_argument(p, "--size", "each view's size (320x240)", default=(320, 240))
     p.add_argument("--views", type=positive_int, default=4, help="orbit views side by side (default 4)")
     add_shared_arguments(p, "--device", device="cpu, cuda or cuda:N (default: cuda when available)")
 

@@ -12,7 +12,7 @@ import logging
 import time
 from pathlib import Path
 
-from ..cli_types import image_size
+from ..cli_types import add_size_argument
 from ..config import choices, load_config
 from ..errors import ConfigError, OGSceneError
 from .options import add_command, add_override_argument, add_shared_arguments
@@ -32,7 +32,7 @@ def add_parser(subparsers) -> None:
         choices=choices("synthetic.layout"),
         help="one furnished room, or an apartment of 2-5 rooms walked through room by room",
     )
-    p.add_argument("--size", type=image_size(8), default=None, metavar="WxH", help="image size, e.g. 160x120")
+    add_size_argument(p, "--size", "image size, e.g. 160x120", minimum=8)
     p.add_argument(
         "--noise",
         default=None,
