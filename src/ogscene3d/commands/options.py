@@ -20,7 +20,6 @@ SHARED_OPTIONS: dict[str, dict[str, Any]] = {
     "--segments": {"default": None, "help": "folder of precomputed segments (<rgb stem>.png/.json)"},
     "--out": {"required": True, "help": "output folder"},
     "--device": {"default": None, "help": "cpu, cuda or cuda:N (default: config, else CUDA if present)"},
-    "--seed": {"type": int, "default": None, "help": "scene, trajectory and noise seed"},
     "--max-frames": {"type": int, "default": None, "help": "map at most this many frames"},
     "--no-progress": {"action": "store_true", "help": "no progress bar"},
 }

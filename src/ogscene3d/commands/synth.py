@@ -23,8 +23,9 @@ log = logging.getLogger(__name__)
 def add_parser(subparsers) -> None:
     p = add_command(subparsers, __doc__, run)
     add_shared_arguments(
-        p, "--out", "--config", "--seed", config="YAML config (its `synthetic` section gives the defaults)"
+        p, "--out", "--config", config="YAML config (its `synthetic` section gives the defaults)"
     )
+    p.add_argument("--seed", type=int, default=None, help="scene, trajectory and noise seed")
     p.add_argument("--frames", type=int, default=None, help="number of frames (--layout apartment: per room)")
     p.add_argument(
         "--layout",
