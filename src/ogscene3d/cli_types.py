@@ -62,6 +62,27 @@ def image_size(minimum: int = 1, example: str = "160x120") -> Callable[[str], tu
     return parse
 
 
+def add_size_argument(
+    parser: argparse.ArgumentParser,
+    flag: str,
+    help: str,  # noqa: A002 - argparse's word
+    minimum: int = 1,
+    default: tuple[int, int] | None = None,
+) -> None:
+    """Add a ``WxH`` option: :func:`image_size` with both sides >= ``minimum``, its error's example the
+    ``default`` (else 160x120).
+
+    Args:
+        parser: the command's parser.
+        flag: the option, e.g. ``"--size"``.
+        help: its help.
+        minimum: the smallest width and height.
+        default: (width, height) when the option is not given; None: not given.
+    """
+    example = f"{default[0]}x{default[1]}" if default else "160x120"
+    parser.add_argument(flag, type=image_size(minimum, example), default=default, metavar="WxH", help=help)
+
+
 def rerun_viewer(text: str) -> str:
     """``--rerun``'s value: a Rerun viewer's URL (``rerun+http://HOST:PORT/proxy``, ``rerun://...``), or
     ``spawn`` (what ``--rerun`` alone means: start a viewer here)."""

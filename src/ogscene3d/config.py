@@ -16,7 +16,7 @@ import math
 import numbers
 import types
 import typing
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -187,6 +187,16 @@ DatasetKind = Literal[
 NoiseLevel = Literal["none", "low", "default", "high", "legacy-low", "legacy-default", "legacy-high"]
 ExecutionProvider = Literal["auto", "cpu", "cuda"]
 _LLM_KEY_DOC = "environment variable holding the endpoint's API key (the key itself never goes in a config)"
+
+
+def _component_model(what: str) -> Any:
+    """A language-model component's own ``model`` setting (``""``: the shared ``graph.endpoint.model``)."""
+    return setting("", f'model name for {what}; "" = graph.endpoint.model')
+
+
+def _max_tokens(default: int) -> Any:
+    """A language-model component's ``max_tokens`` setting, ``default`` tokens per request."""
+    return setting(default, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request"))
 
 
 @dataclass
@@ -670,10 +680,8 @@ class CaptionerConfig:
         "node captions: heuristic (from labels and geometry) | openai (a vision-language model at "
         "an OpenAI-compatible endpoint) | groundtruth (synthetic scenes' instance names)",
     )
-    model: str = setting("", 'model name for the captions (a vision model); "" = graph.endpoint.model')
-    max_tokens: int = setting(
-        300, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request")
-    )
+    model: str = _component_model("the captions (a vision model)")
+    max_tokens: int = _max_tokens(300)
     concurrency: int = setting(4, "parallel per-node caption requests", _int(1))
 
 
@@ -684,10 +692,8 @@ class RelationsConfig:
         "edge relations: geometric (rules on boxes and points) | llm (a language model, with the "
         "geometric rules as per-pair fallback)",
     )
-    model: str = setting("", 'model name for the relations; "" = graph.endpoint.model')
-    max_tokens: int = setting(
-        2000, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request")
-    )
+    model: str = _component_model("the relations")
+    max_tokens: int = _max_tokens(2000)
     contact_tol: float = setting(0.05, 'metres; vertical gap still counted as contact ("on")', _POS)
     cell_size: float = setting(0.05, "metres; horizontal grid for per-column stacking tests", _POS)
     overlap_ratio: float = setting(
@@ -763,10 +769,8 @@ class RoomsConfig:
         "room types: rule (from the tags of the objects in the room) | llm (a language model at an "
         "OpenAI-compatible endpoint, with the rule as fallback)",
     )
-    model: str = setting("", 'model name for room types; "" = graph.endpoint.model')
-    max_tokens: int = setting(
-        200, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request")
-    )
+    model: str = _component_model("room types")
+    max_tokens: int = _max_tokens(200)
 
     def cross_check(self) -> str | None:
         if not self.wall_low < self.wall_high:
@@ -782,10 +786,8 @@ class QueryConfig:
         "terms) | llm (a language model at an OpenAI-compatible endpoint picks node ids from a compact "
         "graph; offline when it fails)",
     )
-    model: str = setting("", 'model name for queries; "" = graph.endpoint.model')
-    max_tokens: int = setting(
-        500, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request")
-    )
+    model: str = _component_model("queries")
+    max_tokens: int = _max_tokens(500)
     max_nodes: int = setting(500, "objects sent to the LLM at most (the largest first)", _int(1))
 
 
@@ -1286,6 +1288,20 @@ def parse_override(text: str) -> dict:
 def config_from_dict(values: dict) -> Config:
     """A :class:`Config` from nested dicts (a YAML file's), moved keys read at their new place."""
     return _build(Config, _move_keys(values))
+
+
+def section_values(section: Any, names: Iterable[str], prefix: str = "") -> dict[str, Any]:
+    """A component's keyword arguments from its config section: ``{name: section.<prefix><name>}``.
+
+    Args:
+        section: the config section (e.g. ``cfg.segmentation``).
+        names: the component's parameters that the section holds.
+        prefix: what the section's keys add to the parameter names (``"detector_"``), if anything.
+
+    Returns:
+        The keyword arguments, in the order of ``names``.
+    """
+    return {name: getattr(section, prefix + name) for name in names}
 
 
 def load_config(path: str | Path | None = None, overrides: list[str] | None = None) -> Config:

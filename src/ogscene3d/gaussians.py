@@ -46,6 +46,27 @@ def _logit(p: torch.Tensor | float) -> torch.Tensor:
     return torch.log(p) - torch.log1p(-p)
 
 
+class _FieldView:
+    """A read-only ``GaussianMap`` attribute: the first ``len(map)`` rows of the field of its name (a view,
+    so in-place writes reach the map; assigning the attribute raises, as a property without setter does)."""
+
+    def __init__(self, doc: str) -> None:
+        self.__doc__ = doc
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        if name not in FIELDS:
+            raise TypeError(f"{owner.__name__}.{name}: not a Gaussian field (known: {sorted(FIELDS)})")
+        self.name = name
+
+    def __get__(self, gm: GaussianMap | None, owner: type | None = None) -> torch.Tensor:
+        if gm is None:
+            return self  # type: ignore[return-value]  # the class attribute (documentation, introspection)
+        return gm._view(self.name)
+
+    def __set__(self, gm: GaussianMap, value: object) -> None:
+        raise AttributeError(f"can't set attribute {self.name!r} (write into the view instead)")
+
+
 class GaussianMap:
     """Struct-of-arrays semantic Gaussians on ``device`` with amortised-capacity growth.
 
@@ -79,45 +100,14 @@ class GaussianMap:
     def _view(self, name: str) -> torch.Tensor:
         return self._data[name][: self._n]
 
-    @property
-    def means(self) -> torch.Tensor:
-        """[N, 3] float32 world-frame centres (metres)."""
-        return self._view("means")
-
-    @property
-    def quats(self) -> torch.Tensor:
-        """[N, 4] float32 rotations, wxyz."""
-        return self._view("quats")
-
-    @property
-    def log_scales(self) -> torch.Tensor:
-        """[N, 3] float32 log of the per-axis standard deviations (metres)."""
-        return self._view("log_scales")
-
-    @property
-    def opacity_logits(self) -> torch.Tensor:
-        """[N] float32 opacity logits."""
-        return self._view("opacity_logits")
-
-    @property
-    def colors(self) -> torch.Tensor:
-        """[N, 3] float32 RGB in [0, 1]."""
-        return self._view("colors")
-
-    @property
-    def labels(self) -> torch.Tensor:
-        """[N] int32 scene labels, -1 = unlabeled."""
-        return self._view("labels")
-
-    @property
-    def confidences(self) -> torch.Tensor:
-        """[N] float32 semantic confidences in [0, 1]."""
-        return self._view("confidences")
-
-    @property
-    def origin_kf(self) -> torch.Tensor:
-        """[N] int32 index of the keyframe that created each Gaussian."""
-        return self._view("origin_kf")
+    means = _FieldView("[N, 3] float32 world-frame centres (metres).")
+    quats = _FieldView("[N, 4] float32 rotations, wxyz.")
+    log_scales = _FieldView("[N, 3] float32 log of the per-axis standard deviations (metres).")
+    opacity_logits = _FieldView("[N] float32 opacity logits.")
+    colors = _FieldView("[N, 3] float32 RGB in [0, 1].")
+    labels = _FieldView("[N] int32 scene labels, -1 = unlabeled.")
+    confidences = _FieldView("[N] float32 semantic confidences in [0, 1].")
+    origin_kf = _FieldView("[N] int32 index of the keyframe that created each Gaussian.")
 
     @property
     def scales(self) -> torch.Tensor:

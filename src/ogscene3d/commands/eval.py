@@ -1,4 +1,12 @@
-"""``ogscene3d eval RUN_DIR --gt GT``: score a run, print a table, write metrics.json and pictures."""
+"""``ogscene3d eval``: evaluate a run directory against ground truth (3D semantics, scene graph, trajectory).
+
+Score RUN_DIR (gaussians.ply, graph.json) against ground truth GT: a synthetic scene directory (found
+automatically for runs of synthetic scenes), its gt/ folder, a labelled PLY (x, y, z, class[, instance]) with
+a class-name table, a ScanNet scene folder (*_vh_clean_2.labels.ply, NYU40; label-filt/ for 2D), an original
+Replica scene folder (habitat/mesh_semantic.ply + info_semantic.json, as HOV-SG scores Replica), or an RGB-D
+sequence whose frames carry class maps but which has no 3D ground truth (label-fusion: scored in 2D only).
+Prints a table and writes metrics.json and a per-class IoU bar chart into the run directory.
+"""
 
 from __future__ import annotations
 
@@ -10,23 +18,11 @@ from typing import Any
 from ..errors import DataError, OGSceneError
 from ..eval.options import add_eval_arguments, eval_options_from_args
 from ..runs import METRICS, write_metrics
+from .options import add_command
 
 
 def add_parser(subparsers: Any) -> None:
-    p = subparsers.add_parser(
-        "eval",
-        help="evaluate a run directory against ground truth (3D semantics, scene graph, trajectory)",
-        description=(
-            "Score RUN_DIR (gaussians.ply, graph.json) against ground truth GT: a synthetic scene directory "
-            "(found automatically for runs of synthetic scenes), its gt/ folder, a labelled PLY "
-            "(x, y, z, class[, instance]) with a class-name table, a ScanNet scene folder "
-            "(*_vh_clean_2.labels.ply, NYU40; label-filt/ for 2D), an original Replica scene folder "
-            "(habitat/mesh_semantic.ply + info_semantic.json, as HOV-SG scores Replica), or an RGB-D "
-            "sequence whose frames carry class maps but which has no 3D ground truth (label-fusion: scored "
-            "in 2D only). "
-            "Prints a table and writes metrics.json and a per-class IoU bar chart into the run directory."
-        ),
-    )
+    p = add_command(subparsers, __doc__, run)
     p.add_argument("run_dir", metavar="RUN_DIR", type=Path, help="run directory written by the mapper")
     p.add_argument(
         "--gt",
@@ -53,7 +49,6 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument(
         "--out", type=Path, default=None, help="where to write metrics.json and PNGs (default RUN_DIR)"
     )
-    p.set_defaults(func=run)
 
 
 def _pct(x: Any) -> str:

@@ -1,4 +1,8 @@
-"""``ogscene3d graph``: inspect, query and export a run's scene graph (graph.json)."""
+"""``ogscene3d graph``: inspect, query or export a scene graph.
+
+Print a scene graph (graph.json of a run directory): a summary line, and with --nodes / --edges one line per
+node / edge; query its nodes by text, or export it to GraphML.
+"""
 
 from __future__ import annotations
 
@@ -12,7 +16,7 @@ from ..cli_types import positive_int
 from ..config import load_config
 from ..errors import DataError
 from ..runs import RunFolder
-from .options import add_override_argument
+from .options import add_command, add_override_argument, add_shared_arguments
 
 if TYPE_CHECKING:
     from ..graph.scenegraph import SceneGraph
@@ -27,12 +31,7 @@ def _query_text(text: str) -> str:
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser(
-        "graph",
-        help="inspect, query or export a scene graph",
-        description="Print a scene graph (graph.json of a run directory): a summary line, and with --nodes / "
-        "--edges one line per node / edge; query its nodes by text, or export it to GraphML.",
-    )
+    p = add_command(subparsers, __doc__, run)
     p.add_argument("path", help="graph.json, or a run directory that contains one")
     p.add_argument(
         "--query",
@@ -45,7 +44,7 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("--top-k", type=positive_int, default=5, help="results per query (default 5)")
     p.add_argument("--graphml", help="write the graph as GraphML to this path (needs networkx)")
-    p.add_argument("--config", help="YAML config (for graph.query_embedding and its endpoint)")
+    add_shared_arguments(p, "--config", config="YAML config (for graph.query_embedding and its endpoint)")
     add_override_argument(p, "graph.query_embedding=openai --set graph.embedding_model=MODEL")
     p.add_argument(
         "--nodes",
@@ -60,7 +59,6 @@ def add_parser(subparsers) -> None:
         help="print the query answers as JSON ({query, source, message, parsed, hits: [{kind, id, score, "
         "reason, ...}]} per query, a list) instead of text",
     )
-    p.set_defaults(func=run)
 
 
 def _name(g: SceneGraph, i: int) -> str:

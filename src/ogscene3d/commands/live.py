@@ -19,11 +19,11 @@ import time
 from pathlib import Path
 
 from ..atomic import atomic_write_bytes
-from ..cli_types import add_rerun_arguments, image_size, port, positive_float, positive_int
+from ..cli_types import add_rerun_arguments, add_size_argument, port, positive_float, positive_int
 from ..config import load_config
 from ..errors import ConfigError, DataError, OGSceneError
 from ..runs import RunFolder, run_directory
-from .options import add_override_argument
+from .options import add_override_argument, add_shared_arguments
 from .run import run_observers
 
 log = logging.getLogger(__name__)
@@ -42,26 +42,32 @@ def _add_session_arguments(p: argparse.ArgumentParser) -> None:
         "run_dir", nargs="?", default=None, metavar="RUN_DIR", help="saved run directory to browse"
     )
     src = p.add_mutually_exclusive_group()
-    src.add_argument("--data", default=None, help="dataset folder to map live (Replica, ScanNet, TUM, ...)")
+    add_shared_arguments(src, "--data", data="dataset folder to map live (Replica, ScanNet, TUM, ...)")
     src.add_argument("--synthetic", action="store_true", help="generate the synthetic scene and map it live")
     src.add_argument(  # robot input (#27): ogscene3d.streams
         "--source",
         default=None,
         help="live camera to map: realsense[:SERIAL], realsense:RECORDING.db3, record3d[:DEVICE_INDEX]",
     )
-    p.add_argument("--config", default=None, help="YAML config (e.g. configs/replica.yaml)")
-    p.add_argument("--segments", default=None, help="folder of precomputed segments (<rgb stem>.png/.json)")
-    p.add_argument("--device", default=None, help="mapping device: cpu, cuda or cuda:N")
-    p.add_argument(
+    add_shared_arguments(
+        p,
+        "--config",
+        "--segments",
+        "--device",
         "--max-frames",
-        type=positive_int,
-        default=None,
-        help="map at most this many frames (--synthetic: the scene is generated with at most this many)",
-    )
-    p.add_argument(
         "--out",
-        default=None,
-        help="run directory written at the end of live mapping (and the default of the GUI's save box)",
+        config="YAML config (e.g. configs/replica.yaml)",
+        device="mapping device: cpu, cuda or cuda:N",
+        max_frames={
+            "type": positive_int,
+            "help": "map at most this many frames (--synthetic: the scene is generated with at most this "
+            "many)",
+        },
+        out={
+            "required": False,
+            "help": "run directory written at the end of live mapping (and the default of the GUI's save "
+            "box)",
+        },
     )
     p.add_argument(
         "--synthetic-dir",
@@ -113,13 +119,7 @@ def _add_viewer_arguments(p: argparse.ArgumentParser) -> None:
         metavar="PNG",
         help="render the view in headless chromium into PNG and exit (after mapping, in live mode)",
     )
-    p.add_argument(
-        "--screenshot-size",
-        type=image_size(64, "1280x800"),
-        default=(1280, 800),
-        metavar="WxH",
-        help="screenshot size",
-    )
+    add_size_argument(p, "--screenshot-size", "screenshot size", minimum=64, default=(1280, 800))
     p.add_argument(
         "--screenshot-wait", type=positive_float, default=8.0, help="seconds to let the browser draw first"
     )

@@ -1,8 +1,14 @@
-"""``ogscene3d run``: map an RGB-D sequence (or the default synthetic scene) into a run directory.
+"""``ogscene3d run``: map an RGB-D sequence into semantic Gaussians and a scene graph.
+
+Incremental semantic mapping (paper Sec. III). Writes gaussians.ply, map.npz (and its memory views in
+map_memory/), graph.json, timings.json, config.yaml and run_id (the run's id, which --resume checks map.npz
+against) to --out. Without --data a synthetic scene is generated (in OUT/scene) from the config's `synthetic`
+section and mapped.
 
 The options are parsed and the outcome printed here; the session is :mod:`ogscene3d.mapping.session`'s and
 the run :mod:`ogscene3d.mapping.engine`'s (heavy modules are imported inside :func:`run` only, so that
-``ogscene3d --help`` stays quick)."""
+``ogscene3d --help`` stays quick).
+"""
 
 from __future__ import annotations
 
@@ -18,34 +24,18 @@ from ..errors import DataError
 from ..models.manifest import manifest_overrides
 from ..progress import RunTimeEstimate
 from ..runs import RunFolder, recorded_data_path
-from .options import add_override_argument, add_poses_argument
+from .options import add_command, add_override_argument, add_poses_argument, add_shared_arguments
 
 log = logging.getLogger(__name__)
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser(
-        "run",
-        help="map an RGB-D sequence into semantic Gaussians and a scene graph",
-        description="Incremental semantic mapping (paper Sec. III). Writes gaussians.ply, map.npz (and "
-        "its memory views in map_memory/), graph.json, timings.json, config.yaml and run_id (the run's id, "
-        "which --resume checks map.npz against) to --out. Without "
-        "--data a synthetic scene is generated (in OUT/scene) from the config's `synthetic` section and "
-        "mapped.",
-    )
-    p.add_argument(
-        "--config", default=None, help="YAML config (e.g. configs/replica.yaml); defaults otherwise"
-    )
-    p.add_argument("--data", default=None, help="dataset folder (Replica, ScanNet, TUM, 7-Scenes, synthetic)")
-    p.add_argument("--segments", default=None, help="folder of precomputed segments (<rgb stem>.png/.json)")
+    p = add_command(subparsers, __doc__, run)
+    add_shared_arguments(p, "--config", "--data", "--segments")
     p.add_argument(
         "--models", default=None, help="models folder from `ogscene3d models export` (its models.json)"
     )
-    p.add_argument("--out", required=True, help="run directory to write")
-    p.add_argument(
-        "--device", default=None, help="cpu, cuda or cuda:N (default: config, else CUDA if present)"
-    )
-    p.add_argument("--max-frames", type=int, default=None, help="map at most this many frames")
+    add_shared_arguments(p, "--out", "--device", "--max-frames", out="run directory to write")
     p.add_argument(
         "--ablation",
         default=None,
@@ -55,9 +45,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--resume", action="store_true", help="continue from OUT/map.npz")
     add_override_argument(p)
     add_poses_argument(p)
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_shared_arguments(p, "--no-progress")
     add_rerun_arguments(p)
-    p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:

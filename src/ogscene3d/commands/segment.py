@@ -1,4 +1,9 @@
-"""``ogscene3d segment``: run a 2D open-set front-end over a dataset and write precomputed segments.
+"""``ogscene3d segment``: compute open-set 2D segments (SAM / SAM+detector / classical) for a dataset.
+
+Run the 2D front-end of paper Sec. III-B.1 over every frame of --data and write the precomputed segments
+format to --out (resumable: frames whose PNG exists are skipped). Backends: sam (SAM grid masks, M_s),
+sam+detector (fused M_f of M_s and detector-prompted SAM masks), classical (weight-free graph segmentation,
+lower quality), simulated (synthetic scenes with ground truth only).
 
 Output (README "File formats"): ``OUT/<rgb stem>.png`` uint16 ids and ``OUT/<rgb stem>.json`` with
 ``{"scores": {"<id>": predicted IoU}, "names": {"<id>": detector class}}`` (``names`` only for
@@ -19,7 +24,7 @@ from ..cli_types import positive_int
 from ..config import load_config
 from ..errors import ConfigError, DataError
 from ..progress import progress
-from .options import add_override_argument
+from .options import add_command, add_override_argument, add_shared_arguments
 
 if TYPE_CHECKING:
     from ..config import SegmentationConfig
@@ -29,19 +34,10 @@ log = logging.getLogger(__name__)
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser(
-        "segment",
-        help="compute open-set 2D segments (SAM / SAM+detector / classical) for a dataset",
-        description="Run the 2D front-end of paper Sec. III-B.1 over every frame of --data and write the "
-        "precomputed segments format to --out (resumable: frames whose PNG exists are skipped). "
-        "Backends: sam (SAM grid masks, M_s), sam+detector (fused M_f of M_s and detector-prompted "
-        "SAM masks), classical (weight-free graph segmentation, lower quality), simulated (synthetic "
-        "scenes with ground truth only).",
+    p = add_command(subparsers, __doc__, run)
+    add_shared_arguments(
+        p, "--data", "--out", data={"required": True}, out="folder to write <rgb stem>.png / .json into"
     )
-    p.add_argument(
-        "--data", required=True, help="dataset folder (Replica, ScanNet, TUM, 7-Scenes, synthetic)"
-    )
-    p.add_argument("--out", required=True, help="folder to write <rgb stem>.png / .json into")
     p.add_argument(
         "--backend",
         default=None,
@@ -60,14 +56,13 @@ def add_parser(subparsers) -> None:
         "--points-per-side", type=positive_int, default=None, help="SAM grid prompts per side (default 32)"
     )
     p.add_argument("--provider", default=None, choices=["auto", "cpu", "cuda"], help="onnxruntime provider")
-    p.add_argument("--config", default=None, help="YAML config; its `segmentation` and `data` sections apply")
+    add_shared_arguments(p, "--config", config="YAML config; its `segmentation` and `data` sections apply")
     add_override_argument(p, "segmentation.pred_iou_thresh=0.9")
     p.add_argument("--kind", default="auto", help="dataset layout (default: detected)")
     p.add_argument("--stride", type=int, default=None, help="use every N-th frame")
-    p.add_argument("--max-frames", type=int, default=None, help="segment at most this many frames")
+    add_shared_arguments(p, "--max-frames", max_frames="segment at most this many frames")
     p.add_argument("--overwrite", action="store_true", help="recompute frames that already have segments")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.set_defaults(func=run)
+    add_shared_arguments(p, "--no-progress")
 
 
 def parse_classes(text: str) -> list[str]:

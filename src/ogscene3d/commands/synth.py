@@ -1,4 +1,8 @@
-"""``ogscene3d synth``: generate a synthetic scene with ground truth and simulated SAM segments."""
+"""``ogscene3d synth``: generate a synthetic RGB-D scene with ground truth and simulated segments.
+
+Render a procedural furnished room along an exploring trajectory (Replica layout plus gt/ and segments/).
+Defaults come from the config's `synthetic` section.
+"""
 
 from __future__ import annotations
 
@@ -8,23 +12,19 @@ import logging
 import time
 from pathlib import Path
 
-from ..cli_types import image_size
+from ..cli_types import add_size_argument
 from ..config import choices, load_config
 from ..errors import ConfigError, OGSceneError
-from .options import add_override_argument
+from .options import add_command, add_override_argument, add_shared_arguments
 
 log = logging.getLogger(__name__)
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser(
-        "synth",
-        help="generate a synthetic RGB-D scene with ground truth and simulated segments",
-        description="Render a procedural furnished room along an exploring trajectory (Replica layout "
-        "plus gt/ and segments/). Defaults come from the config's `synthetic` section.",
+    p = add_command(subparsers, __doc__, run)
+    add_shared_arguments(
+        p, "--out", "--config", config="YAML config (its `synthetic` section gives the defaults)"
     )
-    p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--config", default=None, help="YAML config (its `synthetic` section gives the defaults)")
     p.add_argument("--seed", type=int, default=None, help="scene, trajectory and noise seed")
     p.add_argument("--frames", type=int, default=None, help="number of frames (--layout apartment: per room)")
     p.add_argument(
@@ -34,7 +34,7 @@ def add_parser(subparsers) -> None:
         help="room (one furnished room, a smooth walk) | scan (a long scan like a real ScanNet one; give it "
         "300 frames or more) | apartment (2-5 rooms walked through room by room)",
     )
-    p.add_argument("--size", type=image_size(8), default=None, metavar="WxH", help="image size, e.g. 160x120")
+    add_size_argument(p, "--size", "image size, e.g. 160x120", minimum=8)
     p.add_argument(
         "--noise",
         default=None,
@@ -43,10 +43,11 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("--depth-noise", type=float, default=None, help="depth noise std in metres")
     p.add_argument("--pose-noise", type=float, default=None, help="pose translation noise std in metres")
-    p.add_argument("--device", default="cpu", help="Warp device for ray casting (cpu, cuda, cuda:0)")
+    add_shared_arguments(
+        p, "--device", device={"default": "cpu", "help": "Warp device for ray casting (cpu, cuda, cuda:0)"}
+    )
     p.add_argument("--force", action="store_true", help="overwrite a non-empty output folder")
     add_override_argument(p, "synthetic.frames=30")
-    p.set_defaults(func=run)
 
 
 def _reusable(out: str | Path, params: dict, overwrite: bool) -> bool:

@@ -234,6 +234,15 @@ class RGBDDataset:
     # None: the format defines none (7-Scenes' world is its first camera's, pitched as it was)
     up_axis: tuple[float, float, float] | None = None
     up_axis_source = ""
+    # the files (a trailing "/": folders) whose presence marks a folder as this layout, for detect()
+    layout_markers: tuple[str, ...] = ()
+
+    @classmethod
+    def detect(cls, root: Path) -> bool:
+        """Whether ``root`` holds this layout: every one of ``layout_markers`` is there (none: never)."""
+        return bool(cls.layout_markers) and all(
+            (root / m).is_dir() if m.endswith("/") else (root / m).is_file() for m in cls.layout_markers
+        )
 
     def __init__(
         self,

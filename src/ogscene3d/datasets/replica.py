@@ -117,10 +117,7 @@ class ReplicaDataset(RGBDDataset):
     # frames of NICE-SLAM's room0, depth reprojects best as read, worse with cx or cy shifted by half a
     # pixel either way (docs/results.md, "Dataset checks"; benchmarks/pixel_centers.py)
     pixel_centers_default = "half"
-
-    @staticmethod
-    def detect(root: Path) -> bool:
-        return (root / "results").is_dir() and (root / "traj.txt").is_file()
+    layout_markers = ("results/", "traj.txt")
 
     def __init__(self, root: Path, config: DataConfig, segments_dir: Path | None = None) -> None:
         root = Path(root)

@@ -116,9 +116,7 @@ class ScanNetDataset(RGBDDataset):
     up_axis = (0.0, 0.0, 1.0)
     up_axis_source = "the ScanNet layout (its scans' world is z-up)"
 
-    @staticmethod
-    def detect(root: Path) -> bool:
-        return (root / "color").is_dir() and (root / "depth").is_dir()
+    layout_markers = ("color/", "depth/")
 
     def __init__(self, root: Path, config: DataConfig, segments_dir: Path | None = None) -> None:
         root = Path(root)

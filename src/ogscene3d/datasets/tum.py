@@ -129,9 +129,7 @@ class TUMDataset(RGBDDataset):
     up_axis = (0.0, 0.0, 1.0)
     up_axis_source = "the TUM layout (its motion-capture world is z-up)"
 
-    @staticmethod
-    def detect(root: Path) -> bool:
-        return (root / "rgb.txt").is_file() and (root / "depth.txt").is_file()
+    layout_markers = ("rgb.txt", "depth.txt")
 
     def __init__(self, root: Path, config: DataConfig, segments_dir: Path | None = None) -> None:
         root = Path(root)

@@ -40,7 +40,7 @@ import logging
 import cv2
 import numpy as np
 
-from ..config import SegmentationConfig
+from ..config import SegmentationConfig, section_values
 from .base import Segmentation
 from .sam_onnx import check_rgb
 
@@ -363,15 +363,8 @@ class ClassicalSegmenter:
             if K.shape != (3, 3):
                 raise ValueError(f"K must be 3x3, got shape {K.shape}")
             fx, fy = float(K[0, 0]), float(K[1, 1])
-        return cls(
-            k=config.classical_k,
-            min_size=config.classical_min_size,
-            max_side=config.classical_max_side,
-            depth_weight=config.classical_depth_weight,
-            normal_weight=config.classical_normal_weight,
-            fx=fx,
-            fy=fy,
-        )
+        names = ("k", "min_size", "max_side", "depth_weight", "normal_weight")
+        return cls(**section_values(config, names, "classical_"), fx=fx, fy=fy)
 
     def __call__(
         self,

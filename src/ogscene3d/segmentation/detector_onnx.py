@@ -31,7 +31,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..config import SegmentationConfig
+from ..config import SegmentationConfig, section_values
 from ..errors import ConfigError
 from .masks import nms
 from .onnx_session import OnnxModel
@@ -138,14 +138,11 @@ class DetectorOnnx:
             The detector, its model file opened (ConfigError when ``detector`` is not set).
         """
         require_detector(config)
+        names = ("score_thresh", "nms_thresh", "max_detections", "input_size", "box_format")
         return cls(
             config.detector,
             config.detector_classes,
-            score_thresh=config.detector_score_thresh,
-            nms_thresh=config.detector_nms_thresh,
-            max_detections=config.detector_max_detections,
-            input_size=config.detector_input_size,
-            box_format=config.detector_box_format,
+            **section_values(config, names, "detector_"),
             provider=config.execution_provider,
         )
 

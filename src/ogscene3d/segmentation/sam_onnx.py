@@ -44,7 +44,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..config import SegmentationConfig
+from ..config import SegmentationConfig, section_values
 from ..errors import ConfigError
 from .base import Segmentation
 from .masks import MaskRecord, mask_nms, masks_to_records, paint_masks, remove_small_regions
@@ -126,6 +126,19 @@ class SamImage:
         )
 
 
+#: SamOnnx's prompt grid and mask filters: the segmentation settings of the same names
+_GRID_AND_FILTERS = (
+    "points_per_side",
+    "points_per_batch",
+    "pred_iou_thresh",
+    "stability_score_thresh",
+    "stability_score_offset",
+    "box_nms_thresh",
+    "min_region_area",
+    "mask_threshold",
+)
+
+
 class SamOnnx:
     """Automatic SAM segmentation (paper Sec. III-B.1, M_s) with the split ONNX export.
 
@@ -194,14 +207,7 @@ class SamOnnx:
         return cls(
             config.sam_encoder,
             config.sam_decoder,
-            points_per_side=config.points_per_side,
-            points_per_batch=config.points_per_batch,
-            pred_iou_thresh=config.pred_iou_thresh,
-            stability_score_thresh=config.stability_score_thresh,
-            stability_score_offset=config.stability_score_offset,
-            box_nms_thresh=config.box_nms_thresh,
-            min_region_area=config.min_region_area,
-            mask_threshold=config.mask_threshold,
+            **section_values(config, _GRID_AND_FILTERS),
             input_size=config.sam_input_size,
             provider=config.execution_provider,
         )

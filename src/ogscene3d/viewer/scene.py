@@ -32,6 +32,9 @@ COLOR_MODES = ("rgb", "semantic", "confidence", "room")
 RENDER_MODES = ("auto", "splats", "points")
 HIGHLIGHT_RGB = (255, 196, 0)
 EDGE_RGB = (70, 70, 70)
+# the camera's trajectory and its frustum are drawn alike
+CAMERA_RGB = (230, 60, 30)
+CAMERA_LINE_WIDTH = 2.0
 
 
 @dataclass
@@ -219,6 +222,13 @@ def drawable_graph(graph: dict | None) -> dict | None:
     return {**graph, "nodes": nodes, "edges": edges}
 
 
+def _remove(*handles) -> None:
+    """Take scene handles off the scene (None: nothing drawn there)."""
+    for h in handles:
+        if h is not None:
+            h.remove()
+
+
 def _box_segments(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """The 12 edges of the axis-aligned box [lo, hi] as [12, 2, 3]."""
     c = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=np.float64)
@@ -336,12 +346,18 @@ class SceneLayers:
         self.shown_kind = kind
 
     def _remove_gaussians(self) -> None:
-        if self._gauss_handle is not None:
-            self._gauss_handle.remove()
+        _remove(self._gauss_handle)
         self._gauss_handle = None
         self._gauss_kind = None
         self.shown_gaussians = 0
         self.shown_kind = ""
+
+    def _lines(self, name: str, points: np.ndarray, rgb: tuple[int, ...], width: float, visible: bool = True):
+        """Add line segments ``points`` [M, 2, 3] of one colour, ``width`` screen pixels wide (the look of
+        every line layer: trajectory, edges, highlight boxes, room outlines)."""
+        return self.scene.add_line_segments(
+            name, points=points, colors=rgb, thickness=width, thickness_units="screen", visible=visible
+        )
 
     # ------------------------------------------------------------------ camera
     def update_camera(self, snap: MapSnapshot, st: ViewerSettings) -> None:
@@ -349,19 +365,13 @@ class SceneLayers:
         traj = snap.trajectory
         key = (len(traj), tuple(np.round(traj[-1, :3, 3], 6)) if len(traj) else ())
         if key != self._traj_key:
-            if self._traj_handle is not None:
-                self._traj_handle.remove()
-                self._traj_handle = None
+            _remove(self._traj_handle)
+            self._traj_handle = None
             if len(traj) >= 2:
                 pos = traj[:, :3, 3]
                 seg = np.stack([pos[:-1], pos[1:]], axis=1).astype(np.float32)
-                self._traj_handle = self.scene.add_line_segments(
-                    "/camera/trajectory",
-                    points=seg,
-                    colors=(230, 60, 30),
-                    thickness=2.0,
-                    thickness_units="screen",
-                    visible=st.show_trajectory,
+                self._traj_handle = self._lines(
+                    "/camera/trajectory", seg, CAMERA_RGB, CAMERA_LINE_WIDTH, st.show_trajectory
                 )
             self._traj_key = key
         if snap.pose is None:
@@ -372,15 +382,14 @@ class SceneLayers:
         scale = float(np.clip(0.06 * self.extent, 0.05, 0.5))
         fkey = (round(fov, 5), round(aspect, 5), round(scale, 3))
         if self._frustum is None or fkey != self._frustum_key:
-            if self._frustum is not None:
-                self._frustum.remove()
+            _remove(self._frustum)
             self._frustum = self.scene.add_camera_frustum(
                 "/camera/current",
                 fov=fov,
                 aspect=aspect,
                 scale=scale,
-                color=(230, 60, 30),
-                thickness=2.0,
+                color=CAMERA_RGB,
+                thickness=CAMERA_LINE_WIDTH,
                 thickness_units="screen",
                 visible=st.show_camera,
             )
@@ -478,20 +487,14 @@ class SceneLayers:
             for e in edges
         )
         if key != self._edges_key:
-            if self._edge_segments is not None:
-                self._edge_segments.remove()
-                self._edge_segments = None
+            _remove(self._edge_segments)
+            self._edge_segments = None
             self._edges_key = key
             if edges:
                 src = np.array([k[3] for k in key], dtype=np.float32)
                 dst = np.array([k[4] for k in key], dtype=np.float32)
-                self._edge_segments = self.scene.add_line_segments(
-                    "/graph/edges",
-                    points=np.stack([src, dst], axis=1),
-                    colors=EDGE_RGB,
-                    thickness=1.5,
-                    thickness_units="screen",
-                    visible=st.show_edges,
+                self._edge_segments = self._lines(
+                    "/graph/edges", np.stack([src, dst], axis=1), EDGE_RGB, 1.5, st.show_edges
                 )
         # Relation labels: on a room-sized graph (a hundred edges) all of them at once are a pile of
         # overlapping text, so by default only the selected node's relations are labelled.
@@ -501,8 +504,7 @@ class SceneLayers:
         label_key = (key, tuple(shown))
         if label_key == self._edge_labels_key:
             return
-        for h in self._edge_labels:
-            h.remove()
+        _remove(*self._edge_labels)
         self._edge_labels = []
         self._edge_labels_key = label_key
         for i in shown:
@@ -527,9 +529,8 @@ class SceneLayers:
         key = tuple((tuple(lo), tuple(hi)) for lo, hi in boxes)
         if key == self._highlight_key:
             return
-        if self._highlight_handle is not None:
-            self._highlight_handle.remove()
-            self._highlight_handle = None
+        _remove(self._highlight_handle)
+        self._highlight_handle = None
         self._highlight_key = key
         good = [
             (lo, hi)
@@ -538,9 +539,7 @@ class SceneLayers:
         ]
         if good:
             seg = np.concatenate([_box_segments(lo, hi) for lo, hi in good]).astype(np.float32)
-            self._highlight_handle = self.scene.add_line_segments(
-                "/graph/highlight", points=seg, colors=HIGHLIGHT_RGB, thickness=3.0, thickness_units="screen"
-            )
+            self._highlight_handle = self._lines("/graph/highlight", seg, HIGHLIGHT_RGB, 3.0)
 
     # ------------------------------------------------------------------ rooms
     def update_rooms(self, graph: dict | None, st: ViewerSettings) -> None:
@@ -550,8 +549,7 @@ class SceneLayers:
                     if r.outline)  # fmt: skip
         if key == self._rooms_key:
             return
-        for h in self._room_handles:
-            h.remove()
+        _remove(*self._room_handles)
         self._room_handles = []
         self._rooms_key = key
         for r in rooms:
@@ -560,14 +558,7 @@ class SceneLayers:
             seg = np.concatenate([np.stack([p, np.roll(p, -1, axis=0)], axis=1) for p in r.outline])
             color = tuple(int(round(float(v) * 255)) for v in room_colors(np.array([r.id]))[0])
             self._room_handles.append(
-                self.scene.add_line_segments(
-                    f"/rooms/{r.id}/outline",
-                    points=seg.astype(np.float32),
-                    colors=color,
-                    thickness=3.0,
-                    thickness_units="screen",
-                    visible=st.show_rooms,
-                )
+                self._lines(f"/rooms/{r.id}/outline", seg.astype(np.float32), color, 3.0, st.show_rooms)
             )
             self._room_handles.append(
                 self.scene.add_label(
