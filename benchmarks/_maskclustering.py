@@ -21,12 +21,11 @@ it (else to the cluster that holds it most often). Views that absorbed a cup int
 voxels with the table's cluster, the others with the cup's: the more specific claim wins, as an object
 nested in its support is smaller than the support.
 
-    python benchmarks/yardstick.py SCENE_DIR        # prints instance mIoU and class mIoU
+    python benchmarks/yardstick.py SCENE_DIR --weak   # prints instance mIoU and class mIoU
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -199,23 +198,3 @@ def view_consensus(frames: list, step: int = 2) -> tuple[np.ndarray, np.ndarray]
         _, cluster = np.unique(comp[cluster], return_inverse=True)
     frame_of_mask = np.array([f for f, _ in masks], dtype=np.int64)
     return assign_voxels(points, cluster[owner], frame_of_mask[owner])
-
-
-def main(argv: list[str] | None = None) -> int:
-    from _instances import class_miou, instance_scores
-
-    from ogscene3d.eval.readers import load_ground_truth
-
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("scene", type=Path, help="a synthetic scene folder (ogscene3d synth)")
-    args = ap.parse_args(argv)
-    pts, lab = view_consensus(_frames(args.scene))
-    gt = load_ground_truth(args.scene)
-    inst = instance_scores(pts, lab, gt)
-    print(f"{int(lab.max()) + 1 if lab.size else 0} clusters from {pts.shape[0]} points")
-    print(f"instance mIoU {100 * inst['miou']:.2f}  class mIoU {100 * class_miou(pts, lab, gt):.2f}")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -255,11 +255,11 @@ FRAME_FAULTS: list[tuple[str, Callable[[Path], None], str, str]] = [
     ("pose bad last row", _traj_line("1 0 0 0 0 1 0 0 0 0 1 0 0 0 1 1"), f"traj.txt:{BAD + 1}", "frame"),
     ("traj line non-numeric", _traj_line("1 0 0 x " * 4), f"traj.txt:{BAD + 1}", "frame"),
     ("traj line short", _traj_line("1 0 0 0"), f"traj.txt:{BAD + 1}", "frame"),
-    (
+    (  # the last frame beyond the trajectory: named when the data set opens, an error or a skip
         "traj shorter than frames",
-        lambda s: (s / "traj.txt").write_text("".join((s / "traj.txt").read_text().splitlines(True)[:BAD])),
+        lambda s: (s / "traj.txt").write_text("".join((s / "traj.txt").read_text().splitlines(True)[:-1])),
         "traj.txt",
-        "data",
+        "frame",
     ),
     ("segments corrupt", _write(SEG, b"not a png"), f"frame{STEM}.png", "frame"),
     ("segments wrong size", _img(SEG, lambda s: np.ones((18, 24), np.uint16)), f"frame{STEM}.png", "frame"),
@@ -487,12 +487,12 @@ def model_server(status: int) -> Callable[[Path], tuple[str, bool | None]]:
         threading.Thread(target=srv.serve_forever, daemon=True).start()
         try:
             url = f"http://127.0.0.1:{srv.server_address[1]}/v1"
-            sets = ["graph.captioner.kind=openai", f"graph.captioner.base_url={url}"]
-            sets += ["graph.captioner.model=fault-matrix", "graph.captioner.api_key_env=OGS_FAULT_MATRIX_KEY"]
+            sets = ["graph.captioner.kind=openai", f"graph.endpoint.base_url={url}"]
+            sets += ["graph.endpoint.model=fault-matrix", "graph.endpoint.api_key_env=OGS_FAULT_MATRIX_KEY"]
             # one graph update (the final one), one request at a time: the breaker opens after 3 failed
             # nodes, each asked 1 + max_retries times, so at most 9 requests (with N requests in parallel,
             # up to N - 1 more nodes are already under way when it opens)
-            sets += ["graph.captioner.max_retries=2", "graph.captioner.timeout_s=5"]
+            sets += ["graph.endpoint.max_retries=2", "graph.endpoint.timeout_s=5"]
             sets += ["graph.init_keyframes=1000", "graph.captioner.concurrency=1"]
             args = _run_args(SCENES["base"], tmp / "run")
             for s in sets:

@@ -57,10 +57,11 @@ except ImportError as e:
     print("gsplat not importable:", e)
 PY
 
-step tests python -m pytest -q -p no:cacheprovider tests/test_blend_culling.py tests/test_render_internals.py \
-  tests/test_rasterization.py tests/test_rasterization_edges.py tests/test_semantics.py tests/test_knn.py \
-  tests/test_gaussians.py tests/test_mapping_local.py tests/test_mapping_refine.py \
-  tests/test_mapping_longterm.py tests/test_mapping_merge.py tests/test_mapping_optimize.py tests/test_mapping_mapper.py
+step tests python -m pytest -q -p no:cacheprovider tests/kernels/test_blend_culling.py \
+  tests/rendering/test_projection.py tests/rendering/test_rasterization.py \
+  tests/rendering/test_rasterization_edges.py tests/rendering/test_semantics.py tests/mapping/test_neighbors.py \
+  tests/test_gaussians.py tests/mapping/test_local.py tests/mapping/test_refine.py \
+  tests/mapping/test_longterm.py tests/mapping/test_merge.py tests/mapping/test_optimize.py tests/mapping/test_mapper.py
 step rasterize python benchmarks/rasterize.py --device "$device" --width "$w" --height "$h" \
   --counts "$counts" --iters "$iters"
 step semantic python benchmarks/semantic.py --device "$device" --width "$w" --height "$h" \

@@ -3,8 +3,9 @@ scans every message header once) and to read every frame, side by side, as ratio
 
     python benchmarks/robot_input.py [--frames 30] [--size 320x240] [--work DIR]
 
-The recordings are written from a synthetic scene with the test suite's writers (tests/robot_recordings.py:
-rosbags' ROS 1 and ROS 2 writers, a Record3D .r3d zip); needs ``ogscene3d[ros,record3d]``.
+The recordings are written from a synthetic scene with the test suite's writers
+(tests/helpers/robot_recordings.py: rosbags' ROS 1 and ROS 2 writers, a Record3D .r3d zip); needs
+``ogscene3d[ros,record3d]``.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import numpy as np
 from _common import positive_int, run_main
 
 # the recordings' writers are test helpers (they need no ROS install either)
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests" / "helpers"))
 
 
 def _time(fn, repeats: int = 3) -> float:

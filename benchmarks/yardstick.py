@@ -8,28 +8,35 @@ separation rule) is ``_maskclustering.py`` (``--weak``).
 * **Scene points**: every frame's valid pixels are back-projected and pooled in ``VOXEL`` voxels. A frame
   *sees* the voxels its pixels fall in, and puts a voxel in a mask when all its segmented pixels there are of
   that one segment (else it is on a boundary, seen but in no mask, as MaskClustering's boundary points).
-* **Nodes** start as the masks (a segment of one frame: the voxels it holds there) and become clusters of
-  masks, level by level. A node is *seen* in a frame that sees ``SEEN_FRACTION`` of its voxels (or
-  ``SEEN_VOXELS``: a large cluster is never seen whole), and *held* by the frame's mask that holds at least
-  ``CONTAIN`` (0.7, rule b) of its voxels that lie in some mask there.
-* **Consensus** of two nodes: of the frames that hold both (each by some mask), the share where one mask
-  holds both, over at least ``MIN_VIEWS`` such frames (MaskClustering's view consensus).
+* **Masks** (a segment of one frame: the voxels it holds there) are the nodes; a cluster of masks carries the
+  evidence of its masks together (MaskClustering's nodes: its frames and holding masks are its masks', not
+  computed again from its voxels). A mask is *seen* in a frame that sees ``SEEN_FRACTION`` of its voxels (or
+  ``SEEN_VOXELS``), and *held* by the frame's mask that holds at least ``CONTAIN`` (0.7, rule b) of its
+  voxels that lie in some mask there.
+* **Consensus** of two clusters: of the frames that hold both (each by some mask), the share where one mask
+  holds both (MaskClustering's view consensus).
 * **Under-segmented masks** (MaskClustering's filter): a mask that the other frames clearly split (a second
   mask holds ``SPLIT_PART`` of it) in more than ``SPLIT`` of the frames that see it lies over two objects (a
   first view that merged a refrigerator with the floor): it is no node, holds nothing and has no vote.
-* **Separation** (rule a): two nodes stay apart when some frame clearly separates them, that is holds one
-  by a mask that holds at most ``APART`` (a fifth) of the other's voxels seen there, a mask that is small
-  beside the other (at most ``SEP_SIZE`` of the other's voxels there: a cup's own segment beside the table;
-  a random cut through a wall is no evidence). SAM merges a small object into its support in most far
-  views; the few views that show it apart are the evidence.
-* **Levels**: at each threshold of ``THRESHOLDS`` the node pairs whose consensus reaches it are joined, best
-  consensus first, unless the two groups hold a separated pair (a segment over two objects links each of
-  them; their separation keeps them apart); seen / held / separation are computed again for the new
-  clusters from the union of their voxels.
-* **Votes** (rule c): each voxel takes the cluster with the largest score-weighted share of the views that
-  put it in a mask (a view's weight: its segment's SAM score). A mask that holds another cluster which the
-  views separate from its own (a table's segment that absorbed the cup) gives its vote on that cluster's
-  voxels to that cluster (``nested``): a view that merged the cup with the table says nothing against it.
+* **Separation** (rule a): a frame separates two masks when it holds one by a mask that holds at most
+  ``APART`` (a fifth) of the other's voxels seen there, and either that mask is small beside the other (at
+  most ``SEP_SIZE`` of the other's voxels: a cup's own segment beside the table) or the other is held there
+  by a mask of its own (a cabinet's segment beside the floor's). Two clusters are *apart* when at least
+  ``SEP_MIN`` frames, and ``SEP_SHARE`` of the frames that hold both, separate a mask of one from a mask of
+  the other: SAM merges an object with its support in some views and shows it apart in others, and a random
+  cut through a wall separates two of its pieces in few of the views that see both.
+* **Levels** (:func:`schedule`): at the first threshold of ``THRESHOLDS``, MaskClustering's falling observer
+  counts (the ``OBSERVER_PERCENTILES`` of the pairs' shared frames down to ``MIN_VIEWS``), then each further
+  threshold at ``MIN_VIEWS``: the cluster pairs whose consensus reaches it are joined, best consensus first,
+  never two groups that hold an apart pair (a segment over two objects links each of them; their separation
+  keeps them apart).
+* **Votes** (rule c): each voxel takes the cluster with the largest score-weighted *share* of views: the
+  SAM scores of the views that put it in one of the cluster's masks over those of the views that could have
+  (they see the voxel and hold some mask of the cluster), plus ``PRIOR``. A book that a few views show and
+  the shelf's views absorb scores near 1 there, the shelf near the absorbing share. A mask that holds
+  another cluster apart from its own (a table's segment that absorbed the cup) gives its vote on that
+  cluster's voxels to that cluster (``nested``): a view that merged the cup with the table says nothing
+  against it.
 
 The result is a labelled point set (voxel means), scored like a map (``_instances.py``).
 
@@ -53,12 +60,16 @@ CONTAIN = 0.7  # rule (b): a mask holds a node when it has this share of the nod
 APART = 0.2  # rule (a): ... and it separates it from a node of which it has at most this share
 SEEN_FRACTION = 0.3
 SEEN_VOXELS = 100
-MIN_VIEWS = 2
+MIN_VIEWS = 3
 MIN_MASK_VOXELS = 2
 SPLIT = 0.3  # a mask split in more than this share of the frames that see it is under-segmented
 SEP_SIZE: float | None = 0.3
+SEP_MIN = 2  # ... in at least this many frames
+SEP_SHARE = 0.5  # ... and this share of the frames that hold both
 SPLIT_PART = 0.3  # ... where a second mask holds this share of it
 THRESHOLDS = (0.9, 0.8, 0.7)
+OBSERVER_PERCENTILES = (95, 85, 75, 65, 50)
+PRIOR = 1.0  # rule (c): a cluster's share at a voxel is its votes over (the views that could vote + PRIOR)
 
 
 def _frames(scene: str | Path) -> list:
@@ -256,54 +267,65 @@ def _observers(h: Holding, a: np.ndarray, b: np.ndarray, chunk: int = 50000) -> 
     return out
 
 
-def _separated(h: Holding, a: np.ndarray, b: np.ndarray, chunk: int = 20000) -> np.ndarray:
-    """[E] bool: pairs that some frame separates (rule a), either way round."""
-    out = np.zeros(len(a), bool)
+def _separating_frames(
+    h: Holding, a: np.ndarray, b: np.ndarray, chunk: int = 20000
+) -> tuple[np.ndarray, np.ndarray]:
+    """(pair index, frame) of every frame that clearly separates a pair (rule a), either way round."""
+    hit = []
     for x, y in ((a, b), (b, a)):
         for s in range(0, len(x), chunk):
             xs, ys = x[s : s + chunk], y[s : s + chunk]
             k = h.held[xs]  # the mask holding x in each frame
             look = (k >= 0) & h.seen[ys] & (h.n_in[ys] > 0)
             if SEP_SIZE is not None:  # the mask that holds x is small beside y: a cup's, beside the table
-                look &= h.mask_size[np.maximum(k, 0)] <= SEP_SIZE * h.n_in[ys]
+                small = h.mask_size[np.maximum(k, 0)] <= SEP_SIZE * h.size[ys][:, None]
+                ky = h.held[ys]  # ... or y has a mask of its own there: a cabinet's beside the floor's
+                look &= small | ((ky >= 0) & (ky != k))
             e, g = np.nonzero(look)
             if e.size == 0:
                 continue
             share = h.count(ys[e], k[e, g])
             apart = share <= APART * h.n_in[ys[e], g]
-            out[s + np.unique(e[apart])] = True
-    return out
+            hit.append((s + e[apart]) * h.held.shape[1] + g[apart])
+    keys = np.unique(np.concatenate(hit)) if hit else np.zeros(0, np.int64)  # a frame counts once
+    F = h.held.shape[1]
+    return keys // F, keys % F
 
 
-def _constrained_components(n: int, a, b, rank, apart_a, apart_b) -> np.ndarray:
-    """Union the pairs (a, b) in the order of ``rank`` (best first), never joining two groups that hold a
-    separated pair (apart_a, apart_b): a segment over two objects links each of them, and the separation
-    between the two keeps them apart. Returns each node's group."""
-    parent = np.arange(n)
+class _Union:
+    """Union-find over the masks that never joins two groups holding a separated pair: a segment over two
+    objects links each of them, and their separation keeps them apart (cannot-links, kept by group root)."""
 
-    def find(x: int) -> int:
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
+    def __init__(self, n: int, apart_a: np.ndarray, apart_b: np.ndarray) -> None:
+        self.parent = np.arange(n)
+        self.cannot: dict[int, set[int]] = {}
+        for x, y in zip(apart_a.tolist(), apart_b.tolist()):
+            self.cannot.setdefault(x, set()).add(y)
+            self.cannot.setdefault(y, set()).add(x)
+
+    def find(self, x: int) -> int:
+        p = self.parent
+        while p[x] != x:
+            p[x] = p[p[x]]
+            x = int(p[x])
         return x
 
-    cannot: dict[int, set[int]] = {}
-    for x, y in zip(apart_a.tolist(), apart_b.tolist()):
-        cannot.setdefault(x, set()).add(y)
-        cannot.setdefault(y, set()).add(x)
-    for e in np.argsort(rank, kind="stable"):
-        ra, rb = find(int(a[e])), find(int(b[e]))
-        if ra == rb or rb in cannot.get(ra, ()):
-            continue
-        if len(cannot.get(ra, ())) < len(cannot.get(rb, ())):
+    def roots(self) -> np.ndarray:
+        return np.array([self.find(x) for x in range(len(self.parent))], np.int64)
+
+    def join(self, x: int, y: int) -> bool:
+        ra, rb = self.find(x), self.find(y)
+        if ra == rb or rb in self.cannot.get(ra, ()):
+            return False
+        if len(self.cannot.get(ra, ())) < len(self.cannot.get(rb, ())):
             ra, rb = rb, ra
-        parent[rb] = ra
-        moved = cannot.pop(rb, set())
-        for x in moved:
-            cannot[x].discard(rb)
-            cannot[x].add(ra)
-        cannot.setdefault(ra, set()).update(moved)
-    return np.array([find(x) for x in range(n)], np.int64)
+        self.parent[rb] = ra
+        moved = self.cannot.pop(rb, set())
+        for z in moved:
+            self.cannot[z].discard(rb)
+            self.cannot[z].add(ra)
+        self.cannot.setdefault(ra, set()).update(moved)
+        return True
 
 
 def undersegmented(h: Holding, views: Views) -> np.ndarray:
@@ -322,40 +344,120 @@ def _drop_masks(h: Holding, drop: np.ndarray) -> None:
     h.held[bad] = -1
 
 
-def cluster(views: Views, thresholds: tuple[float, ...] = THRESHOLDS) -> tuple[np.ndarray, Holding]:
-    """The cluster of every mask (-1: an under-segmented mask, left out) after the last level, and the final
-    clusters' holding."""
-    node_of_mask = np.arange(views.n_masks)
+@dataclass
+class Clusters:
+    """The clusters of the masks (``node_of_mask``, -1: an under-segmented mask, left out), the masks'
+    holding, and which clusters the views keep apart (``apart``: pairs of cluster ids, smaller first)."""
+
+    node_of_mask: np.ndarray
+    holding: Holding
+    apart: set[tuple[int, int]]
+
+
+class _Evidence:
+    """The masks' holding and separating frames, summed over the masks of each cluster (MaskClustering's
+    nodes: a cluster's frames and holding masks are those of its masks together, not computed again from
+    its voxels, where one mask over two objects would make the cluster held nowhere and so never apart)."""
+
+    def __init__(self, views: Views, h: Holding, a: np.ndarray, b: np.ndarray) -> None:
+        from scipy.sparse import coo_matrix
+
+        n = views.n_masks
+        self.n, self.frames = n, len(views.seen)
+        pair, frame = _separating_frames(h, a, b)
+        self.sep_a, self.sep_b, self.sep_frame = a[pair], b[pair], frame
+        r, f = np.nonzero(h.held >= 0)
+        self.z = coo_matrix((np.ones(len(r), np.float32), (r, h.held[r, f])), shape=(n, n)).tocsr()
+        self.y = coo_matrix((np.ones(len(r), np.float32), (r, f)), shape=(n, self.frames)).tocsr()
+
+    def of(self, node: np.ndarray):
+        """For clusters ``node`` (per mask, -1: none, ids from 0): their holding masks [C, masks] and frames
+        held [C, F] (0/1 CSR), and the pairs apart (two arrays)."""
+        from scipy.sparse import coo_matrix
+
+        nc = int(node.max()) + 1 if (node >= 0).any() else 0
+        alive = node >= 0
+        p = coo_matrix((np.ones(int(alive.sum()), np.float32), (node[alive], np.nonzero(alive)[0])),
+                       shape=(nc, self.n)).tocsr()  # fmt: skip
+        zc, yc = p @ self.z, p @ self.y
+        zc.data[:] = 1.0
+        yc.data[:] = 1.0
+        ca, cb = node[self.sep_a], node[self.sep_b]
+        lo, hi = np.minimum(ca, cb), np.maximum(ca, cb)
+        ok = (lo >= 0) & (lo != hi)
+        keys = np.unique((lo[ok] * nc + hi[ok]) * self.frames + self.sep_frame[ok])  # a frame counts once
+        pair, count = np.unique(keys // self.frames, return_counts=True)
+        pa, pb = pair // max(nc, 1), pair % max(nc, 1)
+        apart = (count >= SEP_MIN) & (count >= SEP_SHARE * _shared(yc, pa, pb))
+        return zc, yc, pa[apart], pb[apart]
+
+
+def cluster(views: Views, thresholds: tuple[float, ...] = THRESHOLDS) -> Clusters:
+    """Cluster the masks level by level (:func:`schedule`: the pairs that many frames hold first): join the
+    pairs whose consensus reaches the level's threshold, best first, never two groups of which one holds a
+    cluster apart from one of the other (at least ``SEP_MIN`` frames, and ``SEP_SHARE`` of the frames that
+    hold both, separate some mask of one from some mask of the other)."""
     n = views.n_masks
-    h = holding(views, node_of_mask, n)
+    h = holding(views, np.arange(n), n)
     under = undersegmented(h, views)
-    node_of_mask = np.where(under, -1, node_of_mask)
     _drop_masks(h, under)
     h.held[under] = -1  # nor are they nodes
-    for thr in thresholds:
-        a, b, support = _candidate_pairs(h, n, views.n_masks)
-        observers = _observers(h, a, b)
-        apart = _separated(h, a, b)
+    a, b, _ = _candidate_pairs(h, n, n)
+    ev = _Evidence(views, h, a, b)
+    node = np.where(under, -1, np.arange(n))
+    for thr, min_obs in schedule(_observers(h, a, b), thresholds):
+        _, node = np.unique(node, return_inverse=True)
+        node = node - int(under.any())
+        node[under] = -1
+        zc, yc, pa, pb = ev.of(node)
+        union = _Union(zc.shape[0], pa, pb)
+        xa, xb, support = _pairs(zc)
+        observers = _shared(yc, xa, xb)
         rate = support / np.maximum(observers, 1)
-        ok = (observers >= MIN_VIEWS) & (rate >= thr) & ~apart
-        rank = np.lexsort((-observers[ok], -rate[ok]))
-        order = np.empty(len(rank), np.int64)
-        order[rank] = np.arange(len(rank))
-        comp = _constrained_components(n, a[ok], b[ok], order, a[apart], b[apart])
-        alive = np.unique(node_of_mask[node_of_mask >= 0])
-        _, comp_alive = np.unique(comp[alive], return_inverse=True)
-        lut = np.full(n, -1, np.int64)
-        lut[alive] = comp_alive
-        node_of_mask = np.where(node_of_mask >= 0, lut[np.maximum(node_of_mask, 0)], -1)
-        n = int(comp_alive.max()) + 1 if len(comp_alive) else 0
-        h = holding(views, node_of_mask, n)
-        _drop_masks(h, under)
-    return node_of_mask, h
+        ok = (observers >= min_obs) & (rate >= thr)
+        for e in np.lexsort((-observers[ok], -rate[ok])):
+            union.join(int(xa[ok][e]), int(xb[ok][e]))
+        node = np.where(node >= 0, union.roots()[np.maximum(node, 0)], -1)
+    _, node = np.unique(node, return_inverse=True)
+    node = node - int(under.any())
+    node[under] = -1
+    _, _, pa, pb = ev.of(node)
+    return Clusters(node, h, set(zip(pa.tolist(), pb.tolist())))
 
 
-def vote(views: Views, node_of_mask: np.ndarray, h: Holding, nested: bool = True) -> np.ndarray:
+def _pairs(zc) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cluster pairs (a < b) that a mask holds together, and how many masks do (one per frame)."""
+    from scipy.sparse import triu
+
+    s = triu(zc @ zc.T, k=1).tocoo()
+    return s.row.astype(np.int64), s.col.astype(np.int64), s.data.astype(np.int64)
+
+
+def _shared(yc, a: np.ndarray, b: np.ndarray, chunk: int = 50000) -> np.ndarray:
+    """Frames that hold both clusters of each pair."""
+    out = np.zeros(len(a), np.int64)
+    for s in range(0, len(a), chunk):
+        out[s : s + chunk] = np.asarray(yc[a[s : s + chunk]].multiply(yc[b[s : s + chunk]]).sum(1)).ravel()
+    return out
+
+
+def schedule(observers: np.ndarray, thresholds: tuple[float, ...] = THRESHOLDS) -> list[tuple[float, int]]:
+    """(consensus, least frames holding both) of each level: at the first threshold, MaskClustering's
+    falling observer counts (the ``OBSERVER_PERCENTILES`` of the masks' pairs, then ``MIN_VIEWS``), so that a
+    fragment two frames saw joins after the pairs that many frames judged; then each further threshold."""
+    counts = observers[observers >= MIN_VIEWS]
+    pct = np.percentile(counts, OBSERVER_PERCENTILES).astype(int) if counts.size else []
+    steps = [max(MIN_VIEWS, int(c)) for c in pct]
+    steps = [*sorted(steps, reverse=True), MIN_VIEWS]
+    first = [(thresholds[0], int(m)) for m in dict.fromkeys(steps)]
+    return first + [(t, MIN_VIEWS) for t in thresholds[1:]]
+
+
+def vote(views: Views, clusters: Clusters, nested: bool = True) -> np.ndarray:
     """Each voxel's cluster (-1: no mask of a cluster ever held it): the largest score-weighted share of the
-    views that put it in a mask (rule c); with ``nested``, see :func:`_nested`."""
+    views that put it in one of the cluster's masks, of those that could have (rule c, :func:`_chances`);
+    with ``nested``, see :func:`_nested`."""
+    node_of_mask = clusters.node_of_mask
     nv = len(views.points)
     n = int(node_of_mask.max()) + 1 if len(node_of_mask) else 0
     vox, msk, frame = [], [], []
@@ -369,11 +471,12 @@ def vote(views: Views, node_of_mask: np.ndarray, h: Holding, nested: bool = True
     vox, msk, frame = (np.concatenate(x) for x in (vox, msk, frame))
     clu, w = node_of_mask[msk], views.mask_score[msk]
     if nested and n:
-        clu = _nested(node_of_mask, h, vox, msk, frame, clu, len(views.seen))
+        clu = _nested(clusters, vox, msk, frame, clu, len(views.seen))
     key = vox * max(n, 1) + clu
     uk, inv = np.unique(key, return_inverse=True)
     total = np.bincount(inv, weights=w)
     kv, kc = uk // max(n, 1), uk % max(n, 1)
+    total = total / (_chances(views, clu, frame, w, kv, kc, n) + PRIOR)
     order = np.lexsort((-total, kv))
     first = np.r_[True, kv[order][1:] != kv[order][:-1]]
     out = np.full(nv, -1, np.int64)
@@ -381,18 +484,45 @@ def vote(views: Views, node_of_mask: np.ndarray, h: Holding, nested: bool = True
     return out
 
 
-def _nested(node_of_mask, h: Holding, vox, msk, frame, clu, n_frames: int) -> np.ndarray:
-    """The votes' clusters, where a mask holds a cluster that the views separate from the mask's own (the
-    table's segment that absorbed the cup): on the voxels the held cluster's own masks cover, the vote goes
-    to it (the smallest such cluster), as that view merged the two and says nothing against it."""
-    c, g = np.nonzero(h.held >= 0)
-    k = h.held[c, g]
-    other = node_of_mask[k] != c
-    c, g, k = c[other], g[other], k[other]
-    if c.size == 0:
+def _chances(views: Views, clu, frame, w, kv, kc, n: int) -> np.ndarray:
+    """Per (voxel ``kv``, cluster ``kc``): the score-weighted views that could have put the voxel in the
+    cluster: those that see the voxel and hold some mask of the cluster (weight: its best mask's score)."""
+    from scipy.sparse import coo_matrix
+
+    F = len(views.seen)
+    key = np.unique(clu.astype(np.int64) * F + frame)
+    best = np.zeros(len(key))
+    np.maximum.at(best, np.searchsorted(key, clu.astype(np.int64) * F + frame), w)
+    yc = coo_matrix((best, (key // F, key % F)), shape=(max(n, 1), F)).tocsr()
+    r = np.concatenate(views.seen)
+    c = np.concatenate([np.full(len(v), g, np.int64) for g, v in enumerate(views.seen)])
+    sv = coo_matrix((np.ones(len(r), np.float32), (r, c)), shape=(len(views.points), F)).tocsr()
+    out = np.zeros(len(kv))
+    for s in range(0, len(kv), 50000):
+        out[s : s + 50000] = np.asarray(sv[kv[s : s + 50000]].multiply(yc[kc[s : s + 50000]]).sum(1)).ravel()
+    return out
+
+
+def _nested(clusters: Clusters, vox, msk, frame, clu, n_frames: int) -> np.ndarray:
+    """The votes' clusters, where a mask held a mask of a cluster that the views separate from the holding
+    mask's own (the table's segment that absorbed the cup): on the voxels the held cluster's own masks
+    cover, the vote goes to it (the smallest such cluster), as that view merged the two and says nothing
+    against it."""
+    node_of_mask, h = clusters.node_of_mask, clusters.holding
+    m, g = np.nonzero(h.held >= 0)
+    k = h.held[m, g]
+    c, holder = node_of_mask[m], node_of_mask[k]
+    keep = (c >= 0) & (holder >= 0) & (c != holder)
+    m, g, k, c, holder = m[keep], g[keep], k[keep], c[keep], holder[keep]
+    if m.size == 0:
         return clu
-    apart = _separated(h, c, node_of_mask[k])
-    c, g, k = c[apart], g[apart], k[apart]
+    apart = clusters.apart
+    keep = np.array([(min(x, y), max(x, y)) in apart for x, y in zip(c.tolist(), holder.tolist())], bool)
+    g, k, c = g[keep], k[keep], c[keep]
+    uniq = np.unique(np.stack([c, g, k], 1), axis=0)
+    if uniq.size == 0:
+        return clu
+    c, g, k = uniq[:, 0], uniq[:, 1], uniq[:, 2]
     # each cluster's own voxels (a CSR over clusters)
     n = int(node_of_mask.max()) + 1
     nv = int(vox.max()) + 1
@@ -411,10 +541,9 @@ def _nested(node_of_mask, h: Holding, vox, msk, frame, clu, n_frames: int) -> np
     pos = np.clip(np.searchsorted(skey, q), 0, len(skey) - 1)
     hit = (skey[pos] == q) & (msk[order[pos]] == cand_k)
     out = clu.copy()
-    # the smallest held cluster wins where several are
     size = np.diff(ptr)
     sel = np.nonzero(hit)[0]
-    sel = sel[np.argsort(-size[cand_c[sel]], kind="stable")]  # larger first, smaller overwrite
+    sel = sel[np.argsort(-size[cand_c[sel]], kind="stable")]  # larger first, the smallest overwrites
     out[order[pos[sel]]] = cand_c[sel]
     return out
 
@@ -424,8 +553,7 @@ def strong_consensus(frames: list) -> tuple[np.ndarray, np.ndarray]:
     views = build_views(frames)
     if views.n_masks == 0:
         return views.points, np.full(len(views.points), -1, np.int64)
-    node_of_mask, h = cluster(views)
-    return views.points, vote(views, node_of_mask, h)
+    return views.points, vote(views, cluster(views))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -17,6 +17,7 @@ import numpy as np
 from ogscene3d.config import load_config
 from ogscene3d.datasets import configured_scene, open_dataset
 from ogscene3d.mapping.mapper import Mapper
+from ogscene3d.up_axis import choose_up_axis
 from ogscene3d.viewer.app import LiveViewer
 from ogscene3d.viewer.snapshot import snapshot_from_mapper
 
@@ -38,6 +39,7 @@ def main() -> None:
         scene_dir, s, overwrite=args.force, progress=True, remedy="choose another --scene, or pass --force"
     )
     ds = open_dataset(scene, config=cfg.data)
+    choose_up_axis(cfg.graph, ds)  # graph.up_axis auto: the scene's own up (what `ogscene3d run` does)
     mapper = Mapper(cfg, args.device)
     viewer = LiveViewer(port=args.port, up=tuple(cfg.graph.up_axis))
     print(f"open {viewer.url} in a browser")

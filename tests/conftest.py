@@ -32,7 +32,8 @@ def shared_data() -> Path:
     return SHARED_DATA
 
 
-sys.path.insert(0, str(ROOT / "tests"))
+# the helpers that tests share (scenes, file writers, reference implementations), imported by module name
+sys.path.insert(0, str(ROOT / "tests" / "helpers"))
 
 
 @pytest.fixture

@@ -8,6 +8,7 @@ import os
 from pathlib import Path
 
 import pytest
+from layout_scenes import garble_pixels
 
 from ogscene3d.batch import (
     EvalOptions,
@@ -304,7 +305,7 @@ def test_a_bad_frame_keeps_the_scenes_map_so_far(tmp_path: Path, tiny_scene: Pat
 
     scene = tmp_path / "scene"
     shutil.copytree(tiny_scene, scene)
-    (scene / "results" / "depth000004.png").write_bytes(b"not a png")  # keyframes 0 and 2 come before it
+    garble_pixels(scene / "results" / "depth000004.png")  # keyframes 0 and 2 come before it
     scenes = tmp_path / "scenes.txt"
     scenes.write_text(f"{scene}\n")
     argv = ["run-batch", str(scenes), "--out", str(tmp_path / "out"), "--config", CONFIG]

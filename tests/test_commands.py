@@ -18,7 +18,7 @@ from ogscene3d.commands import COMMAND_MODULES
 from ogscene3d.config import Config, load_config
 from ogscene3d.eval.options import EvalOptions
 
-HEAVY = ("torch", "warp", "open3d", "viser", "cv2")
+HEAVY = ("torch", "warp", "open3d", "viser", "cv2", "rerun")
 COMMANDS = ["run", "eval", "live", "synth", "segment", "track", "graph", "run-batch", "eval-batch",
             "render-demo", "config"]  # fmt: skip
 

@@ -1,4 +1,5 @@
-"""The central range check of every numeric setting (config.RANGES, config.LIST_CHECKS, check_config)."""
+"""The central range check of every numeric setting (config.RANGES, config.LIST_CHECKS: views of the rules on
+the fields; check_config)."""
 
 import copy
 import dataclasses
@@ -71,14 +72,23 @@ def _outside(key):
     return out
 
 
+def _numeric_list(tp) -> bool:
+    return typing.get_origin(tp) is list and typing.get_args(tp)[0] in (int, float)
+
+
+def _members(tp) -> tuple:
+    """The members of a union type; ``(tp,)`` for any other."""
+    return typing.get_args(tp) if typing.get_origin(tp) in (typing.Union, types.UnionType) else (tp,)
+
+
 def test_every_numeric_setting_has_a_range():
     numeric, lists = {}, set()
     for key, tp in _fields():
         base, optional = _split_optional(tp)
         if base in (int, float):
             numeric[key] = (base, optional)
-        elif typing.get_origin(base) is list and typing.get_args(base)[0] in (int, float):
-            lists.add(key)
+        elif any(_numeric_list(t) for t in _members(base)):
+            lists.add(key)  # a numeric list, or a choice or one (graph.up_axis: auto or a 3-vector)
     missing = sorted(set(numeric) - set(RANGES))
     assert not missing, f"numeric settings without an entry in config.RANGES: {missing}"
     stale = sorted(set(RANGES) - set(numeric))
@@ -86,7 +96,7 @@ def test_every_numeric_setting_has_a_range():
     for key, (base, optional) in numeric.items():
         assert RANGES[key].integer == (base is int), key
         assert RANGES[key].optional == optional, key
-    assert lists == set(LIST_CHECKS), "numeric list settings and config.LIST_CHECKS differ"
+    assert lists == set(LIST_CHECKS), "numeric list settings and the check= on fields differ"
     assert len(RANGES) >= 120
 
 
@@ -157,6 +167,7 @@ def test_messages_name_key_value_and_range():
         ("graph.up_axis", [0.0, 0.0, 0.0]),
         ("graph.up_axis", [0.0, math.inf, 0.0]),
         ("graph.up_axis", [0.0, 1.0]),
+        ("graph.up_axis", "up"),
         ("tracking.iterations", []),
         ("tracking.iterations", [20, 0, 5]),
         ("tracking.iterations", [20, 2.5]),
@@ -172,6 +183,7 @@ def test_list_settings_pass_when_sensible():
     check_config(_with("data.intrinsics", None))
     check_config(_with("segmentation.conf_range", [1.0, 0.5]))
     check_config(_with("graph.up_axis", [0.0, 0.0, 2.0]))
+    check_config(_with("graph.up_axis", "auto"))
     check_config(_with("tracking.iterations", [7]))
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_datasets import _png, _pose, _rgb
+from dataset_files import _png, _pose, _rgb
 
 from ogscene3d.datasets import open_dataset
 from ogscene3d.errors import DataError

@@ -4,6 +4,7 @@ every results table stamped with the commit and date it was measured at."""
 from __future__ import annotations
 
 import argparse
+import inspect
 import re
 from pathlib import Path
 
@@ -87,3 +88,36 @@ def test_the_readme_picture_is_committed_and_small():
     assert path.is_file() and path.suffix == ".png"
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert path.stat().st_size < 300_000
+
+
+# Exported names whose docstrings get their Args/Returns sections in the later pass of issue 40 (their modules
+# were being reworked at the time). Take a name out once it has them: the test says when one does.
+API_LATER = {"Mapper"}
+
+
+def _missing_sections(obj) -> list[str]:
+    """The docstring sections ``obj`` lacks: Args (Attributes for a dataclass), and Returns for a function
+    that returns something."""
+    doc = inspect.getdoc(obj) or ""
+    if inspect.isclass(obj):
+        return [] if ("Args:" in doc or "Attributes:" in doc) else ["Args/Attributes"]
+    sig = inspect.signature(obj)
+    missing = ["Args"] if sig.parameters and "Args:" not in doc else []
+    if sig.return_annotation not in ("None", None) and "Returns:" not in doc:
+        missing.append("Returns")
+    return missing
+
+
+def test_the_public_api_is_on_the_api_page_with_args_and_returns():
+    import ogscene3d
+
+    page = (DOCS / "api.md").read_text()
+    names = [n for n in ogscene3d.__all__ if not n.startswith("__")]
+    for name in names:
+        obj = getattr(ogscene3d, name)
+        assert re.search(rf"^::: ogscene3d\.[\w.]*\.{name}$", page, re.M), f"{name} is not on docs/api.md"
+        missing = _missing_sections(obj)
+        if name in API_LATER:
+            assert missing, f"{name} has its Args/Returns now: take it out of API_LATER"
+        else:
+            assert not missing, f"{name}'s docstring lacks {', '.join(missing)}"

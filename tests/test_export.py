@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_viewer import BLUE, GREEN, _write_run, make_scene
+from viewer_runs import BLUE, GREEN, _write_run, make_scene
 
 from ogscene3d.cli import main
 from ogscene3d.colors import label_colors

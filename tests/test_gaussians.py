@@ -4,6 +4,7 @@ import torch
 
 from ogscene3d.errors import ConfigError, DataError
 from ogscene3d.gaussians import SH_C0, GaussianMap
+from ogscene3d.runs.map_npz import NPZ_VERSION
 
 
 def _random_rows(m: int, seed: int = 0, device: str = "cpu") -> dict:
@@ -129,6 +130,20 @@ def test_npz_corrupt_and_missing(tmp_path):
     np.savez(tmp_path / "partial.npz", means=np.zeros((2, 3), np.float32))
     with pytest.raises(DataError, match="missing"):
         GaussianMap.load_npz(tmp_path / "partial.npz")
+
+
+def test_npz_of_a_newer_or_damaged_format_version(tmp_path):
+    gm = GaussianMap()
+    gm.append(**_random_rows(3))
+    state = gm.state_dict()
+    np.savez(tmp_path / "newer.npz", **{**state, "version": np.array(NPZ_VERSION + 1)})
+    with pytest.raises(DataError, match=rf"newer ogscene3d \(map format {NPZ_VERSION + 1};.*to read it"):
+        GaussianMap.load_npz(tmp_path / "newer.npz")
+    np.savez(tmp_path / "odd.npz", **{**state, "version": np.array("two")})
+    with pytest.raises(DataError, match="odd.npz: not a readable map npz"):
+        GaussianMap.load_npz(tmp_path / "odd.npz")
+    np.savez(tmp_path / "old.npz", **{k: v for k, v in state.items() if k != "version"})
+    assert len(GaussianMap.load_npz(tmp_path / "old.npz")) == 3  # no version: format 1, read as it is
 
 
 def test_ply_layout_plyfile_and_open3d(tmp_path):

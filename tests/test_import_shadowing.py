@@ -1,7 +1,8 @@
 """No import name of this repository shadows an installed distribution, whatever runs from the repository.
 
-``python -m pytest``, ``python -c`` and most IDEs put the repository root on ``sys.path``; pytest also puts
-``tests/`` there (its ``prepend`` import mode), and a script puts its own folder (``benchmarks/``,
+``python -m pytest``, ``python -c`` and most IDEs put the repository root on ``sys.path``; the tests'
+conftest puts ``tests/helpers/`` there (pytest's own ``importlib`` mode adds no folder; ``tests/`` is checked
+too, for a run in pytest's former ``prepend`` mode), and a script puts its own folder (``benchmarks/``,
 ``examples/``). A regular package or a module in one of these folders would be imported instead of an
 installed distribution with the same top-level name: the repo's ``kernels/`` once hid Hugging Face's
 ``kernels`` from ``transformers`` (issue 38).
@@ -16,9 +17,9 @@ from importlib.metadata import packages_distributions
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-# Folders that some command puts first on sys.path: the root (python -m, python -c, IDEs), tests/ (pytest),
-# and the folders whose scripts are run directly.
-PATH_FOLDERS = (ROOT, ROOT / "tests", ROOT / "benchmarks", ROOT / "examples")
+# Folders that some command puts first on sys.path: the root (python -m, python -c, IDEs), tests/helpers/
+# (conftest), tests/ (pytest's prepend mode), and the folders whose scripts are run directly.
+PATH_FOLDERS = (ROOT, ROOT / "tests" / "helpers", ROOT / "tests", ROOT / "benchmarks", ROOT / "examples")
 
 
 def _import_names(folder: Path) -> dict[str, Path]:

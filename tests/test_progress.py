@@ -67,3 +67,46 @@ def test_disabled_bar_passes_the_items_through(capsys):
     with progress(iter([1, 2]), desc="x", disable=True) as items:
         assert list(items) == [1, 2]
     assert "x:" not in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------------- the run-time estimate
+
+
+class _Mapper:
+    def __init__(self, device: str) -> None:
+        self.device = device
+
+
+class _Frame:
+    width, height = 1200, 680
+
+
+def test_the_first_keyframe_gives_the_runs_estimate_and_on_a_cpu_what_to_change(caplog):
+    from ogscene3d.progress import RunTimeEstimate
+
+    est = RunTimeEstimate(frames=2000, keyframe_every=5, scale=1.0, opt_iters=10)
+    with caplog.at_level(logging.INFO, logger="ogscene3d.progress"):
+        est.keyframe(_Mapper("cpu"), _Frame(), 120.0)
+        est.keyframe(_Mapper("cpu"), _Frame(), 1.0)  # said once, from the first keyframe
+    (record,) = caplog.records
+    assert record.levelno == logging.WARNING
+    text = record.getMessage()
+    assert "the first keyframe took 120.0 s on cpu at 1200x680" in text
+    assert "the run's 400 keyframes will take about 13 h 20 min" in text
+    # the largest scale in steps of 0.05 that fits 10 minutes (0.086 here), but not below 0.25
+    assert "map on a GPU (--device cuda)" in text
+    assert "--set data.scale=0.25 (16x fewer pixels: about 50 min)" in text
+    assert "--set mapping.opt_iters=3" in text
+
+
+def test_a_short_or_gpu_run_is_only_told_its_estimate(caplog):
+    from ogscene3d.progress import RunTimeEstimate
+
+    with caplog.at_level(logging.INFO, logger="ogscene3d.progress"):
+        RunTimeEstimate(frames=60, keyframe_every=2).keyframe(_Mapper("cpu"), _Frame(), 2.9)
+        RunTimeEstimate(frames=2000, keyframe_every=0).keyframe(_Mapper("cuda:0"), _Frame(), 2.0)
+    cpu, gpu = (r.getMessage() for r in caplog.records)
+    assert all(r.levelno == logging.INFO for r in caplog.records)
+    assert cpu.endswith("the run's 30 keyframes will take about 87 s") and "to go faster" not in cpu
+    assert "up to 2000 keyframes (by camera motion) will take about 67 min" in gpu
+    assert "to go faster" not in gpu

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from ogscene3d.cli import main as cli_main
+from ogscene3d.commands.options import add_poses_argument
 from ogscene3d.config import TrackingConfig
 from ogscene3d.datasets import open_dataset
 from ogscene3d.errors import ConfigError, OGSceneError
@@ -27,7 +28,6 @@ from ogscene3d.eval.trajectory import ate_rmse, read_trajectory
 from ogscene3d.frame import Frame, check_pose
 from ogscene3d.tracking import (
     Tracker,
-    add_poses_argument,
     geometric_conditioning,
     open3d_device,
     ransac_rigid,

@@ -45,6 +45,7 @@ from typing import Any, Literal
 import yaml
 
 from .atomic import atomic_write_text
+from .config import load_config
 from .errors import ConfigError, DataError
 from .eval.options import EvalOptions
 from .runs import RunFolder, json_safe, write_metrics
@@ -232,9 +233,9 @@ def map_scene(
     gaussians, labels, map_seconds (processing + finalize), total_seconds (+ generation, I/O, save),
     fps (frames / map_seconds), peak_rss_mb, peak_cuda_mb (None on CPU).
     """
+    # torch and the mapping inside: `ogscene3d --help` imports this module (run-batch's --executor choices)
     import torch
 
-    from .config import load_config
     from .mapping.session import mapping_session
 
     t_start = time.perf_counter()
@@ -299,7 +300,7 @@ def evaluate_scene(
     The record holds, per protocol, ``miou``/``fmiou``/``macc``/``oacc`` (fractions, None when not
     defined) and the protocol text, plus relation recall when the graph was scored.
     """
-    from .eval import evaluate_run, find_ground_truth, iou_bar_chart, write_png
+    from .eval import evaluate_run, find_ground_truth, iou_bar_chart, write_png  # torch: as above
 
     opts = options or EvalOptions()
     run = Path(run_dir)
@@ -642,8 +643,6 @@ def run_batch(
 ) -> BatchResult:
     """Map every scene (a list or a scenes file) into ``out/<name>``; optionally evaluate each run in
     the same task; write ``out/run_batch.json``. See :func:`execute` for the executors."""
-    from .config import load_config
-
     specs = read_scenes_file(scenes) if isinstance(scenes, (str, Path)) else list(scenes)
     if not specs:
         raise ConfigError("no scenes to run")

@@ -9,6 +9,17 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Camera:
+    """Pinhole intrinsics of an image of ``width`` x ``height`` pixels (OpenCV axes, pixel centres at +0.5).
+
+    Attributes:
+        fx: focal length along x, in pixels (> 0).
+        fy: focal length along y, in pixels (> 0).
+        cx: principal point's x, in pixels from the image's left edge.
+        cy: principal point's y, in pixels from the image's top edge.
+        width: image width in pixels.
+        height: image height in pixels.
+    """
+
     fx: float
     fy: float
     cx: float
@@ -27,6 +38,7 @@ class Camera:
 
     @classmethod
     def from_K(cls, K: np.ndarray, width: int, height: int) -> Camera:
+        """The camera of a 3x3 intrinsics matrix ``K`` and an image size."""
         K = np.asarray(K, dtype=np.float64)
         if K.shape != (3, 3):
             raise ValueError(f"K must be 3x3, got shape {K.shape}")
@@ -34,6 +46,7 @@ class Camera:
 
     @property
     def K(self) -> np.ndarray:
+        """The 3x3 intrinsics matrix, float32."""
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]], dtype=np.float32)
 
     def scaled(self, factor: float) -> Camera:

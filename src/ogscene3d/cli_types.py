@@ -60,3 +60,55 @@ def image_size(minimum: int = 1, example: str = "160x120") -> Callable[[str], tu
         return w, h
 
     return parse
+
+
+def add_size_argument(
+    parser: argparse.ArgumentParser,
+    flag: str,
+    help: str,  # noqa: A002 - argparse's word
+    minimum: int = 1,
+    default: tuple[int, int] | None = None,
+) -> None:
+    """Add a ``WxH`` option: :func:`image_size` with both sides >= ``minimum``, its error's example the
+    ``default`` (else 160x120).
+
+    Args:
+        parser: the command's parser.
+        flag: the option, e.g. ``"--size"``.
+        help: its help.
+        minimum: the smallest width and height.
+        default: (width, height) when the option is not given; None: not given.
+    """
+    example = f"{default[0]}x{default[1]}" if default else "160x120"
+    parser.add_argument(flag, type=image_size(minimum, example), default=default, metavar="WxH", help=help)
+
+
+def rerun_viewer(text: str) -> str:
+    """``--rerun``'s value: a Rerun viewer's URL (``rerun+http://HOST:PORT/proxy``, ``rerun://...``), or
+    ``spawn`` (what ``--rerun`` alone means: start a viewer here)."""
+    if text != "spawn" and not text.startswith(("rerun://", "rerun+http://", "rerun+https://")):
+        raise argparse.ArgumentTypeError(
+            f"expected a Rerun viewer's URL such as rerun+http://127.0.0.1:9876/proxy, got {text!r}"
+        )
+    return text
+
+
+def add_rerun_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--rerun [URL]`` and ``--rerun-save FILE.rrd`` (``run`` and ``live``; the ``rerun`` extra)."""
+    parser.add_argument(
+        "--rerun",
+        nargs="?",
+        const="spawn",
+        default=None,
+        type=rerun_viewer,
+        metavar="URL",
+        help="log the session to Rerun (per keyframe: camera pose and image, the map's points by label, the "
+        "scene graph): start a Rerun viewer, or stream to the one at URL (rerun+http://HOST:9876/proxy); "
+        'needs pip install "ogscene3d[rerun]"',
+    )
+    parser.add_argument(
+        "--rerun-save",
+        default=None,
+        metavar="FILE.rrd",
+        help="log the session to Rerun into this .rrd file (open it with `rerun FILE.rrd`)",
+    )

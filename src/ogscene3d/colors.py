@@ -96,3 +96,19 @@ def dim(rgb: np.ndarray, amount: float = 0.75) -> np.ndarray:
 
 
 __all__ = ["UNLABELED_RGB", "confidence_colors", "dim", "label_color_uint8", "label_colors", "turbo"]
+
+
+# Rooms are few and lie side by side: a qualitative palette keeps neighbours apart (Tableau 10's hues).
+_ROOM_PALETTE = np.array(
+    [[78, 121, 167], [242, 142, 43], [225, 87, 89], [118, 183, 178], [89, 161, 79], [237, 201, 72],
+     [176, 122, 161], [255, 157, 167], [156, 117, 95], [186, 176, 172]],
+    dtype=np.float32,
+) / 255.0  # fmt: skip
+
+
+def room_colors(room_ids: np.ndarray) -> np.ndarray:
+    """Colour per room id (from 1): [N] int -> [N, 3] float32; id < 1 (no room) -> grey."""
+    ids = np.asarray(room_ids).astype(np.int64)
+    rgb = _ROOM_PALETTE[(np.maximum(ids, 1) - 1) % len(_ROOM_PALETTE)].copy()
+    rgb[ids < 1] = UNLABELED_RGB
+    return rgb

@@ -16,7 +16,7 @@ import math
 import numbers
 import types
 import typing
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -108,6 +108,7 @@ def _numbers(value: Any, count: int | None = None, integer: bool = False) -> lis
     return list(value)
 
 
+# the checks of the numeric list settings (``check=`` on their fields): what is wrong, None when fine
 def _check_intrinsics(v: Any) -> str | None:
     if v is None:
         return None
@@ -132,9 +133,11 @@ def _check_conf_range(v: Any) -> str | None:
 
 
 def _check_up_axis(v: Any) -> str | None:
+    if v == "auto":
+        return None
     vals = _numbers(v, 3)
     if vals is None or not math.hypot(*vals) > 1e-9:
-        return "must be a finite non-zero 3-vector"
+        return "must be auto or a finite non-zero 3-vector"
     return None
 
 
@@ -143,16 +146,6 @@ def _check_iterations(v: Any) -> str | None:
     if not vals or not all(n >= 1 for n in vals):
         return "must be a non-empty list of integers >= 1 (one per pyramid level)"
     return None
-
-
-# the numeric list settings: a check returns what is wrong (None: fine)
-LIST_CHECKS: dict[str, Callable[[Any], str | None]] = {
-    "data.intrinsics": _check_intrinsics,
-    "segmentation.sam_score_range": _check_score_range,
-    "segmentation.conf_range": _check_conf_range,
-    "graph.up_axis": _check_up_axis,
-    "tracking.iterations": _check_iterations,
-}
 
 
 def setting(
@@ -178,7 +171,15 @@ def section(cls: type, doc: str) -> Any:
 
 # ------------------------------------------------------------------------------------------------- sections
 DatasetKind = Literal[
-    "auto", "replica", "semantic_nerf", "scannet", "tum", "sevenscenes", "labelfusion", "synthetic", "rosbag",
+    "auto",
+    "replica",
+    "semantic_nerf",
+    "scannet",
+    "tum",
+    "sevenscenes",
+    "labelfusion",
+    "synthetic",
+    "rosbag",
     "record3d",
 ]
 # low / default / high err like SAM (objects absorbed into their support, merged with it, cut in two); the
@@ -186,6 +187,16 @@ DatasetKind = Literal[
 NoiseLevel = Literal["none", "low", "default", "high", "legacy-low", "legacy-default", "legacy-high"]
 ExecutionProvider = Literal["auto", "cpu", "cuda"]
 _LLM_KEY_DOC = "environment variable holding the endpoint's API key (the key itself never goes in a config)"
+
+
+def _component_model(what: str) -> Any:
+    """A language-model component's own ``model`` setting (``""``: the shared ``graph.endpoint.model``)."""
+    return setting("", f'model name for {what}; "" = graph.endpoint.model')
+
+
+def _max_tokens(default: int) -> Any:
+    """A language-model component's ``max_tokens`` setting, ``default`` tokens per request."""
+    return setting(default, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request"))
 
 
 @dataclass
@@ -211,6 +222,12 @@ class DataConfig:
     )
     intrinsics: list[float] | None = setting(
         None, "[fx, fy, cx, cy] overriding the dataset's", check=_check_intrinsics
+    )
+    scale: float = setting(
+        1.0,
+        "resize factor of the frames (colour, depth, segments and intrinsics alike, as read): 0.5 halves "
+        "width and height, a quarter of the pixels to map (large images on a CPU)",
+        _float(0.0, 1.0, lo_open=True),
     )
     pixel_centers: Literal["auto", "integer", "half"] = setting(
         "auto",
@@ -268,18 +285,20 @@ class DataConfig:
 @dataclass
 class SyntheticConfig:
     seed: int = setting(0, "seed of the procedural room", _int(0))
-    frames: int = setting(60, "frames of the camera path", _int(1))
+    frames: int = setting(60, "frames of the camera path (layout apartment: per room)", _int(1))
     width: int = setting(160, "image width in pixels", _int(8))
     height: int = setting(120, "image height in pixels", _int(8))
     noise: NoiseLevel = setting("default", "how far the simulated SAM segments err")
     depth_noise: float = setting(0.0, "std of the depth noise in metres", _NONNEG)
     pose_noise: float = setting(0.0, "std of the translation noise of the given poses in metres", _NONNEG)
-    layout: Literal["room", "scan"] = setting(
+    layout: Literal["room", "scan", "apartment"] = setting(
         "room",
-        "the scene kind: room (one furnished room, a smooth walk around it) | scan (a long scan like a real "
+        "the scene: room (one furnished room, a smooth walk around it) | scan (a long scan like a real "
         "ScanNet one: a larger room whose large furniture stands side by side, a walk that leaves places and "
         "comes back, irregular frame gaps up to 1.5 m / 60 degrees, objects merged with the floor or their "
-        "neighbour in their first views; give it 300 frames or more)",
+        "neighbour in their first views; give it 300 frames or more) | apartment (2-5 rooms of distinct "
+        "types joined by doorways, walked through room by room; gt/instances.json gives every instance's "
+        "room)",
     )
 
 
@@ -570,20 +589,32 @@ class MappingConfig:
 
 
 @dataclass
+class EndpointConfig:
+    """The OpenAI-compatible endpoint that every language-model component of the graph calls (captioner
+    ``openai``, relations ``llm``, rooms typer ``llm``, query ``llm``, ``query_embedding: openai``); a
+    component's own ``model`` replaces ``model`` here."""
+
+    base_url: str = setting(
+        "http://127.0.0.1:8000/v1",
+        "the OpenAI-compatible API root, with its version (OpenAI, vLLM, Ollama: /v1)",
+    )
+    model: str = setting(
+        "", "model name every component asks for, unless its own section names one (its model setting)"
+    )
+    api_key_env: str = setting("OPENAI_API_KEY", _LLM_KEY_DOC)
+    timeout_s: float = setting(30.0, "seconds per request", _POS)
+    max_retries: int = setting(2, "retries of a failed request", _int(0))
+
+
+@dataclass
 class CaptionerConfig:
     kind: Literal["heuristic", "openai", "groundtruth"] = setting(
         "heuristic",
         "node captions: heuristic (from labels and geometry) | openai (a vision-language model at "
         "an OpenAI-compatible endpoint) | groundtruth (synthetic scenes' instance names)",
     )
-    base_url: str = setting("http://127.0.0.1:8000/v1", "OpenAI-compatible endpoint")
-    model: str = setting("", "model name sent to the endpoint")
-    api_key_env: str = setting("OPENAI_API_KEY", _LLM_KEY_DOC)
-    timeout_s: float = setting(30.0, "seconds per request", _POS)
-    max_retries: int = setting(2, "retries of a failed request", _int(0))
-    max_tokens: int = setting(
-        300, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request")
-    )
+    model: str = _component_model("the captions (a vision model)")
+    max_tokens: int = _max_tokens(300)
     concurrency: int = setting(4, "parallel per-node caption requests", _int(1))
 
 
@@ -594,14 +625,8 @@ class RelationsConfig:
         "edge relations: geometric (rules on boxes and points) | llm (a language model, with the "
         "geometric rules as per-pair fallback)",
     )
-    base_url: str = setting("http://127.0.0.1:8000/v1", "OpenAI-compatible endpoint")
-    model: str = setting("", "model name sent to the endpoint")
-    api_key_env: str = setting("OPENAI_API_KEY", _LLM_KEY_DOC)
-    timeout_s: float = setting(30.0, "seconds per request", _POS)
-    max_retries: int = setting(2, "retries of a failed request", _int(0))
-    max_tokens: int = setting(
-        2000, "max_tokens of a request", _int(0, note="0 = no max_tokens in the request")
-    )
+    model: str = _component_model("the relations")
+    max_tokens: int = _max_tokens(2000)
     contact_tol: float = setting(0.05, 'metres; vertical gap still counted as contact ("on")', _POS)
     cell_size: float = setting(0.05, "metres; horizontal grid for per-column stacking tests", _POS)
     overlap_ratio: float = setting(
@@ -641,6 +666,65 @@ class NodeConfidenceConfig:
 
 
 @dataclass
+class RoomsConfig:
+    enabled: bool = setting(
+        True, "segment storeys and rooms from the map and make them graph nodes (objects 'in' rooms)"
+    )
+    update_every: int = setting(
+        4, "keyframes between room updates (rooms also update with every graph update)", _int(1)
+    )
+    cell_size: float = setting(0.1, "metres per cell of the bird's-eye floor plan", _POS)
+    wall_low: float = setting(
+        1.0,
+        "metres above the floor from which Gaussians are walls in the floor plan (above most furniture)",
+        _NONNEG,
+    )
+    wall_high: float = setting(
+        1.9,
+        "metres above the floor up to which Gaussians are walls (below door lintels: doorways stay open)",
+        _POS,
+    )
+    door_width: float = setting(
+        1.0, "metres: openings up to this wide separate rooms (where free space is wider lies a room)", _POS
+    )
+    min_room_area: float = setting(
+        1.5, "square metres below which a segment is no room (its Gaussians go to the nearest room)", _NONNEG
+    )
+    storey_height: float = setting(2.0, "metres: the least height between two storeys' floors", _POS)
+    max_points: int = setting(
+        200_000, "Gaussians a room update reads at most (a fixed random subset of a larger map)", _int(1000)
+    )
+    assign_radius: float = setting(
+        0.5, "metres outside every room's outline beyond which a Gaussian or object is in no room", _NONNEG
+    )
+    typer: Literal["rule", "llm"] = setting(
+        "rule",
+        "room types: rule (from the tags of the objects in the room) | llm (a language model at an "
+        "OpenAI-compatible endpoint, with the rule as fallback)",
+    )
+    model: str = _component_model("room types")
+    max_tokens: int = _max_tokens(200)
+
+    def cross_check(self) -> str | None:
+        if not self.wall_low < self.wall_high:
+            return f"graph.rooms.wall_low must be < wall_high, got {self.wall_low!r} >= {self.wall_high!r}"
+        return None
+
+
+@dataclass
+class QueryConfig:
+    kind: Literal["offline", "llm"] = setting(
+        "offline",
+        "queries (ogscene3d graph -q, the viewer's Find): offline (a parser of object, relation and room "
+        "terms) | llm (a language model at an OpenAI-compatible endpoint picks node ids from a compact "
+        "graph; offline when it fails)",
+    )
+    model: str = _component_model("queries")
+    max_tokens: int = _max_tokens(500)
+    max_nodes: int = setting(500, "objects sent to the LLM at most (the largest first)", _int(1))
+
+
+@dataclass
 class GraphConfig:
     enabled: bool = setting(
         True, "build the 3D scene graph; false: the graph.* settings are neither used nor checked"
@@ -657,7 +741,12 @@ class GraphConfig:
         _float(0.0, 1.0, hi_open=True),
     )
     min_gaussians: int = setting(20, "labels with fewer Gaussians make no node", _int(1))
-    up_axis: list[float] = setting([0.0, -1.0, 0.0], "the world's up direction", check=_check_up_axis)
+    up_axis: Literal["auto"] | list[float] = setting(
+        "auto",
+        "the world's up direction (on/under relations, floor/wall/ceiling tags): auto (the dataset format's "
+        "world up where it defines one, else the cameras' up over the first frames; logged) or a 3-vector",
+        check=_check_up_axis,
+    )
     edge_voxel: float = setting(
         0.0,
         "a node's points for edges and relations: its Gaussian means thinned to one per voxel of this many "
@@ -693,9 +782,15 @@ class GraphConfig:
     query_min_similarity: float = setting(
         0.25, "cosine similarity below which a node does not answer a query", _float(-1.0, 1.0)
     )
+    endpoint: EndpointConfig = section(
+        EndpointConfig,
+        "the OpenAI-compatible endpoint of the captioner, relations, room typer, queries, query embeddings",
+    )
     captioner: CaptionerConfig = section(CaptionerConfig, "node captions")
     relations: RelationsConfig = section(RelationsConfig, "edge relations")
     confidence: NodeConfidenceConfig = section(NodeConfidenceConfig, "node confidence")
+    rooms: RoomsConfig = section(RoomsConfig, "storeys and rooms")
+    query: QueryConfig = section(QueryConfig, "queries over objects, relations and rooms")
 
 
 @dataclass
@@ -769,6 +864,20 @@ class TrackingConfig:
 
 @dataclass
 class Config:
+    """Every setting of a run: :func:`load_config` reads it from YAML, ``ogscene3d config`` lists each key
+    with its default, allowed values and doc.
+
+    Attributes:
+        device: ``cpu``, ``cuda`` or ``cuda:N``; None: CUDA when available.
+        seed: random seed of the run.
+        data: the RGB-D input (:class:`DataConfig`).
+        synthetic: the procedural scene of ``--synthetic`` (:class:`SyntheticConfig`).
+        segmentation: open-set 2D segmentation (:class:`SegmentationConfig`).
+        mapping: semantic mapping (:class:`MappingConfig`).
+        graph: the 3D scene graph, its LLM endpoint among its sections (:class:`GraphConfig`).
+        tracking: camera poses (:class:`TrackingConfig`).
+    """
+
     device: str | None = setting(None, "cpu | cuda | cuda:N; null: CUDA when available")
     seed: int = setting(0, "random seed of the run", _int(0))
     data: DataConfig = section(DataConfig, "the RGB-D input")
@@ -805,6 +914,8 @@ def _type_name(tp: Any) -> str:
         return " | ".join(_type_name(a) for a in typing.get_args(tp))
     if origin is list:
         return f"list[{', '.join(_type_name(a) for a in typing.get_args(tp))}]"
+    if origin is Literal:
+        return " | ".join(str(a) for a in typing.get_args(tp))
     if tp is type(None):
         return "null"
     return getattr(tp, "__name__", str(tp))
@@ -1002,6 +1113,80 @@ RETIRED: dict[str, str] = {
 }
 
 
+# Settings that moved: read at their new key (with one notice naming them) so that the YAML files and run
+# folders written before still load. Several old keys can move to one new key (each LLM component of the
+# graph had its own endpoint settings): set to different values, they conflict, unless the new key is given.
+_ENDPOINT_KEYS = ("base_url", "api_key_env", "timeout_s", "max_retries")
+MOVED: dict[str, str] = {
+    f"graph.{part}.{key}": f"graph.endpoint.{key}"
+    for part in ("captioner", "relations", "rooms", "query")
+    for key in _ENDPOINT_KEYS
+}
+
+
+def _pop_key(values: dict, key: str) -> tuple[dict, Any]:
+    """``values`` without the dotted ``key`` (a copy where it changes) and the value it held
+    (``dataclasses.MISSING``: none)."""
+    head, _, rest = key.partition(".")
+    if head not in values:
+        return values, dataclasses.MISSING
+    if not rest:
+        return {k: v for k, v in values.items() if k != head}, values[head]
+    if not isinstance(values[head], dict):
+        return values, dataclasses.MISSING
+    inner, value = _pop_key(values[head], rest)
+    return {**values, head: inner}, value
+
+
+def _put_key(values: dict, key: str, value: Any) -> dict:
+    head, _, rest = key.partition(".")
+    if not rest:
+        return {**values, head: value}
+    inner = values.get(head)
+    return {**values, head: _put_key(inner if isinstance(inner, dict) else {}, rest, value)}
+
+
+def _move_keys(values: dict) -> dict:
+    """``values`` (a config as nested dicts) with the keys of :data:`MOVED` at their new place."""
+    found: dict[str, list[tuple[str, Any]]] = {}
+    for old, new in MOVED.items():
+        values, value = _pop_key(values, old)
+        if value is not dataclasses.MISSING:
+            found.setdefault(new, []).append((old, value))
+    if not found:
+        return values
+    defaults = {s.key: s.default for s in settings() if s.key in found}
+    for new, olds in found.items():
+        values, given = _pop_key(values, new)
+        if given is dataclasses.MISSING:
+            # the old keys that say something beyond the default must agree
+            said: list[tuple[str, Any]] = []
+            for k, v in olds:
+                if v != defaults[new] and all(v != w for _, w in said):
+                    said.append((k, v))
+            if len(said) > 1:
+                raise ConfigError(
+                    f"{' and '.join(f'{k}={v!r}' for k, v in said)} differ, but one endpoint "
+                    f"({new.rpartition('.')[0]}) now serves them all: set {new} instead"
+                )
+            given = said[0][1] if said else defaults[new]
+        values = _put_key(values, new, given)
+    # one line: the old keys by section (graph.captioner.{base_url,timeout_s}), then where they went
+    by_section: dict[str, list[str]] = {}
+    for olds in found.values():
+        for k, _ in olds:
+            head, _, name = k.rpartition(".")
+            by_section.setdefault(head, []).append(name)
+    old_keys = ", ".join(
+        f"{h}.{{{','.join(n)}}}" if len(n) > 1 else f"{h}.{n[0]}" for h, n in by_section.items()
+    )
+    targets = ", ".join(dict.fromkeys(new.rpartition(".")[0] for new in found))
+    logging.getLogger(__name__).info(
+        "config keys %s moved to %s (read there; update the file)", old_keys, targets
+    )
+    return values
+
+
 def _build(cls: type, values: dict, prefix: str = "") -> Any:
     hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}
@@ -1045,12 +1230,41 @@ def parse_override(text: str) -> dict:
 
 
 def config_from_dict(values: dict) -> Config:
-    return _build(Config, values)
+    """A :class:`Config` from nested dicts (a YAML file's), moved keys read at their new place."""
+    return _build(Config, _move_keys(values))
+
+
+def section_values(section: Any, names: Iterable[str], prefix: str = "") -> dict[str, Any]:
+    """A component's keyword arguments from its config section: ``{name: section.<prefix><name>}``.
+
+    Args:
+        section: the config section (e.g. ``cfg.segmentation``).
+        names: the component's parameters that the section holds.
+        prefix: what the section's keys add to the parameter names (``"detector_"``), if anything.
+
+    Returns:
+        The keyword arguments, in the order of ``names``.
+    """
+    return {name: getattr(section, prefix + name) for name in names}
 
 
 def load_config(path: str | Path | None = None, overrides: list[str] | None = None) -> Config:
-    """Load a YAML config (None: all defaults; a bare name such as ``"replica"``: the config shipped with the
-    package) and apply ``key=value`` overrides."""
+    """Load a YAML config and apply ``key=value`` overrides, then check every setting.
+
+    Keys that moved (:data:`MOVED`) are read at their new place, with one notice.
+
+    Args:
+        path: a YAML file, a bare name such as ``"replica"`` (the config shipped with the package), or None
+            for all defaults.
+        overrides: ``key=value`` strings (the value is parsed as YAML), e.g. ``"mapping.tau_p=0.2"``.
+
+    Returns:
+        The checked config.
+
+    Raises:
+        ConfigError: a missing or unreadable file, an unknown key, or a value outside its rules (the message
+            names the key, the value and what is allowed).
+    """
     values: dict = {}
     if path is not None:
         p = resolve_config_path(path)
@@ -1078,31 +1292,6 @@ def load_config(path: str | Path | None = None, overrides: list[str] | None = No
     cfg = config_from_dict(values)
     check_config(cfg)
     return cfg
-
-
-def add_override_argument(parser: Any, example: str = "mapping.opt_iters=5") -> None:
-    """The ``--set KEY=VALUE`` option every command that reads a config offers (parsed by ``load_config``)."""
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help=f"config override, repeatable (e.g. --set {example})",
-    )
-
-
-def add_poses_argument(parser: Any) -> None:
-    """Add ``--poses gt|odometry`` (the choices of ``tracking.poses``) to a subcommand.
-
-    The command then does ``if args.poses: cfg.tracking.poses = args.poses``.
-    """
-    parser.add_argument(
-        "--poses",
-        choices=choices("tracking.poses"),
-        default=None,
-        help="camera poses: the dataset's (gt) or RGB-D odometry (odometry); default: config tracking.poses",
-    )
 
 
 def config_to_dict(cfg: Any) -> dict:

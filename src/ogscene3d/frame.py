@@ -40,13 +40,25 @@ def check_pose(pose: np.ndarray, what: str = "pose", tol: float = 1e-3) -> np.nd
 
 @dataclass
 class Frame:
-    """An RGB-D frame. ``pose`` is camera-to-world 4x4 (OpenCV axes) or None when it must be tracked.
+    """One RGB-D frame, as datasets and camera streams give it to the mapper.
 
-    ``segments`` is an int id map (0 or negative = no segment) with ``segment_scores`` {id: SAM predicted
-    IoU}; ``gt_instances`` / ``gt_classes`` are ground-truth maps when the dataset has them (synthetic
-    scenes; class maps also for label-fusion's segm images and ScanNet's label-filt, in NYU40 ids).
-    ``depth_scale_checked``: the frame's reader checks its sequence's depth scale and warns about an
-    implausible one (datasets do, naming their ``data.depth_scale``), so the mapper does not warn again.
+    Attributes:
+        index: the frame's index in its sequence.
+        rgb: colour image. uint8 [H, W, 3]
+        depth: depth in metres, 0 = invalid. float32 [H, W]
+        K: pinhole intrinsics, pixel centres at +0.5. float32 [3, 3]
+        pose: camera-to-world (OpenCV axes), or None when it must be tracked. float64 [4, 4]
+        timestamp: seconds, where the sequence records it.
+        name: the colour file's stem; precomputed segments are looked up by it.
+        segments: an int id map, 0 or negative = no segment; None: none given. [H, W]
+        segment_scores: {segment id: SAM predicted IoU}.
+        segment_names: {segment id: detector class}, where known.
+        gt_instances: ground-truth instance map, where the dataset has one (synthetic scenes). [H, W]
+        gt_classes: ground-truth class map (synthetic scenes; label-fusion's segm images and ScanNet's
+            label-filt, in NYU40 ids). [H, W]
+        depth_scale_checked: the frame's reader checked its sequence's depth scale and warned about an
+            implausible one (datasets do, naming their ``data.depth_scale``), so the mapper does not warn
+            again.
     """
 
     index: int

@@ -24,7 +24,8 @@ import torch
 from .device import resolve_device
 from .errors import DataError
 from .runs.gaussians_ply import PLY_PROPERTIES, SH_C0, read_gaussians_ply, write_gaussians_ply
-from .runs.map_npz import NPZ_VERSION, corrupt_npz_message, read_map_npz, write_map_npz
+from .runs.map_npz import NPZ_VERSION, pop_npz_version, read_map_npz, write_map_npz
+from .runs.map_npz import corrupt_npz_message as corrupt_npz_message  # mapper.py reads it from here
 
 # Per-Gaussian fields: name -> (trailing shape, dtype).
 FIELDS: dict[str, tuple[tuple[int, ...], torch.dtype]] = {
@@ -45,8 +46,37 @@ def _logit(p: torch.Tensor | float) -> torch.Tensor:
     return torch.log(p) - torch.log1p(-p)
 
 
+class _FieldView:
+    """A read-only ``GaussianMap`` attribute: the first ``len(map)`` rows of the field of its name (a view,
+    so in-place writes reach the map; assigning the attribute raises, as a property without setter does)."""
+
+    def __init__(self, doc: str) -> None:
+        self.__doc__ = doc
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        if name not in FIELDS:
+            raise TypeError(f"{owner.__name__}.{name}: not a Gaussian field (known: {sorted(FIELDS)})")
+        self.name = name
+
+    def __get__(self, gm: GaussianMap | None, owner: type | None = None) -> torch.Tensor:
+        if gm is None:
+            return self  # type: ignore[return-value]  # the class attribute (documentation, introspection)
+        return gm._view(self.name)
+
+    def __set__(self, gm: GaussianMap, value: object) -> None:
+        raise AttributeError(f"can't set attribute {self.name!r} (write into the view instead)")
+
+
 class GaussianMap:
-    """Struct-of-arrays semantic Gaussians on ``device`` with amortised-capacity growth."""
+    """Struct-of-arrays semantic Gaussians on ``device`` with amortised-capacity growth.
+
+    Each field (``means``, ``quats``, ``log_scales``, ``opacity_logits``, ``colors``, ``labels``,
+    ``confidences``, ``origin_kf``) is a view of the first ``len(map)`` rows of its storage.
+
+    Args:
+        device: "cpu", "cuda", "cuda:N", a torch.device, or None (CUDA when available).
+        capacity: rows allocated up front (the storage doubles as rows are appended).
+    """
 
     def __init__(self, device: str | torch.device = "cpu", capacity: int = 1024) -> None:
         self.device = resolve_device(device)
@@ -70,45 +100,14 @@ class GaussianMap:
     def _view(self, name: str) -> torch.Tensor:
         return self._data[name][: self._n]
 
-    @property
-    def means(self) -> torch.Tensor:
-        """[N, 3] float32 world-frame centres (metres)."""
-        return self._view("means")
-
-    @property
-    def quats(self) -> torch.Tensor:
-        """[N, 4] float32 rotations, wxyz."""
-        return self._view("quats")
-
-    @property
-    def log_scales(self) -> torch.Tensor:
-        """[N, 3] float32 log of the per-axis standard deviations (metres)."""
-        return self._view("log_scales")
-
-    @property
-    def opacity_logits(self) -> torch.Tensor:
-        """[N] float32 opacity logits."""
-        return self._view("opacity_logits")
-
-    @property
-    def colors(self) -> torch.Tensor:
-        """[N, 3] float32 RGB in [0, 1]."""
-        return self._view("colors")
-
-    @property
-    def labels(self) -> torch.Tensor:
-        """[N] int32 scene labels, -1 = unlabeled."""
-        return self._view("labels")
-
-    @property
-    def confidences(self) -> torch.Tensor:
-        """[N] float32 semantic confidences in [0, 1]."""
-        return self._view("confidences")
-
-    @property
-    def origin_kf(self) -> torch.Tensor:
-        """[N] int32 index of the keyframe that created each Gaussian."""
-        return self._view("origin_kf")
+    means = _FieldView("[N, 3] float32 world-frame centres (metres).")
+    quats = _FieldView("[N, 4] float32 rotations, wxyz.")
+    log_scales = _FieldView("[N, 3] float32 log of the per-axis standard deviations (metres).")
+    opacity_logits = _FieldView("[N] float32 opacity logits.")
+    colors = _FieldView("[N, 3] float32 RGB in [0, 1].")
+    labels = _FieldView("[N] int32 scene labels, -1 = unlabeled.")
+    confidences = _FieldView("[N] float32 semantic confidences in [0, 1].")
+    origin_kf = _FieldView("[N] int32 index of the keyframe that created each Gaussian.")
 
     @property
     def scales(self) -> torch.Tensor:
@@ -287,7 +286,13 @@ class GaussianMap:
         return gm
 
     def save_npz(self, path: str | Path, extra: dict[str, np.ndarray] | None = None) -> None:
-        """Write the map (and optional extra arrays, e.g. mapper state) to an npz file atomically."""
+        """Write the map to an npz file (``map.npz``'s format), atomically.
+
+        Args:
+            path: the file to write.
+            extra: more named arrays to store beside the map's (e.g. a mapper's state); a name may not
+                clash with a map field.
+        """
         arrays = self.state_dict()
         for k, v in (extra or {}).items():
             if k in arrays:
@@ -297,24 +302,33 @@ class GaussianMap:
 
     @classmethod
     def load_npz(cls, path: str | Path, device: str | torch.device = "cpu") -> GaussianMap:
-        """Load a map written by ``save_npz`` (extra arrays are ignored; read them with ``np.load``)."""
+        """Load a map written by :meth:`save_npz` (its extra arrays are left out: read them with ``np.load``).
+
+        Args:
+            path: the npz file.
+            device: where the map's tensors go.
+
+        Returns:
+            The map.
+
+        Raises:
+            DataError: the file is missing, damaged, lacks a field, or was written by a newer ogscene3d.
+        """
         p = Path(path)
         # only the map's arrays: a mapper checkpoint also holds its memory views (hundreds of MB)
         state = read_map_npz(p, lambda k: k in FIELDS or k in ("next_label", "version"))
-        try:
-            version = int(state.pop("version", 1))
-        except (TypeError, ValueError) as e:
-            raise DataError(corrupt_npz_message(p, e)) from e
-        if version > NPZ_VERSION:
-            raise DataError(
-                f"{p}: written by a newer ogscene3d (map format {version}; this one reads up to "
-                f"{NPZ_VERSION}): update ogscene3d to read it"
-            )
+        pop_npz_version(state, p, "map", "read it")
         return cls.from_state_dict(state, device, what=str(p))
 
     def export_ply(self, path: str | Path) -> None:
-        """Write the 3DGS PLY (binary little-endian, SH degree 0, + label int32 + confidence float32;
-        ``ogscene3d.runs.gaussians_ply``)."""
+        """Write the 3DGS PLY that other Gaussian splatting tools open (``ogscene3d.runs.gaussians_ply``).
+
+        Binary little-endian, SH degree 0, plus the properties ``label`` (int32) and ``confidence``
+        (float32).
+
+        Args:
+            path: the ``.ply`` file to write.
+        """
         write_gaussians_ply(
             path,
             means=self.means.detach().cpu().numpy(),
@@ -328,7 +342,15 @@ class GaussianMap:
 
     @classmethod
     def read_ply(cls, path: str | Path, device: str | torch.device = "cpu") -> GaussianMap:
-        """Read a PLY written by ``export_ply`` (or any 3DGS PLY; missing label/confidence -> -1 / 0)."""
+        """Read a PLY written by :meth:`export_ply`, or any 3DGS PLY.
+
+        Args:
+            path: the ``.ply`` file.
+            device: where the map's tensors go.
+
+        Returns:
+            The map; Gaussians without a label / confidence property get -1 / 0.
+        """
         ply = read_gaussians_ply(path)
         n = len(ply)
         state = {

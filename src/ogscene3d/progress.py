@@ -17,9 +17,12 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import sys
 from collections.abc import Iterable, Iterator
 from typing import Any
+
+log = logging.getLogger(__name__)
 
 
 @contextlib.contextmanager
@@ -36,7 +39,9 @@ def progress(
     from tqdm import tqdm
     from tqdm.contrib.logging import logging_redirect_tqdm
 
-    bar = tqdm(iterable, desc=desc, total=total, unit=unit, disable=disable, dynamic_ncols=True)
+    # smoothing 0: the remaining time from the mean rate since the start (frames cost unevenly: a keyframe
+    # costs far more than the frames between, a recent rate swings with them)
+    bar = tqdm(iterable, desc=desc, total=total, unit=unit, disable=disable, dynamic_ncols=True, smoothing=0)
     try:
         if disable:
             yield bar
@@ -57,3 +62,77 @@ def progress(
                 root.removeHandler(fallback)
     finally:
         bar.close()
+
+
+# A run expected to take longer than this on a CPU is told what would make it faster.
+LONG_RUN_S = 600.0
+
+
+def duration(seconds: float) -> str:
+    """``seconds`` in words: "45 s", "12 min", "3 h 20 min"."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    minutes = round(seconds / 60)
+    return f"{minutes} min" if minutes < 90 else f"{minutes // 60} h {minutes % 60:02d} min"
+
+
+class RunTimeEstimate:
+    """An observer of the mapping engine that says, after the first keyframe, how long the run will take: that
+    keyframe's time times the keyframes to come. On a CPU, when that is longer than :data:`LONG_RUN_S`, it
+    warns and names what would make it faster: a GPU, ``data.scale`` (the time scales about with the pixels),
+    a smaller budget per keyframe (``configs/synthetic.yaml``'s). The first keyframe also carries one-time
+    costs (kernel compilation, model loading), so the estimate errs long.
+
+    Args:
+        frames: the frames the run will read.
+        keyframe_every: ``mapping.keyframe_every`` (0: keyframes by camera motion, at most every frame).
+        scale: ``data.scale`` now.
+        opt_iters: ``mapping.opt_iters`` now.
+    """
+
+    def __init__(self, frames: int, keyframe_every: int, scale: float = 1.0, opt_iters: int = 10) -> None:
+        self.frames = int(frames)
+        self.keyframe_every = int(keyframe_every)
+        self.scale = float(scale)
+        self.opt_iters = int(opt_iters)
+        self.said: str | None = None  # the line logged (tests and callers read it)
+
+    def keyframe(self, mapper, frame, seconds: float) -> None:
+        if self.said is not None:
+            return
+        every = self.keyframe_every
+        keyframes = math.ceil(self.frames / every) if every > 0 else self.frames
+        total = seconds * keyframes
+        device = str(getattr(mapper, "device", "cpu"))
+        size = f"{frame.width}x{frame.height}" if hasattr(frame, "width") else "these images"
+        count = f"{keyframes} keyframes" if every > 0 else f"up to {keyframes} keyframes (by camera motion)"
+        self.said = (
+            f"the first keyframe took {seconds:.1f} s on {device} at {size}: the run's {count} will take "
+            f"about {duration(total)}"
+        )
+        if device.startswith("cpu") and total > LONG_RUN_S:
+            self.said += "; to go faster: " + "; ".join(self._remedies(total))
+            log.warning("%s", self.said)
+        else:
+            log.info("%s", self.said)
+
+    def _remedies(self, total: float) -> list[str]:
+        out = ["map on a GPU (--device cuda)"]
+        # the time goes about with the pixels: the largest scale (in steps of 0.05) that brings the run under
+        # LONG_RUN_S, at least 0.25
+        target = max(0.25, math.floor(20 * self.scale * math.sqrt(LONG_RUN_S / total)) / 20)
+        if target < self.scale:
+            factor = (target / self.scale) ** 2
+            pixels = f"{round(1 / factor)}x fewer pixels: about {duration(total * factor)}"
+            out.append(f"--set data.scale={target:g} ({pixels})")
+        if self.opt_iters > 3:
+            out.append(
+                "a smaller budget per keyframe, as configs/synthetic.yaml has (--set mapping.opt_iters=3 "
+                "--set mapping.opt_memory_frames=1)"
+            )
+        if self.keyframe_every == 1:
+            out.append("fewer keyframes (--set mapping.keyframe_every=5)")
+        return out
+
+    def finished(self, mapper) -> None:
+        pass

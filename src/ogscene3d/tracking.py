@@ -64,7 +64,7 @@ Use by the mapper (``config.tracking.poses == "odometry"``)::
 
 With ``poses == "gt"`` the mapper uses ``frame.pose`` from the dataset and never builds a Tracker. For a
 whole sequence at once use ``track`` (poses only) or ``track_sequence`` (poses + validity + per-frame info).
-A command that maps offers ``--poses`` with ``add_poses_argument(parser)`` and then does
+A command that maps offers ``--poses`` (``ogscene3d.commands.options.add_poses_argument``) and then does
 ``if args.poses: cfg.tracking.poses = args.poses``. ``ogscene3d track --data DIR --out OUT`` writes
 ``OUT/traj.txt`` and ``OUT/tracking.json`` (per-frame status, ATE against the dataset's poses if any).
 
@@ -86,9 +86,9 @@ import numpy as np
 
 from .camera import Camera
 from .config import TrackingConfig, check_section, choices
-from .config import add_poses_argument as add_poses_argument  # the option lives with the config
 from .errors import OGSceneError
 from .frame import Frame, check_pose
+from .progress import progress as progress_bar
 
 log = logging.getLogger(__name__)
 
@@ -186,6 +186,16 @@ def _orthonormalize(pose: np.ndarray) -> np.ndarray:
     out[:3, :3] = R
     out[:3, 3] = pose[:3, 3]
     return out
+
+
+def _best_candidate(
+    passing: list[tuple[float, float, np.ndarray]],
+) -> tuple[float, float, np.ndarray]:
+    """Of the passing (fitness, rmse, pose) alignments, the lowest residual among those within
+    ``_FITNESS_TIE`` of the best overlap, its pose re-orthonormalised."""
+    top = max(c[0] for c in passing)
+    fitness, rmse, pose = min((c for c in passing if c[0] >= top - _FITNESS_TIE), key=lambda c: c[1])
+    return fitness, rmse, _orthonormalize(pose)
 
 
 def _downsample_depth(depth: np.ndarray, f: int, edge: float) -> np.ndarray:
@@ -312,11 +322,17 @@ class _Prepared:
 
 
 class Tracker:
-    """Incremental keyframe-to-frame RGB-D odometry. See the module docstring for the algorithm.
+    """Incremental keyframe-to-frame RGB-D odometry (the algorithm: :mod:`ogscene3d.tracking`).
 
     ``step(frame)`` returns the frame's c2w pose (float64 [4, 4], OpenCV axes) or None when the frame was
     skipped; ``last`` holds the ``StepInfo`` of the latest call. All frames of a sequence must share one
     image size and intrinsics.
+
+    Args:
+        config: the ``tracking`` config section; None: its defaults.
+        device: where Open3D runs the odometry: "cpu", "cuda", "cuda:N", or None (CUDA if Open3D can).
+        frame_step: folder frames per ``step`` call (the data stride): the jump limits are per folder
+            frame.
     """
 
     def __init__(
@@ -572,93 +588,124 @@ class Tracker:
 
     # ------------------------------------------------------------------ public step
     def step(self, frame: Frame) -> np.ndarray | None:
-        """Track one frame: its c2w pose (float64 [4, 4]) or None when it is skipped (a warning is logged)."""
+        """Track one frame.
+
+        Args:
+            frame: the next frame of the sequence (same image size and intrinsics as the ones before);
+                ``frame.pose`` is read for the anchor frame only.
+
+        Returns:
+            The frame's c2w pose (float64 [4, 4], OpenCV axes), or None when it is skipped (a warning is
+            logged; ``self.last`` says why).
+        """
         if not isinstance(frame, Frame):
             raise TypeError(f"Tracker.step expects an ogscene3d.frame.Frame, got {type(frame).__name__}")
-        cfg = self.config
         prep = self._prepare(frame)
         self._since_good += 1
-
         if self._kf is None:
-            if prep.valid_fraction < cfg.min_fitness:
-                return self._skip(
-                    frame,
-                    f"only {prep.valid_fraction:.1%} valid depth pixels (< tracking.min_fitness "
-                    f"{cfg.min_fitness}; tracking.depth_min/depth_max and data.min_depth bound them), "
-                    "cannot anchor",
-                )
-            if self._anchor_override is not None:
-                pose = self._anchor_override
-            elif frame.pose is not None:
-                pose = check_pose(frame.pose, f"frame {frame.index} pose")
-            else:
-                pose = np.eye(4)
-            self._accept_keyframe(prep, pose)
-            self._last_pose = pose
-            self._velocity = np.eye(4)
-            self._since_good = 0
-            self._failures = 0
-            self._anchor_override = None
-            self.last = StepInfo(frame.index, pose.copy(), "anchor", "first usable frame", keyframe=True)
-            return pose.copy()
-
+            return self._anchor(frame, prep)
         kf = self._kf
+        self._check_same_camera(frame, prep, kf)
+        if prep.valid_fraction < self.config.min_fitness:
+            return self._skip(
+                frame,
+                f"only {prep.valid_fraction:.1%} valid depth pixels "
+                f"(< tracking.min_fitness {self.config.min_fitness})",
+            )
+        method, passing, reason, fitness, rmse = self._candidates(prep, kf)
+        if not passing:
+            return self._skip(frame, reason, fitness, rmse)
+        fitness, rmse, pose = _best_candidate(passing)
+        reason = self._jump_reason(pose) or self._reacquisition_reason(method, rmse)
+        if reason:
+            return self._skip(frame, reason, fitness, rmse)
+        self._accept_step(pose, method, rmse)
+        why = self._keyframe_reason(pose, fitness)
+        info = StepInfo(frame.index, pose.copy(), "tracked", why, fitness, rmse, bool(why), kf.index, method)
+        if why:
+            self._accept_keyframe(prep, pose)
+        self.last = info
+        return pose.copy()
+
+    def _anchor(self, frame: Frame, prep: _Prepared) -> np.ndarray | None:
+        """Start the trajectory at ``frame`` (the first usable frame, or the first after a restart): its pose
+        is the restart pose, else its own, else the identity."""
+        cfg = self.config
+        if prep.valid_fraction < cfg.min_fitness:
+            return self._skip(
+                frame,
+                f"only {prep.valid_fraction:.1%} valid depth pixels (< tracking.min_fitness "
+                f"{cfg.min_fitness}; tracking.depth_min/depth_max and data.min_depth bound them), "
+                "cannot anchor",
+            )
+        if self._anchor_override is not None:
+            pose = self._anchor_override
+        elif frame.pose is not None:
+            pose = check_pose(frame.pose, f"frame {frame.index} pose")
+        else:
+            pose = np.eye(4)
+        self._accept_keyframe(prep, pose)
+        self._last_pose = pose
+        self._velocity = np.eye(4)
+        self._since_good = 0
+        self._failures = 0
+        self._anchor_override = None
+        self.last = StepInfo(frame.index, pose.copy(), "anchor", "first usable frame", keyframe=True)
+        return pose.copy()
+
+    @staticmethod
+    def _check_same_camera(frame: Frame, prep: _Prepared, kf: _Prepared) -> None:
         if prep.shape != kf.shape or not np.allclose(prep.K, kf.K):
             raise ValueError(
                 f"frame {frame.index}: image size {prep.shape[::-1]} / intrinsics differ from the keyframe's "
                 f"{kf.shape[::-1]}; a Tracker follows one camera (call reset() for a new one)"
             )
-        if prep.valid_fraction < cfg.min_fitness:
-            return self._skip(
-                frame,
-                f"only {prep.valid_fraction:.1%} valid depth pixels "
-                f"(< tracking.min_fitness {cfg.min_fitness})",
-            )
 
+    def _candidates(
+        self, prep: _Prepared, kf: _Prepared
+    ) -> tuple[str, list[tuple[float, float, np.ndarray]], str, float, float]:
+        """Align ``prep`` to the keyframe from the motion prior, the ORB guess and the last pose (see the
+        module docstring) with the keyframe's objective, and with hybrid when "auto" chose point-to-plane
+        and nothing passed. -> (objective, passing candidates, reason, last fitness, last rmse)."""
         assert self._last_pose is not None and self._kf_pose is not None
-        kf_inv = np.linalg.inv(self._kf_pose)
-        # Candidates from the motion prior, the ORB guess and the last pose; see the module docstring.
-        prior = kf_inv @ self._last_pose
+        last = np.linalg.inv(self._kf_pose) @ self._last_pose
+        prior = last
         if self._since_good == 1 and not np.allclose(self._velocity, np.eye(4)):
             prior = prior @ self._velocity
         method = self._kf_method
-        passing, reason, fitness, rmse = self._align(prep, kf, prior, kf_inv @ self._last_pose, method)
-        if not passing and cfg.method == "auto" and method != "hybrid":
+        passing, reason, fitness, rmse = self._align(prep, kf, prior, last, method)
+        if not passing and self.config.method == "auto" and method != "hybrid":
             # Geometry looked well-conditioned but nothing passed: let the photometric term help.
             method = "hybrid"
-            passing, reason2, fitness, rmse = self._align(prep, kf, prior, kf_inv @ self._last_pose, method)
+            passing, reason2, fitness, rmse = self._align(prep, kf, prior, last, method)
             reason = f"point_to_plane: {reason}; hybrid: {reason2}"
-        if not passing:
-            return self._skip(frame, reason, fitness, rmse)
-        top = max(c[0] for c in passing)
-        best = min((c for c in passing if c[0] >= top - _FITNESS_TIE), key=lambda c: c[1])
-        fitness, rmse, pose = best[0], best[1], _orthonormalize(best[2])
-        jump = self._jump_reason(pose)
-        if jump:
-            return self._skip(frame, jump, fitness, rmse)
-        recent = [r for m, r in self._recent_rmse if m == method]
-        if self._since_good > 1 and self._recent_rmse and cfg.max_residual_ratio > 0:
-            # Re-acquiring after skipped frames: no motion prior, often little overlap. A wrong alignment
-            # shows up as a residual far above the recent good ones (good and wrong steps' ratios on the
-            # samples: docs/results.md, "Odometry"). Residual scales differ between objectives, so a
-            # result from an objective with no recent history cannot be validated and is not trusted.
-            if not recent:
-                return self._skip(
-                    frame,
-                    f"re-acquisition by {method} cannot be checked against recent residuals",
-                    fitness,
-                    rmse,
-                )
-            ref = float(np.median(recent))
-            if rmse > cfg.max_residual_ratio * ref:
-                return self._skip(
-                    frame,
-                    f"re-acquisition residual {rmse:.2e} is {rmse / ref:.1f}x the recent median "
-                    f"(max_residual_ratio {cfg.max_residual_ratio})",
-                    fitness,
-                    rmse,
-                )
+        return method, passing, reason, fitness, rmse
 
+    def _reacquisition_reason(self, method: str, rmse: float) -> str | None:
+        """Why the first good-looking frame after skipped ones is not trusted, or None.
+
+        Re-acquiring after skipped frames: no motion prior, often little overlap. A wrong alignment shows up
+        as a residual far above the recent good ones (good and wrong steps' ratios on the samples:
+        docs/results.md, "Odometry"). Residual scales differ between objectives, so a result from an
+        objective with no recent history cannot be validated and is not trusted.
+        """
+        cfg = self.config
+        if not (self._since_good > 1 and self._recent_rmse and cfg.max_residual_ratio > 0):
+            return None
+        recent = [r for m, r in self._recent_rmse if m == method]
+        if not recent:
+            return f"re-acquisition by {method} cannot be checked against recent residuals"
+        ref = float(np.median(recent))
+        if rmse > cfg.max_residual_ratio * ref:
+            return (
+                f"re-acquisition residual {rmse:.2e} is {rmse / ref:.1f}x the recent median "
+                f"(max_residual_ratio {cfg.max_residual_ratio})"
+            )
+        return None
+
+    def _accept_step(self, pose: np.ndarray, method: str, rmse: float) -> None:
+        """Move the trajectory on to ``pose``: the motion prior, the failure counts, the recent residuals."""
+        assert self._last_pose is not None
         if self._since_good == 1:
             self._velocity = np.linalg.inv(self._last_pose) @ pose
         else:
@@ -669,21 +716,20 @@ class Tracker:
         self._kf_age += 1
         self._recent_rmse = [*self._recent_rmse[1 - _RECENT :], (method, rmse)]
 
-        rel = kf_inv @ pose
-        why = ""
+    def _keyframe_reason(self, pose: np.ndarray, fitness: float) -> str:
+        """Why the frame at ``pose`` becomes the new keyframe ("" when it does not)."""
+        cfg = self.config
+        assert self._kf_pose is not None
+        rel = np.linalg.inv(self._kf_pose) @ pose
         if fitness < cfg.keyframe_fitness:
-            why = f"overlap with keyframe {fitness:.2f} < {cfg.keyframe_fitness}"
-        elif np.linalg.norm(rel[:3, 3]) > cfg.keyframe_translation:
-            why = "translation from keyframe"
-        elif rotation_angle_deg(rel[:3, :3]) > cfg.keyframe_rotation_deg:
-            why = "rotation from keyframe"
-        elif self._kf_age >= cfg.keyframe_every:
-            why = f"{self._kf_age} frames since keyframe"
-        info = StepInfo(frame.index, pose.copy(), "tracked", why, fitness, rmse, bool(why), kf.index, method)
-        if why:
-            self._accept_keyframe(prep, pose)
-        self.last = info
-        return pose.copy()
+            return f"overlap with keyframe {fitness:.2f} < {cfg.keyframe_fitness}"
+        if np.linalg.norm(rel[:3, 3]) > cfg.keyframe_translation:
+            return "translation from keyframe"
+        if rotation_angle_deg(rel[:3, :3]) > cfg.keyframe_rotation_deg:
+            return "rotation from keyframe"
+        if self._kf_age >= cfg.keyframe_every:
+            return f"{self._kf_age} frames since keyframe"
+        return ""
 
     def _align(
         self, prep: _Prepared, kf: _Prepared, prior: np.ndarray, fallback: np.ndarray, method: str
@@ -757,8 +803,6 @@ def track_frames(
     """(frame, pose or None, step info) for each of ``frames`` in turn, tracked by ``tracker``.
     ``progress``: a progress bar (odometry takes a second or more per frame on a CPU) with log lines routed
     through it; ``total`` its length (default: ``len(frames)`` where there is one)."""
-    from .progress import progress as progress_bar
-
     if total is None and isinstance(frames, Sized):
         total = len(frames)
     tracked = 0
@@ -779,9 +823,22 @@ def track_sequence(
     frame_step: int = 1,
     progress: bool = False,
 ) -> TrackResult:
-    """Track a whole sequence; see ``TrackResult`` for what skipped frames hold. ``progress``: show a bar.
+    """Track a whole sequence, with each frame's validity and what the tracker did with it.
 
-    Raises OGSceneError when ``frames`` is empty or no frame could be anchored (no usable depth anywhere).
+    Args:
+        frames: the sequence's frames in order (one camera); the first frame's ``pose``, if any, anchors
+            the trajectory.
+        config: the ``tracking`` config section; None: its defaults.
+        device: where Open3D runs: "cpu", "cuda", "cuda:N", or None (CUDA if Open3D can).
+        frame_step: folder frames per frame given (the data stride).
+        progress: show a progress bar.
+
+    Returns:
+        A :class:`TrackResult`: one c2w pose per frame (a skipped frame holds the last good pose), the
+        validity flags and the per-frame :class:`StepInfo`.
+
+    Raises:
+        OGSceneError: ``frames`` is empty, or no frame could be anchored (no usable depth anywhere).
     """
     tracker = Tracker(config, device, frame_step=frame_step)
     raw: list[np.ndarray | None] = []
@@ -819,11 +876,21 @@ def track(
     frame_step: int = 1,
     progress: bool = False,
 ) -> list[np.ndarray]:
-    """c2w float64 [4, 4] poses (OpenCV axes) for every frame, estimated by RGB-D odometry.
+    """Camera poses for every frame of a sequence, estimated by RGB-D odometry.
 
     The first frame's pose is its given ``frame.pose`` or the identity; later given poses are ignored.
-    A frame that could not be tracked holds the last good pose before it (see ``TrackResult``); use
-    ``track_sequence`` to get the validity flags.
+    A frame that could not be tracked holds the last good pose before it; use :func:`track_sequence` to
+    get the validity flags.
+
+    Args:
+        frames: the sequence's frames in order (one camera).
+        config: the ``tracking`` config section; None: its defaults.
+        device: where Open3D runs: "cpu", "cuda", "cuda:N", or None (CUDA if Open3D can).
+        frame_step: folder frames per frame given (the data stride).
+        progress: show a progress bar.
+
+    Returns:
+        One c2w pose per frame, float64 [4, 4], OpenCV axes.
     """
     return track_sequence(frames, config, device, frame_step, progress).poses
 

@@ -3,7 +3,7 @@
 Each module has ``add_parser(subparsers)``, which registers its subcommand(s) and sets ``func``
 (``args -> int`` exit code). A command module imports only light things at module level (argparse, the
 config dataclasses, the errors): the heavy ones (torch, warp, open3d, viser) go inside ``func``, so that
-``ogscene3d --help`` answers at once. tests/test_lazy_import.py holds every module listed here to that.
+``ogscene3d --help`` answers at once. tests/test_commands.py holds every module listed here to that.
 """
 
 from __future__ import annotations

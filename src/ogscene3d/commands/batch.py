@@ -1,5 +1,12 @@
-"""``ogscene3d run-batch SCENES_FILE --out OUT`` and ``ogscene3d eval-batch OUT``: many scenes at once
-(the engine, scenes files and executors: :mod:`ogscene3d.batch`)."""
+"""``ogscene3d run-batch``: map many scenes (sequentially or on a Ray cluster) and summarise them.
+
+Map every scene of SCENES_FILE into OUT/<name> (like `ogscene3d run`), one scene per task; print a per-scene
+table with mean/std and write OUT/run_batch.json. SCENES_FILE: a text file (one dataset folder or
+synthetic:SEED per line) or a YAML list (strings or {path|synthetic, name, gt, segments, set}).
+
+``ogscene3d eval-batch OUT`` (:data:`EVAL_BATCH_DOC`) evaluates such a folder. The engine, scenes files and
+executors: :mod:`ogscene3d.batch`.
+"""
 
 from __future__ import annotations
 
@@ -8,10 +15,19 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..batch import EXECUTORS
-from ..config import add_override_argument
+from ..batch import EXECUTORS, eval_batch, run_batch
 from ..errors import OGSceneError
 from ..eval.options import add_eval_arguments, eval_options_from_args
+from .options import add_command, add_override_argument, add_shared_arguments
+
+#: ``ogscene3d eval-batch``'s text (the module's docstring is run-batch's)
+EVAL_BATCH_DOC = """``ogscene3d eval-batch``: evaluate every run of a batch folder and summarise (mean/std).
+
+Evaluate every run directory under OUT (the scenes of OUT/run_batch.json, else every sub-folder with
+gaussians.ply) like `ogscene3d eval`: writes each run's metrics.json, prints a per-scene table with mean/std
+and writes OUT/eval_batch.json. Ground truth: the scene's `gt` from the scenes file, else the synthetic scene
+the run was made from.
+"""
 
 
 def _add_executor_args(p: argparse.ArgumentParser) -> None:
@@ -33,44 +49,42 @@ def _add_executor_args(p: argparse.ArgumentParser) -> None:
         help="GPUs per Ray task when the cluster has GPUs (default 1)",
     )
     p.add_argument("--cpus-per-task", type=float, default=1.0, help="CPUs per Ray task (default 1)")
-    p.add_argument(
-        "--device", default=None, help="sequential executor: cpu, cuda or cuda:N (default: config, else CUDA)"
+    add_shared_arguments(
+        p, "--device", device="sequential executor: cpu, cuda or cuda:N (default: config, else CUDA)"
     )
+
+
+def _executor_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The options of :func:`_add_executor_args`, as ``run_batch`` and ``eval_batch`` take them."""
+    return {
+        "executor": args.executor,
+        "ray_address": args.ray_address,
+        "gpus_per_task": args.gpus_per_task,
+        "cpus_per_task": args.cpus_per_task,
+        "device": args.device,
+    }
 
 
 def add_parser(subparsers: Any) -> None:
-    p = subparsers.add_parser(
-        "run-batch",
-        help="map many scenes (sequentially or on a Ray cluster) and summarise them",
-        description="Map every scene of SCENES_FILE into OUT/<name> (like `ogscene3d run`), one scene per "
-        "task; print a per-scene table with mean/std and write OUT/run_batch.json. SCENES_FILE: a text file "
-        "(one dataset folder or synthetic:SEED per line) or a YAML list (strings or {path|synthetic, name, "
-        "gt, segments, set}).",
-    )
+    p = add_command(subparsers, __doc__, _run_batch_cli)
     p.add_argument("scenes_file", metavar="SCENES_FILE", type=Path, help="text or YAML list of scenes")
-    p.add_argument(
-        "--out", required=True, type=Path, help="batch output folder (one run directory per scene)"
+    add_shared_arguments(
+        p,
+        "--out",
+        "--config",
+        out={"type": Path, "help": "batch output folder (one run directory per scene)"},
+        config="YAML config for every scene (e.g. configs/replica.yaml)",
     )
-    p.add_argument("--config", default=None, help="YAML config for every scene (e.g. configs/replica.yaml)")
     add_override_argument(p, "mapping.opt_iters=5")
     _add_executor_args(p)
     g = p.add_argument_group("evaluation (with --eval)")
     g.add_argument("--eval", action="store_true", help="evaluate each run right after mapping (same task)")
     add_eval_arguments(g)
-    p.set_defaults(func=_run_batch_cli)
 
-    q = subparsers.add_parser(
-        "eval-batch",
-        help="evaluate every run of a batch folder and summarise (mean/std)",
-        description="Evaluate every run directory under OUT (the scenes of OUT/run_batch.json, else every "
-        "sub-folder with gaussians.ply) like `ogscene3d eval`: writes each run's metrics.json, prints a "
-        "per-scene table with mean/std and writes OUT/eval_batch.json. Ground truth: the scene's `gt` from "
-        "the scenes file, else the synthetic scene the run was made from.",
-    )
+    q = add_command(subparsers, EVAL_BATCH_DOC, _eval_batch_cli)
     q.add_argument("out", metavar="OUT", type=Path, help="batch output folder of run-batch")
     _add_executor_args(q)
     add_eval_arguments(q)
-    q.set_defaults(func=_eval_batch_cli)
 
 
 def protocol_line(name: str, text: str) -> str:
@@ -95,33 +109,17 @@ def _report(res: Any) -> int:
 
 
 def _run_batch_cli(args: argparse.Namespace) -> int:
-    from ..batch import run_batch
-
     res = run_batch(
         args.scenes_file,
         args.out,
         config=args.config,
         overrides=args.overrides,
-        executor=args.executor,
-        ray_address=args.ray_address,
-        gpus_per_task=args.gpus_per_task,
-        cpus_per_task=args.cpus_per_task,
-        device=args.device,
         evaluate=eval_options_from_args(args) if args.eval else None,
+        **_executor_options(args),
     )
     return _report(res)
 
 
 def _eval_batch_cli(args: argparse.Namespace) -> int:
-    from ..batch import eval_batch
-
-    res = eval_batch(
-        args.out,
-        eval_options_from_args(args),
-        executor=args.executor,
-        ray_address=args.ray_address,
-        gpus_per_task=args.gpus_per_task,
-        cpus_per_task=args.cpus_per_task,
-        device=args.device,
-    )
+    res = eval_batch(args.out, eval_options_from_args(args), **_executor_options(args))
     return _report(res)

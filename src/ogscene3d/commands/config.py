@@ -1,5 +1,12 @@
-"""``ogscene3d config``: every setting with its default, allowed values and doc (read from the fields of
-:class:`ogscene3d.config.Config`)."""
+"""``ogscene3d config``: list every config setting: default, allowed values, doc.
+
+Print every setting of the run configuration with its default, its allowed values (choices or range) and what
+it does. --format yaml (default) prints a commented YAML file that load_config reads back (a starting point
+for your own config); --format table one line per key. With --config / --set the values shown are those of
+that configuration instead of the defaults.
+
+The settings are read from the fields of :class:`ogscene3d.config.Config`.
+"""
 
 from __future__ import annotations
 
@@ -9,26 +16,19 @@ from typing import Any
 
 import yaml
 
-from ..config import Setting, add_override_argument, load_config, sections, settings
+from ..config import Setting, load_config, sections, settings
 from ..errors import ConfigError
+from .options import add_command, add_override_argument, add_shared_arguments
 
 
 def add_parser(subparsers: Any) -> None:
-    p = subparsers.add_parser(
-        "config",
-        help="list every config setting: default, allowed values, doc",
-        description="Print every setting of the run configuration with its default, its allowed values "
-        "(choices or range) and what it does. --format yaml (default) prints a commented YAML file that "
-        "load_config reads back (a starting point for your own config); --format table one line per key. "
-        "With --config / --set the values shown are those of that configuration instead of the defaults.",
-    )
+    p = add_command(subparsers, __doc__, run)
     p.add_argument(
         "prefix", nargs="?", default="", help="show only the keys that start with this (e.g. mapping.tau)"
     )
     p.add_argument("--format", choices=["yaml", "table"], default="yaml", help="output form (default yaml)")
-    p.add_argument("--config", default=None, help="YAML config whose values to show instead of the defaults")
+    add_shared_arguments(p, "--config", config="YAML config whose values to show instead of the defaults")
     add_override_argument(p, "mapping.tau_p=0.2")
-    p.set_defaults(func=run)
 
 
 def allowed_text(s: Setting) -> str:

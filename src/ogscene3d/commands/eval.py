@@ -1,4 +1,12 @@
-"""``ogscene3d eval RUN_DIR --gt GT``: score a run, print a table, write metrics.json and pictures."""
+"""``ogscene3d eval``: evaluate a run directory against ground truth (3D semantics, scene graph, trajectory).
+
+Score RUN_DIR (gaussians.ply, graph.json) against ground truth GT: a synthetic scene directory (found
+automatically for runs of synthetic scenes), its gt/ folder, a labelled PLY (x, y, z, class[, instance]) with
+a class-name table, a ScanNet scene folder (*_vh_clean_2.labels.ply, NYU40; label-filt/ for 2D), an original
+Replica scene folder (habitat/mesh_semantic.ply + info_semantic.json, as HOV-SG scores Replica), or an RGB-D
+sequence whose frames carry class maps but which has no 3D ground truth (label-fusion: scored in 2D only).
+Prints a table and writes metrics.json and a per-class IoU bar chart into the run directory.
+"""
 
 from __future__ import annotations
 
@@ -9,23 +17,12 @@ from typing import Any
 
 from ..errors import DataError, OGSceneError
 from ..eval.options import add_eval_arguments, eval_options_from_args
+from ..runs import METRICS, write_metrics
+from .options import add_command
 
 
 def add_parser(subparsers: Any) -> None:
-    p = subparsers.add_parser(
-        "eval",
-        help="evaluate a run directory against ground truth (3D semantics, scene graph, trajectory)",
-        description=(
-            "Score RUN_DIR (gaussians.ply, graph.json) against ground truth GT: a synthetic scene directory "
-            "(found automatically for runs of synthetic scenes), its gt/ folder, a labelled PLY "
-            "(x, y, z, class[, instance]) with a class-name table, a ScanNet scene folder "
-            "(*_vh_clean_2.labels.ply, NYU40; label-filt/ for 2D), an original Replica scene folder "
-            "(habitat/mesh_semantic.ply + info_semantic.json, as HOV-SG scores Replica), or an RGB-D "
-            "sequence whose frames carry class maps but which has no 3D ground truth (label-fusion: scored "
-            "in 2D only). "
-            "Prints a table and writes metrics.json and a per-class IoU bar chart into the run directory."
-        ),
-    )
+    p = add_command(subparsers, __doc__, run)
     p.add_argument("run_dir", metavar="RUN_DIR", type=Path, help="run directory written by the mapper")
     p.add_argument(
         "--gt",
@@ -52,7 +49,6 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument(
         "--out", type=Path, default=None, help="where to write metrics.json and PNGs (default RUN_DIR)"
     )
-    p.set_defaults(func=run)
 
 
 def _pct(x: Any) -> str:
@@ -186,14 +182,45 @@ def _run(args: argparse.Namespace) -> int:
             f"{g['num_no_edge']} no edge, {g['num_wrong_relation']} wrong relation; "
             f"{g['num_matched_nodes']} nodes matched)"
         )
+    _print_rooms_and_queries(report)
     _finish(report, out)
     return 0
 
 
+def _print_rooms_and_queries(report: dict[str, Any]) -> None:
+    """The room segmentation and query accuracy lines (when the report has them)."""
+    r = report.get("rooms")
+    if r:
+        print()
+        print(f"rooms: {r['protocol']}")
+        print(
+            f"room precision {_pct(r['precision'])}   recall {_pct(r['recall'])}   (matched per room: "
+            f"{_pct(r['matched_precision'])} / {_pct(r['matched_recall'])}; {r['num_gt_rooms']} GT rooms, "
+            f"{r['num_pred_rooms']} predicted; types right: {r.get('types_correct', 'n/a')})"
+        )
+        for gid, row in r["per_room"].items():
+            settle = row.get("settle_frames")
+            when = "" if settle is None else f", node {settle:+d} frames after the room was entered"
+            pred = row["pred_room"]
+            name = f"#{pred} {r['pred_types'].get(str(pred), '')}" if pred is not None else "none"
+            print(
+                f"  GT room {gid} ({row.get('gt_type') or '?'}): precision {_pct(row['precision'])} recall "
+                f"{_pct(row['recall'])} (room {name}{when})"
+            )
+    q = report.get("queries")
+    if q:
+        print()
+        print(f"queries: {q['protocol']}")
+        cells = [
+            f"{k} {_pct(v['top1_accuracy'])} ({v['top1']}/{v['queries']}, {v['answerable']} answerable)"
+            for k, v in q["per_kind"].items()
+            if v["queries"]
+        ]
+        print("top-1   " + "   ".join(cells))
+
+
 def _finish(report: dict[str, Any], out: Path) -> None:
     """Print the trajectory line and the notes, and write metrics.json."""
-    from ..runs import METRICS, write_metrics
-
     t = report.get("trajectory")
     if t:
         print()

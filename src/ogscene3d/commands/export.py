@@ -1,22 +1,25 @@
-"""``ogscene3d export``: a run's map and scene graph as files other tools open (see docs/exports.md)."""
+"""``ogscene3d export``: export a run as a coloured point cloud, per-node clouds and GraphML.
+
+Write a run's Gaussians as a PLY point cloud with standard red/green/blue colours and label/confidence
+properties (Open3D, CloudCompare, MeshLab show its colours), one such cloud per scene-graph node, and the
+scene graph as GraphML with each node's boxes.
+
+The files: docs/exports.md.
+"""
 
 from __future__ import annotations
 
 import argparse
 
 from ..cli_types import unit_interval
+from ..errors import ConfigError
+from .options import add_command, add_shared_arguments
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser(
-        "export",
-        help="export a run as a coloured point cloud, per-node clouds and GraphML",
-        description="Write a run's Gaussians as a PLY point cloud with standard red/green/blue colours and "
-        "label/confidence properties (Open3D, CloudCompare, MeshLab show its colours), one such cloud "
-        "per scene-graph node, and the scene graph as GraphML with each node's boxes.",
-    )
+    p = add_command(subparsers, __doc__, run)
     p.add_argument("run", help="run directory (with gaussians.ply and graph.json)")
-    p.add_argument("--out", help="output directory (default RUN/export)")
+    add_shared_arguments(p, "--out", out={"required": False, "help": "output directory (default RUN/export)"})
     p.add_argument(
         "--colors",
         choices=("rgb", "semantic"),
@@ -33,11 +36,9 @@ def add_parser(subparsers) -> None:
         default=0.0,
         help="leave out Gaussians less opaque than this (0-1, default 0: all)",
     )
-    p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..errors import ConfigError
     from ..export import export_run
 
     if args.no_cloud and args.no_nodes and args.no_graphml:

@@ -10,6 +10,7 @@ The server binds 127.0.0.1 unless ``--host`` says otherwise and prints the URL w
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import signal
 import sys
@@ -17,38 +18,56 @@ import threading
 import time
 from pathlib import Path
 
-from ..cli_types import image_size, port, positive_float, positive_int
-from ..config import add_override_argument
+from ..atomic import atomic_write_bytes
+from ..cli_types import add_rerun_arguments, add_size_argument, port, positive_float, positive_int
+from ..config import load_config
 from ..errors import ConfigError, DataError, OGSceneError
+from ..runs import RunFolder, run_directory
+from .options import add_override_argument, add_shared_arguments
+from .run import run_observers
 
 log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Every option of ``ogscene3d live`` / ``ogscene3d-live``, in the order ``--help`` lists them."""
+    _add_session_arguments(p)
+    _add_viewer_arguments(p)
+    add_rerun_arguments(p)
+
+
+def _add_session_arguments(p: argparse.ArgumentParser) -> None:
+    """What to show: a saved run, or what to map live (data, the synthetic scene, a camera) and how."""
     p.add_argument(
         "run_dir", nargs="?", default=None, metavar="RUN_DIR", help="saved run directory to browse"
     )
     src = p.add_mutually_exclusive_group()
-    src.add_argument("--data", default=None, help="dataset folder to map live (Replica, ScanNet, TUM, ...)")
+    add_shared_arguments(src, "--data", data="dataset folder to map live (Replica, ScanNet, TUM, ...)")
     src.add_argument("--synthetic", action="store_true", help="generate the synthetic scene and map it live")
     src.add_argument(  # robot input (#27): ogscene3d.streams
         "--source",
         default=None,
         help="live camera to map: realsense[:SERIAL], realsense:RECORDING.db3, record3d[:DEVICE_INDEX]",
     )
-    p.add_argument("--config", default=None, help="YAML config (e.g. configs/replica.yaml)")
-    p.add_argument("--segments", default=None, help="folder of precomputed segments (<rgb stem>.png/.json)")
-    p.add_argument("--device", default=None, help="mapping device: cpu, cuda or cuda:N")
-    p.add_argument(
+    add_shared_arguments(
+        p,
+        "--config",
+        "--segments",
+        "--device",
         "--max-frames",
-        type=positive_int,
-        default=None,
-        help="map at most this many frames (--synthetic: the scene is generated with at most this many)",
-    )
-    p.add_argument(
         "--out",
-        default=None,
-        help="run directory written at the end of live mapping (and the default of the GUI's save box)",
+        config="YAML config (e.g. configs/replica.yaml)",
+        device="mapping device: cpu, cuda or cuda:N",
+        max_frames={
+            "type": positive_int,
+            "help": "map at most this many frames (--synthetic: the scene is generated with at most this "
+            "many)",
+        },
+        out={
+            "required": False,
+            "help": "run directory written at the end of live mapping (and the default of the GUI's save "
+            "box)",
+        },
     )
     p.add_argument(
         "--synthetic-dir",
@@ -56,6 +75,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="where --synthetic writes its scene (default: OUT/scene, else outputs/live-synthetic)",
     )
     add_override_argument(p, "mapping.opt_iters=5")
+
+
+def _add_viewer_arguments(p: argparse.ArgumentParser) -> None:
+    """Where the viewer serves, how it draws the map, when it stops, and the headless screenshot."""
     p.add_argument(
         "--host", default="127.0.0.1", help="address to bind (0.0.0.0 exposes the viewer to the network)"
     )
@@ -66,6 +89,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="port to try first (the next free one is used if busy; 0: any free port)",
     )
     p.add_argument("--rate", type=positive_float, default=4.0, help="maximum viewer updates per second")
+
     p.add_argument("--max-splats", type=positive_int, default=200_000, help="most Gaussians drawn as splats")
     p.add_argument(
         "--max-points", type=positive_int, default=1_000_000, help="most Gaussians drawn as points"
@@ -77,7 +101,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="auto: splats up to --max-splats, points beyond",
     )
     p.add_argument(
-        "--color", choices=["rgb", "semantic", "confidence"], default="rgb", help="initial colouring"
+        "--color", choices=["rgb", "semantic", "confidence", "room"], default="rgb", help="initial colouring"
     )
     p.add_argument(
         "--up",
@@ -85,6 +109,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         choices=["+x", "-x", "+y", "-y", "+z", "-z"],
         help="world up direction (default: the config's graph.up_axis)",
     )
+
     p.add_argument(
         "--exit-when-done", action="store_true", help="stop serving once live mapping has finished"
     )
@@ -94,13 +119,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="PNG",
         help="render the view in headless chromium into PNG and exit (after mapping, in live mode)",
     )
-    p.add_argument(
-        "--screenshot-size",
-        type=image_size(64, "1280x800"),
-        default=(1280, 800),
-        metavar="WxH",
-        help="screenshot size",
-    )
+    add_size_argument(p, "--screenshot-size", "screenshot size", minimum=64, default=(1280, 800))
     p.add_argument(
         "--screenshot-wait", type=positive_float, default=8.0, help="seconds to let the browser draw first"
     )
@@ -117,8 +136,11 @@ def add_parser(subparsers) -> None:
 
 
 def _up_from_config(cfg) -> tuple[float, float, float]:
-    # load_config's check_config has made sure it is a finite non-zero 3-vector
-    return tuple(float(v) for v in cfg.graph.up_axis)  # type: ignore[return-value]
+    from ..up_axis import up_vector
+
+    # load_config's check_config has made sure it is auto or a finite non-zero 3-vector; auto not chosen when
+    # the dataset opened (a live camera): an upright first camera's up, as odometry's world has it
+    return up_vector(cfg.graph.up_axis)
 
 
 def _settings(args):
@@ -153,7 +175,6 @@ def take_screenshot(
     sorted and faded in; software WebGL can take tens of seconds for the first full frame) or
     ``timeout`` seconds have passed.
     """
-    from ..atomic import atomic_write_bytes
     from ..viewer.headless import HeadlessBrowser, find_chromium
 
     if find_chromium() is None:
@@ -187,11 +208,18 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.run_dir is None and not args.data and not args.synthetic and not args.source:
         raise ConfigError("nothing to show: give RUN_DIR, --data DATASET, --synthetic or --source CAMERA")
+    if args.rerun or args.rerun_save:
+        if args.run_dir is not None:
+            raise ConfigError(
+                "--rerun and --rerun-save log a mapping session: give --data, --synthetic or --source"
+            )
+        from ..viewer.rerun_log import rerun_module
+
+        rerun_module()  # a missing rerun-sdk fails now, before a server starts
     # before reading a run or building a mapper: a host/port the server cannot bind is an error now
     check_bindable(args.host, args.port)
     if args.run_dir is not None or args.out is None:
         return _serve(args)
-    from ..runs import run_directory
 
     with run_directory(args.out, "live"):  # one writer per run directory, as for `ogscene3d run`
         return _serve(args)
@@ -201,6 +229,7 @@ def _serve(args: argparse.Namespace) -> int:
     from ..mapping.engine import stopped_message
 
     stop = threading.Event()
+    watchers = contextlib.ExitStack()  # the session's observers that need closing (a Rerun recording)
     prev = signal.getsignal(signal.SIGTERM)
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -219,7 +248,7 @@ def _serve(args: argparse.Namespace) -> int:
                 f"{len((snap.graph or {}).get('nodes', []))} graph nodes)"
             )
         else:
-            session, viewer = _start_live(args)
+            session, viewer = _start_live(args, watchers)
         if args.screenshot:
             if session is not None:
                 while not session.join(0.5) and not stop.is_set():
@@ -241,6 +270,7 @@ def _serve(args: argparse.Namespace) -> int:
                 session.join()
             # no timeout: a stop saves the map so far (--out), which must not be cut short at exit
             session.stop(timeout=None)
+        watchers.close()
         if viewer is not None:
             viewer.close()
         if threading.current_thread() is threading.main_thread():
@@ -269,8 +299,6 @@ def _synthetic_config() -> Path | None:
 def live_config(args: argparse.Namespace):
     """The config live mapping runs with: ``--config`` (for ``--synthetic`` by default the shipped
     ``synthetic.yaml``), ``--set`` and ``--device``."""
-    from ..config import load_config
-
     overrides = list(args.overrides)
     if args.device:
         overrides.append(f"device={args.device}")
@@ -290,7 +318,6 @@ def live_data(args: argparse.Namespace, cfg) -> str | Path:
     import copy
 
     from ..datasets import configured_scene
-    from ..runs import RunFolder
 
     data = args.data
     if args.synthetic:
@@ -336,7 +363,7 @@ def _viewer(args: argparse.Namespace, up, name: str):
     )
 
 
-def _start_live(args: argparse.Namespace):
+def _start_live(args: argparse.Namespace, watchers: contextlib.ExitStack):
     from ..mapping.session import open_session
     from ..viewer.live import LiveSession
 
@@ -353,6 +380,9 @@ def _start_live(args: argparse.Namespace):
     mapping = open_session(
         cfg, args.out, data, segments=args.segments, max_frames=args.max_frames, stream=stream
     )
+    # what watches the session: the run-time estimate, Rerun (closed by the caller when the session ends)
+    observers = watchers.enter_context(run_observers(args, cfg, mapping.data, mapping.total))
+    mapping.engine.observers.extend(observers)
 
     up = args.up or _up_from_config(cfg)
     viewer = _viewer(args, up, stream.name if stream is not None else Path(str(data)).name)

@@ -1,12 +1,12 @@
-"""``ogscene3d render-demo``: render a procedural Gaussian scene to a PNG (the library part:
-:mod:`ogscene3d.rendering`)."""
+"""``ogscene3d render-demo``: render a procedural Gaussian scene to a PNG (rasterizer smoke test)."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from ..cli_types import image_size, positive_int
+from ..cli_types import add_size_argument, positive_int
+from .options import add_command, add_shared_arguments
 
 # argparse types: the CLI names the option in its message (the library checks again, naming the argument)
 
@@ -22,26 +22,21 @@ def _image_path(text: str) -> Path:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "render-demo", help="render a procedural Gaussian scene to a PNG (rasterizer smoke test)"
-    )
-    p.add_argument(
+    p = add_command(sub, __doc__, _run)
+    add_shared_arguments(
+        p,
         "--out",
-        type=_image_path,
-        default=Path("outputs/render_demo.png"),
-        help="image file to write, e.g. render.png (default outputs/render_demo.png)",
+        out={
+            "required": False,
+            "type": _image_path,
+            "default": Path("outputs/render_demo.png"),
+            "help": "image file to write, e.g. render.png (default outputs/render_demo.png)",
+        },
     )
     p.add_argument("--gaussians", type=positive_int, default=20000, help="Gaussians (default 20000)")
-    p.add_argument(
-        "--size",
-        type=image_size(1, "320x240"),
-        default=(320, 240),
-        metavar="WxH",
-        help="each view's size (320x240)",
-    )
+    add_size_argument(p, "--size", "each view's size (320x240)", default=(320, 240))
     p.add_argument("--views", type=positive_int, default=4, help="orbit views side by side (default 4)")
-    p.add_argument("--device", default=None, help="cpu, cuda or cuda:N (default: cuda when available)")
-    p.set_defaults(func=_run)
+    add_shared_arguments(p, "--device", device="cpu, cuda or cuda:N (default: cuda when available)")
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -1,44 +1,41 @@
-"""``ogscene3d run``: map an RGB-D sequence (or the default synthetic scene) into a run directory.
+"""``ogscene3d run``: map an RGB-D sequence into semantic Gaussians and a scene graph.
+
+Incremental semantic mapping (paper Sec. III). Writes gaussians.ply, map.npz (and its memory views in
+map_memory/), graph.json, timings.json, config.yaml and run_id (the run's id, which --resume checks map.npz
+against) to --out. Without --data a synthetic scene is generated (in OUT/scene) from the config's `synthetic`
+section and mapped.
 
 The options are parsed and the outcome printed here; the session is :mod:`ogscene3d.mapping.session`'s and
 the run :mod:`ogscene3d.mapping.engine`'s (heavy modules are imported inside :func:`run` only, so that
-``ogscene3d --help`` stays quick)."""
+``ogscene3d --help`` stays quick).
+"""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
+from collections.abc import Iterator
 from pathlib import Path
 
-from ..config import add_override_argument, add_poses_argument, choices, load_config
+from ..cli_types import add_rerun_arguments
+from ..config import choices, load_config
 from ..errors import DataError
+from ..models.manifest import manifest_overrides
+from ..progress import RunTimeEstimate
+from ..runs import RunFolder, recorded_data_path
+from .options import add_command, add_override_argument, add_poses_argument, add_shared_arguments
 
 log = logging.getLogger(__name__)
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser(
-        "run",
-        help="map an RGB-D sequence into semantic Gaussians and a scene graph",
-        description="Incremental semantic mapping (paper Sec. III). Writes gaussians.ply, map.npz (and "
-        "its memory views in map_memory/), graph.json, timings.json, config.yaml and run_id (the run's id, "
-        "which --resume checks map.npz against) to --out. Without "
-        "--data a synthetic scene is generated (in OUT/scene) from the config's `synthetic` section and "
-        "mapped.",
-    )
-    p.add_argument(
-        "--config", default=None, help="YAML config (e.g. configs/replica.yaml); defaults otherwise"
-    )
-    p.add_argument("--data", default=None, help="dataset folder (Replica, ScanNet, TUM, 7-Scenes, synthetic)")
-    p.add_argument("--segments", default=None, help="folder of precomputed segments (<rgb stem>.png/.json)")
+    p = add_command(subparsers, __doc__, run)
+    add_shared_arguments(p, "--config", "--data", "--segments")
     p.add_argument(
         "--models", default=None, help="models folder from `ogscene3d models export` (its models.json)"
     )
-    p.add_argument("--out", required=True, help="run directory to write")
-    p.add_argument(
-        "--device", default=None, help="cpu, cuda or cuda:N (default: config, else CUDA if present)"
-    )
-    p.add_argument("--max-frames", type=int, default=None, help="map at most this many frames")
+    add_shared_arguments(p, "--out", "--device", "--max-frames", out="run directory to write")
     p.add_argument(
         "--ablation",
         default=None,
@@ -48,20 +45,17 @@ def add_parser(subparsers) -> None:
     p.add_argument("--resume", action="store_true", help="continue from OUT/map.npz")
     add_override_argument(p)
     add_poses_argument(p)
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.set_defaults(func=run)
+    add_shared_arguments(p, "--no-progress")
+    add_rerun_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
     from ..mapping.engine import stopped_message
     from ..mapping.session import mapping_session
-    from ..runs import RunFolder, recorded_data_path
 
     overrides = list(args.overrides)
     if args.models:  # the exported models' settings first: --set still overrides them
-        from ..models.manifest import manifest_overrides
-
         overrides = manifest_overrides(args.models) + overrides
     if args.ablation:
         overrides.append(f"mapping.ablation={args.ablation}")
@@ -77,6 +71,10 @@ def run(args: argparse.Namespace) -> int:
     if args.poses:
         cfg.tracking.poses = args.poses
     resolve_device(cfg.device)  # an unusable device fails before a synthetic scene is generated
+    if args.rerun or args.rerun_save:  # a missing rerun-sdk fails now, before anything is generated or read
+        from ..viewer.rerun_log import rerun_module
+
+        rerun_module()
     data = args.data or cfg.data.path or (recorded_data_path(out) if args.resume else None)
     if data is None and args.resume:
         raise DataError(f"{out}: --resume needs the run's dataset: pass --data (the run records none)")
@@ -92,8 +90,10 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
     ) as session:
         _warn_small_images(cfg, session.dataset)
-        # bad frames raise, or are skipped with a warning under data.on_bad_frame: skip
-        summary = session.run(progress=not args.no_progress)
+        with run_observers(args, cfg, session.data, session.total) as observers:
+            session.engine.observers.extend(observers)
+            # bad frames raise, or are skipped with a warning under data.on_bad_frame: skip
+            summary = session.run(progress=not args.no_progress)
     start, data = session.start, session.data
     if summary.status == "stopped":
         print(stopped_message(summary))
@@ -111,6 +111,28 @@ def run(args: argparse.Namespace) -> int:
     print(summary.line())
     print(session.mapper.timings.table())
     return 0
+
+
+@contextlib.contextmanager
+def run_observers(args: argparse.Namespace, cfg, data, frames: int | None) -> Iterator[list]:
+    """What watches a run (``MappingEngine``'s observers): the run-time estimate over ``frames`` (None: a
+    camera, no end to estimate), and the Rerun logger that ``--rerun`` / ``--rerun-save`` ask for (closed,
+    its file complete, when the block ends)."""
+    m = cfg.mapping
+    observers: list = []
+    if frames is not None:
+        observers.append(RunTimeEstimate(frames, m.keyframe_every, cfg.data.scale, m.opt_iters))
+    rerun = None
+    if getattr(args, "rerun", None) or getattr(args, "rerun_save", None):
+        from ..viewer.rerun_log import rerun_logger
+
+        rerun = rerun_logger(args.rerun, args.rerun_save, Path(str(data)).name)
+        observers.append(rerun)
+    try:
+        yield observers
+    finally:
+        if rerun is not None:
+            rerun.close()
 
 
 # The most a Gaussian centre may drift per keyframe (mapping.lr_means x mapping.opt_iters) before small

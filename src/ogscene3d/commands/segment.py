@@ -1,4 +1,9 @@
-"""``ogscene3d segment``: run a 2D open-set front-end over a dataset and write precomputed segments.
+"""``ogscene3d segment``: compute open-set 2D segments (SAM / SAM+detector / classical) for a dataset.
+
+Run the 2D front-end of paper Sec. III-B.1 over every frame of --data and write the precomputed segments
+format to --out (resumable: frames whose PNG exists are skipped). Backends: sam (SAM grid masks, M_s),
+sam+detector (fused M_f of M_s and detector-prompted SAM masks), classical (weight-free graph segmentation,
+lower quality), simulated (synthetic scenes with ground truth only).
 
 Output (README "File formats"): ``OUT/<rgb stem>.png`` uint16 ids and ``OUT/<rgb stem>.json`` with
 ``{"scores": {"<id>": predicted IoU}, "names": {"<id>": detector class}}`` (``names`` only for
@@ -16,29 +21,23 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..cli_types import positive_int
-from ..config import add_override_argument, load_config
+from ..config import load_config
 from ..errors import ConfigError, DataError
+from ..progress import progress
+from .options import add_command, add_override_argument, add_shared_arguments
 
 if TYPE_CHECKING:
+    from ..config import SegmentationConfig
     from ..segmentation.base import Segmentation
 
 log = logging.getLogger(__name__)
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser(
-        "segment",
-        help="compute open-set 2D segments (SAM / SAM+detector / classical) for a dataset",
-        description="Run the 2D front-end of paper Sec. III-B.1 over every frame of --data and write the "
-        "precomputed segments format to --out (resumable: frames whose PNG exists are skipped). "
-        "Backends: sam (SAM grid masks, M_s), sam+detector (fused M_f of M_s and detector-prompted "
-        "SAM masks), classical (weight-free graph segmentation, lower quality), simulated (synthetic "
-        "scenes with ground truth only).",
+    p = add_command(subparsers, __doc__, run)
+    add_shared_arguments(
+        p, "--data", "--out", data={"required": True}, out="folder to write <rgb stem>.png / .json into"
     )
-    p.add_argument(
-        "--data", required=True, help="dataset folder (Replica, ScanNet, TUM, 7-Scenes, synthetic)"
-    )
-    p.add_argument("--out", required=True, help="folder to write <rgb stem>.png / .json into")
     p.add_argument(
         "--backend",
         default=None,
@@ -57,14 +56,13 @@ def add_parser(subparsers) -> None:
         "--points-per-side", type=positive_int, default=None, help="SAM grid prompts per side (default 32)"
     )
     p.add_argument("--provider", default=None, choices=["auto", "cpu", "cuda"], help="onnxruntime provider")
-    p.add_argument("--config", default=None, help="YAML config; its `segmentation` and `data` sections apply")
+    add_shared_arguments(p, "--config", config="YAML config; its `segmentation` and `data` sections apply")
     add_override_argument(p, "segmentation.pred_iou_thresh=0.9")
     p.add_argument("--kind", default="auto", help="dataset layout (default: detected)")
     p.add_argument("--stride", type=int, default=None, help="use every N-th frame")
-    p.add_argument("--max-frames", type=int, default=None, help="segment at most this many frames")
+    add_shared_arguments(p, "--max-frames", max_frames="segment at most this many frames")
     p.add_argument("--overwrite", action="store_true", help="recompute frames that already have segments")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.set_defaults(func=run)
+    add_shared_arguments(p, "--no-progress")
 
 
 def parse_classes(text: str) -> list[str]:
@@ -89,13 +87,37 @@ def write_frame_segments(out: Path, stem: str, seg: Segmentation) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     from ..datasets import open_dataset
-    from ..progress import progress
     from ..segmentation.factory import make_segmenter
-    from ..segmentation.precomputed import segments_paths
 
-    overrides = list(args.overrides)
-    cfg = load_config(args.config, overrides)
-    sc = cfg.segmentation
+    cfg = load_config(args.config, list(args.overrides))
+    sc = _segmentation_settings(args, cfg.segmentation)
+    ds = open_dataset(
+        args.data, kind=args.kind, stride=args.stride, max_frames=args.max_frames, config=cfg.data
+    )
+    segmenter = make_segmenter(sc, getattr(ds, "K", None))
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    stems, todo = _frames_to_do(ds, out, args.overwrite)
+    t0 = time.perf_counter()
+    done, bad, n_segments = _segment_frames(args, cfg, ds, segmenter, out, stems, todo)
+    dt = time.perf_counter() - t0
+    if done:
+        log.info(
+            "segmented %d frames into %s (%.1f segments per frame, %.2f s per frame)",
+            done,
+            out,
+            n_segments / done,
+            dt / done,
+        )
+    elif bad:
+        log.warning("no frame segmented: the %d left to do were bad and skipped", bad)
+    else:
+        log.info("nothing to do: all %d frames already have segments in %s", len(stems), out)
+    return 0
+
+
+def _segmentation_settings(args: argparse.Namespace, sc: SegmentationConfig) -> SegmentationConfig:
+    """The config's ``segmentation`` section with this command's options applied."""
     if args.backend:
         sc.backend = args.backend
     if args.sam_encoder:
@@ -114,28 +136,36 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(
             "choose a segmentation backend with --backend (sam, sam+detector, classical, simulated)"
         )
+    return sc
 
-    ds = open_dataset(
-        args.data, kind=args.kind, stride=args.stride, max_frames=args.max_frames, config=cfg.data
-    )
-    segmenter = make_segmenter(sc, getattr(ds, "K", None))
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
 
-    # frames whose PNG exists are done; decide from the file names alone, without reading images
+def _frames_to_do(ds, out: Path, overwrite: bool) -> tuple[list[str | None], list[int]]:
+    """(each frame's file stem, None where the dataset has no file names; the frames to segment): frames
+    whose PNG exists are done, decided from the file names alone, without reading images."""
     records = getattr(ds, "records", None)
     stems = [r.rgb_path.stem for r in records] if records is not None else [None] * len(ds)
-    todo = [
-        i
-        for i, s in enumerate(stems)
-        if args.overwrite or s is None or not segments_paths(out, s)[0].exists()
-    ]
+    todo = [i for i, s in enumerate(stems) if overwrite or s is None or not _segmented(out, s)]
     skipped = len(stems) - len(todo)
     if skipped:
         log.info("%d of %d frames already segmented in %s: skipping them", skipped, len(stems), out)
+    return stems, todo
 
-    done, bad, n_segments, t0 = 0, 0, 0, time.perf_counter()
-    with progress(todo, desc=f"segment ({sc.backend})", disable=args.no_progress) as bar:
+
+def _segmented(out: Path, stem: str) -> bool:
+    """Whether the frame ``stem`` is done: its PNG, written last, is in ``out``."""
+    from ..segmentation.precomputed import segments_paths
+
+    return segments_paths(out, stem)[0].exists()
+
+
+def _segment_frames(
+    args: argparse.Namespace, cfg, ds, segmenter, out: Path, stems: list[str | None], todo: list[int]
+) -> tuple[int, int, int]:
+    """Segment and write the ``todo`` frames. -> (frames done, bad frames, segments written)."""
+    backend = cfg.segmentation.backend
+    # frames the dataset left out as it opened (a broken file, under data.on_bad_frame: skip) are bad ones too
+    done, bad, n_segments = 0, int(getattr(ds, "frames_left_out", 0) or 0), 0
+    with progress(todo, desc=f"segment ({backend})", disable=args.no_progress) as bar:
         for i in bar:
             try:
                 frame = ds[i]
@@ -146,9 +176,9 @@ def run(args: argparse.Namespace) -> int:
                     continue
                 raise
             stem = stems[i] or frame.name or f"{frame.index:06d}"
-            if stems[i] is None and not args.overwrite and segments_paths(out, stem)[0].exists():
+            if stems[i] is None and not args.overwrite and _segmented(out, stem):
                 continue
-            if sc.backend == "simulated":
+            if backend == "simulated":
                 if frame.gt_instances is None:
                     raise DataError(
                         f"{args.data}: backend 'simulated' needs ground-truth instance maps, which only "
@@ -161,17 +191,4 @@ def run(args: argparse.Namespace) -> int:
             done += 1
             n_segments += len(seg.scores)
             bar.set_postfix(segments=len(seg.scores))
-    dt = time.perf_counter() - t0
-    if done:
-        log.info(
-            "segmented %d frames into %s (%.1f segments per frame, %.2f s per frame)",
-            done,
-            out,
-            n_segments / done,
-            dt / done,
-        )
-    elif bad:
-        log.warning("no frame segmented: the %d left to do were bad and skipped", bad)
-    else:
-        log.info("nothing to do: all %d frames already have segments in %s", len(stems), out)
-    return 0
+    return done, bad, n_segments

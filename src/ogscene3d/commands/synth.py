@@ -1,4 +1,8 @@
-"""``ogscene3d synth``: generate a synthetic scene with ground truth and simulated SAM segments."""
+"""``ogscene3d synth``: generate a synthetic RGB-D scene with ground truth and simulated segments.
+
+Render a procedural furnished room along an exploring trajectory (Replica layout plus gt/ and segments/).
+Defaults come from the config's `synthetic` section.
+"""
 
 from __future__ import annotations
 
@@ -8,44 +12,42 @@ import logging
 import time
 from pathlib import Path
 
-from ..cli_types import image_size
-from ..config import add_override_argument, choices, load_config
+from ..cli_types import add_size_argument
+from ..config import choices, load_config
 from ..errors import ConfigError, OGSceneError
+from .options import add_command, add_override_argument, add_shared_arguments
 
 log = logging.getLogger(__name__)
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser(
-        "synth",
-        help="generate a synthetic RGB-D scene with ground truth and simulated segments",
-        description="Render a procedural furnished room along an exploring trajectory (Replica layout "
-        "plus gt/ and segments/). Defaults come from the config's `synthetic` section.",
+    p = add_command(subparsers, __doc__, run)
+    add_shared_arguments(
+        p, "--out", "--config", config="YAML config (its `synthetic` section gives the defaults)"
     )
-    p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--config", default=None, help="YAML config (its `synthetic` section gives the defaults)")
     p.add_argument("--seed", type=int, default=None, help="scene, trajectory and noise seed")
-    p.add_argument("--frames", type=int, default=None, help="number of frames")
-    p.add_argument("--size", type=image_size(8), default=None, metavar="WxH", help="image size, e.g. 160x120")
+    p.add_argument("--frames", type=int, default=None, help="number of frames (--layout apartment: per room)")
+    p.add_argument(
+        "--layout",
+        default=None,
+        choices=choices("synthetic.layout"),
+        help="room (one furnished room, a smooth walk) | scan (a long scan like a real ScanNet one; give it "
+        "300 frames or more) | apartment (2-5 rooms walked through room by room)",
+    )
+    add_size_argument(p, "--size", "image size, e.g. 160x120", minimum=8)
     p.add_argument(
         "--noise",
         default=None,
         choices=choices("synthetic.noise"),
         help="simulated-SAM level (docs/consistency.md)",
     )
-    p.add_argument(
-        "--layout",
-        default=None,
-        choices=choices("synthetic.layout"),
-        help="room (default: one room, a smooth walk) | scan (a long scan like a real ScanNet one; "
-        "give it 300 frames or more)",
-    )
     p.add_argument("--depth-noise", type=float, default=None, help="depth noise std in metres")
     p.add_argument("--pose-noise", type=float, default=None, help="pose translation noise std in metres")
-    p.add_argument("--device", default="cpu", help="Warp device for ray casting (cpu, cuda, cuda:0)")
+    add_shared_arguments(
+        p, "--device", device={"default": "cpu", "help": "Warp device for ray casting (cpu, cuda, cuda:0)"}
+    )
     p.add_argument("--force", action="store_true", help="overwrite a non-empty output folder")
     add_override_argument(p, "synthetic.frames=30")
-    p.set_defaults(func=run)
 
 
 def _reusable(out: str | Path, params: dict, overwrite: bool) -> bool:
@@ -61,6 +63,12 @@ def _reusable(out: str | Path, params: dict, overwrite: bool) -> bool:
         return json.loads(marker.read_text()) == _scene_params(**params)
     except (OSError, json.JSONDecodeError):
         return False
+
+
+def _frame_count(out: Path) -> int:
+    """The frames written (an apartment's path has ``frames`` per room): the poses in traj.txt."""
+    with open(Path(out) / "traj.txt") as f:
+        return sum(1 for line in f if line.strip())
 
 
 def run(args: argparse.Namespace) -> int:
@@ -90,9 +98,10 @@ def run(args: argparse.Namespace) -> int:
             raise
         # Bad argument values (frames, size, noise std, device): print them like config errors.
         raise ConfigError(f"synth: {e}") from e
+    what = f"{_frame_count(out)} frames" + (", an apartment" if params["layout"] == "apartment" else "")
     if reused:
-        print(f"synthetic scene reused from {out} ({params['frames']} frames, made with the same arguments)")
+        print(f"synthetic scene reused from {out} ({what}, made with the same arguments)")
     else:
         dt = time.perf_counter() - t0
-        print(f"synthetic scene written to {out} ({params['frames']} frames, {dt:.1f} s)")
+        print(f"synthetic scene written to {out} ({what}, {dt:.1f} s)")
     return 0

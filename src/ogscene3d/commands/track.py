@@ -1,34 +1,39 @@
-"""``ogscene3d track``: camera poses of an RGB-D sequence by RGB-D odometry (the tracker:
-:mod:`ogscene3d.tracking`)."""
+"""``ogscene3d track``: estimate camera poses of an RGB-D sequence with Open3D RGB-D odometry.
+
+Track a dataset with keyframe-to-frame RGB-D odometry (config section `tracking`). Writes OUT/traj.txt (one
+row-major c2w 4x4 per frame; a skipped frame repeats the last good pose) and OUT/tracking.json (per-frame
+status, and the ATE against the dataset's poses when it has them).
+
+The tracker: :mod:`ogscene3d.tracking`.
+"""
 
 from __future__ import annotations
 
 import math
 from typing import Any
 
-from ..config import add_override_argument
+from ..atomic import atomic_write_text
+from ..config import load_config
 from ..errors import ConfigError, OGSceneError
+from .options import add_command, add_override_argument, add_shared_arguments
 
 
 def add_parser(subparsers: Any) -> None:
-    p = subparsers.add_parser(
-        "track",
-        help="estimate camera poses of an RGB-D sequence with Open3D RGB-D odometry",
-        description="Track a dataset with keyframe-to-frame RGB-D odometry (config section `tracking`). "
-        "Writes OUT/traj.txt (one row-major c2w 4x4 per frame; a skipped frame repeats the last good "
-        "pose) and OUT/tracking.json (per-frame status, and the ATE against the dataset's poses when it "
-        "has them).",
+    p = add_command(subparsers, __doc__, run)
+    add_shared_arguments(
+        p,
+        "--data",
+        "--out",
+        "--config",
+        "--device",
+        "--max-frames",
+        "--no-progress",
+        data="dataset folder (default: config data.path)",
+        config="YAML config; defaults otherwise",
+        device="cpu, cuda or cuda:N (default: config, else CUDA if usable)",
+        max_frames="track at most this many frames",
     )
-    p.add_argument("--data", default=None, help="dataset folder (default: config data.path)")
-    p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--config", default=None, help="YAML config; defaults otherwise")
-    p.add_argument(
-        "--device", default=None, help="cpu, cuda or cuda:N (default: config, else CUDA if usable)"
-    )
-    p.add_argument("--max-frames", type=int, default=None, help="track at most this many frames")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_override_argument(p, "tracking.max_width=320")
-    p.set_defaults(func=run)
 
 
 def run(args: Any) -> int:
@@ -38,8 +43,6 @@ def run(args: Any) -> int:
 
     import numpy as np
 
-    from ..atomic import atomic_write_text
-    from ..config import load_config
     from ..datasets import open_dataset
     from ..eval.trajectory import ate
     from ..tracking import Tracker, hold_last_good, track_frames, trajectory_text, validate_tracking_config

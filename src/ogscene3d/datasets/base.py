@@ -3,13 +3,17 @@
 A reader lists its frames once (file paths, poses, timestamps: cheap) as :class:`FrameRecord` s and
 reads pixels only when a frame is asked for. Everything that can go wrong with a file raises
 :class:`~ogscene3d.errors.DataError` naming the file and the problem; iteration turns that into a
-logged warning and a skipped frame when ``on_bad_frame == "skip"``. Missing files are found when the
-dataset is opened (one stat per file, nothing read), all at once.
+logged warning and a skipped frame when ``on_bad_frame == "skip"``. What can be checked cheaply is checked
+when the dataset is opened, for every selected frame, all at once: its files exist, are not empty, hold their
+name's format and are not cut short (their first and last bytes, :mod:`.headers`), and its images have the
+size of the other frames' (colour that of its depth, unless the layout resamples it), so that a broken folder
+fails in seconds naming the files instead of when mapping reaches them.
 """
 
 from __future__ import annotations
 
 import logging
+from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,15 +27,13 @@ from ..errors import DataError
 from ..frame import Frame, check_pose, implausible_median_depth
 from ..segmentation.base import Segmentation
 from ..segmentation.precomputed import has_segments, read_segmentation
+from .headers import JPEG_END, PNG_END, ImageHeader, read_header
 
 log = logging.getLogger(__name__)
 
 DEPTH_FORMATS = ("linear", "shift3")
 
 MISSING_LISTED = 5  # missing files named in the error; the rest are counted
-
-_PNG_END = b"IEND\xaeB`\x82"
-_JPEG_END = b"\xff\xd9"
 
 
 # --------------------------------------------------------------------------------------- file readers
@@ -52,22 +54,29 @@ def _read_bytes(path: Path, what: str) -> bytes:
 def _check_complete(path: Path, data: bytes, what: str) -> None:
     """Reject truncated PNG/JPEG files (OpenCV would silently return a partly grey image)."""
     if data[:8] == b"\x89PNG\r\n\x1a\n":
-        if not data.rstrip(b"\x00").endswith(_PNG_END):
+        if not data.rstrip(b"\x00").endswith(PNG_END):
             raise DataError(f"{path}: {what} PNG is truncated (no IEND chunk)")
     elif data[:2] == b"\xff\xd8":
         # Some encoders pad after the end-of-image marker; look for it near the end.
-        if _JPEG_END not in data[-64:]:
+        if JPEG_END not in data[-64:]:
             raise DataError(f"{path}: {what} JPEG is truncated (no end-of-image marker)")
+
+
+def _decode_image(path: Path, what: str) -> np.ndarray:
+    """The image file ``path`` decoded as stored (any bit depth and channel count), after the checks every
+    image reader makes: missing, unreadable, empty, truncated, undecodable."""
+    data = _read_bytes(path, what)
+    _check_complete(path, data, what)
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise DataError(f"{path}: cannot decode {what} image (corrupt or unsupported format)")
+    return img
 
 
 def read_rgb(path: str | Path) -> np.ndarray:
     """Read a colour image as uint8 [H, W, 3] RGB (grey images are replicated, alpha is dropped)."""
     path = Path(path)
-    data = _read_bytes(path, "rgb")
-    _check_complete(path, data, "rgb")
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise DataError(f"{path}: cannot decode rgb image (corrupt or unsupported format)")
+    img = _decode_image(path, "rgb")
     if img.dtype != np.uint8:
         raise DataError(f"{path}: rgb image must be 8-bit, got {img.dtype}")
     if img.ndim == 2:
@@ -84,11 +93,7 @@ def read_rgb(path: str | Path) -> np.ndarray:
 def read_depth_raw(path: str | Path) -> np.ndarray:
     """Read a single-channel 16-bit depth PNG as raw uint16 [H, W] (no scaling)."""
     path = Path(path)
-    data = _read_bytes(path, "depth")
-    _check_complete(path, data, "depth")
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise DataError(f"{path}: cannot decode depth image (corrupt or unsupported format)")
+    img = _decode_image(path, "depth")
     if img.ndim != 2:
         raise DataError(f"{path}: depth image must be single-channel, got shape {img.shape}")
     if img.dtype != np.uint16:
@@ -196,6 +201,9 @@ class FrameRecord:
     pose_source: str = ""
     pose_path: Path | None = None
     pose_error: str | None = None  # why the layout's pose of this frame could not be read (file:line ...)
+    # why the frame cannot be mapped though its files are there (a TUM frame without a pose near its stamp):
+    # named with the frames whose files are missing or broken when the dataset opens
+    lacks: str | None = None
     timestamp: float = 0.0
     extras: dict[str, Path] = field(default_factory=dict)
 
@@ -222,6 +230,19 @@ class RGBDDataset:
     depth_format_default = "linear"
     min_depth_default = 0.0
     invalid_raw: int | None = None  # a raw depth value that means "no measurement" (7-Scenes: 65535)
+    # the world up direction of the format's poses (graph.up_axis auto, ogscene3d.up_axis), and what says so;
+    # None: the format defines none (7-Scenes' world is its first camera's, pitched as it was)
+    up_axis: tuple[float, float, float] | None = None
+    up_axis_source = ""
+    # the files (a trailing "/": folders) whose presence marks a folder as this layout, for detect()
+    layout_markers: tuple[str, ...] = ()
+
+    @classmethod
+    def detect(cls, root: Path) -> bool:
+        """Whether ``root`` holds this layout: every one of ``layout_markers`` is there (none: never)."""
+        return bool(cls.layout_markers) and all(
+            (root / m).is_dir() if m.endswith("/") else (root / m).is_file() for m in cls.layout_markers
+        )
 
     def __init__(
         self,
@@ -252,9 +273,11 @@ class RGBDDataset:
                 f"{self.root}: frame range start={config.start} stride={config.stride} selects none of "
                 f"{len(records)} frames"
             )
-        # frames of the selection left out when opened (files missing, under on_bad_frame: skip): a run's
-        # count of skipped frames starts from this; frames skipped while iterating come on top
+        # frames of the selection left out when opened (files missing or broken, under on_bad_frame: skip): a
+        # run's count of skipped frames starts from this; frames skipped while iterating come on top
         self.frames_left_out = 0
+        self.resize_rgb_to_depth = resize_rgb_to_depth
+        self._header_size: tuple[int, int] | None = None  # (h, w) of the depth images, from their headers
         self.records = self._drop_incomplete(selected)
         if config.intrinsics is not None:
             if len(config.intrinsics) != 4:
@@ -266,6 +289,7 @@ class RGBDDataset:
             )
         self.pixel_centers = self.read_pixel_centers(config)
         self.K = to_half_pixel_K(check_K(K, str(self.root)), self.pixel_centers)
+        self._scaled_size: tuple[int, int] | None = None  # (h, w) of the frames under data.scale
         self.depth_scale = float(
             config.depth_scale if config.depth_scale is not None else self.depth_scale_default
         )
@@ -283,11 +307,34 @@ class RGBDDataset:
         self.segments_dir = Path(segments_dir) if segments_dir is not None else None
         if self.segments_dir is not None and not self.segments_dir.is_dir():
             raise DataError(f"{self.segments_dir}: segments folder does not exist")
-        self.resize_rgb_to_depth = resize_rgb_to_depth
         self._depth_checked = False
         self._size_checked = False
         self._warned_no_segments = False
+        if self._header_size is not None:  # K against the images' size, now rather than at the first frame
+            self._size_checked = True
+            self._check_principal_point(self._header_size, self.records[0].depth_path)
+        self._apply_scale(config.scale)
 
+    def _apply_scale(self, scale: float) -> None:
+        """Frames resized by ``scale`` (``data.scale``): K scaled to the new size (exact with pixel centres
+        at +0.5: a resize maps pixel edges onto pixel edges)."""
+        if not (0 < scale <= 1):
+            raise DataError(f"data.scale must be in (0, 1], got {scale}")
+        if scale == 1:
+            return
+        h, w = self._native_size()
+        sh, sw = max(1, round(h * scale)), max(1, round(w * scale))
+        self._scaled_size = (sh, sw)
+        K = self.K.astype(np.float64).copy()
+        K[0] *= sw / w
+        K[1] *= sh / h
+        self.K = K.astype(np.float32)
+
+    def _native_size(self) -> tuple[int, int]:
+        """(h, w) of the frames as stored (the depth images')."""
+        if self._header_size is not None:
+            return self._header_size
+        return read_depth_raw(self.records[0].depth_path).shape
     def read_pixel_centers(self, config: DataConfig) -> str:
         """The convention of the intrinsics this dataset reads: ``data.pixel_centers`` or the layout's."""
         conv = self.pixel_centers_default if config.pixel_centers == "auto" else config.pixel_centers
@@ -298,28 +345,109 @@ class RGBDDataset:
         return conv
 
     def _drop_incomplete(self, selected: list[FrameRecord]) -> list[FrameRecord]:
-        """``selected`` less the frames whose rgb, depth or pose file is missing, found now rather than
-        when mapping reaches them (maybe hours in). Missing files are a :class:`DataError` listing them
-        all, or, when ``on_bad_frame == "skip"``, one warning and those frames left out."""
-        missing = {id(rec): paths for rec in selected if (paths := _missing_files(rec))}
-        if not missing:
+        """``selected`` less the frames that cannot be mapped, found now rather than when mapping reaches them
+        (maybe hours in): a file missing, empty, not of its name's format or cut short, an image of another
+        size than the other frames' (colour than its depth, where the layout does not resample it), or what
+        the reader found lacking (:attr:`FrameRecord.lacks`). They are a :class:`DataError` naming them all,
+        or, when ``on_bad_frame == "skip"``, one warning and those frames left out. Reads each image file's
+        first and last bytes only (:mod:`.headers`), a few hundred bytes a file."""
+        missing: dict[int, list[Path]] = {}
+        broken: dict[int, list[str]] = {}
+        unusable: dict[int, str] = {}
+        depth_heads: dict[int, ImageHeader] = {}
+        rgb_heads: dict[int, ImageHeader] = {}
+        for k, rec in enumerate(selected):
+            gone = _missing_files(rec)
+            if gone:
+                missing[k] = gone
+            files = ((rec.rgb_path, "rgb", rgb_heads), (rec.depth_path, "depth", depth_heads))
+            for path, what, heads in files:
+                if path in gone:
+                    continue
+                try:
+                    head = read_header(path, what)
+                except DataError as e:
+                    broken.setdefault(k, []).append(self._relative_message(e, path))
+                    continue
+                problem = _format_problem(head, what) if head is not None else None
+                if problem is not None:
+                    broken.setdefault(k, []).append(f"{self._relative(path)}: {problem}")
+                elif head is not None:
+                    heads[k] = head
+            if rec.lacks is not None:
+                unusable[k] = f"{self._relative(rec.rgb_path)}: {rec.lacks}"
+        self._check_sizes(selected, depth_heads, rgb_heads, broken)
+        bad = set(missing) | set(broken) | set(unusable)
+        if not bad:
             return selected
-        files = [p for paths in missing.values() for p in paths]
-        named = ", ".join(self._relative(p) for p in files[:MISSING_LISTED])
-        if len(files) > MISSING_LISTED:
-            named += f" and {len(files) - MISSING_LISTED} more"
-        msg = (
-            f"{self.root}: {len(missing)} of the {len(selected)} selected frames lack files ({self.kind} "
-            f"layout); {len(files)} missing: {named}"
-        )
-        kept = [rec for rec in selected if id(rec) not in missing]
+        msg = self._bad_frames_message(len(bad), len(selected), missing, broken, unusable)
+        kept = [rec for k, rec in enumerate(selected) if k not in bad]
         if self.config.on_bad_frame == "skip" and kept:
             log.warning("%s; leaving those frames out (data.on_bad_frame: skip)", msg)
-            self.frames_left_out = len(missing)
+            self.frames_left_out = len(bad)
             return kept
         if self.config.on_bad_frame == "skip":
             raise DataError(f"{msg}; no selected frame is left")
         raise DataError(f"{msg}; set data.on_bad_frame: skip to leave those frames out")
+
+    def _check_sizes(
+        self,
+        selected: list[FrameRecord],
+        depth_heads: dict[int, ImageHeader],
+        rgb_heads: dict[int, ImageHeader],
+        broken: dict[int, list[str]],
+    ) -> None:
+        """Add to ``broken`` the frames whose depth image has another size than most frames' (the size the
+        intrinsics are for), or whose colour image has another size than its depth (than most colour images,
+        where the layout resamples colour to depth); sets ``_header_size``."""
+        if not depth_heads:
+            return
+        sizes = Counter(h.size for h in depth_heads.values())
+        size = sizes.most_common(1)[0][0]
+        self._header_size = size
+        rgb_size = Counter(h.size for h in rgb_heads.values()).most_common(1)[0][0] if rgb_heads else None
+        for k, head in depth_heads.items():
+            if head.size != size:
+                broken.setdefault(k, []).append(
+                    f"{self._relative(selected[k].depth_path)}: depth is {head.width}x{head.height}, the "
+                    f"other frames' {size[1]}x{size[0]}"
+                )
+        for k, head in rgb_heads.items():
+            want = rgb_size if self.resize_rgb_to_depth else getattr(depth_heads.get(k), "size", None)
+            if want is not None and head.size != want:
+                whose = "the other frames'" if self.resize_rgb_to_depth else "its depth image"
+                broken.setdefault(k, []).append(
+                    f"{self._relative(selected[k].rgb_path)}: rgb is {head.width}x{head.height}, {whose} "
+                    f"{want[1]}x{want[0]}"
+                )
+
+    def _bad_frames_message(
+        self,
+        bad: int,
+        selected: int,
+        missing: dict[int, list[Path]],
+        broken: dict[int, list[str]],
+        unusable: dict[int, str],
+    ) -> str:
+        """The message naming the frames that cannot be mapped: the missing files, the broken ones, then the
+        frames that lack something else."""
+        files = [p for paths in missing.values() for p in paths]
+        problems = [p for k in sorted(broken) for p in broken[k]]
+        parts = []
+        if files:
+            parts.append(f"{len(files)} missing: {_listed([self._relative(p) for p in files])}")
+        if problems:
+            parts.append(f"{len(problems)} broken: {_listed(problems)}")
+        if unusable:
+            parts.append(f"{len(unusable)} unusable: {_listed([unusable[k] for k in sorted(unusable)])}")
+        what = "lack files" if not problems and not unusable else "cannot be mapped"
+        head = f"{self.root}: {bad} of the {selected} selected frames {what} ({self.kind} layout)"
+        return head + "; " + "; ".join(parts)
+
+    def _relative_message(self, e: DataError, path: Path) -> str:
+        """A file's error with the file named below the dataset folder."""
+        text = str(e)
+        return self._relative(path) + text[len(str(path)) :] if text.startswith(str(path)) else text
 
     def _relative(self, path: Path) -> str:
         """``path`` below the dataset folder (named at the start of messages), else in full."""
@@ -365,7 +493,7 @@ class RGBDDataset:
     @property
     def camera(self) -> Camera:
         """Camera of the first frame (reads its depth image for the size)."""
-        h, w = read_depth_raw(self.records[0].depth_path).shape
+        h, w = self._scaled_size or read_depth_raw(self.records[0].depth_path).shape
         return Camera.from_K(self.K, w, h)
 
     # -- reading
@@ -426,6 +554,14 @@ class RGBDDataset:
             if seg is not None:
                 segments, scores, names = seg.ids, seg.scores, seg.names
         gt_instances, gt_classes = self._load_gt(rec, depth.shape)
+        if self._scaled_size is not None:
+            depth, rgb, segments, gt_instances, gt_classes = _resized(
+                self._scaled_size, depth, rgb, segments, gt_instances, gt_classes
+            )
+            if segments is not None:
+                present = {int(i) for i in np.unique(segments) if i != 0}
+                scores = {i: v for i, v in scores.items() if i in present}
+                names = {i: v for i, v in names.items() if i in present}
         return Frame(
             index=i,
             rgb=np.ascontiguousarray(rgb),
@@ -472,6 +608,10 @@ class RGBDDataset:
         the frame's size (what ``ogscene3d segment`` writes) are read as they are."""
         assert self.segments_dir is not None
         stem = rec.rgb_path.stem
+        if self._scaled_size is not None and has_segments(self.segments_dir, stem):
+            seg = read_segmentation(self.segments_dir, stem)
+            if seg.ids.shape == self._scaled_size:  # segmented at data.scale (`ogscene3d segment` with it)
+                return seg
         if not has_segments(self.segments_dir, stem):
             if not self._warned_no_segments:
                 log.warning(
@@ -610,6 +750,42 @@ def _read_pose(rec: FrameRecord) -> np.ndarray | None:
         raise DataError(str(e)) from e
 
 
+def _resized(size: tuple[int, int], depth, rgb, segments, gt_instances, gt_classes) -> tuple:
+    """The frame's images at ``size`` (h, w) (``data.scale``): colour by area, depth and every id map by the
+    nearest pixel (a depth between two surfaces, or an id between two segments, is neither); those already at
+    ``size`` as they are."""
+    h, w = size
+
+    def nearest(img):
+        if img is None or img.shape[:2] == (h, w):
+            return img
+        return cv2.resize(img, (w, h), interpolation=cv2.INTER_NEAREST_EXACT)
+
+    colour = rgb if rgb.shape[:2] == (h, w) else cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA)
+    return nearest(depth), colour, nearest(segments), nearest(gt_instances), nearest(gt_classes)
+
+
+def _listed(items: list[str]) -> str:
+    """The first :data:`MISSING_LISTED` of ``items``, and how many more there are."""
+    named = ", ".join(items[:MISSING_LISTED])
+    return named + (f" and {len(items) - MISSING_LISTED} more" if len(items) > MISSING_LISTED else "")
+
+
+def _format_problem(head: ImageHeader, what: str) -> str | None:
+    """What the header of an image says is wrong for its use (None: nothing), as decoding would say it."""
+    if what == "depth":
+        if head.channels != 1:
+            return f"depth image must be single-channel, got {head.channels} channels"
+        if head.bit_depth != 16:
+            return f"depth image must be 16-bit, got {head.bit_depth}-bit"
+        return None
+    if head.bit_depth != 8:
+        return f"rgb image must be 8-bit, got {head.bit_depth}-bit"
+    if head.channels not in (1, 3, 4):
+        return f"rgb image has {head.channels} channels, expected 3"
+    return None
+
+
 def _missing_files(rec: FrameRecord) -> list[Path]:
     """The files ``rec`` needs that do not exist (a stat each; nothing is read)."""
     paths = [rec.rgb_path, rec.depth_path]
@@ -631,11 +807,7 @@ def read_label_png(
     ``shape`` by nearest neighbour (ScanNet's label images have the colour camera's size, and colour is
     resampled to depth's); otherwise the size must be ``shape``.
     """
-    data = _read_bytes(path, what)
-    _check_complete(path, data, what)
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise DataError(f"{path}: cannot decode {what} image")
+    img = _decode_image(path, what)
     if img.ndim != 2:
         raise DataError(f"{path}: {what} image must be single-channel, got shape {img.shape}")
     if img.shape != tuple(shape):

@@ -31,9 +31,12 @@ class DecodedDataset(RGBDDataset):
     def _drop_incomplete(self, selected: list[FrameRecord]) -> list[FrameRecord]:
         return selected  # no per-frame files: what a container lacks its reader reports when it opens
 
+    def _native_size(self) -> tuple[int, int]:
+        return self._image_size()
+
     @property
     def camera(self) -> Camera:
-        h, w = self._image_size()
+        h, w = self._scaled_size or self._image_size()
         return Camera.from_K(self.K, w, h)
 
     def _load(self, i: int) -> Frame:

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..errors import DataError
 from ..runs.map_npz import read_map_npz
+from .loader import open_dataset
 
 
 def frame_names(ds: Any) -> list[str]:
@@ -59,8 +60,6 @@ def matching_pixel_centers(ds: Any, K: Any) -> str | None:
     config, read = getattr(ds, "config", None), getattr(ds, "pixel_centers", None)
     if config is None or read not in ("integer", "half"):
         return None
-    from .loader import open_dataset
-
     other = "half" if read == "integer" else "integer"
     try:
         ds_other = open_dataset(

@@ -88,14 +88,28 @@ def open_dataset(
     max_frames: int | None = None,
     config: DataConfig | None = None,
 ) -> RGBDDataset:
-    """Open an RGB-D sequence lazily.
+    """Open an RGB-D sequence lazily: frames are read when indexed or iterated.
 
-    Arguments left at None fall back to ``config`` (a :class:`DataConfig`; its ``path``, ``kind``,
-    ``segments_dir``, ``stride``, ``max_frames``, and also ``start``, ``depth_scale``,
-    ``depth_format``, ``intrinsics``, ``min_depth``/``max_depth``, ``on_bad_frame``), then to the
-    defaults (stride 1, all frames). ``kind``: auto | replica | semantic_nerf | scannet | tum |
-    sevenscenes | labelfusion | synthetic | rosbag | record3d. Raises :class:`DataError` for a missing
-    folder or an unknown layout.
+    Arguments left at None fall back to ``config``, then to the defaults (stride 1, all frames).
+
+    Args:
+        path: the dataset folder (or a ROS bag / Record3D file); None: ``config.path``.
+        kind: the layout: auto (detected) | replica | semantic_nerf | scannet | tum | sevenscenes |
+            labelfusion | synthetic | rosbag | record3d.
+        segments_dir: a folder of precomputed segments (``<rgb stem>.png/.json``); None:
+            ``config.segments_dir``.
+        stride: use every N-th frame; None: ``config.stride``.
+        max_frames: read at most this many frames; None: ``config.max_frames``.
+        config: the ``data`` config section (a :class:`~ogscene3d.config.DataConfig`), which also gives
+            ``start``, ``depth_scale``, ``depth_format``, ``intrinsics``, ``min_depth`` / ``max_depth``
+            and ``on_bad_frame``; None: its defaults.
+
+    Returns:
+        The dataset: a sequence of :class:`~ogscene3d.frame.Frame` (``len``, indexing, iteration) with
+        the sequence's intrinsics ``K``.
+
+    Raises:
+        DataError: no path, a missing folder, or a layout it does not recognise.
     """
     cfg = dataclasses.replace(config) if config is not None else DataConfig()
     if path is None:

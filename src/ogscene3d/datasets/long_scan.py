@@ -41,6 +41,7 @@ from .procedural import (
     _books_in_shelf,
     _Builder,
     _chair,
+    _chair_slots,
     _finish,
     _light_switches,
     _local,
@@ -250,13 +251,7 @@ def _dining(b: _Builder, W: float, D: float) -> SceneObject | None:
             continue
         lo, hi = table.aabb
         color = b.color((0.3, 0.22, 0.15), 0.08)
-        slots = []
-        for axis in (0, 1):
-            for sgn in (-1, 1):
-                c = (lo + hi) / 2
-                c[2] = 0.0
-                c[axis] = (hi if sgn > 0 else lo)[axis] + sgn * rng.uniform(0.28, 0.34)
-                slots.append((c, np.arctan2(0, -sgn) if axis == 0 else np.arctan2(-sgn, 0)))
+        slots = _chair_slots(lo, hi, lambda: rng.uniform(0.28, 0.34))
         order = rng.permutation(len(slots))
         for i in order[: int(rng.integers(2, 5))]:
             b.try_add("chair", _chair(slots[i][0], slots[i][1], color), floor.instance_id, "on", margin=0.05)

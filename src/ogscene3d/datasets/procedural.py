@@ -2,8 +2,8 @@
 
 The builder works in a z-up frame (x, y horizontal, z up, floor at z = 0, room centred on the
 origin) because furniture is easiest to reason about there; :func:`build_room` converts the result
-into the ogscene3d world frame, in which **up is -y** (``WORLD_FROM_ZUP``), matching the default
-``graph.up_axis = [0, -1, 0]`` so the synthetic scenes need no config override.
+into the ogscene3d world frame, in which **up is -y** (``WORLD_FROM_ZUP``), as ``gt/instances.json``
+states (``"up"``), which ``graph.up_axis: auto`` reads: the synthetic scenes need no config override.
 
 Placement is collision-free by construction: every object is a set of parts (boxes, cylinders,
 frusta, ellipsoids), and a new object is accepted only if none of its parts' axis-aligned boxes
@@ -249,6 +249,25 @@ class _Builder:
 
 def _structure(b: _Builder, W: float, D: float, H: float) -> dict[str, int]:
     t = 0.05
+    ids = _floor_and_ceiling(b, W, D, H, t)
+    wall_color = b.color((0.78, 0.76, 0.7), 0.1)
+    walls = {
+        "+x": ([W / 2 + t / 2, 0, H / 2], [t, D, H]),
+        "-x": ([-W / 2 - t / 2, 0, H / 2], [t, D, H]),
+        "+y": ([0, D / 2 + t / 2, H / 2], [W, t, H]),
+        "-y": ([0, -D / 2 - t / 2, H / 2], [W, t, H]),
+    }
+    for name, (c, s) in walls.items():
+        part = make_part(
+            "box", c, wall_color * b.rng.uniform(0.93, 1.05), size=s, texture=TEXTURE_NOISE, texture_scale=0.6
+        )
+        ids[name] = b.add("wall", [part]).instance_id
+    return ids
+
+
+def _floor_and_ceiling(b: _Builder, W: float, D: float, H: float, t: float) -> dict[str, int]:
+    """A W x D room's floor (top at z = 0) and ceiling (bottom at z = H), ``t`` thick, reaching under and
+    over its walls; their instance ids by name."""
     ids = {}
     floor = make_part(
         "box",
@@ -263,18 +282,6 @@ def _structure(b: _Builder, W: float, D: float, H: float) -> dict[str, int]:
         "box", [0, 0, H + t / 2], b.color((0.9, 0.9, 0.88), 0.03), size=[W + 2 * t, D + 2 * t, t]
     )
     ids["ceiling"] = b.add("ceiling", [ceiling]).instance_id
-    wall_color = b.color((0.78, 0.76, 0.7), 0.1)
-    walls = {
-        "+x": ([W / 2 + t / 2, 0, H / 2], [t, D, H]),
-        "-x": ([-W / 2 - t / 2, 0, H / 2], [t, D, H]),
-        "+y": ([0, D / 2 + t / 2, H / 2], [W, t, H]),
-        "-y": ([0, -D / 2 - t / 2, H / 2], [W, t, H]),
-    }
-    for name, (c, s) in walls.items():
-        part = make_part(
-            "box", c, wall_color * b.rng.uniform(0.93, 1.05), size=s, texture=TEXTURE_NOISE, texture_scale=0.6
-        )
-        ids[name] = b.add("wall", [part]).instance_id
     return ids
 
 
@@ -328,6 +335,19 @@ def _table(center, yaw, size, color) -> tuple[list[Part], list]:
     return parts, [top]
 
 
+def _chair_slots(lo: np.ndarray, hi: np.ndarray, gap) -> list[tuple[np.ndarray, float]]:
+    """The four places (floor point, yaw) of a chair facing a table's sides (its box ``lo``, ``hi``), each
+    ``gap()`` metres out (a draw per side, in this order)."""
+    slots = []
+    for axis in (0, 1):
+        for sgn in (-1, 1):
+            c = (lo + hi) / 2
+            c[2] = 0.0
+            c[axis] = (hi if sgn > 0 else lo)[axis] + sgn * gap()
+            slots.append((c, np.arctan2(0, -sgn) if axis == 0 else np.arctan2(-sgn, 0)))
+    return slots
+
+
 def _chair(center, yaw, color) -> list[Part]:
     s, seat_h, back_h = 0.44, 0.45, 0.45
     parts = [make_part("box", center + [0, 0, seat_h - 0.025], color, size=[s, s, 0.05])]
@@ -373,6 +393,84 @@ def _shelf(center, yaw, size, color, n_boards):
             mid = _local(center, yaw, [t / 2, 0, 0])[:2]
             tops.append((mid - inner, mid + inner, z + t, levels[k + 1] - (z + t)))
     return parts, tops
+
+
+def _cabinet(center, yaw, size, col) -> tuple[list[Part], list]:
+    """A closed cabinet of ``size`` (length along the wall, depth, height) with two door panels on its front
+    (local +x), and its top surface."""
+    body = make_part(
+        "box", center + [0, 0, size[2] / 2], col, size=_rot_size([size[1], size[0], size[2]], yaw)
+    )
+    parts = [body]
+    for k in range(2):
+        fc = _local(center, yaw, [size[1] / 2 + 0.005, 0, size[2] * (0.28 + 0.42 * k)])
+        parts.append(
+            make_part("box", fc, col * 0.9, size=_rot_size([0.01, size[0] * 0.9, size[2] * 0.38], yaw))
+        )
+    half = _rot_size([size[1], size[0], 0], yaw)[:2] / 2
+    return parts, [(center[:2] - half, center[:2] + half, size[2])]
+
+
+def _sofa(center, yaw, size, col) -> tuple[list[Part], list]:
+    """A sofa of ``size`` (length, depth, height) facing local +x (seat, backrest, two arms) and its seat."""
+    L, Dp, Hs = size
+    seat_h, back_t, arm_w = 0.42, 0.2, 0.18
+    parts = [
+        make_part(
+            "box",
+            _local(center, yaw, [back_t / 2, 0, seat_h / 2]),
+            col,
+            size=_rot_size([Dp - back_t, L - 2 * arm_w, seat_h], yaw),
+            texture=TEXTURE_NOISE,
+            texture_scale=0.08,
+        ),
+        make_part(
+            "box",
+            _local(center, yaw, [-Dp / 2 + back_t / 2, 0, Hs / 2]),
+            col * 0.9,
+            size=_rot_size([back_t, L, Hs], yaw),
+        ),
+    ]
+    for s in (-1, 1):
+        parts.append(
+            make_part(
+                "box",
+                _local(center, yaw, [back_t / 2, s * (L / 2 - arm_w / 2), 0.3]),
+                col * 0.95,
+                size=_rot_size([Dp - back_t, arm_w, 0.6], yaw),
+            )
+        )
+    seat_c = _local(center, yaw, [back_t / 2, 0, 0])[:2]
+    half = _rot_size([Dp - back_t - 0.1, L - 2 * arm_w - 0.05, 0], yaw)[:2] / 2
+    return parts, [(seat_c - half, seat_c + half, seat_h)]
+
+
+def _decoration(b: _Builder, cls: str, side: str, W: float, D: float) -> list[Part] | None:
+    """The parts of a wall decoration (door, window, picture or clock) at a random spot of wall ``side``,
+    or None when the wall is too short for it."""
+    rng = b.rng
+    p, n, half_len, yaw = _wall_frame(side, W, D)
+    t_axis = np.array([-n[1], n[0], 0.0])
+    if cls == "door":
+        w, h, z0, thick, col = 0.9, 2.05, 0.0, 0.04, b.color((0.55, 0.4, 0.28))
+    elif cls == "window":
+        w, h, z0, thick, col = rng.uniform(0.9, 1.4), 1.0, 0.95, 0.03, b.color((0.6, 0.75, 0.9), 0.04)
+    elif cls == "picture":
+        w, h = rng.uniform(0.35, 0.7), rng.uniform(0.3, 0.5)
+        z0, thick, col = rng.uniform(1.25, 1.65), 0.03, b.vivid()
+    else:
+        w = h = 0.3
+        z0, thick, col = rng.uniform(1.6, 1.9), 0.04, b.color((0.92, 0.92, 0.9), 0.02)
+    if half_len - w / 2 - 0.15 <= 0:
+        return None
+    along = rng.uniform(-half_len + w / 2 + 0.15, half_len - w / 2 - 0.15)
+    c = p + n * thick / 2 + t_axis * along + [0, 0, z0 + h / 2]
+    if cls == "clock":
+        axis_rot = _yaw_matrix(yaw) @ np.array([[0, 0, 1.0], [0, 1.0, 0], [-1.0, 0, 0]])
+        return [make_part("cylinder", c - n * thick / 2, col, radius=w / 2, height=thick, rotation=axis_rot)]
+    tex = TEXTURE_STRIPES if cls in ("picture", "window") else TEXTURE_PLAIN
+    scale = float(rng.uniform(0.06, 0.2))
+    return [make_part("box", c, col, size=_rot_size([thick, w, h], yaw), texture=tex, texture_scale=scale)]
 
 
 def _place_small(
@@ -479,15 +577,19 @@ def _small_object(b: _Builder, cls: str, clearance: float) -> tuple[list[Part] |
         ]
     elif cls == "monitor":
         w, h = rng.uniform(0.45, 0.6), rng.uniform(0.28, 0.36)
-        dark = b.color((0.08, 0.08, 0.1), 0.02)
-        parts = [
-            make_part("box", [0, 0, 0.01], dark, size=[0.2, 0.15, 0.02]),
-            make_part("box", [0, 0, 0.02 + 0.06], dark, size=[0.04, 0.03, 0.12]),
-            make_part("box", [0, 0, 0.14 + h / 2], dark, size=[w, 0.04, h]),
-        ]
+        parts = _screen(b.color((0.08, 0.08, 0.1), 0.02), w, h, 0.04, [0.2, 0.15], [0.04, 0.03, 0.12])
     elif cls == "pillow":
         s = np.array([0.38, 0.14, 0.34])
         parts = [make_part("box", [0, 0, s[2] / 2], c, size=s, texture=TEXTURE_STRIPES, texture_scale=0.08)]
+    elif cls == "tv":  # a flat screen on a foot (apartments' living rooms)
+        w, h = rng.uniform(0.8, 1.1), rng.uniform(0.48, 0.62)
+        parts = _screen(b.color((0.06, 0.06, 0.08), 0.02), w, h, 0.05, [0.3, 0.2], [0.05, 0.04, 0.1])
+    elif cls == "sink":  # a basin with a tap on a counter or a vanity (apartments)
+        steel = b.color((0.75, 0.77, 0.8), 0.04)
+        parts = [
+            make_part("box", [0, 0, 0.04], steel, size=[0.48, 0.38, 0.08]),
+            make_part("box", [0, 0.15, 0.08 + 0.1], steel * 0.8, size=[0.03, 0.03, 0.2]),
+        ]
     else:
         raise ValueError(f"unknown small object class {cls!r}")
     lo = np.min([p.aabb[0] for p in parts], 0)
@@ -499,6 +601,16 @@ def _small_object(b: _Builder, cls: str, clearance: float) -> tuple[list[Part] |
         parts = [Part(p.vertices @ rot.T, p.triangles, p.color, p.texture, p.texture_scale) for p in parts]
         lo, hi = np.min([p.aabb[0] for p in parts], 0), np.max([p.aabb[1] for p in parts], 0)
     return parts, (hi - lo)[:2]
+
+
+def _screen(color, w: float, h: float, thick: float, foot, stem) -> list[Part]:
+    """A screen ``w`` x ``h`` (``thick`` deep) on a stem ``stem`` (x, y, height) over a 2 cm foot ``foot``
+    (x, y), based at z = 0."""
+    return [
+        make_part("box", [0, 0, 0.01], color, size=[foot[0], foot[1], 0.02]),
+        make_part("box", [0, 0, 0.02 + stem[2] / 2], color, size=stem),
+        make_part("box", [0, 0, 0.02 + stem[2] + h / 2], color, size=[w, thick, h]),
+    ]
 
 
 def _books_in_shelf(b: _Builder, shelf: SceneObject, top) -> None:
@@ -548,7 +660,25 @@ def build_room(seed: int = 0) -> Room:
     floor = b.objects[ids["floor"] - 1]
     sides = ["+x", "-x", "+y", "-y"]
 
-    # Wall furniture first (shelf, cabinet, sofa), then the central table with chairs.
+    wall_objs = _wall_furniture(b, sides, W, D, floor)
+    table = _central_table(b, W, D, floor)
+    if table is not None:
+        _chairs(b, table, floor)
+    _floor_items(b, sides, W, D, floor)
+    _wall_decorations(b, sides, W, D, ids)
+    light = _ceiling_lamp(b, ids, H, table)
+    _small_objects(b, table, wall_objs)
+    _light_switches(b, ids, W, D, seed)
+    _floor_lamp(b, ids, W, D)
+
+    return _finish(b, (W, D, H), light)
+
+
+def _wall_furniture(
+    b: _Builder, sides: list[str], W: float, D: float, floor: SceneObject
+) -> list[SceneObject]:
+    """Shelves, cabinets and a sofa against the walls, placed first."""
+    rng = b.rng
     wall_items = ["bookshelf", "cabinet", "sofa"]
     if rng.uniform() < 0.6:
         wall_items.append("cabinet")
@@ -569,59 +699,20 @@ def build_room(seed: int = 0) -> Room:
             if cls == "bookshelf":
                 parts, tops = _shelf(center, yaw, size, b.color((0.55, 0.38, 0.22)), int(rng.integers(3, 5)))
             elif cls == "cabinet":
-                col = b.color((0.85, 0.83, 0.78), 0.1)
-                body = make_part(
-                    "box", center + [0, 0, size[2] / 2], col, size=_rot_size([size[1], size[0], size[2]], yaw)
-                )
-                parts = [body]
-                for k in range(2):
-                    fc = _local(center, yaw, [size[1] / 2 + 0.005, 0, size[2] * (0.28 + 0.42 * k)])
-                    parts.append(
-                        make_part(
-                            "box", fc, col * 0.9, size=_rot_size([0.01, size[0] * 0.9, size[2] * 0.38], yaw)
-                        )
-                    )
-                half = _rot_size([size[1], size[0], 0], yaw)[:2] / 2
-                tops = [(center[:2] - half, center[:2] + half, size[2])]
+                parts, tops = _cabinet(center, yaw, size, b.color((0.85, 0.83, 0.78), 0.1))
             else:
-                col = b.color((0.35, 0.4, 0.55), 0.12)
-                L, Dp, Hs = size
-                seat_h, back_t, arm_w = 0.42, 0.2, 0.18
-                parts = [
-                    make_part(
-                        "box",
-                        _local(center, yaw, [back_t / 2, 0, seat_h / 2]),
-                        col,
-                        size=_rot_size([Dp - back_t, L - 2 * arm_w, seat_h], yaw),
-                        texture=TEXTURE_NOISE,
-                        texture_scale=0.08,
-                    ),
-                    make_part(
-                        "box",
-                        _local(center, yaw, [-Dp / 2 + back_t / 2, 0, Hs / 2]),
-                        col * 0.9,
-                        size=_rot_size([back_t, L, Hs], yaw),
-                    ),
-                ]
-                for s in (-1, 1):
-                    parts.append(
-                        make_part(
-                            "box",
-                            _local(center, yaw, [back_t / 2, s * (L / 2 - arm_w / 2), 0.3]),
-                            col * 0.95,
-                            size=_rot_size([Dp - back_t, arm_w, 0.6], yaw),
-                        )
-                    )
-                seat_c = _local(center, yaw, [back_t / 2, 0, 0])[:2]
-                half = _rot_size([Dp - back_t - 0.1, L - 2 * arm_w - 0.05, 0], yaw)[:2] / 2
-                tops = [(seat_c - half, seat_c + half, seat_h)]
+                parts, tops = _sofa(center, yaw, size, b.color((0.35, 0.4, 0.55), 0.12))
             # Keep 0.9 m clear in front of wall furniture so the camera path never runs into it.
             obj = b.try_add(cls, parts, floor.instance_id, "on", tops, margin=0.15)
             if obj is not None:
                 wall_objs.append(obj)
                 break
+    return wall_objs
 
-    # Central table and chairs around it.
+
+def _central_table(b: _Builder, W: float, D: float, floor: SceneObject) -> SceneObject | None:
+    """The central table (None when it found no free spot)."""
+    rng = b.rng
     table = None
     for _ in range(30):
         size = np.array([rng.uniform(1.0, 1.5), rng.uniform(0.7, 0.9), rng.uniform(0.72, 0.78)])
@@ -633,26 +724,23 @@ def build_room(seed: int = 0) -> Room:
         table = b.try_add("table", parts, floor.instance_id, "on", tops, margin=0.6)
         if table is not None:
             break
-    chairs = []
-    if table is not None:
-        lo, hi = table.aabb
-        chair_color = b.color((0.3, 0.22, 0.15), 0.08)
-        slots = []
-        for side_axis in (0, 1):
-            for sgn in (-1, 1):
-                c = (lo + hi) / 2
-                c = c.copy()
-                c[2] = 0.0
-                c[side_axis] = (hi if sgn > 0 else lo)[side_axis] + sgn * (0.22 + rng.uniform(0.05, 0.12))
-                yaw = np.arctan2(0, -sgn) if side_axis == 0 else np.arctan2(-sgn, 0)
-                slots.append((c, yaw))
-        rng.shuffle(slots)
-        for c, yaw in slots[: int(rng.integers(2, 5))]:
-            obj = b.try_add("chair", _chair(c, yaw, chair_color), floor.instance_id, "on", margin=0.05)
-            if obj is not None:
-                chairs.append(obj)
+    return table
 
-    # Floor items in free spots near walls.
+
+def _chairs(b: _Builder, table: SceneObject, floor: SceneObject) -> None:
+    """Two to four chairs around the table."""
+    rng = b.rng
+    lo, hi = table.aabb
+    chair_color = b.color((0.3, 0.22, 0.15), 0.08)
+    slots = _chair_slots(lo, hi, lambda: 0.22 + rng.uniform(0.05, 0.12))
+    rng.shuffle(slots)
+    for c, yaw in slots[: int(rng.integers(2, 5))]:
+        b.try_add("chair", _chair(c, yaw, chair_color), floor.instance_id, "on", margin=0.05)
+
+
+def _floor_items(b: _Builder, sides: list[str], W: float, D: float, floor: SceneObject) -> None:
+    """A plant and a trash can in free spots near the walls."""
+    rng = b.rng
     for cls in ("plant", "trash can"):
         for _ in range(30):
             side = sides[rng.integers(4)]
@@ -677,41 +765,16 @@ def build_room(seed: int = 0) -> Room:
             if b.try_add(cls, parts, floor.instance_id, "on", margin=0.1) is not None:
                 break
 
-    # Wall decorations: door, window, pictures, clock.
+
+def _wall_decorations(b: _Builder, sides: list[str], W: float, D: float, ids: dict[str, int]) -> None:
+    """A door, a window, pictures and a clock on the walls."""
+    rng = b.rng
     for cls in ("door", "window", "picture", "picture", "picture", "clock"):
         for _ in range(30):
             side = sides[rng.integers(4)]
-            p, n, half_len, yaw = _wall_frame(side, W, D)
-            t_axis = np.array([-n[1], n[0], 0.0])
-            if cls == "door":
-                w, h, z0, thick, col = 0.9, 2.05, 0.0, 0.04, b.color((0.55, 0.4, 0.28))
-            elif cls == "window":
-                w, h, z0, thick, col = rng.uniform(0.9, 1.4), 1.0, 0.95, 0.03, b.color((0.6, 0.75, 0.9), 0.04)
-            elif cls == "picture":
-                w, h = rng.uniform(0.35, 0.7), rng.uniform(0.3, 0.5)
-                z0, thick, col = rng.uniform(1.25, 1.65), 0.03, b.vivid()
-            else:
-                w = h = 0.3
-                z0, thick, col = rng.uniform(1.6, 1.9), 0.04, b.color((0.92, 0.92, 0.9), 0.02)
-            if half_len - w / 2 - 0.15 <= 0:
+            parts = _decoration(b, cls, side, W, D)
+            if parts is None:
                 continue
-            along = rng.uniform(-half_len + w / 2 + 0.15, half_len - w / 2 - 0.15)
-            c = p + n * thick / 2 + t_axis * along + [0, 0, z0 + h / 2]
-            if cls == "clock":
-                axis_rot = _yaw_matrix(yaw) @ np.array([[0, 0, 1.0], [0, 1.0, 0], [-1.0, 0, 0]])
-                parts = [
-                    make_part(
-                        "cylinder", c - n * thick / 2, col, radius=w / 2, height=thick, rotation=axis_rot
-                    )
-                ]
-            else:
-                size = _rot_size([thick, w, h], yaw)
-                tex = TEXTURE_STRIPES if cls in ("picture", "window") else TEXTURE_PLAIN
-                parts = [
-                    make_part(
-                        "box", c, col, size=size, texture=tex, texture_scale=float(rng.uniform(0.06, 0.2))
-                    )
-                ]
             wall_id = ids[side]
             obj = b.try_add(cls, parts, wall_id, "attached to", margin=0.05)
             if obj is not None:
@@ -719,7 +782,9 @@ def build_room(seed: int = 0) -> Room:
                     b.extra_relations.append((obj.instance_id, "on", ids["floor"]))
                 break
 
-    # Ceiling lamp above the table, with the scene's point light just below it.
+
+def _ceiling_lamp(b: _Builder, ids: dict[str, int], H: float, table: SceneObject | None) -> np.ndarray:
+    """A ceiling lamp above the table. -> where the scene's point light is (just below the lamp)."""
     light = np.array([0.0, 0.0, H - 0.45])
     if table is not None:
         lo, hi = table.aabb
@@ -739,7 +804,12 @@ def build_room(seed: int = 0) -> Room:
         if lamp is not None:
             b.extra_relations.append((lamp.instance_id, "above", table.instance_id))
             light = c - [0, 0, 0.5]
+    return light
 
+
+def _small_objects(b: _Builder, table: SceneObject | None, wall_objs: list[SceneObject]) -> None:
+    """Small objects on the top surfaces: the table, shelves, cabinets, sofa, then on some lying books."""
+    rng = b.rng
     # Small objects on top surfaces.
     if table is not None:
         for cls in rng.choice(
@@ -774,10 +844,6 @@ def build_room(seed: int = 0) -> Room:
             and rng.uniform() < 0.7
         ):
             _place_small(b, str(rng.choice(["cup", "book"])), obj, obj.top_surfaces[0])
-    _light_switches(b, ids, W, D, seed)
-    _floor_lamp(b, ids, W, D)
-
-    return _finish(b, (W, D, H), light)
 
 
 def _light_switches(b: _Builder, ids: dict[str, int], W: float, D: float, seed: int) -> None:

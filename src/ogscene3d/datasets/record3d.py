@@ -10,7 +10,7 @@ confidence, 0 low / 1 medium / 2 high).
 Frames have the depth resolution: colour is resampled to it and K scaled to it. Depth whose confidence is
 below ``data.r3d_min_confidence`` (default 1: low is left out) is invalid. ARKit's camera looks down -z with
 +y up and its world has +y up; both are turned half a turn about x, so that poses are OpenCV
-camera-to-world (z forward, y down) in a world whose up is -y, the default ``graph.up_axis``.
+camera-to-world (z forward, y down) in a world whose up is -y, which ``graph.up_axis: auto`` takes.
 """
 
 from __future__ import annotations
@@ -65,6 +65,8 @@ def _member_number(name: str, suffix: str) -> int | None:
 class Record3DDataset(DecodedDataset):
     kind = "record3d"
     depth_scale_default = 1.0  # depth is float metres
+    up_axis = (0.0, -1.0, 0.0)
+    up_axis_source = "Record3D (ARKit's gravity-aligned world, y up, turned to OpenCV axes: -y up)"
     # ARKit intrinsics count pixel centres from 0, as OpenCV does
     pixel_centers_default = "integer"
 
@@ -108,8 +110,13 @@ class Record3DDataset(DecodedDataset):
         if not colour:
             raise DataError(f"{root}: holds no rgbd/N.jpg colour images")
         records, missing = [], []
-        for n in sorted(colour):
-            lacks = [what for what, ok in (("depth", n in depth), ("pose", n < len(poses))) if not ok]
+        sizes = {i.filename: i.file_size for i in self.zip.infolist()}
+        for n in sorted(set(colour) | set(depth)):
+            # every frame the capture holds some of: a missing or empty member is named, not passed over
+            have = (("colour", colour.get(n)), ("depth", depth.get(n)))
+            lacks = [what if m is None else f"empty {what}" for what, m in have if not sizes.get(m)]
+            if n >= len(poses):
+                lacks.append("pose")
             if lacks:
                 missing.append(f"frame {n} ({' and '.join(lacks)})")
                 continue
@@ -127,7 +134,7 @@ class Record3DDataset(DecodedDataset):
             )
         if missing:
             shown = ", ".join(missing[:5]) + (f" and {len(missing) - 5} more" if len(missing) > 5 else "")
-            msg = f"{root}: {len(missing)} of {len(colour)} frames lack data: {shown}"
+            msg = f"{root}: {len(missing)} of {len(set(colour) | set(depth))} frames lack data: {shown}"
             if config.on_bad_frame != "skip" or not records:
                 raise DataError(f"{msg}; set data.on_bad_frame: skip to leave them out")
             log.warning("%s; leaving them out (data.on_bad_frame: skip)", msg)

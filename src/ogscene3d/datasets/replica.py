@@ -81,6 +81,12 @@ def read_traj(path: Path) -> np.ndarray:
     return poses
 
 
+def beyond_trajectory(path: Path, poses: int, n: int) -> str | None:
+    """Why frame number ``n`` has no pose in a trajectory file of ``poses`` lines (line i is frame i); None
+    when it has one."""
+    return None if n < poses else f"no pose: {path.name} has poses for frames 0 to {poses - 1} only"
+
+
 def bad_lines_message(errors: dict[int, str]) -> str:
     """The first bad line's error, and how many more there are."""
     first = errors[min(errors)]
@@ -105,14 +111,13 @@ def list_replica_frames(results: Path) -> list[tuple[int, Path, Path]]:
 class ReplicaDataset(RGBDDataset):
     kind = "replica"
     depth_scale_default = 6553.5
+    up_axis = (0.0, 0.0, 1.0)
+    up_axis_source = "the Replica layout (its meshes' world is z-up)"
     # Replica's renders agree with cam_params.json read with ogscene3d's pixel centres (+0.5): between
     # frames of NICE-SLAM's room0, depth reprojects best as read, worse with cx or cy shifted by half a
     # pixel either way (docs/results.md, "Dataset checks"; benchmarks/pixel_centers.py)
     pixel_centers_default = "half"
-
-    @staticmethod
-    def detect(root: Path) -> bool:
-        return (root / "results").is_dir() and (root / "traj.txt").is_file()
+    layout_markers = ("results/", "traj.txt")
 
     def __init__(self, root: Path, config: DataConfig, segments_dir: Path | None = None) -> None:
         root = Path(root)
@@ -129,11 +134,6 @@ class ReplicaDataset(RGBDDataset):
             raise DataError(
                 f"{bad_lines_message(bad_lines)}; set data.on_bad_frame: skip to leave those frames out"
             )
-        if frames[-1][0] >= len(poses):
-            raise DataError(
-                f"{traj_path}: {len(poses)} poses, but results/ holds frame number {frames[-1][0]} "
-                f"({frames[-1][1].name})"
-            )
         K, size = None, None
         cam = find_cam_params(root)
         if cam is not None:
@@ -145,10 +145,11 @@ class ReplicaDataset(RGBDDataset):
                 name=rgb.stem,
                 rgb_path=rgb,
                 depth_path=depth,
-                pose=poses[n],
+                pose=poses[n] if n < len(poses) else None,
                 pose_source=f"{traj_path}:{n + 1}",
                 pose_error=bad_lines.get(n),
                 timestamp=float(n),
+                lacks=beyond_trajectory(traj_path, len(poses), n),
             )
             for n, rgb, depth in frames
         ]

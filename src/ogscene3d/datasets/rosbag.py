@@ -380,29 +380,9 @@ class RosBagDataset(DecodedDataset):
                 f"the recording; its topics:\n{self.bag.topics()}"
             )
         if pose_topic is None and tf is not None and (tf.chain(camera) or config.ros_world_frame):
-            world = (config.ros_world_frame or tf.root(camera)).lstrip("/")
-            if camera not in tf.frames or world not in tf.frames:
-                missing = camera if camera not in tf.frames else world
-                raise DataError(
-                    f"{self.bag.path}: tf has no frame {missing!r}; its frames: "
-                    f"{', '.join(sorted(tf.frames))} "
-                    "(set data.ros_world_frame / data.ros_camera_frame)"
-                )
-            if tf.root(world) != tf.root(camera):
-                raise DataError(
-                    f"{self.bag.path}: tf does not connect {world!r} and {camera!r} (their trees' roots are "
-                    f"{tf.root(world)!r} and {tf.root(camera)!r})"
-                )
-            self.pose_desc = f"tf {world} -> {camera}"
-            out = [(tf.lookup(world, camera, t, tol), self.pose_desc) for t in stamps]
-            if not any(p is not None for p, _ in out):
-                raise DataError(
-                    f"{self.bag.path}: tf gives no pose of {camera!r} in {world!r} at the images' stamps "
-                    f"({stamps[0]:.3f}..{stamps[-1]:.3f} s): transform "
-                    f"{tf.gap(world, camera, stamps[0], tol)} "
-                    "has no sample near them"
-                )
-            return out
+            return self._tf_poses(
+                tf, (config.ros_world_frame or tf.root(camera)).lstrip("/"), camera, stamps, tol
+            )
         if pose_topic is None:
             cands = [t for t, c in by_topic.items() if c.msgtype in POSE_TYPES]
             if len(cands) > 1:
@@ -416,7 +396,42 @@ class RosBagDataset(DecodedDataset):
                 self.bag.path, camera,
             )  # fmt: skip
             return None
-        track = self._read_pose_topic(by_topic[pose_topic])
+        return self._topic_poses(by_topic[pose_topic], pose_topic, tf, camera, stamps, tol)
+
+    def _tf_poses(
+        self, tf: TfTree, world: str, camera: str, stamps: list[float], tol: float
+    ) -> list[tuple[np.ndarray | None, str]]:
+        """The camera's poses in ``world`` from the recording's tf tree."""
+        if camera not in tf.frames or world not in tf.frames:
+            missing = camera if camera not in tf.frames else world
+            raise DataError(
+                f"{self.bag.path}: tf has no frame {missing!r}; its frames: "
+                f"{', '.join(sorted(tf.frames))} "
+                "(set data.ros_world_frame / data.ros_camera_frame)"
+            )
+        if tf.root(world) != tf.root(camera):
+            raise DataError(
+                f"{self.bag.path}: tf does not connect {world!r} and {camera!r} (their trees' roots are "
+                f"{tf.root(world)!r} and {tf.root(camera)!r})"
+            )
+        self.pose_desc = f"tf {world} -> {camera}"
+        self._rep103(world)
+        out = [(tf.lookup(world, camera, t, tol), self.pose_desc) for t in stamps]
+        if not any(p is not None for p, _ in out):
+            raise DataError(
+                f"{self.bag.path}: tf gives no pose of {camera!r} in {world!r} at the images' stamps "
+                f"({stamps[0]:.3f}..{stamps[-1]:.3f} s): transform "
+                f"{tf.gap(world, camera, stamps[0], tol)} "
+                "has no sample near them"
+            )
+        return out
+
+    def _topic_poses(
+        self, conn: Any, pose_topic: str, tf: TfTree | None, camera: str, stamps: list[float], tol: float
+    ) -> list[tuple[np.ndarray | None, str]]:
+        """The camera's poses from a PoseStamped/Odometry topic, through tf where the topic's frame is
+        another body than the camera."""
+        track = self._read_pose_topic(conn)
         body = track.child or camera
         link = None
         if body != camera:
@@ -432,6 +447,7 @@ class RosBagDataset(DecodedDataset):
                     f"to the camera frame {camera!r}: record /tf_static too, or set data.ros_camera_frame"
                 )
             link = tf
+        self._rep103(track.parent or pose_topic)
         self.pose_desc = f"{pose_topic} ({track.parent} -> {body})" + (
             f" and tf {body} -> {camera}" if link else ""
         )
@@ -443,6 +459,11 @@ class RosBagDataset(DecodedDataset):
                 T = None if step is None else T @ step
             out.append((T, self.pose_desc))
         return out
+
+    def _rep103(self, world: str) -> None:
+        """The poses' world is a ROS world frame: z-up (REP 103: x forward, y left, z up)."""
+        self.up_axis = (0.0, 0.0, 1.0)
+        self.up_axis_source = f"ROS's REP 103 (the world frame {world!r} of the recording's poses is z-up)"
 
     def _read_tf(self, by_topic: dict[str, Any]) -> TfTree | None:
         conns = [c for c in by_topic.values() if c.msgtype == TF]

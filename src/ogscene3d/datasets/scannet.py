@@ -113,35 +113,39 @@ def read_label_map(path: str | Path, src: str = "id", dst: str = "nyu40id") -> n
 class ScanNetDataset(RGBDDataset):
     kind = "scannet"
     depth_scale_default = 1000.0
+    up_axis = (0.0, 0.0, 1.0)
+    up_axis_source = "the ScanNet layout (its scans' world is z-up)"
 
-    @staticmethod
-    def detect(root: Path) -> bool:
-        return (root / "color").is_dir() and (root / "depth").is_dir()
+    layout_markers = ("color/", "depth/")
 
     def __init__(self, root: Path, config: DataConfig, segments_dir: Path | None = None) -> None:
         root = Path(root)
         color = numbered_files(root / "color", _RGB_SUFFIXES)
         if not color:
             raise DataError(f"{root / 'color'}: no numbered colour images (N.jpg or 000000.png)")
-        # Depth and pose files are matched to colour by number: SensReader writes 0.png, other
-        # exporters (bring-your-own-camera) 000000.png. A frame without one gets the name it would
-        # most likely have (the colour file's stem), which the base class reports as missing.
+        # Colour, depth and pose files are matched by number: SensReader writes 0.png, other exporters
+        # (bring-your-own-camera) 000000.png. A frame is every number one of them has; a frame without one of
+        # its files gets the name that file would most likely have (the stem of a file it has, the colour
+        # images' suffix), which the base class reports as missing rather than the frame vanishing unnamed.
         depth = numbered_files(root / "depth", (".png",))
         pose_dir = root / "pose"
         poses = numbered_files(pose_dir, (".txt",))
         has_poses = bool(poses)  # without pose files (no pose/ or an empty one) the frames need tracking
         labels = self._label_files(root)
-        records = [
-            FrameRecord(
-                name=color[n].stem,
-                rgb_path=color[n],
-                depth_path=depth.get(n, root / "depth" / f"{color[n].stem}.png"),
-                pose_path=poses.get(n, pose_dir / f"{color[n].stem}.txt") if has_poses else None,
-                timestamp=float(n),
-                extras={"label": labels[n]} if n in labels else {},
+        suffix = next(iter(color.values())).suffix
+        records = []
+        for n in sorted(set(color) | set(depth) | set(poses)):
+            stem = next(files[n].stem for files in (color, depth, poses) if n in files)
+            records.append(
+                FrameRecord(
+                    name=stem,
+                    rgb_path=color.get(n, root / "color" / f"{stem}{suffix}"),
+                    depth_path=depth.get(n, root / "depth" / f"{stem}.png"),
+                    pose_path=poses.get(n, pose_dir / f"{stem}.txt") if has_poses else None,
+                    timestamp=float(n),
+                    extras={"label": labels[n]} if n in labels else {},
+                )
             )
-            for n in sorted(color)
-        ]
         K = None
         if config.intrinsics is None:
             K = self._intrinsics(root, records, self.read_pixel_centers(config))

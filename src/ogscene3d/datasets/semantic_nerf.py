@@ -48,7 +48,8 @@ import numpy as np
 from ..config import DataConfig
 from ..errors import DataError
 from .base import FrameRecord, K_from_values, RGBDDataset, numbered_files, read_depth_raw, read_label_png
-from .replica import bad_lines_message, read_traj_lines
+from .replica import bad_lines_message, beyond_trajectory, read_traj_lines
+from .replica_semantic import read_info_semantic
 
 log = logging.getLogger(__name__)
 
@@ -126,8 +127,6 @@ def find_class_info(seq: Path) -> Path | None:
 def read_class_names(path: Path) -> dict[int, str]:
     """Class id -> name from ``info_semantic.json``'s ``classes``, without id 0: the renderer writes 0 for
     pixels of no class, and Semantic-NeRF scores 0 as void."""
-    from .replica_semantic import read_info_semantic
-
     classes, _ = read_info_semantic(path)
     classes.pop(VOID_ID, None)
     if not classes:
@@ -138,6 +137,8 @@ def read_class_names(path: Path) -> dict[int, str]:
 class SemanticNeRFDataset(RGBDDataset):
     kind = "semantic_nerf"
     void_class_id = VOID_ID
+    up_axis = (0.0, 0.0, 1.0)
+    up_axis_source = "the Semantic-NeRF layout (Replica's world, z-up)"
     depth_scale_default = 1000.0
     # the K derived from the field of view (hfov_intrinsics) is already ogscene3d's
     pixel_centers_default = "half"
@@ -176,25 +177,22 @@ class SemanticNeRFDataset(RGBDDataset):
             raise DataError(
                 f"{bad_lines_message(bad_lines)}; set data.on_bad_frame: skip to leave those frames out"
             )
-        last = max(rgbs)
-        if last >= len(poses):
-            raise DataError(
-                f"{traj}: {len(poses)} poses (one a line, line i = frame i), but rgb/ holds frame {last} "
-                f"({rgbs[last].name})"
-            )
+        # a frame is every number rgb/ or depth/ has; a missing file gets the name it should have, which the
+        # base class reports
+        numbers = sorted(set(rgbs) | set(depths))
         records = [
             FrameRecord(
-                name=rgbs[n].stem,
-                rgb_path=rgbs[n],
-                # a missing depth file gets the name it should have, which the base class reports
+                name=f"rgb_{n}" if n not in rgbs else rgbs[n].stem,
+                rgb_path=rgbs.get(n, root / "rgb" / f"rgb_{n}.png"),
                 depth_path=depths.get(n, root / "depth" / f"depth_{n}.png"),
-                pose=poses[n],
+                pose=poses[n] if n < len(poses) else None,
                 pose_error=bad_lines.get(n),
                 pose_source=f"{traj}:{n + 1}",
                 timestamp=float(n),
+                lacks=beyond_trajectory(traj, len(poses), n),
                 extras={"label": labels[n]} if n in labels else {},
             )
-            for n in sorted(rgbs)
+            for n in numbers
         ]
         K = None
         if config.intrinsics is None:

@@ -42,12 +42,12 @@ def _color_files(folder: Path) -> list[Path]:
 
 
 def _frame_color_files(folder: Path) -> list[Path]:
-    """The colour file of every frame in ``folder``, by frame name: a depth image without its colour image
-    gets the colour file's expected name (the other frames' suffix), which the base class then reports as
-    missing rather than the frame disappearing without a word."""
+    """The colour file of every frame in ``folder``, by frame name: a depth image or pose file without its
+    colour image gets the colour file's expected name (the other frames' suffix), which the base class then
+    reports as missing rather than the frame disappearing without a word."""
     colors = {p.name.split(".")[0]: p for p in _color_files(folder)}
     suffix = next(iter(colors.values())).suffix if colors else ".png"
-    for d in folder.glob("frame-*.depth.png"):
+    for d in (*folder.glob("frame-*.depth.png"), *folder.glob("frame-*.pose.txt")):
         base = d.name.split(".")[0]
         colors.setdefault(base, folder / f"{base}.color{suffix}")
     return [colors[b] for b in sorted(colors)]

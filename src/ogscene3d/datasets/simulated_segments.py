@@ -6,17 +6,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..segmentation.precomputed import write_segments
+from ..segmentation.simulated import SimulatedSegmenter
+from .loader import open_dataset
+from .long_scan import merges_by_frame
+from .synthetic import load_first_views
+
 
 def simulate_scene_segments(
     scene_dir: str | Path, out_dir: str | Path, noise: str = "default", seed: int = 0
 ) -> Path:
     """Write simulated segments for every frame of a synthetic scene (e.g. another noise level)."""
-    from ..segmentation.precomputed import write_segments
-    from ..segmentation.simulated import SimulatedSegmenter
-    from .loader import open_dataset
-    from .long_scan import merges_by_frame
-    from .synthetic import load_first_views
-
     ds = open_dataset(scene_dir, kind="synthetic")
     # what each object stands or hangs on: SAM-like noise merges an object with its support in some views
     support = {k: v["support"] for k, v in ds.gt["instances"].items() if v.get("support") is not None}

@@ -5,8 +5,9 @@ with Warp (``kernels/raycast.py``) along a smooth exploring trajectory and write
 the built-in default scene (no dataset can be downloaded in every setting) and it comes with exact
 ground truth for evaluation.
 
-World frame: metres, **up is -y** (the default ``graph.up_axis``), floor at y = 0, the room centred
-on x = z = 0. Poses are camera-to-world 4x4 with OpenCV camera axes, as everywhere in ogscene3d.
+World frame: metres, **up is -y** (``gt/instances.json``'s ``up``, which ``graph.up_axis: auto`` takes),
+floor at y = 0, the room centred on x = z = 0. Poses are camera-to-world 4x4 with OpenCV camera axes, as
+everywhere in ogscene3d.
 
 Layout of a scene folder (the Replica NICE-SLAM layout plus ``gt/`` and ``segments/``)::
 
@@ -35,7 +36,11 @@ Layout of a scene folder (the Replica NICE-SLAM layout plus ``gt/`` and ``segmen
          "color": [r, g, b],                                     # albedo, 0-255
          "bbox_min": [x, y, z], "bbox_max": [x, y, z], "center": [x, y, z],   # world, metres
          "num_points": 1234,                                     # its points in gt/points.ply
-         "support": 1 | null, "support_relation": "on" | "in" | "attached to" | null}},
+         "support": 1 | null, "support_relation": "on" | "in" | "attached to" | null,
+         "room": 2}},                                            # apartments only: the instance's room
+     "rooms": {"<room id>": {"type": "kitchen", "floor": 0,     # apartments only (layout "apartment")
+         "bbox_min": [x, y, z], "bbox_max": [x, y, z],           # the interior, world, metres
+         "first_frame": 57 | null}},                             # the first frame whose camera is inside
      "relations": [[subject_id, "on", object_id], ...],
      "relation_vocabulary": ["on", "under", "above", "below", "next to", "in", "attached to"],
      "inverse_relations": {"on": "under", "under": "on", "above": "below", "below": "above"},
@@ -77,6 +82,11 @@ import numpy as np
 from ..atomic import atomic_write_bytes, atomic_write_text
 from ..config import DataConfig, SyntheticConfig
 from ..errors import DataError
+from ..progress import progress as progress_bar
+from ..segmentation.precomputed import write_segments
+from ..segmentation.simulated import NOISE_LEVELS, SimulatedSegmenter
+from ..segmentation.simulated_detector import SIMULATED_DETECTOR_VERSION, SimulatedDetector
+from .apartment import Apartment, apartment_camera, build_apartment, rooms_entered
 from .base import FrameRecord, read_label_png
 from .long_scan import (
     build_scan_room,
@@ -108,7 +118,7 @@ SWEEP = 1.6 * np.pi  # radians the camera walks around the room (given enough fr
 MAX_STEP_DEG = 20.0
 MAX_STEP_M = 0.35
 GENERATOR_VERSION = 2  # 2: gt/points.ply carries the per-point "observed" flag
-LAYOUTS = ("room", "scan")  # synthetic.layout
+LAYOUTS = ("room", "scan", "apartment")  # synthetic.layout: what make_synthetic_scene builds
 
 
 # --------------------------------------------------------------------------------------- trajectory
@@ -163,6 +173,16 @@ def exploration_trajectory(room: Room, frames: int, seed: int) -> np.ndarray:
     return poses
 
 
+def apartment_trajectory(apt: Apartment, frames_per_room: int, seed: int) -> np.ndarray:
+    """[frames_per_room x rooms, 4, 4] c2w poses (world frame) of :func:`~.apartment.apartment_camera`: from
+    room to room, turning once around in each, steps within :data:`MAX_STEP_M` and :data:`MAX_STEP_DEG`."""
+    xyz, yaw, pitch = apartment_camera(apt, frames_per_room, seed, MAX_STEP_M, MAX_STEP_DEG)
+    poses = np.tile(np.eye(4), (len(xyz), 1, 1))
+    poses[:, :3, :3] = WORLD_FROM_ZUP @ _look_rotation_zup(yaw, pitch)
+    poses[:, :3, 3] = xyz @ WORLD_FROM_ZUP.T
+    return poses
+
+
 def _sweep(frames: int, radius: float) -> float:
     """The angle (radians) the camera walks around the room: :data:`SWEEP`, or less where ``frames`` are too
     few for it, so that no step between consecutive frames exceeds :data:`MAX_STEP_DEG` of turn or
@@ -195,7 +215,14 @@ def perturb_poses(poses: np.ndarray, sigma: float, rng: np.random.Generator) -> 
 class MeshRenderer:
     """Ray casts a :class:`Room` with Warp: RGB (uint8), depth (float32 m) and instance (int32) images."""
 
-    def __init__(self, room: Room, device: str | None = "cpu", supersample: int = 2, shadows: bool = True):
+    def __init__(
+        self,
+        room: Room,
+        device: str | None = "cpu",
+        supersample: int = 2,
+        shadows: bool = True,
+        light_range: float = 4.0,
+    ):
         import warp as wp
 
         from ..device import resolve_device, warp_device
@@ -207,6 +234,7 @@ class MeshRenderer:
         self.device = warp_device(self.torch_device)
         self.supersample = int(supersample)
         self.shadows = shadows
+        self.light_range = float(light_range)  # metres at which the light's falloff halves its diffuse term
         self.room = room
         self.mesh = wp.Mesh(
             points=wp.array(room.vertices, dtype=wp.vec3, device=self.device),
@@ -243,7 +271,7 @@ class MeshRenderer:
                 self.tri_texture_scale,
                 self.tri_instance,
                 self.light,
-                4.0,
+                self.light_range,
                 0.35,
                 int(self.shadows),
             ],
@@ -410,6 +438,23 @@ def instances_json(room: Room, classes: dict[str, int], num_points: np.ndarray) 
     }
 
 
+def add_rooms(doc: dict, apt: Apartment, entered: dict[int, int]) -> None:
+    """Add an apartment's rooms to an ``instances.json`` document: ``"room"`` per instance and the
+    ``"rooms"`` table (type, storey, interior box in the world, the first frame inside it)."""
+    for key, inst in doc["instances"].items():
+        inst["room"] = apt.instance_room[int(key)]
+    doc["rooms"] = {
+        str(r.id): {
+            "type": r.type,
+            "floor": r.floor,
+            "bbox_min": [round(float(v), 5) for v in r.bbox_min],
+            "bbox_max": [round(float(v), 5) for v in r.bbox_max],
+            "first_frame": entered.get(r.id),
+        }
+        for r in apt.rooms
+    }
+
+
 def load_instances(path: str | Path) -> dict:
     """Read and check ``gt/instances.json``; instance ids become ints: {"instances": {id: {...}}, ...}."""
     path = Path(path)
@@ -423,6 +468,10 @@ def load_instances(path: str | Path) -> dict:
             if not isinstance(v["class"], str) or int(v["class_id"]) not in data["classes"]:
                 raise ValueError(f"instance {k} has a bad class")
         data["relations"] = [(int(s), str(r), int(o)) for s, r, o in data["relations"]]
+        data["rooms"] = {int(k): v for k, v in data.get("rooms", {}).items()}
+        for k, v in data["instances"].items():
+            if v.get("room") is not None and int(v["room"]) not in data["rooms"]:
+                raise ValueError(f"instance {k} is in room {v['room']}, which is not in 'rooms'")
     except (json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError) as e:
         raise DataError(f"{path}: malformed ground-truth instances ({e})") from e
     return data
@@ -442,13 +491,10 @@ def _pose_lines(poses: np.ndarray) -> str:
     return "".join(" ".join(f"{v:.9e}" for v in p.reshape(-1)) + "\n" for p in poses)
 
 
-def _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise, layout="room") -> dict:
-    from ..segmentation.simulated_detector import SIMULATED_DETECTOR_VERSION
-
-    # the default room's parameters name no layout: a room made before layouts existed is reused as it is
+def _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise, layout: str = "room") -> dict:
+    # the default layout is left out, so that scenes written before layouts existed are still reused
     extra = {} if layout == "room" else {"layout": str(layout)}
     return {
-        **extra,
         "detector": SIMULATED_DETECTOR_VERSION,  # named segments: a scene made without them is made again
         "generator": "ogscene3d.synthetic",
         "version": GENERATOR_VERSION,
@@ -459,6 +505,7 @@ def _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise, l
         "noise": str(noise),
         "depth_noise": float(depth_noise),
         "pose_noise": float(pose_noise),
+        **extra,
     }
 
 
@@ -480,20 +527,71 @@ def make_synthetic_scene(
 ) -> Path:
     """Generate (or reuse) a synthetic scene in ``out_dir`` and return its path.
 
-    ``noise``: simulated-SAM noise level (none | low | default | high); ``depth_noise``: std of
-    additive Gaussian depth noise in metres; ``pose_noise``: std of the translation noise of the
-    poses written to traj.txt in metres (rotation noise: half that in radians; gt/traj.txt keeps
-    the true poses). ``layout``: "room" (a furnished room, a smooth walk around it) or "scan" (a long scan
-    like a real ScanNet one, :mod:`.long_scan`). If ``out_dir`` already holds a complete scene made with the
-    same arguments it
-    is reused as is; a folder holding anything else is an error unless ``overwrite``.
-    ``progress``: True for a tqdm bar, or a wrapper ``iterable -> iterable``. ``remedy``: what the error for
-    a folder holding something else tells the user to do (a command names its own options).
-    """
-    from ..segmentation.precomputed import write_segments
-    from ..segmentation.simulated import NOISE_LEVELS, SimulatedSegmenter
-    from ..segmentation.simulated_detector import SimulatedDetector
+    If ``out_dir`` already holds a complete scene made with the same arguments it is reused as is; a folder
+    holding anything else is an error unless ``overwrite``.
 
+    Args:
+        out_dir: the scene folder (Replica layout, with ``gt/`` and ``segments/``).
+        seed: seed of the procedural room (or apartment) and of every noise.
+        frames: frames of the camera path (``layout="apartment"``: per room).
+        width: image width in pixels (at least 8).
+        height: image height in pixels (at least 8).
+        noise: simulated-SAM noise level (none | low | default | high | legacy-*).
+        depth_noise: std of additive Gaussian depth noise in metres.
+        pose_noise: std of the translation noise of the poses written to traj.txt in metres (rotation noise:
+            half that in radians; gt/traj.txt keeps the true poses).
+        overwrite: replace what ``out_dir`` holds.
+        device: Warp device of the ray caster.
+        progress: True for a tqdm bar, or a wrapper ``iterable -> iterable``.
+        remedy: what the error for a folder holding something else tells the user to do (a command names
+            its own options).
+        layout: "room" (one furnished room, :func:`~.procedural.build_room`, a smooth walk around it),
+            "scan" (a long scan like a real ScanNet one, :mod:`.long_scan`; its first-view merge plan in
+            ``gt/first_views.json``) or "apartment" (2-5 rooms joined by doorways,
+            :func:`~.apartment.build_apartment`; ``gt/instances.json`` gives every instance's room).
+
+    Returns:
+        ``out_dir`` as a path.
+
+    Raises:
+        ValueError: an argument out of its range.
+        DataError: ``out_dir`` holds something else and ``overwrite`` is false.
+    """
+    _check_scene_args(frames, layout, width, height, noise, depth_noise, pose_noise)
+    out = Path(out_dir)
+    params = _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise, layout)
+    if _reuse_or_clear(out, params, overwrite, remedy):
+        log.info("reusing synthetic scene %s", out)
+        return out
+    K = intrinsics_for(width, height)
+    room, poses, renderer = _scene_and_path(layout, seed, frames, device)
+    merges = _first_view_merges(out, layout, renderer, room, poses, K, (width, height), noise, seed)
+    noise_rng = np.random.default_rng(np.random.SeedSequence([seed, 0xD0152]))
+    written_poses = perturb_poses(poses, pose_noise, noise_rng)
+    cam = {"camera": {"w": width, "h": height, "fx": float(K[0, 0]), "fy": float(K[1, 1]),
+                      "cx": float(K[0, 2]), "cy": float(K[1, 2]), "scale": REPLICA_DEPTH_SCALE}}  # fmt: skip
+    atomic_write_text(out / "cam_params.json", json.dumps(cam, indent=2))
+    atomic_write_text(out / "traj.txt", _pose_lines(written_poses))
+    atomic_write_text(out / "gt" / "traj.txt", _pose_lines(poses))
+    classes = class_table(room)
+    classes_of = np.zeros(len(room.objects) + 1, dtype=np.int32)
+    for obj in room.objects:
+        classes_of[obj.instance_id] = classes[obj.class_name]
+    pts = sample_surface_points(room, seed)
+    noises = (noise, seed, depth_noise, noise_rng)
+    observed = _write_frames(out, room, renderer, poses, K, (width, height), pts, noises, merges, progress)
+    write_points_ply(out / "gt" / "points.ply", pts, classes_of, observed)
+    write_mesh_ply(out / "gt" / "mesh.ply", room, classes_of)
+    num_points = np.bincount(pts["instance"], minlength=len(room.objects) + 1)
+    doc = instances_json(room, classes, num_points)
+    if isinstance(room, Apartment):
+        add_rooms(doc, room, rooms_entered(room, poses))
+    atomic_write_text(out / "gt" / "instances.json", json.dumps(doc, indent=1))
+    atomic_write_text(out / "scene.json", json.dumps(params, indent=2))
+    return out
+
+
+def _check_scene_args(frames, layout, width, height, noise, depth_noise, pose_noise) -> None:
     if frames < 1:
         raise ValueError(f"frames must be >= 1, got {frames}")
     if width < 8 or height < 8:
@@ -505,8 +603,12 @@ def make_synthetic_scene(
     for name, val in (("depth_noise", depth_noise), ("pose_noise", pose_noise)):
         if not np.isfinite(val) or val < 0:
             raise ValueError(f"{name} must be a finite number >= 0, got {val}")
-    out = Path(out_dir)
-    params = _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise, layout)
+
+
+def _reuse_or_clear(out: Path, params: dict, overwrite: bool, remedy: str) -> bool:
+    """True when ``out`` holds a complete scene made with ``params`` (and no ``overwrite``); else ``out`` is
+    made ready for a new scene (emptied of an earlier one with ``overwrite``; an error when it holds
+    something else)."""
     marker = out / "scene.json"
     if marker.is_file():
         try:
@@ -514,8 +616,7 @@ def make_synthetic_scene(
         except json.JSONDecodeError:
             same = False
         if same and not overwrite:
-            log.info("reusing synthetic scene %s", out)
-            return out
+            return True
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise DataError(f"{out}: folder is not empty and holds no synthetic scene made with these arguments "
                         f"(an earlier one?); {remedy}")  # fmt: skip
@@ -526,22 +627,53 @@ def make_synthetic_scene(
                 shutil.rmtree(out / sub)
     for sub in ("results", "segments", "gt"):
         (out / sub).mkdir(parents=True, exist_ok=True)
+    return False
 
-    K = intrinsics_for(width, height)
+
+def _scene_and_path(layout: str, seed: int, frames: int, device: str | None):
+    """The procedural room or apartment, the camera path through it ([N, 4, 4]) and its renderer."""
+    if layout == "apartment":
+        room = build_apartment(seed)
+        poses = apartment_trajectory(room, frames, seed)
+        # one light for several rooms: no shadows (walls would leave the rooms beyond them dark) and a long
+        # falloff (the rooms far from the middle stay lit)
+        return room, poses, MeshRenderer(room, device=device, shadows=False, light_range=12.0)
     if layout == "scan":
         room = build_scan_room(seed)
-        poses = scan_trajectory(room, frames, seed)
-    else:
-        room = build_room(seed)
-        poses = exploration_trajectory(room, frames, seed)
-    noise_rng = np.random.default_rng(np.random.SeedSequence([seed, 0xD0152]))
-    written_poses = perturb_poses(poses, pose_noise, noise_rng)
-    renderer = MeshRenderer(room, device=device)
-    merges = {}
-    if layout == "scan" and NOISE_LEVELS[noise].first_view_merge_prob > 0:
-        plan = _first_view_plan(renderer, room, poses, K, width, height, NOISE_LEVELS[noise], seed)
-        atomic_write_text(out / "gt" / "first_views.json", json.dumps(_plan_json(plan), indent=1))
-        merges = merges_by_frame(plan)
+        return room, scan_trajectory(room, frames, seed), MeshRenderer(room, device=device)
+    room = build_room(seed)
+    return room, exploration_trajectory(room, frames, seed), MeshRenderer(room, device=device)
+
+
+def _first_view_merges(out: Path, layout: str, renderer, room, poses, K, size, noise: str, seed: int) -> dict:
+    """A long scan's first-view merge plan, written to ``gt/first_views.json``, as {frame: {instance:
+    partner}} for the simulated SAM ({} for other layouts and levels without first-view merges)."""
+    level = NOISE_LEVELS[noise]
+    if layout != "scan" or level.first_view_merge_prob <= 0:
+        return {}
+    plan = _first_view_plan(renderer, room, poses, K, *size, level, seed)
+    atomic_write_text(out / "gt" / "first_views.json", json.dumps(_plan_json(plan), indent=1))
+    return merges_by_frame(plan)
+
+
+def _write_frames(
+    out: Path,
+    room,
+    renderer: MeshRenderer,
+    poses: np.ndarray,
+    K: np.ndarray,
+    size: tuple[int, int],
+    pts: dict[str, np.ndarray],
+    noises: tuple[str, int, float, np.random.Generator],
+    merges: dict,
+    progress: Callable[[Iterator], Iterator] | bool,
+) -> np.ndarray:
+    """Render every pose and write its colour, depth, instance map and simulated segments (``noises``:
+    the SAM noise level, the seed, the depth noise and its generator; ``merges``: a long scan's first-view
+    plan). -> which surface points some frame observed."""
+    width, height = size
+    noise, seed, depth_noise, noise_rng = noises
+    frames = len(poses)
     # support relations let the simulated SAM merge an object with what it stands or hangs on
     segmenter = SimulatedSegmenter(noise, seed=seed, support={o.instance_id: o.support for o in room.objects},
                                    first_view_merges=merges)  # fmt: skip
@@ -549,28 +681,13 @@ def make_synthetic_scene(
     detector = SimulatedDetector({o.instance_id: o.class_name for o in room.objects},
                                  noise=noise.removeprefix("legacy-"), seed=seed,
                                  min_area=NOISE_LEVELS[noise].min_area)  # fmt: skip
-
-    cam = {"camera": {"w": width, "h": height, "fx": float(K[0, 0]), "fy": float(K[1, 1]),
-                      "cx": float(K[0, 2]), "cy": float(K[1, 2]), "scale": REPLICA_DEPTH_SCALE}}  # fmt: skip
-    atomic_write_text(out / "cam_params.json", json.dumps(cam, indent=2))
-    atomic_write_text(out / "traj.txt", _pose_lines(written_poses))
-    atomic_write_text(out / "gt" / "traj.txt", _pose_lines(poses))
-
-    classes = class_table(room)
-    classes_of = np.zeros(len(room.objects) + 1, dtype=np.int32)
-    for obj in room.objects:
-        classes_of[obj.instance_id] = classes[obj.class_name]
-
     steps: Iterator = iter(range(frames))
     bars = contextlib.ExitStack()
     if progress is True:
-        from ..progress import progress as progress_bar
-
         steps = iter(bars.enter_context(progress_bar(range(frames), desc="synth", total=frames)))
     elif callable(progress):
         steps = iter(progress(range(frames)))
     max_depth = 65535.0 / REPLICA_DEPTH_SCALE
-    pts = sample_surface_points(room, seed)
     observed = np.zeros(len(pts["xyz"]), dtype=bool)
     with bars:  # the bar's log routing ends with the loop
         for i in steps:
@@ -596,15 +713,7 @@ def make_synthetic_scene(
             _encode(out / "gt" / f"instance{stem}.png", inst.astype(np.uint16))
             seg = detector(seg, inst, frame_index=i)  # fused with named detector masks, as sam+detector does
             write_segments(out / "segments", f"frame{stem}", seg.ids, seg.scores, seg.names)
-
-    write_points_ply(out / "gt" / "points.ply", pts, classes_of, observed)
-    write_mesh_ply(out / "gt" / "mesh.ply", room, classes_of)
-    num_points = np.bincount(pts["instance"], minlength=len(room.objects) + 1)
-    atomic_write_text(
-        out / "gt" / "instances.json", json.dumps(instances_json(room, classes, num_points), indent=1)
-    )
-    atomic_write_text(marker, json.dumps(params, indent=2))
-    return out
+    return observed
 
 
 def _first_view_plan(
@@ -657,6 +766,8 @@ class SyntheticDataset(ReplicaDataset):
         if segments_dir is None and (root / "segments").is_dir():
             segments_dir = root / "segments"
         self.gt = load_instances(root / "gt" / "instances.json")
+        self.up_axis = _scene_up(self.gt, root / "gt" / "instances.json")
+        self.up_axis_source = "the synthetic scene's gt/instances.json"
         ids = self.gt["instances"]
         self._class_lut = np.zeros(max(ids, default=0) + 1, dtype=np.int32)
         for k, v in ids.items():
@@ -683,8 +794,30 @@ class SyntheticDataset(ReplicaDataset):
         return inst, self._class_lut[inst]
 
 
+def _scene_up(gt: dict, path: Path) -> tuple[float, float, float]:
+    """The world up a scene's ``instances.json`` states (the generator's, -y, in older scenes without it)."""
+    up = gt.get("up", (0.0, -1.0, 0.0))
+    try:
+        x, y, z = (float(v) for v in up)
+    except (TypeError, ValueError):
+        raise DataError(f"{path}: 'up' must be a 3-vector, got {up!r}") from None
+    if not np.isfinite([x, y, z]).all() or not np.linalg.norm([x, y, z]) > 0:
+        raise DataError(f"{path}: 'up' must be a finite non-zero 3-vector, got {up!r}")
+    return x, y, z
+
+
 def configured_scene(out_dir: str | Path, s: SyntheticConfig, **kwargs: Any) -> Path:
     """:func:`make_synthetic_scene` with the settings of a config's ``synthetic`` section (keyword arguments
     as there: ``overwrite``, ``device``, ``progress``, ``remedy``)."""
-    args = (s.seed, s.frames, s.width, s.height, s.noise, s.depth_noise, s.pose_noise)
-    return make_synthetic_scene(out_dir, *args, layout=s.layout, **kwargs)
+    return make_synthetic_scene(
+        out_dir,
+        s.seed,
+        s.frames,
+        s.width,
+        s.height,
+        s.noise,
+        s.depth_noise,
+        s.pose_noise,
+        layout=s.layout,
+        **kwargs,
+    )

@@ -2,12 +2,13 @@
 (``timestamp tx ty tz qx qy qz qw``: the optical centre's camera-to-world pose, OpenCV axes) and
 16-bit depth PNGs at 5000 units per metre.
 
-Frames are the rgb images that have a depth image (and, when ``groundtruth.txt`` exists, a pose)
-within ``MAX_DT`` seconds, as in TUM's ``associate.py``: colour and depth paired one to one, closest pairs
-first; the 100 Hz poses by nearest stamp. Intrinsics: ``data.intrinsics`` if given,
-else the published calibration of the freiburg1/2/3 sensor named in the folder name (the innermost
-folder that names one: ``data/freiburg1_runs/rgbd_dataset_freiburg3_office`` is freiburg3), else the
-ROS default (525, 525, 319.5, 239.5) with a warning.
+Frames are the rgb images that have a depth image within ``MAX_DT`` seconds, as in TUM's ``associate.py``:
+colour and depth paired one to one, closest pairs first (the images left unpaired are named in a warning);
+the 100 Hz poses by nearest stamp, when ``groundtruth.txt`` exists: a frame with no pose within ``MAX_DT``
+is named when the dataset opens, an error, or left out under ``data.on_bad_frame: skip``. Intrinsics:
+``data.intrinsics`` if given, else the published calibration of the freiburg1/2/3 sensor named in the
+folder name (the innermost folder that names one: ``data/freiburg1_runs/rgbd_dataset_freiburg3_office`` is
+freiburg3), else the ROS default (525, 525, 319.5, 239.5) with a warning.
 
 Known limitation: TUM's calibration of the freiburg1 and freiburg2 colour cameras has lens distortion
 (k1 = 0.26 and 0.23 ...), which is not corrected: a colour pixel lands up to about 24 px (fr1) / 19 px
@@ -30,6 +31,7 @@ from .base import FrameRecord, K_from_values, RGBDDataset, quat_to_matrix
 log = logging.getLogger(__name__)
 
 MAX_DT = 0.02  # seconds
+LISTED = 5  # images left out that a warning names; the rest are counted
 
 TUM_INTRINSICS = {
     "freiburg1": (517.3, 516.5, 318.6, 255.3),
@@ -103,13 +105,31 @@ def associate(a: np.ndarray, b: np.ndarray, max_dt: float = MAX_DT, one_to_one: 
     return out
 
 
+def _log_unpaired(root: Path, rgb_files: list, depth_files: list, d_idx: np.ndarray) -> None:
+    """Name the colour and depth images that the association paired with none (TUM's streams run at their own
+    rates and drop frames: such images are left out, as the benchmark's associate.py leaves them out)."""
+    used = set(d_idx[d_idx >= 0].tolist())
+    unused = [f for k, (f,) in enumerate(depth_files) if k not in used]
+    lonely = (
+        ("colour images in rgb.txt have no depth image", [f for (f,), j in zip(rgb_files, d_idx) if j < 0]),
+        ("depth images in depth.txt have no colour image", unused),
+    )
+    for what, files in lonely:
+        if files:
+            more = f" and {len(files) - LISTED} more" if len(files) > LISTED else ""
+            log.warning(
+                "%s: %d %s within %s s (paired one to one, closest first); left out: %s%s",
+                root, len(files), what, MAX_DT, ", ".join(files[:LISTED]), more,
+            )  # fmt: skip
+
+
 class TUMDataset(RGBDDataset):
     kind = "tum"
     depth_scale_default = 5000.0
+    up_axis = (0.0, 0.0, 1.0)
+    up_axis_source = "the TUM layout (its motion-capture world is z-up)"
 
-    @staticmethod
-    def detect(root: Path) -> bool:
-        return (root / "rgb.txt").is_file() and (root / "depth.txt").is_file()
+    layout_markers = ("rgb.txt", "depth.txt")
 
     def __init__(self, root: Path, config: DataConfig, segments_dir: Path | None = None) -> None:
         root = Path(root)
@@ -139,20 +159,26 @@ class TUMDataset(RGBDDataset):
             log.info("%s: no groundtruth.txt; frames have no pose (use tracking.poses=odometry)", root)
         records = []
         for i, (ts, (rgb_name,)) in enumerate(zip(t_rgb, rgb_files)):
-            if d_idx[i] < 0 or (poses is not None and g_idx[i] < 0):
+            if d_idx[i] < 0:
                 continue
+            no_pose = poses is not None and g_idx[i] < 0
             records.append(
                 FrameRecord(
                     name=Path(rgb_name).stem,
                     rgb_path=root / rgb_name,
                     depth_path=root / depth_files[d_idx[i]][0],
-                    pose=None if poses is None else poses[g_idx[i]],
+                    pose=None if poses is None or no_pose else poses[g_idx[i]],
                     pose_source=f"{gt_path} (t={ts:.6f})",
                     timestamp=float(ts),
+                    # the base class names these with the frames whose files are missing: an error, or a skip
+                    lacks=f"no pose in groundtruth.txt within {MAX_DT} s of its stamp {ts:.6f}"
+                    if no_pose
+                    else None,
                 )
             )
         if not records:
-            raise DataError(f"{root}: no rgb frame has a depth image (and pose) within {MAX_DT} s")
+            raise DataError(f"{root}: no rgb frame has a depth image within {MAX_DT} s")
+        _log_unpaired(root, rgb_files, depth_files, d_idx)
         K = None
         if config.intrinsics is None:
             sensor = tum_sensor(root)

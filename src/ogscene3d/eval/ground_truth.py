@@ -38,6 +38,10 @@ class GroundTruth:
     source: str = ""
     observed: np.ndarray | None = None  # [M] bool, seen by some frame (synthetic scenes); None = unknown
     has_3d: bool = True  # False: per-frame class maps only (points is empty), 2D scores only
+    instance_rooms: dict[int, int] = field(default_factory=dict)  # instance id -> room id (apartments)
+    rooms: dict[int, dict[str, Any]] = field(
+        default_factory=dict
+    )  # room id -> {"type", "floor", "first_frame"}
 
     def class_index_of_ids(self, ids: Any) -> np.ndarray:
         """Dataset class ids (e.g. a GT class image) -> indices into ``class_names``, -1 if unknown."""

@@ -273,32 +273,15 @@ def segmentation_metrics(
     Raises:
         ValueError: bad shapes/values, or no evaluated class has any counted point.
     """
-    cm = np.asarray(confusion)
-    if cm.ndim != 2 or cm.shape[0] == 0:
-        raise ValueError(f"confusion must be a [C, C+1] or [C, C] matrix, got shape {cm.shape}")
+    cm = _checked_confusion(confusion)
     c = cm.shape[0]
-    if cm.shape[1] == c:
-        cm = np.concatenate([cm, np.zeros((c, 1), dtype=cm.dtype)], axis=1)
-    elif cm.shape[1] != c + 1:
-        raise ValueError(f"confusion must be [C, C+1] or [C, C], got shape {cm.shape}")
-    if not np.all(np.isfinite(cm)) or np.any(cm < 0):
-        raise ValueError("confusion has negative or non-finite entries")
-    cm = cm.astype(np.int64)
     names = list(class_names) if class_names is not None else [f"class_{i}" for i in range(c)]
     if len(names) != c:
         raise ValueError(f"class_names has {len(names)} entries but the confusion matrix has {c} classes")
     if ignored_gt_points not in ("drop", "false_positive"):
         raise ValueError(f"ignored_gt_points must be 'drop' or 'false_positive', got {ignored_gt_points!r}")
     ignore_idx, ignore_unknown = resolve_ignore(ignore, names)
-    void_fp = np.zeros(c, dtype=np.int64)
-    if void_predicted is not None:
-        vp = np.asarray(void_predicted)
-        if vp.shape != (c,) or not np.issubdtype(vp.dtype, np.integer) or np.any(vp < 0):
-            raise ValueError(f"void_predicted must be [{c}] non-negative counts, got {vp.dtype} {vp.shape}")
-        if ignored_gt_points == "false_positive":
-            void_fp = vp.astype(np.int64)
-
-    cm = cm.copy()
+    void_fp = _void_false_positives(void_predicted, c, ignored_gt_points)
     if ignored_gt_points == "drop" and ignore_idx:
         cm[ignore_idx, :] = 0
     tp = np.diag(cm[:, :c]).astype(np.float64)
@@ -338,6 +321,34 @@ def segmentation_metrics(
         macc=float(np.mean(acc[evaluated])),
         overall_acc=float(tp[evaluated].sum() / t.sum()),
     )
+
+
+def _checked_confusion(confusion: Any) -> np.ndarray:
+    """``confusion`` as a new int64 [C, C+1] matrix (a [C, C] one gets an empty *no class* column)."""
+    cm = np.asarray(confusion)
+    if cm.ndim != 2 or cm.shape[0] == 0:
+        raise ValueError(f"confusion must be a [C, C+1] or [C, C] matrix, got shape {cm.shape}")
+    c = cm.shape[0]
+    if cm.shape[1] == c:
+        cm = np.concatenate([cm, np.zeros((c, 1), dtype=cm.dtype)], axis=1)
+    elif cm.shape[1] != c + 1:
+        raise ValueError(f"confusion must be [C, C+1] or [C, C], got shape {cm.shape}")
+    if not np.all(np.isfinite(cm)) or np.any(cm < 0):
+        raise ValueError("confusion has negative or non-finite entries")
+    return cm.astype(np.int64)  # (a copy: the caller zeroes the rows of dropped classes)
+
+
+def _void_false_positives(void_predicted: Any, c: int, ignored_gt_points: str) -> np.ndarray:
+    """Per class, the predictions on void GT points counted as its false positives (none when they are
+    dropped)."""
+    void_fp = np.zeros(c, dtype=np.int64)
+    if void_predicted is not None:
+        vp = np.asarray(void_predicted)
+        if vp.shape != (c,) or not np.issubdtype(vp.dtype, np.integer) or np.any(vp < 0):
+            raise ValueError(f"void_predicted must be [{c}] non-negative counts, got {vp.dtype} {vp.shape}")
+        if ignored_gt_points == "false_positive":
+            void_fp = vp.astype(np.int64)
+    return void_fp
 
 
 def _present_mask(gt_present: Any, num_classes: int) -> np.ndarray:

@@ -27,16 +27,13 @@ def _comma_list(text: str | None) -> tuple[str, ...] | None:
     return None if text is None else tuple(s.strip() for s in text.split(",") if s.strip())
 
 
-def _int_list(flag: str) -> Callable[[str | None], list[int] | None]:
-    def parse(text: str | None) -> list[int] | None:
-        if text is None:
-            return None
-        try:
-            return [int(x) for x in text.split(",") if x.strip()]
-        except ValueError:
-            raise ConfigError(f"{flag}: expected comma-separated integers, got {text!r}") from None
-
-    return parse
+def _int_list(text: str | None) -> list[int] | None:
+    if text is None:
+        return None
+    try:
+        return [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise ValueError(f"expected comma-separated integers, got {text!r}") from None
 
 
 def option(
@@ -51,7 +48,7 @@ def option(
     """An evaluation setting with its command-line option: ``flag``, ``help`` (``%(default)s`` is filled in),
     the argparse keywords (``type``, ``choices``, ``action``, ``metavar``), the option's own default when it
     differs in form from the field's (``cli_default``), and ``from_arg`` turning the parsed value into the
-    field's."""
+    field's (a ValueError it raises becomes a ConfigError naming ``flag``)."""
     metadata = {
         "flag": flag,
         "help": help,
@@ -143,7 +140,7 @@ class EvalOptions:
         "--view-frames",
         "comma-separated frame indices to render instead (positions in the whole sequence: the run's "
         "data.start/stride/max_frames do not apply)",
-        from_arg=_int_list("--view-frames"),
+        from_arg=_int_list,
     )
     held_out: bool = option(
         False,
@@ -160,7 +157,7 @@ class EvalOptions:
         "--mapping-frames",
         "without 3D GT: comma-separated frame indices whose renders the overlap mapping reads (default: the "
         "scored frames; with --held-out as many evenly spread frames the run mapped)",
-        from_arg=_int_list("--mapping-frames"),
+        from_arg=_int_list,
     )
     plots: bool = option(
         True,
@@ -226,7 +223,10 @@ def eval_options_from_args(args: argparse.Namespace) -> EvalOptions:
     for f in dataclasses.fields(EvalOptions):
         value = getattr(args, f"eval_{f.name}")
         convert = f.metadata["from_arg"]
-        values[f.name] = convert(value) if convert is not None else value
+        try:
+            values[f.name] = convert(value) if convert is not None else value
+        except ValueError as e:  # a from_arg's message, named by the option
+            raise ConfigError(f"{f.metadata['flag']}: {e}") from None
     opts = EvalOptions(**values)
     opts.check(cli=True)
     return opts

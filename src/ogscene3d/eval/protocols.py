@@ -112,6 +112,16 @@ def _labels(x: Any, n: int, name: str) -> np.ndarray:
     return a.astype(np.int64, copy=False)
 
 
+def _checked_clouds(
+    pred_points: Any, pred_classes: Any, gt_points: Any, gt_classes: Any
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A protocol's two labelled clouds, checked (ValueError naming the argument) and as float64 / int64."""
+    pp = _points(pred_points, "pred_points")
+    pc = _labels(pred_classes, pp.shape[0], "pred_classes")
+    gp = _points(gt_points, "gt_points")
+    return pp, pc, gp, _labels(gt_classes, gp.shape[0], "gt_classes")
+
+
 def nearest_neighbors(
     ref_points: Any, query_points: Any, k: int = 1, max_distance: float | None = None, workers: int = 1
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -240,10 +250,7 @@ def hovsg_protocol(
             vote; labelled points with class -1 (a label the mapping could not name) vote *no class*.
             None = ``pred_classes >= 0`` (every point without a class is taken as unlabelled).
     """
-    pp = _points(pred_points, "pred_points")
-    pc = _labels(pred_classes, pp.shape[0], "pred_classes")
-    gp = _points(gt_points, "gt_points")
-    gc = _labels(gt_classes, gp.shape[0], "gt_classes")
+    pp, pc, gp, gc = _checked_clouds(pred_points, pred_classes, gt_points, gt_classes)
     labelled = _labelled_mask(pred_labelled, pc)
     voted = hovsg_vote(pp, pc, labelled, gp, len(class_names), k=k, workers=workers)
     cm = confusion_matrix(gc, voted, len(class_names))
@@ -321,10 +328,7 @@ def conceptgraphs_protocol(
     whose nearest GT point is void are skipped. The classes averaged are those with a (non-void)
     point in ``gt_classes``, less the ignored ones.
     """
-    pp = _points(pred_points, "pred_points")
-    pc = _labels(pred_classes, pp.shape[0], "pred_classes")
-    gp = _points(gt_points, "gt_points")
-    gc = _labels(gt_classes, gp.shape[0], "gt_classes")
+    pp, pc, gp, gc = _checked_clouds(pred_points, pred_classes, gt_points, gt_classes)
     if pp.shape[0] == 0:
         raise ValueError("pred_points is empty: the ConceptGraphs protocol counts on predicted points")
     if not (np.isfinite(voxel_size) and voxel_size >= 0):

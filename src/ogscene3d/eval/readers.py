@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import json
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -206,6 +206,8 @@ class _InstanceTable:
     relations: list[tuple[int, str, int]]
     symmetric: list[str] | None
     inverses: list[tuple[str, str]] | None
+    instance_rooms: dict[int, int] = field(default_factory=dict)
+    rooms: dict[int, dict[str, Any]] = field(default_factory=dict)
 
 
 def _read_instances_json(path: Path) -> _InstanceTable:
@@ -246,13 +248,44 @@ def _read_instances_json(path: Path) -> _InstanceTable:
             raise DataError(f"{path}: relation {r!r}: subject/object must be instance ids") from None
     sym = data.get("symmetric_relations")
     inv = data.get("inverse_relations")
+    rooms, instance_rooms = _read_rooms(path, data, entries)
     return _InstanceTable(
         instance_class=inst,
         class_table=table,
         relations=rels,
         symmetric=[str(x) for x in sym] if isinstance(sym, list) else None,
         inverses=[(str(a), str(b)) for a, b in inv.items()] if isinstance(inv, dict) else None,
+        instance_rooms=instance_rooms,
+        rooms=rooms,
     )
+
+
+def _read_rooms(path: Path, data: dict, entries: dict) -> tuple[dict[int, dict[str, Any]], dict[int, int]]:
+    """The rooms of an apartment's instances.json ({} without): {room id: {"type", "floor", "first_frame"}}
+    and {instance id: room id}."""
+    raw = data.get("rooms") or {}
+    if not isinstance(raw, dict):
+        raise DataError(f"{path}: 'rooms' must map room ids to rooms")
+    try:
+        rooms = {
+            int(k): {
+                "type": str(v.get("type", "room")),
+                "floor": int(v.get("floor", 0)),
+                "first_frame": None if v.get("first_frame") is None else int(v["first_frame"]),
+            }
+            for k, v in raw.items()
+        }
+        inst_room = {
+            int(k): int(v["room"])
+            for k, v in entries.items()
+            if isinstance(v, dict) and v.get("room") is not None
+        }
+    except (AttributeError, TypeError, ValueError) as e:
+        raise DataError(f"{path}: malformed rooms ({type(e).__name__}: {e})") from None
+    unknown = sorted({r for r in inst_room.values() if r not in rooms})
+    if unknown:
+        raise DataError(f"{path}: instances are in rooms {unknown}, which are not in 'rooms'")
+    return rooms, inst_room
 
 
 def _find_gt_ply(folder: Path) -> Path:
@@ -349,6 +382,8 @@ def _load_instance_gt(folder: Path, inst_json: Path) -> GroundTruth:
         class_ids=class_ids,
         source=str(folder),
         observed=observed,
+        instance_rooms=table.instance_rooms,
+        rooms=table.rooms,
     )
 
 

@@ -20,10 +20,11 @@ from typing import Any, Literal
 import numpy as np
 import torch
 
+from ..datasets.scannet import SCANNET20_CLASSES
 from ..device import resolve_device
 from ..errors import DataError
 from .graph_metrics import match_nodes_by_overlap, relation_recall
-from .label_mapping import TextEmbedder, majority_overlap_mapping, text_label_mapping
+from .label_mapping import TextEmbedder, TextMatch, majority_overlap_mapping, text_label_mapping
 from .metrics import SegmentationMetrics, warn_unknown_ignore
 from .options import EvalOptions
 from .protocols import (
@@ -31,7 +32,9 @@ from .protocols import (
     label_lookup,
     nearest_neighbors,
 )
+from .queries import queries_block
 from .readers import GroundTruth, RunData, load_ground_truth, read_run
+from .rooms import rooms_block
 from .views import ViewSet, overlap_mapping_2d, prepare_views, score_views
 
 log = logging.getLogger(__name__)
@@ -82,15 +85,7 @@ def build_label_mapping(
     point index, -1 = none) or, without 3D ground truth, ``overlap_2d``: the mapping
     :func:`~ogscene3d.eval.views.overlap_mapping_2d` made from renders, and the frames it used.
     """
-    tags: dict[int, str] = {}
-    heuristic: set[int] = set()
-    if run.graph is not None:
-        for n in run.graph["nodes"]:
-            tag = n.get("tag") or ""
-            if isinstance(tag, str) and tag.strip():
-                tags[int(n["id"])] = tag
-                if n.get("caption_source") == "heuristic":  # ("detector" tags are class names: they count)
-                    heuristic.add(int(n["id"]))
+    tags, heuristic = _node_tags(run.graph)
     labels_present = np.unique(run.labels[run.labels >= 0])
     text = text_label_mapping(tags, gt.class_names, embedder=embedder) if tags else {}
     n_text = sum(1 for k, m in text.items() if m.class_index >= 0 and k not in heuristic)
@@ -99,26 +94,7 @@ def build_label_mapping(
     if method == "text":
         if run.graph is None:
             raise DataError("label mapping 'text' needs graph.json with node tags in the run directory")
-        mapping = {k: m.class_index for k, m in text.items() if m.class_index >= 0}
-        methods: dict[str, int] = {}
-        for m in text.values():
-            methods[m.method] = methods.get(m.method, 0) + 1
-        info = {
-            "method": "text",
-            "description": "graph node tags matched to class names (exact / synonym / head noun"
-            + (" / embedding" if embedder is not None else "")
-            + ")",
-            "num_tags": len(tags),
-            "matches_by_method": methods,
-            "per_label": {
-                str(k): {
-                    "tag": m.tag,
-                    "class": gt.class_names[m.class_index] if m.class_index >= 0 else None,
-                    "method": m.method,
-                }
-                for k, m in sorted(text.items())
-            },
-        }
+        mapping, info = _text_naming(text, len(tags), gt, embedder is not None)
     elif method == "overlap" and assoc is None and overlap_2d is not None:
         mapping = dict(overlap_2d[0])
         info = {
@@ -131,27 +107,77 @@ def build_label_mapping(
     elif method == "overlap":
         if assoc is None:
             raise ValueError("overlap label mapping needs the Gaussian -> GT point association")
-        ok = assoc >= 0
-        if gt.instances is not None and gt.instance_classes:
-            gt_ids = np.where(ok, gt.instances[np.maximum(assoc, 0)], -1)
-            mapping = majority_overlap_mapping(run.labels, gt_ids, id_to_class=gt.instance_classes)
-            desc = "majority overlap with GT instances (class-agnostic), then the instance's class"
-        else:
-            gt_ids = np.where(ok, gt.classes[np.maximum(assoc, 0)], -1)
-            mapping = majority_overlap_mapping(run.labels, gt_ids)
-            desc = "majority overlap with GT classes"
-        mapping = {k: v for k, v in mapping.items() if v >= 0}
-        info = {
-            "method": "overlap",
-            "description": desc + " (uses the ground truth: an oracle naming)",
-            "space": "3d",
-        }
+        mapping, info = _overlap_naming_3d(run, gt, assoc)
     else:
         raise ValueError(f"unknown label mapping method {method!r}; expected auto, text or overlap")
     info["num_scene_labels"] = int(labels_present.size)
     info["num_mapped_labels"] = (
         int(np.isin(labels_present, np.fromiter(mapping, np.int64)).sum()) if mapping else 0
     )
+    return mapping, info
+
+
+def _node_tags(graph: dict[str, Any] | None) -> tuple[dict[int, str], set[int]]:
+    """The tag of each graph node that has one, and the nodes whose tag is the offline heuristic
+    captioner's ("detector" tags are class names: they count)."""
+    tags: dict[int, str] = {}
+    heuristic: set[int] = set()
+    for n in graph["nodes"] if graph is not None else ():
+        tag = n.get("tag") or ""
+        if isinstance(tag, str) and tag.strip():
+            tags[int(n["id"])] = tag
+            if n.get("caption_source") == "heuristic":
+                heuristic.add(int(n["id"]))
+    return tags, heuristic
+
+
+def _text_naming(
+    text: dict[int, TextMatch], num_tags: int, gt: GroundTruth, with_embedder: bool
+) -> tuple[dict[int, int], dict[str, Any]]:
+    """The text matches of the node tags as a mapping, and its description."""
+    mapping = {k: m.class_index for k, m in text.items() if m.class_index >= 0}
+    methods: dict[str, int] = {}
+    for m in text.values():
+        methods[m.method] = methods.get(m.method, 0) + 1
+    info = {
+        "method": "text",
+        "description": "graph node tags matched to class names (exact / synonym / head noun"
+        + (" / embedding" if with_embedder else "")
+        + ")",
+        "num_tags": num_tags,
+        "matches_by_method": methods,
+        "per_label": {
+            str(k): {
+                "tag": m.tag,
+                "class": gt.class_names[m.class_index] if m.class_index >= 0 else None,
+                "method": m.method,
+            }
+            for k, m in sorted(text.items())
+        },
+    }
+    return mapping, info
+
+
+def _overlap_naming_3d(
+    run: RunData, gt: GroundTruth, assoc: np.ndarray
+) -> tuple[dict[int, int], dict[str, Any]]:
+    """Scene labels named by majority overlap with the GT instances (then their class) or classes of the
+    Gaussians' nearest GT points, and its description."""
+    ok = assoc >= 0
+    if gt.instances is not None and gt.instance_classes:
+        gt_ids = np.where(ok, gt.instances[np.maximum(assoc, 0)], -1)
+        mapping = majority_overlap_mapping(run.labels, gt_ids, id_to_class=gt.instance_classes)
+        desc = "majority overlap with GT instances (class-agnostic), then the instance's class"
+    else:
+        gt_ids = np.where(ok, gt.classes[np.maximum(assoc, 0)], -1)
+        mapping = majority_overlap_mapping(run.labels, gt_ids)
+        desc = "majority overlap with GT classes"
+    mapping = {k: v for k, v in mapping.items() if v >= 0}
+    info = {
+        "method": "overlap",
+        "description": desc + " (uses the ground truth: an oracle naming)",
+        "space": "3d",
+    }
     return mapping, info
 
 
@@ -194,60 +220,137 @@ def evaluate_run(
         embedder: text embeddings for the text label mapping (None: words only).
         out_dir: where the side-by-side view PNGs go (None = no pictures).
         device: rendering device.
+
+    Returns:
+        The report (what ``metrics.json`` holds: every block states its protocol, None where it could not
+        be scored, with a note saying why), the metrics per protocol, the label naming and the 2D metrics.
+
+    Raises:
+        DataError: an unreadable run or ground truth, no labelled Gaussian, or nothing that can be scored.
+        ConfigError: options out of their rules.
     """
     opts = (options or EvalOptions()).replace(**settings)
     opts.check()
-    protocols, ignore, mapping, classes, k = opts.protocols, opts.ignore, opts.mapping, opts.classes, opts.k
-    min_opacity, assoc_radius, min_node_iou = opts.min_opacity, opts.assoc_radius, opts.min_node_iou
-    num_views, view_frames, held_out = opts.num_views, opts.view_frames, opts.held_out
-    gt_points, cg_voxel_size, mapping_frames = opts.gt_points, opts.cg_voxel_size, opts.mapping_frames
-    if not opts.plots:
-        out_dir = None
+    out_dir = out_dir if opts.plots else None
     device = resolve_device(device)
-    run = read_run(run_dir)
-    gt = load_ground_truth(gt_path, classes)
-    want_views = num_views > 0 or bool(view_frames)
+    run_data = read_run(run_dir)
+    gt = load_ground_truth(gt_path, opts.classes)
+    want_views = opts.num_views > 0 or bool(opts.view_frames)
     if not gt.has_3d and not want_views:
         raise DataError(
             f"{gt.source}: no 3D ground truth, only per-frame class maps: render views to score (--views N)"
         )
-    # Every protocol is given the Gaussians above min_opacity, unlabelled ones included: ConceptGraphs
-    # counts on predicted points, so an unlabelled Gaussian is a miss there, while HOV-SG's vote
-    # leaves it out (pred_labelled). Label naming and node matching look at labelled Gaussians only.
+    scored, labelled = _scored_gaussians(run_data, opts.min_opacity, run_dir)
+    run = _subset(scored, labelled)
+    notes: list[str] = []
+    mapping_frames = _mapping_frames(gt, gt_path, opts.mapping_frames, notes)
+    # Rendered before the naming: without 3D ground truth the overlap naming reads the renders.
+    rendered = _render_views(run_dir, gt_path, gt, opts, mapping_frames, device, notes)
+    assoc = _associate(run, gt, opts.assoc_radius) if gt.has_3d else None
+    label_to_class, mapping_info = _name_labels(run, gt, opts, assoc, embedder, rendered, notes)
+    _check_ignore(opts.ignore, gt, notes)
+    gt_classes, gt_block = _scored_gt_points(gt, opts.gt_points, notes)
+    semantic = _semantic_3d(scored, labelled, gt, gt_classes, gt_block, label_to_class, opts)
+    graph_block = _graph_block(run, gt, assoc, opts, notes)
+    rooms, queries = _rooms_and_queries(run, scored, gt, assoc, gt_block, opts.min_node_iou, notes)
+    semantic_2d, views = (None, None) if rendered is None else _views_block(
+        rendered, gt, label_to_class, out_dir, opts.ignore, mapping_info.get("space") == "2d"
+    )  # fmt: skip
+    semantic_3d = {p: m.to_dict() for p, m in semantic.items()}
+    report = _report(run_dir, gt, scored, labelled, gt_points=gt_block, label_mapping=mapping_info,
+                     semantic_3d=semantic_3d, semantic_2d=semantic_2d, scene_graph=graph_block,
+                     rooms=rooms, queries=queries, notes=notes)  # fmt: skip
+    return EvalResult(report=report, semantic=semantic, label_to_class=label_to_class, views=views)
+
+
+def _report(
+    run_dir: str | Path, gt: GroundTruth, scored: RunData, labelled: np.ndarray, **blocks: Any
+) -> dict[str, Any]:
+    """``metrics.json``: what was scored, then ``blocks`` in their order (None where not scored)."""
+    return {
+        "version": 1,
+        "run_dir": str(run_dir),
+        "ground_truth": gt.source,
+        "num_gaussians_evaluated": int(scored.means.shape[0]),
+        "num_gaussians_labelled": int(labelled.sum()),
+        "unlabelled_fraction": 1.0 - float(labelled.mean()),
+        "num_gt_points": int(gt.points.shape[0]),
+        "has_3d_ground_truth": gt.has_3d,
+        **blocks,
+    }
+
+
+def _mapping_frames(
+    gt: GroundTruth, gt_path: str | Path, mapping_frames: Sequence[int] | None, notes: list[str]
+) -> Sequence[int] | None:
+    """The frames whose renders the overlap naming reads: only without 3D ground truth (else named in 3D)."""
+    if not gt.has_3d:
+        notes.append(f"no 3D ground truth in {gt_path}: rendered-view (2D) scores only")
+    elif mapping_frames:
+        notes.append("mapping frames not used: with 3D ground truth the overlap mapping is made in 3D")
+        return None
+    return mapping_frames
+
+
+def _scored_gaussians(run: RunData, min_opacity: float, run_dir: str | Path) -> tuple[RunData, np.ndarray]:
+    """The Gaussians every protocol is given (those above ``min_opacity``, unlabelled ones included) and
+    which of them are labelled.
+
+    ConceptGraphs counts on predicted points, so an unlabelled Gaussian is a miss there, while HOV-SG's vote
+    leaves it out (pred_labelled). Label naming and node matching look at labelled Gaussians only."""
     scored = run
     if min_opacity > 0 and run.opacities is not None:
         scored = _subset(run, run.opacities >= min_opacity)
     labelled = scored.labels >= 0
     if not labelled.any():
         raise DataError(f"{run_dir}: no labelled Gaussians to evaluate (min_opacity={min_opacity})")
-    run = _subset(scored, labelled)
-    notes: list[str] = []
-    if not gt.has_3d:
-        notes.append(f"no 3D ground truth in {gt_path}: rendered-view (2D) scores only")
-    elif mapping_frames:
-        notes.append("mapping frames not used: with 3D ground truth the overlap mapping is made in 3D")
-        mapping_frames = None
-    # Rendered before the naming: without 3D ground truth the overlap naming reads the renders.
-    rendered: ViewSet | None = None
-    if want_views:
-        rendered, why = prepare_views(
-            run_dir, gt_path, gt, num_views, view_frames, mapping_frames, device, held_out
+    return scored, labelled
+
+
+def _render_views(
+    run_dir: str | Path,
+    gt_path: str | Path,
+    gt: GroundTruth,
+    opts: EvalOptions,
+    mapping_frames: Sequence[int] | None,
+    device: torch.device,
+    notes: list[str],
+) -> ViewSet | None:
+    """The map rendered at the scored (and naming) frames; None when no views are asked for, or, with a
+    note, when they cannot be rendered (an error when nothing else could be scored)."""
+    if not (opts.num_views > 0 or opts.view_frames):
+        return None
+    rendered, why = prepare_views(
+        run_dir, gt_path, gt, opts.num_views, opts.view_frames, mapping_frames, device, opts.held_out
+    )
+    if rendered is None and not gt.has_3d:
+        raise DataError(f"nothing to score: {why}")
+    if rendered is None:
+        notes.append(f"2D views skipped: {why}")
+    elif rendered.passed_over:
+        notes.append(
+            f"2D views: {rendered.passed_over} frames without a valid pose (lost tracking) were not "
+            "among the evenly spread frames"
         )
-        if rendered is None and not gt.has_3d:
-            raise DataError(f"nothing to score: {why}")
-        if rendered is None:
-            notes.append(f"2D views skipped: {why}")
-        elif rendered.passed_over:
-            notes.append(
-                f"2D views: {rendered.passed_over} frames without a valid pose (lost tracking) were not "
-                "among the evenly spread frames"
-            )
-    assoc = _associate(run, gt, assoc_radius) if gt.has_3d else None
+    return rendered
+
+
+def _name_labels(
+    run: RunData,
+    gt: GroundTruth,
+    opts: EvalOptions,
+    assoc: np.ndarray | None,
+    embedder: TextEmbedder | None,
+    rendered: ViewSet | None,
+    notes: list[str],
+) -> tuple[dict[int, int], dict[str, Any]]:
+    """The GT class of each scene label (:func:`build_label_mapping`; from the renders without 3D ground
+    truth) and the mapping's report, with a note when few Gaussians got a class."""
     overlap_2d = None
     if rendered is not None and not gt.has_3d:
         pick = rendered.mapping_frames
         overlap_2d = (overlap_mapping_2d(rendered.views[i] for i in pick), pick)
-    label_to_class, mapping_info = build_label_mapping(run, gt, mapping, assoc, embedder, overlap_2d)
+    label_to_class, mapping_info = build_label_mapping(run, gt, opts.mapping, assoc, embedder, overlap_2d)
     if rendered is not None and rendered.held_out is not None:
         notes.extend(_held_out_notes(rendered, mapping_info.get("space") == "2d"))
     named = float((label_lookup(label_to_class, run.labels) >= 0).mean())
@@ -258,33 +361,54 @@ def evaluate_run(
             f"'{mapping_info['method']}' label mapping; the others are predictions of no class "
             "(they vote 'no class' under hovsg and are misses under conceptgraphs)"
         )
-    unlabelled_fraction = 1.0 - float(labelled.mean())
-    # A typo in a user's ignore list would otherwise leave that class in the means without a word.
-    if ignore is not None:
-        warn_unknown_ignore(ignore, gt.class_names)
-        # (classes without a 3D point never enter the 3D means; without 3D GT every class may)
-        present = [n for i, n in enumerate(gt.class_names) if not gt.has_3d or np.any(gt.classes == i)]
-        if (why := _hovsg_scannet_mismatch(ignore, present)) is not None:
-            log.warning("%s", why)
-            notes.append(why)
+    return label_to_class, mapping_info
 
-    gt_classes = gt.classes
-    gt_block: dict[str, Any] | None = {"points": "all", "num_scored": int((gt.classes >= 0).sum())}
+
+def _check_ignore(ignore: Sequence[str] | None, gt: GroundTruth, notes: list[str]) -> None:
+    """Warn about names of the ignore list that are no class (a typo would otherwise leave that class in
+    the means without a word) and about a HOV-SG ScanNet preset over other classes."""
+    if ignore is None:
+        return
+    warn_unknown_ignore(ignore, gt.class_names)
+    # (classes without a 3D point never enter the 3D means; without 3D GT every class may)
+    present = [n for i, n in enumerate(gt.class_names) if not gt.has_3d or np.any(gt.classes == i)]
+    if (why := _hovsg_scannet_mismatch(ignore, present)) is not None:
+        log.warning("%s", why)
+        notes.append(why)
+
+
+def _scored_gt_points(
+    gt: GroundTruth, gt_points: str, notes: list[str]
+) -> tuple[np.ndarray, dict[str, Any] | None]:
+    """The GT classes scored (-1 for the points left out) and the report's ``gt_points`` block (None
+    without 3D ground truth)."""
     if not gt.has_3d:
-        gt_block = None
-    elif gt_points == "observed" and gt.observed is not None:
+        return gt.classes, None
+    if gt_points == "observed" and gt.observed is not None:
         gt_classes = np.where(gt.observed, gt.classes, -1)
-        gt_block = {
+        return gt_classes, {
             "points": "observed",
             "num_scored": int((gt_classes >= 0).sum()),
             "observed_fraction": float(gt.observed.mean()) if gt.observed.size else 0.0,
         }
-    elif gt_points == "observed":
+    if gt_points == "observed":
         notes.append("the ground truth does not say which points were observed: every GT point is scored")
+    return gt.classes, {"points": "all", "num_scored": int((gt.classes >= 0).sum())}
 
+
+def _semantic_3d(
+    scored: RunData,
+    labelled: np.ndarray,
+    gt: GroundTruth,
+    gt_classes: np.ndarray,
+    gt_block: dict[str, Any] | None,
+    label_to_class: dict[int, int],
+    opts: EvalOptions,
+) -> dict[str, SegmentationMetrics]:
+    """3D semantic metrics per protocol (none without 3D ground truth)."""
     semantic: dict[str, SegmentationMetrics] = {}
     scored_classes = label_lookup(label_to_class, scored.labels)
-    for p in protocols if gt.has_3d else ():
+    for p in opts.protocols if gt.has_3d else ():
         gt_pts, gt_cls = gt.points, gt_classes
         if p == "hovsg" and gt_block is not None and gt_block["points"] == "observed":
             # HOV-SG counts predictions on void GT points as false positives: unobserved points leave
@@ -297,69 +421,101 @@ def evaluate_run(
             gt_cls,
             gt.class_names,
             protocol=p,  # type: ignore[arg-type]
-            ignore=ignore,
-            k=k,
+            ignore=opts.ignore,
+            k=opts.k,
             pred_labelled=labelled,
             pred_labels=scored.labels,
-            voxel_size=cg_voxel_size,
+            voxel_size=opts.cg_voxel_size,
         )
+    return semantic
 
-    graph_block: dict[str, Any] | None = None
+
+def _graph_block(
+    run: RunData, gt: GroundTruth, assoc: np.ndarray | None, opts: EvalOptions, notes: list[str]
+) -> dict[str, Any] | None:
+    """Relation recall of the run's scene graph, nodes matched to GT instances in 3D; None (with a note
+    saying why, where one helps) when it cannot be scored."""
     if not gt.has_3d:
-        pass  # nodes are matched to GT instances in 3D
-    elif not gt.relations:
+        return None  # nodes are matched to GT instances in 3D
+    if not gt.relations:
         notes.append("scene graph not scored: the ground truth has no relation triplets")
-    elif run.graph is None:
+        return None
+    if run.graph is None:
         notes.append("scene graph not scored: the run directory has no graph.json")
-    elif gt.instances is None:
+        return None
+    if gt.instances is None:
         notes.append("scene graph not scored: the ground truth has no instance ids")
+        return None
+    assert assoc is not None  # (there is 3D ground truth)
+    gt_inst = np.where(assoc >= 0, gt.instances[np.maximum(assoc, 0)], -1)
+    # Only labels that are graph nodes compete for GT instances.
+    node_ids = np.array(sorted({int(n["id"]) for n in run.graph["nodes"]}), dtype=np.int64)
+    node_labels = np.where(np.isin(run.labels, node_ids), run.labels, -1)
+    matches = match_nodes_by_overlap(node_labels, gt_inst, min_iou=opts.min_node_iou)
+    conventions: dict[str, Any] = {}
+    if gt.symmetric_relations is not None:
+        conventions["symmetric"] = gt.symmetric_relations
+    if gt.inverse_relations is not None:
+        conventions["inverses"] = gt.inverse_relations
+    rr = relation_recall(
+        gt.relations,
+        run.graph["edges"],
+        matches,
+        **conventions,
+        protocol=f"relation recall (nodes matched to GT instances by point IoU >= {opts.min_node_iou}, "
+        f"Gaussians paired with their nearest GT point within {opts.assoc_radius} m; "
+        "unmatched endpoints are misses)",
+    )
+    return rr.to_dict()
+
+
+def _rooms_and_queries(
+    run: RunData,
+    scored: RunData,
+    gt: GroundTruth,
+    assoc: np.ndarray | None,
+    gt_block: dict[str, Any] | None,
+    min_node_iou: float,
+    notes: list[str],
+) -> tuple[dict[str, Any] | None, dict[str, Any] | None]:
+    """Room segmentation (when the GT has rooms) and query accuracy (when it has instances), each None when
+    it cannot be scored (a note says why)."""
+    if not gt.has_3d or run.graph is None or gt.instances is None or assoc is None:
+        return None, None
+    observed = gt.observed if gt_block is not None and gt_block["points"] == "observed" else None
+    keep = observed if observed is not None else np.ones(len(gt.points), bool)
+    rooms = None
+    if not gt.rooms:
+        notes.append("rooms not scored: the ground truth has no rooms (an apartment's has)")
+    elif "rooms" not in run.graph:
+        notes.append(
+            "rooms not scored: graph.json has no rooms (graph.rooms.enabled was off, or an older run)"
+        )
     else:
-        assert assoc is not None  # (there is 3D ground truth)
-        gt_inst = np.where(assoc >= 0, gt.instances[np.maximum(assoc, 0)], -1)
-        # Only labels that are graph nodes compete for GT instances.
-        node_ids = np.array(sorted({int(n["id"]) for n in run.graph["nodes"]}), dtype=np.int64)
-        node_labels = np.where(np.isin(run.labels, node_ids), run.labels, -1)
-        matches = match_nodes_by_overlap(node_labels, gt_inst, min_iou=min_node_iou)
-        conventions: dict[str, Any] = {}
-        if gt.symmetric_relations is not None:
-            conventions["symmetric"] = gt.symmetric_relations
-        if gt.inverse_relations is not None:
-            conventions["inverses"] = gt.inverse_relations
-        rr = relation_recall(
-            gt.relations,
-            run.graph["edges"],
-            matches,
-            **conventions,
-            protocol=f"relation recall (nodes matched to GT instances by point IoU >= {min_node_iou}, "
-            f"Gaussians paired with their nearest GT point within {assoc_radius} m; "
-            "unmatched endpoints are misses)",
-        )
-        graph_block = rr.to_dict()
-
-    semantic_2d: dict[str, Any] | None = None
-    views: SegmentationMetrics | None = None
-    if rendered is not None:
-        semantic_2d, views = _views_block(
-            rendered, gt, label_to_class, out_dir, ignore, mapping_info.get("space") == "2d"
-        )
-
-    report: dict[str, Any] = {
-        "version": 1,
-        "run_dir": str(run_dir),
-        "ground_truth": gt.source,
-        "num_gaussians_evaluated": int(scored.means.shape[0]),
-        "num_gaussians_labelled": int(labelled.sum()),
-        "unlabelled_fraction": unlabelled_fraction,
-        "num_gt_points": int(gt.points.shape[0]),
-        "has_3d_ground_truth": gt.has_3d,
-        "gt_points": gt_block,
-        "label_mapping": mapping_info,
-        "semantic_3d": {p: m.to_dict() for p, m in semantic.items()},
-        "semantic_2d": semantic_2d,
-        "scene_graph": graph_block,
-        "notes": notes,
-    }
-    return EvalResult(report=report, semantic=semantic, label_to_class=label_to_class, views=views)
+        # every surface point of a room, seen or not, as HOV-SG's ground-truth room is its whole region: the
+        # floor under the camera's path or behind furniture is the room's, and its outline may hold it
+        lut = gt.instance_rooms
+        point_rooms = np.array([lut.get(int(i), -1) for i in gt.instances], dtype=np.int64)
+        entered = {k: v.get("first_frame") for k, v in gt.rooms.items()}
+        try:
+            types = {k: str(v["type"]) for k, v in gt.rooms.items()}
+            rooms = rooms_block(run.graph, scored.means, gt.points, point_rooms, entered, types)
+        except DataError as e:
+            notes.append(f"rooms not scored: {e}")
+    gt_inst = np.where(assoc >= 0, gt.instances[np.maximum(assoc, 0)], -1)
+    names = {i: gt.class_names[c] for i, c in gt.instance_classes.items()}
+    present = {int(i) for i in np.unique(gt.instances[keep]) if i >= 0}
+    room_types = {k: str(v["type"]) for k, v in gt.rooms.items()}
+    symmetric = gt.symmetric_relations if gt.symmetric_relations is not None else ("next to",)
+    try:
+        queries = queries_block(
+            run.graph, run.labels, gt_inst, names, gt.relations, gt.instance_rooms, room_types, present,
+            min_node_iou, symmetric,
+        )  # fmt: skip
+    except DataError as e:  # a graph.json with too little in it to answer queries (no node geometry)
+        notes.append(f"queries not scored: {e}")
+        queries = None
+    return rooms, queries
 
 
 def _hovsg_scannet_mismatch(ignore: Iterable[str], class_names: Sequence[str]) -> str | None:
@@ -367,8 +523,6 @@ def _hovsg_scannet_mismatch(ignore: Iterable[str], class_names: Sequence[str]) -
 
     HOV-SG scores ScanNet's 20 benchmark classes (plus a background); over the 40 NYU40 classes of a
     ScanNet labels PLY the same ignore list leaves ceiling, otherprop, pillow, ... in the means."""
-    from ..datasets.scannet import SCANNET20_CLASSES
-
     if not any(str(i).strip().lower() == "preset:hovsg-scannet" for i in ignore):
         return None
     allowed = {n.lower() for n in SCANNET20_CLASSES.values()} | {"background", "furniture"}

@@ -27,7 +27,11 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import DataError
+from ..config import DataConfig
+from ..datasets import detect_kind, open_dataset
+from ..datasets.identity import mapped_intrinsics, matching_pixel_centers
+from ..datasets.semantic_nerf import is_sequence, sequence_dirs
+from ..errors import ConfigError, DataError
 from ..runs import RunFolder, read_config, recorded_data_path
 from .held_out import HeldOut, check_held_out, naming_frames, pick_frames, pick_held_out, run_frames
 from .label_mapping import majority_overlap_mapping
@@ -79,15 +83,10 @@ def open_view_dataset(scene_dir: str | Path, run_dir: str | Path | None = None) 
     """Every frame of the sequence in ``scene_dir``, read with the run's data settings (layout, intrinsics,
     depth format) when ``run_dir`` mapped that folder, so that renders use the camera the mapper used; the
     run's frame selection (start, stride, max_frames) is not applied."""
-    from ..config import DataConfig
-    from ..datasets import open_dataset
-
     cfg = DataConfig()
     if run_dir is not None:
         recorded = recorded_data_path(run_dir)
         if recorded is not None and same_sequence(recorded, scene_dir):
-            from ..errors import ConfigError
-
             try:
                 data = read_config(run_dir).data
                 # eval renders the map and reads no segments (a frame the run did not map may have none)
@@ -97,8 +96,6 @@ def open_view_dataset(scene_dir: str | Path, run_dir: str | Path | None = None) 
     cfg.path = str(scene_dir)
     ds = open_dataset(config=cfg)
     if run_dir is not None:
-        from ..datasets.identity import mapped_intrinsics, matching_pixel_centers
-
         mapped_K = mapped_intrinsics(RunFolder(run_dir).map)
         if mapped_K is not None and not np.allclose(mapped_K, np.asarray(ds.K).reshape(-1), atol=1e-3):
             setting = matching_pixel_centers(ds, mapped_K)
@@ -118,9 +115,6 @@ def open_view_dataset(scene_dir: str | Path, run_dir: str | Path | None = None) 
 def _sequence_folder(path: str | Path) -> Path:
     """The folder whose frames ``open_dataset(path)`` reads: ``path``, the one scene a parent folder holds, or
     a Semantic-NeRF scene folder's first ``Sequence_N/``."""
-    from ..datasets import detect_kind
-    from ..datasets.semantic_nerf import is_sequence, sequence_dirs
-
     try:
         kind, root = detect_kind(path)
     except DataError:
@@ -247,8 +241,6 @@ def prepare_views(
         DataError: a frame is out of range, or a chosen frame has no class map or no pose; with
             ``held_out``, the run mapped every frame or one of ``frames``.
     """
-    from ..datasets import detect_kind
-
     if gt.class_ids is None:
         return None, "the ground truth has no class-id table to read per-frame class maps with"
     gt_path = Path(gt_path)

@@ -1,4 +1,5 @@
-"""ogscene3d.graph: the progressive 3D scene graph (paper Sec. III-D).
+"""ogscene3d.graph: the progressive 3D scene graph (paper Sec. III-D), with its rooms and storeys
+(:mod:`.rooms`) and queries over objects, relations and rooms (:mod:`.query`).
 
 The mapper uses :class:`SceneGraph` only (``observe`` every keyframe, ``update`` when ``is_due``,
 ``finalize`` at the end); captioners, relation predictors and node-confidence scorers are pluggable
@@ -29,6 +30,7 @@ __getattr__, __dir__ = lazy_exports(
         ],
         ".geometry": ["directed_ratios", "proximate_points", "proximity_ratios"],
         ".openai_client": ["ChatClient", "EndpointUnreachable"],
+        ".query": ["QueryAnswer", "QueryHit", "parse_query"],
         ".relations": [
             "RELATIONS",
             "GeometricRelations",
@@ -39,6 +41,7 @@ __getattr__, __dir__ = lazy_exports(
             "edge_prompt",
             "normalize_relation",
         ],
+        ".rooms": ["Floor", "RoomMap", "RoomNode", "assign_rooms", "segment_rooms"],
         ".scenegraph": ["SceneGraph"],
         ".types": [
             "CaptionRequest",
@@ -64,6 +67,7 @@ __all__ = [
     "Crop",
     "Description",
     "EndpointUnreachable",
+    "Floor",
     "GeometricRelations",
     "GroundTruthCaptioner",
     "HeuristicCaptioner",
@@ -72,18 +76,25 @@ __all__ = [
     "NodeConfidence",
     "ObservationSet",
     "OpenAICaptioner",
+    "QueryAnswer",
+    "QueryHit",
     "Relation",
     "RelationPredictor",
+    "RoomMap",
+    "RoomNode",
     "SceneContext",
     "SceneEdge",
     "SceneGraph",
     "SceneNode",
+    "assign_rooms",
     "build_captioner",
     "build_confidence",
     "build_relations",
     "directed_ratios",
     "edge_prompt",
     "normalize_relation",
+    "parse_query",
     "proximate_points",
     "proximity_ratios",
+    "segment_rooms",
 ]

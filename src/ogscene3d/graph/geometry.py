@@ -301,81 +301,106 @@ def proximate_points(
     if n_nodes < 2:
         return empty
     clouds = [np.asarray(p, dtype=np.float64).reshape(-1, 3) for p in points]
-    sizes = np.array([len(p) for p in clouds], dtype=np.int64)
-    if sizes.sum() == 0:
+    if sum(len(p) for p in clouds) == 0:
         return empty
-    P = np.concatenate(clouds, axis=0)
-    owner = np.repeat(np.arange(n_nodes, dtype=np.int64), sizes)
-    cells = np.floor((P - P.min(axis=0)) / theta).astype(np.int64) + 1  # +1: room for the -1 offset
-    dims = cells.max(axis=0) + 2
-    if float(np.prod(dims.astype(np.float64))) * n_nodes > 2.0**62:
-        raise ValueError("proximity_ratios: scene extent / theta too large for the hash grid")
-    ckey = (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
-    okey = ckey * n_nodes + owner  # sort by cell, then by node inside a cell
-    order = np.argsort(okey, kind="stable")
-    sokey = okey[order]
-    ukeys, starts, counts = np.unique(ckey[order], return_index=True, return_counts=True)
-    ends = starts + counts
-    # per occupied cell: smallest / largest node id in it (equal: a single-node cell)
-    omin = owner[order][starts]
-    omax = owner[order][ends - 1]
-    offsets = np.array([(dx, dy, dz) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1)])
-    off_keys = (offsets[:, 0] * dims[1] + offsets[:, 1]) * dims[2] + offsets[:, 2]
-
-    # Cell-level filter: a single-node cell whose occupied neighbours hold only that node is "pure".
-    mixed = omin != omax
-    for dk in off_keys:
-        pos = np.minimum(np.searchsorted(ukeys, ukeys + dk), len(ukeys) - 1)
-        hit = ukeys[pos] == ukeys + dk
-        mixed |= hit & ((omin[pos] != omin) | (omax[pos] != omin))
-    point_cell = np.repeat(np.arange(len(ukeys)), counts)  # in sorted order
-    cand_sorted = mixed[point_cell]
+    g = _HashGrid.build(clouds, theta)
     qsel = np.ones(n_nodes, dtype=bool)
     if query is not None:
         qsel[:] = False
         qsel[np.asarray(query, dtype=np.int64)] = True
-        cand_sorted &= qsel[owner[order]]
-    qidx = order[cand_sorted]  # original indices of the query points
+    qidx = g.order[g.boundary_points() & qsel[g.owner[g.order]]]  # original indices of the query points
     if len(qidx) == 0:
         return empty
-    theta2 = np.float32(theta * theta)
-    # Distances in float32 relative to the grid origin (plenty for cm-scale thresholds, half the traffic).
-    P32 = (P - P.min(axis=0)).astype(np.float32)
-    # With every node queried, each close pair is met from both sides: record only the query side then.
-    qnode = qsel
     found: list[np.ndarray] = []  # encoded (point index, other node), deduplicated per chunk
-    step = max(1, int(max_pairs_per_chunk // max(1.0, 27.0 * float(counts.mean()))))
+    step = max(1, int(max_pairs_per_chunk // max(1.0, 27.0 * float(g.counts.mean()))))
     for c0 in range(0, len(qidx), step):
-        q = qidx[c0 : c0 + step]
+        chunk = g.close_pairs(qidx[c0 : c0 + step], qsel, theta)
+        if chunk.size:
+            found.append(chunk)
+    if not found:
+        return empty
+    codes = np.unique(np.concatenate(found))
+    return np.divmod(codes, n_nodes)
+
+
+@dataclass
+class _HashGrid:
+    """The points of all nodes in a uniform hash grid (cells of ``theta``), sorted by cell, then node."""
+
+    n_nodes: int
+    owner: np.ndarray  # node of each point
+    ckey: np.ndarray  # cell key of each point
+    order: np.ndarray  # point indices sorted by (cell, node)
+    sokey: np.ndarray  # sorted (cell, node) keys
+    ukeys: np.ndarray  # occupied cells, sorted
+    starts: np.ndarray  # each occupied cell's first position in ``order``
+    counts: np.ndarray  # points per occupied cell
+    off_keys: np.ndarray  # key offsets of the 27 neighbouring cells
+    P32: np.ndarray  # float32 points relative to the grid origin (plenty for cm-scale thresholds)
+
+    @classmethod
+    def build(cls, clouds: list[np.ndarray], theta: float) -> _HashGrid:
+        n_nodes = len(clouds)
+        sizes = np.array([len(p) for p in clouds], dtype=np.int64)
+        P = np.concatenate(clouds, axis=0)
+        owner = np.repeat(np.arange(n_nodes, dtype=np.int64), sizes)
+        cells = np.floor((P - P.min(axis=0)) / theta).astype(np.int64) + 1  # +1: room for the -1 offset
+        dims = cells.max(axis=0) + 2
+        if float(np.prod(dims.astype(np.float64))) * n_nodes > 2.0**62:
+            raise ValueError("proximity_ratios: scene extent / theta too large for the hash grid")
+        ckey = (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
+        okey = ckey * n_nodes + owner  # sort by cell, then by node inside a cell
+        order = np.argsort(okey, kind="stable")
+        ukeys, starts, counts = np.unique(ckey[order], return_index=True, return_counts=True)
+        offsets = np.array([(dx, dy, dz) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1)])
+        off_keys = (offsets[:, 0] * dims[1] + offsets[:, 1]) * dims[2] + offsets[:, 2]
+        P32 = (P - P.min(axis=0)).astype(np.float32)
+        return cls(n_nodes, owner, ckey, order, okey[order], ukeys, starts, counts, off_keys, P32)
+
+    def boundary_points(self) -> np.ndarray:
+        """Per point in sorted order: whether its cell or a neighbouring one holds another node's points
+        (a single-node cell whose occupied neighbours hold only that node is "pure": skipped)."""
+        ends = self.starts + self.counts
+        omin = self.owner[self.order][self.starts]  # smallest / largest node id in each occupied cell
+        omax = self.owner[self.order][ends - 1]
+        mixed = omin != omax
+        for dk in self.off_keys:
+            pos = np.minimum(np.searchsorted(self.ukeys, self.ukeys + dk), len(self.ukeys) - 1)
+            hit = self.ukeys[pos] == self.ukeys + dk
+            mixed |= hit & ((omin[pos] != omin) | (omax[pos] != omin))
+        return mixed[np.repeat(np.arange(len(self.ukeys)), self.counts)]
+
+    def close_pairs(self, q: np.ndarray, qnode: np.ndarray, theta: float) -> np.ndarray:
+        """Encoded (point, other node) pairs, unique, of the query points ``q`` with a point of another node
+        within ``theta``. With every node queried (``qnode``), each close pair is met from both sides: only
+        the query side is recorded then."""
+        n_nodes, owner, ukeys = self.n_nodes, self.owner, self.ukeys
+        theta2 = np.float32(theta * theta)
+        ends = self.starts + self.counts
         qo = owner[q]
-        chunk_found: list[np.ndarray] = []
-        for dk in off_keys:
-            nkey = ckey[q] + dk
+        found: list[np.ndarray] = []
+        for dk in self.off_keys:
+            nkey = self.ckey[q] + dk
             pos = np.minimum(np.searchsorted(ukeys, nkey), len(ukeys) - 1)
             hit = ukeys[pos] == nkey
             if not hit.any():
                 continue
             qh, qoh, ph = q[hit], qo[hit], pos[hit]
             # the query node's own points form one sub-range of the cell: skip it
-            own_lo = np.searchsorted(sokey, nkey[hit] * n_nodes + qoh, side="left")
-            own_hi = np.searchsorted(sokey, nkey[hit] * n_nodes + qoh, side="right")
-            for begin, count in ((starts[ph], own_lo - starts[ph]), (own_hi, ends[ph] - own_hi)):
+            own_lo = np.searchsorted(self.sokey, nkey[hit] * n_nodes + qoh, side="left")
+            own_hi = np.searchsorted(self.sokey, nkey[hit] * n_nodes + qoh, side="right")
+            for begin, count in ((self.starts[ph], own_lo - self.starts[ph]), (own_hi, ends[ph] - own_hi)):
                 if not count.any():
                     continue
                 which, spos = _expand_ranges(begin, count)
-                a, b = qh[which], order[spos]
-                d = P32[a] - P32[b]
+                a, b = qh[which], self.order[spos]
+                d = self.P32[a] - self.P32[b]
                 close = np.einsum("ij,ij->i", d, d) < theta2
                 if close.any():
                     a, b = a[close], b[close]
                     ob = owner[b]
-                    chunk_found.append(a * n_nodes + ob)  # the query point is near b's node
+                    found.append(a * n_nodes + ob)  # the query point is near b's node
                     back = ~qnode[ob]  # b's node is not queried itself: record b near a's node here
                     if back.any():
-                        chunk_found.append(b[back] * n_nodes + owner[a[back]])
-        if chunk_found:
-            found.append(np.unique(np.concatenate(chunk_found)))
-    if not found:
-        return empty
-    codes = np.unique(np.concatenate(found))
-    return np.divmod(codes, n_nodes)
+                        found.append(b[back] * n_nodes + owner[a[back]])
+        return np.unique(np.concatenate(found)) if found else np.zeros(0, np.int64)

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from ..config import EndpointConfig
 from ..errors import ModelError
 
 log = logging.getLogger(__name__)
@@ -224,10 +225,10 @@ class ChatClient:
         api_key_env: str = "OPENAI_API_KEY",
         timeout_s: float = 30.0,
         max_retries: int = 2,
-        model_setting: str = "graph.captioner.model / graph.relations.model",
+        model_setting: str = "graph.endpoint.model",
     ) -> None:
-        """``model_setting`` names the config key that gives ``model``, for the error when it is empty (the
-        captioner, the relations LLM and the query embeddings each read their own)."""
+        """``model_setting`` names the config key that gives ``model``, for the error when it is empty (each
+        component can name its own model beside the endpoint's)."""
         if not base_url or not re.match(r"^https?://", base_url):
             raise ModelError(
                 f"OpenAI-compatible endpoint: base_url must start with http:// or https://, got {base_url!r}"
@@ -250,6 +251,24 @@ class ChatClient:
         self._calls_lock = threading.Lock()
         self._sdk_client: Any = None
         self._sdk_lock = threading.Lock()
+
+    @classmethod
+    def from_config(cls, endpoint: EndpointConfig, model: str = "", model_setting: str = "") -> ChatClient:
+        """A client of the endpoint ``endpoint`` (``graph.endpoint``) that asks for ``model``, a component's
+        own (``""``: the endpoint's).
+
+        Args:
+            endpoint: base URL, default model, API key variable, timeout and retries.
+            model: the model the component names in its own section; ``""`` for ``endpoint.model``.
+            model_setting: the key that gave ``model`` (e.g. ``"graph.captioner.model"``), named in the error
+                when neither gives a model.
+
+        Returns:
+            The client (no request made yet).
+        """
+        setting = f"{model_setting} or graph.endpoint.model" if model_setting else "graph.endpoint.model"
+        return cls(endpoint.base_url, model or endpoint.model, endpoint.api_key_env, endpoint.timeout_s,
+                   endpoint.max_retries, model_setting=setting)  # fmt: skip
 
     def __repr__(self) -> str:  # never shows the key (it is not stored anyway)
         return (

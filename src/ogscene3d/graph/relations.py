@@ -31,7 +31,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from ..config import RelationsConfig, check_section
+from ..config import EndpointConfig, RelationsConfig, check_section
+from ..errors import ConfigError
 from .geometry import Shape, unit_up
 from .openai_client import ChatClient, extract_json
 from .types import SceneNode
@@ -149,6 +150,9 @@ for _w, _rel in {
     "covering": "under",
 }.items():
     _SYNONYMS[_w] = (_rel, True)
+
+#: Every phrase :func:`normalize_relation` knows, longest first (queries look for them in their text).
+RELATION_PHRASES: tuple[str, ...] = tuple(sorted(_SYNONYMS, key=lambda w: (-len(w.split()), w)))
 
 
 def normalize_relation(text: str) -> tuple[str, bool] | None:
@@ -499,14 +503,11 @@ class LLMRelations:
         self.max_tokens = max_tokens
 
     @classmethod
-    def from_config(cls, config: RelationsConfig, up: Sequence[float]) -> LLMRelations:
-        client = ChatClient(
-            config.base_url,
-            config.model,
-            config.api_key_env,
-            config.timeout_s,
-            config.max_retries,
-        )
+    def from_config(
+        cls, config: RelationsConfig, up: Sequence[float], endpoint: EndpointConfig | None = None
+    ) -> LLMRelations:
+        """From ``graph.relations`` and the endpoint it calls (``graph.endpoint``; None: the defaults)."""
+        client = ChatClient.from_config(endpoint or EndpointConfig(), config.model, "graph.relations.model")
         return cls(client, GeometricRelations(config, up), up, config.max_tokens)
 
     def predict(self, pairs: Sequence[tuple[SceneNode, SceneNode]]) -> list[Relation]:
@@ -535,12 +536,14 @@ class LLMRelations:
         return [answers[k] for k in range(len(pairs))]
 
 
-def build_relations(config: RelationsConfig, up: Sequence[float]) -> RelationPredictor:
-    """The predictor selected by ``graph.relations.kind`` (geometric | llm)."""
+def build_relations(
+    config: RelationsConfig, up: Sequence[float], endpoint: EndpointConfig | None = None
+) -> RelationPredictor:
+    """The predictor selected by ``graph.relations.kind`` (geometric | llm); ``endpoint``: the one ``llm``
+    calls (``graph.endpoint``; None: the defaults)."""
     if config.kind == "geometric":
         return GeometricRelations(config, up)
     if config.kind == "llm":
-        return LLMRelations.from_config(config, up)
-    from ..errors import ConfigError
+        return LLMRelations.from_config(config, up, endpoint)
 
     raise ConfigError(f"graph.relations.kind must be 'geometric' or 'llm', got {config.kind!r}")

@@ -50,10 +50,18 @@ from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame
 from ..runs import RunFolder
 from ..runs.graph_json import read_graph_json, write_graph_json
+from ..up_axis import up_vector
 from .captioner import Captioner, GroundTruthCaptioner, HeuristicCaptioner, build_captioner
 from .confidence import MeanConfidence, NodeConfidence, build_confidence
 from .geometry import directed_ratios, proximate_points, unit_up
+from .query import LLMQuery, QueryAnswer, QueryContext, QueryHit, answer_offline
 from .relations import GeometricRelations, RelationPredictor, build_relations
+from .rooms import Floor, RoomMap, RoomNode, build_room_typer
+from .terms import SYNONYM_GROUPS, text_score
+
+__all__ = ["SYNONYM_GROUPS", "SceneGraph"]  # SYNONYM_GROUPS: the offline synonyms, from .terms
+from .confidence import ClipConfidence
+from .openai_client import ChatClient
 from .types import (
     OFFLINE_SOURCES,
     VLM_CAPTION_SOURCES,
@@ -69,33 +77,6 @@ log = logging.getLogger(__name__)
 
 GRAPH_JSON_VERSION = 1
 
-#: Offline query synonyms: a query matching any word of a group also matches the others.
-SYNONYM_GROUPS: tuple[frozenset[str], ...] = tuple(
-    frozenset(g)
-    for g in (
-        {"sofa", "couch", "settee", "loveseat"},
-        {"tv", "television", "monitor", "screen", "display"},
-        {"cup", "mug"},
-        {"trash can", "trash bin", "garbage can", "bin", "wastebasket", "waste bin", "dustbin"},
-        {"rug", "carpet", "mat"},
-        {"picture", "painting", "photo", "photograph", "poster", "artwork", "picture frame"},
-        {"cabinet", "cupboard", "dresser", "sideboard", "wardrobe"},
-        {"shelf", "shelves", "bookshelf", "bookcase", "shelving"},
-        {"table", "desk"},
-        {"lamp", "light", "light fixture"},
-        {"chair", "seat", "stool", "armchair"},
-        {"plant", "potted plant", "houseplant", "flower pot"},
-        {"pillow", "cushion"},
-        {"blinds", "curtain", "drape", "window shade"},
-        {"laptop", "computer", "notebook computer"},
-        {"phone", "telephone", "cellphone", "mobile phone"},
-        {"refrigerator", "fridge"},
-        {"sink", "basin", "washbasin"},
-        {"floor", "ground", "flooring"},
-        {"book", "books"},
-    )
-)
-
 
 def _to_numpy(x: Any, name: str) -> np.ndarray:
     if hasattr(x, "detach"):  # torch tensor, on any device
@@ -103,13 +84,54 @@ def _to_numpy(x: Any, name: str) -> np.ndarray:
     return np.array(x, copy=True)
 
 
+def _label_regions(
+    lm: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The labelled regions of a label map ``lm`` [H, W] (-1: none): the labelled pixels (flat indices),
+    the labels present (sorted), each labelled pixel's index into them, each label's area in pixels and its
+    bounding box [L, 4] (y0, y1, x0, x1; ends exclusive). None when no pixel is labelled."""
+    H, W = lm.shape
+    flat = lm.reshape(-1)
+    pix = np.nonzero(flat >= 0)[0]
+    if len(pix) == 0:
+        return None
+    vals = flat[pix].astype(np.int64)
+    top = int(vals.max())
+    if top < 4 * len(flat) + 1024:  # labels small enough for counting (the usual case): no sort
+        counts = np.bincount(vals, minlength=top + 1)
+        labs = np.nonzero(counts)[0]
+        area = counts[labs]
+        lut = np.zeros(top + 1, np.int64)
+        lut[labs] = np.arange(len(labs))
+        inv = lut[vals]
+    else:
+        labs, inv, area = np.unique(vals, return_inverse=True, return_counts=True)
+    ys, xs = np.divmod(pix, W)
+    # Bounding boxes from per-(label, row) and per-(label, column) occupancy: two bincounts.
+    L = len(labs)
+    rows = np.bincount(inv * H + ys, minlength=L * H).reshape(L, H) > 0
+    cols = np.bincount(inv * W + xs, minlength=L * W).reshape(L, W) > 0
+    r0, r1 = rows.argmax(axis=1), H - rows[:, ::-1].argmax(axis=1)
+    c0, c1 = cols.argmax(axis=1), W - cols[:, ::-1].argmax(axis=1)
+    return pix, labs, inv, area, np.stack([r0, r1, c0, c1], axis=1)
+
+
 class SceneGraph:
     """Nodes (one per scene label with at least ``min_gaussians`` Gaussians) and directed relation edges.
 
-    ``captioner``, ``relations`` and ``node_confidence`` default to what ``config`` selects
-    (``graph.captioner.kind``, ``graph.relations.kind``, ``graph.confidence.kind``); ``label_names`` /
-    ``class_names`` feed the ground-truth captioner. ``out_path``: graph.json rewritten (atomically) after
-    every update. Thread-safe: ``observe`` may run while a background update is in flight.
+    Thread-safe: ``observe`` may run while a background update is in flight.
+
+    Args:
+        config: the ``graph`` section (its defaults when None).
+        captioner: node captions; None: what ``graph.captioner.kind`` selects.
+        relations: edge relations; None: what ``graph.relations.kind`` selects.
+        node_confidence: node confidence; None: what ``graph.confidence.kind`` selects.
+        out_path: graph.json, rewritten (atomically) after every update; None: not written.
+        label_names: scene label -> name, for the ground-truth captioner.
+        class_names: class id -> name, for the ground-truth captioner.
+
+    Raises:
+        ConfigError: settings of ``config`` out of their rules.
     """
 
     def __init__(
@@ -125,7 +147,8 @@ class SceneGraph:
         self.config = config or GraphConfig()
         c = self.config
         try:
-            self.up = unit_up(c.up_axis)
+            # graph.up_axis auto: provisional until the mapper chooses it (set_up_axis) from the cameras
+            self.up = unit_up(up_vector(c.up_axis))
         except ValueError as e:
             raise ConfigError(str(e)) from None
         for key in (
@@ -148,11 +171,13 @@ class SceneGraph:
                 f"graph: need support_band > 0 and 0 < support_ratio <= 1 "
                 f"(got {c.support_band}, {c.support_ratio})"
             )
-        self.captioner: Captioner = captioner or build_captioner(c.captioner, label_names, class_names)
-        self.relations: RelationPredictor = relations or build_relations(c.relations, c.up_axis)
+        self.captioner: Captioner = captioner or build_captioner(
+            c.captioner, label_names, class_names, c.endpoint
+        )
+        self.relations: RelationPredictor = relations or build_relations(c.relations, self.up, c.endpoint)
         self.node_confidence: NodeConfidence = node_confidence or build_confidence(c.confidence)
         self._fallback_captioner = HeuristicCaptioner()
-        self._fallback_relations = GeometricRelations(c.relations, c.up_axis)
+        self._fallback_relations = GeometricRelations(c.relations, self.up)
         self.out_path = Path(out_path) if out_path is not None else None
 
         self.nodes: dict[int, SceneNode] = {}
@@ -160,6 +185,9 @@ class SceneGraph:
         self._obs: dict[int, ObservationSet] = {}
         self._gt_class_votes: dict[int, dict[int, int]] = {}
         self._name_votes: dict[int, dict[str, int]] = {}
+        self._label_pixels: dict[
+            int, int
+        ] = {}  # label -> its pixels in the observed keyframes (all named or not)
         self._gt_instance_votes: dict[int, dict[int, int]] = {}
         self._lock = threading.RLock()
         self._initialized = False
@@ -171,6 +199,25 @@ class SceneGraph:
         self._future: Future | None = None
         self._embed_cache: dict[str, np.ndarray] = {}
         self._query_encoder: Any = None
+        # storeys and rooms (graph.rooms), updated with the graph and every rooms.update_every keyframes
+        self.room_map: RoomMap | None = (
+            RoomMap(c.rooms, build_room_typer(c.rooms, c.endpoint)) if c.rooms.enabled else None
+        )
+        self._last_rooms_count = 0
+        self._keyframe_frames: dict[int, int] = {}  # keyframe index -> its dataset frame index
+        self._llm_query: LLMQuery | None = (
+            LLMQuery.from_config(c.query, c.endpoint) if c.query.kind == "llm" else None
+        )
+
+    def set_up_axis(self, up: Sequence[float]) -> None:
+        """Set the world up direction (``graph.up_axis`` auto, chosen by the mapper from the cameras at its
+        first update): the graph's, its config's and its relation predictors'."""
+        with self._lock:
+            self.up = unit_up(up)
+            self.config.up_axis = [float(v) for v in self.up]
+            for r in (self.relations, getattr(self.relations, "fallback", None), self._fallback_relations):
+                if r is not None and hasattr(r, "up"):
+                    r.up = self.up
 
     # ----------------------------------------------------------------------------------------- observe
 
@@ -194,6 +241,7 @@ class SceneGraph:
         if not self.config.enabled:
             return
         with self._lock:
+            self._keyframe_frames[int(keyframe_index)] = int(frame.index)
             for lab, d in (name_votes or {}).items():
                 acc = self._name_votes.setdefault(int(lab), {})
                 for name, n in d.items():
@@ -207,65 +255,69 @@ class SceneGraph:
         if not np.issubdtype(lm.dtype, np.integer):
             raise ValueError(f"SceneGraph.observe: label_map must be an integer array, got {lm.dtype}")
         t0 = time.perf_counter()
-        flat = lm.reshape(-1)
-        pix = np.nonzero(flat >= 0)[0]
-        if len(pix) == 0:
+        regions = _label_regions(lm)
+        if regions is None:
             return
-        vals = flat[pix].astype(np.int64)
-        top = int(vals.max())
-        if top < 4 * len(flat) + 1024:  # labels small enough for counting (the usual case): no sort
-            counts = np.bincount(vals, minlength=top + 1)
-            labs = np.nonzero(counts)[0]
-            area = counts[labs]
-            lut = np.zeros(top + 1, np.int64)
-            lut[labs] = np.arange(len(labs))
-            inv = lut[vals]
-        else:
-            labs, inv, area = np.unique(vals, return_inverse=True, return_counts=True)
-        ys, xs = np.divmod(pix, W)
-        # Bounding boxes from per-(label, row) and per-(label, column) occupancy: two bincounts.
-        L = len(labs)
-        rows = np.bincount(inv * H + ys, minlength=L * H).reshape(L, H) > 0
-        cols = np.bincount(inv * W + xs, minlength=L * W).reshape(L, W) > 0
-        r0, r1 = rows.argmax(axis=1), H - 1 - rows[:, ::-1].argmax(axis=1)
-        c0, c1 = cols.argmax(axis=1), W - 1 - cols[:, ::-1].argmax(axis=1)
-        c = self.config
+        pix, labs, inv, area, boxes = regions
         with self._lock:
-            for k in np.nonzero(area >= c.min_obs_pixels)[0]:
-                lab, a = int(labs[k]), int(area[k])
-                obs = self._obs.setdefault(lab, ObservationSet())
-                want_ctx, want_mask = obs.wants(keyframe_index, a, c.max_masked_views)
-                if not (want_ctx or want_mask):
-                    continue
-                y0, y1, x0, x1 = int(r0[k]), int(r1[k]) + 1, int(c0[k]), int(c1[k]) + 1
-                ctx = masked = None
-                if want_ctx:
-                    py, px = round(c.context_pad * (y1 - y0)), round(c.context_pad * (x1 - x0))
-                    ctx = self._downscale(
-                        frame.rgb[max(0, y0 - py) : min(H, y1 + py), max(0, x0 - px) : min(W, x1 + px)]
-                    )
-                if want_mask:
-                    sub = frame.rgb[y0:y1, x0:x1].copy()
-                    sub[lm[y0:y1, x0:x1] != lab] = 0
-                    masked = self._downscale(sub)
-                obs.add(keyframe_index, a, ctx, masked, c.max_masked_views)
-            for gt, votes in (
-                (frame.gt_classes, self._gt_class_votes),
-                (frame.gt_instances, self._gt_instance_votes),
-            ):
-                if gt is None or gt.shape != (H, W):
-                    continue
-                g = np.asarray(gt).reshape(-1)[pix].astype(np.int64)
-                ok = g >= 0
-                if not ok.any():
-                    continue
-                gmax = int(g[ok].max()) + 1
-                codes, counts = np.unique(inv[ok].astype(np.int64) * gmax + g[ok], return_counts=True)
-                for code, n in zip(codes.tolist(), counts.tolist()):
-                    li, gi = divmod(code, gmax)
-                    d = votes.setdefault(int(labs[li]), {})
-                    d[gi] = d.get(gi, 0) + n
+            for lab, a in zip(labs.tolist(), area.tolist()):
+                self._label_pixels[lab] = self._label_pixels.get(lab, 0) + a
+            self._add_views(keyframe_index, frame, lm, labs, area, boxes)
+            self._add_gt_votes(frame, pix, labs, inv)
         self._time("observe", time.perf_counter() - t0)
+
+    def _add_views(
+        self,
+        keyframe_index: int,
+        frame: Frame,
+        lm: np.ndarray,
+        labs: np.ndarray,
+        area: np.ndarray,
+        boxes: np.ndarray,
+    ) -> None:
+        """Put the keyframe's context crop and masked view of each region large enough into its
+        observation set, where the set wants them. Call with the lock held."""
+        c = self.config
+        H, W = lm.shape
+        for k in np.nonzero(area >= c.min_obs_pixels)[0]:
+            lab, a = int(labs[k]), int(area[k])
+            obs = self._obs.setdefault(lab, ObservationSet())
+            want_ctx, want_mask = obs.wants(keyframe_index, a, c.max_masked_views)
+            if not (want_ctx or want_mask):
+                continue
+            y0, y1, x0, x1 = (int(v) for v in boxes[k])
+            ctx = masked = None
+            if want_ctx:
+                py, px = round(c.context_pad * (y1 - y0)), round(c.context_pad * (x1 - x0))
+                ctx = self._downscale(
+                    frame.rgb[max(0, y0 - py) : min(H, y1 + py), max(0, x0 - px) : min(W, x1 + px)]
+                )
+            if want_mask:
+                sub = frame.rgb[y0:y1, x0:x1].copy()
+                sub[lm[y0:y1, x0:x1] != lab] = 0
+                masked = self._downscale(sub)
+            obs.add(keyframe_index, a, ctx, masked, c.max_masked_views)
+
+    def _add_gt_votes(self, frame: Frame, pix: np.ndarray, labs: np.ndarray, inv: np.ndarray) -> None:
+        """Accumulate the overlap votes label -> GT class / instance of a frame with ground-truth maps
+        (synthetic scenes). Call with the lock held."""
+        H, W = frame.rgb.shape[:2]
+        for gt, votes in (
+            (frame.gt_classes, self._gt_class_votes),
+            (frame.gt_instances, self._gt_instance_votes),
+        ):
+            if gt is None or gt.shape != (H, W):
+                continue
+            g = np.asarray(gt).reshape(-1)[pix].astype(np.int64)
+            ok = g >= 0
+            if not ok.any():
+                continue
+            gmax = int(g[ok].max()) + 1
+            codes, counts = np.unique(inv[ok].astype(np.int64) * gmax + g[ok], return_counts=True)
+            for code, n in zip(codes.tolist(), counts.tolist()):
+                li, gi = divmod(code, gmax)
+                d = votes.setdefault(int(labs[li]), {})
+                d[gi] = d.get(gi, 0) + n
 
     def _downscale(self, img: np.ndarray) -> np.ndarray:
         import cv2
@@ -294,13 +346,22 @@ class SceneGraph:
     # ------------------------------------------------------------------------------------------ update
 
     def is_due(self, keyframe_index: int) -> bool:
-        """Whether :meth:`update` at 0-based keyframe ``keyframe_index`` would run (paper schedule)."""
+        """Whether :meth:`update` at 0-based keyframe ``keyframe_index`` would run: a graph update (paper
+        schedule) or a room update (every ``graph.rooms.update_every`` keyframes)."""
+        return self._graph_due(keyframe_index) or self._rooms_due(keyframe_index)
+
+    def _graph_due(self, keyframe_index: int) -> bool:
         if not self.config.enabled:
             return False
         count = keyframe_index + 1
         if not self._initialized:
             return count >= self.config.init_keyframes
         return count - self._last_update_count >= self.config.update_every
+
+    def _rooms_due(self, keyframe_index: int) -> bool:
+        if not self.config.enabled or self.room_map is None:
+            return False
+        return keyframe_index + 1 - self._last_rooms_count >= self.config.rooms.update_every
 
     def update(
         self,
@@ -318,8 +379,10 @@ class SceneGraph:
         tensors (copied). Gaussians with non-finite means are ignored. Shape mismatches raise ValueError
         (a caller bug); failures inside the update are logged and never raised.
         """
-        if not self.config.enabled or not (force or self.is_due(keyframe_index)):
+        if not self.config.enabled:
             return False
+        if not (force or self._graph_due(keyframe_index)):
+            return self._rooms_only(keyframe_index, means) if self._rooms_due(keyframe_index) else False
         arrays = self._check_arrays(means, labels, confidences, colors)
         if self.config.background:
             if self._future is not None and not self._future.done():
@@ -335,6 +398,61 @@ class SceneGraph:
             return True
         self._last_update_count = keyframe_index + 1
         return self._safe_update(keyframe_index, *arrays)
+
+    def _rooms_only(self, kf: int, means) -> bool:
+        """A room update between graph updates (on the worker thread with ``background``)."""
+        m = _to_numpy(means, "means").astype(np.float64)
+        if m.ndim != 2 or m.shape[1] != 3:
+            raise ValueError(f"SceneGraph.update: means must be [N, 3], got {m.shape}")
+        self._last_rooms_count = kf + 1
+        if self.config.background:
+            if self._future is not None and not self._future.done():
+                return False
+            if self._executor is None:
+                self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="scenegraph")
+            self._future = self._executor.submit(self._safe_rooms, kf, m, True)
+            return True
+        return self._safe_rooms(kf, m, True)
+
+    def _safe_rooms(self, kf: int, means: np.ndarray, save: bool) -> bool:
+        try:
+            self._update_rooms(kf, means, ask_model=False)
+        except Exception:
+            log.exception("room update at keyframe %d failed; mapping continues", kf)
+            return False
+        if save and self.out_path is not None:
+            try:
+                self.save(self.out_path)
+            except Exception as e:
+                log.warning("scene graph: could not write %s (%s)", self.out_path, e)
+        return True
+
+    def _update_rooms(self, kf: int, means: np.ndarray, ask_model: bool = True) -> None:
+        """Segment the rooms anew from all Gaussian means and put the object nodes in them (``ask_model``:
+        an LLM room typer is asked, at graph updates only)."""
+        if self.room_map is None:
+            return
+        t0 = time.perf_counter()
+        with self._lock:
+            objects = {
+                i: (n.points if len(n.points) else n.center[None], n.tag, n.num_gaussians)
+                for i, n in self.nodes.items()
+            }
+        self.room_map.update(kf, means, self.up, objects, self._keyframe_frames.get(kf, -1), ask_model)
+        with self._lock:
+            for i, n in self.nodes.items():
+                n.room = self.room_map.object_room.get(i)
+        self._time("graph_rooms", time.perf_counter() - t0)
+
+    @property
+    def rooms(self) -> dict[int, RoomNode]:
+        """The room nodes by id (empty when ``graph.rooms.enabled`` is false or none was found yet)."""
+        return self.room_map.rooms if self.room_map is not None else {}
+
+    @property
+    def floors(self) -> list[Floor]:
+        """The storeys found so far (lowest first)."""
+        return self.room_map.floors if self.room_map is not None else []
 
     def wait(self, timeout: float | None = None) -> None:
         """Block until a background update (if any) has finished."""
@@ -438,49 +556,97 @@ class SceneGraph:
         t_start = time.perf_counter()
         geo = self._geometry(kf, means, labels, confs, colors)
         with self._lock:
-            gone = [i for i in self.nodes if i not in geo]
-            for i in gone:
-                del self.nodes[i]
-            if gone:
-                self.edges = {
-                    k: e for k, e in self.edges.items() if k[0] in self.nodes and k[1] in self.nodes
-                }
-                log.info("scene graph: %d node(s) left the map: %s", len(gone), gone[:10])
-            new = []
-            for lab, g in geo.items():
-                node = self.nodes.get(lab)
-                if node is None:
-                    self.nodes[lab] = SceneNode(id=lab, first_seen=kf, last_updated=kf, **g)
-                    new.append(lab)
-                else:
-                    for k, v in g.items():
-                        setattr(node, k, v)
-                    node._shape = None
-            retry: set[int] = set()
-            if not self._initialized:
-                todo = sorted(self.nodes)
-            else:
-                low = [
-                    i for i, n in self.nodes.items() if n.confidence < self.config.tau_update and i not in new
-                ]
-                retry = self._awaiting_caption() - set(new) - set(low)
-                todo = sorted(set(new) | set(low) | retry)
-            ctx = self._scene_context()
-            requests = [
-                CaptionRequest(
-                    node=self.nodes[i],
-                    observations=self._obs[i].copy() if i in self._obs else ObservationSet(),
-                    context=ctx,
-                    gt_class_votes=dict(self._gt_class_votes.get(i, {})),
-                    gt_instance_votes=dict(self._gt_instance_votes.get(i, {})),
-                    detector_name_votes=dict(self._name_votes.get(i, {})),
-                )
-                for i in todo
-            ]
+            new = self._merge_geometry(kf, geo)
+            requests, retry, ctx = self._caption_requests(new)
         self._time("graph_geometry", time.perf_counter() - t_start)
 
-        # Node captioning (slow, possibly remote) outside the lock.
         t0 = time.perf_counter()
+        self._caption(kf, requests, ctx)
+        self._time("graph_caption", time.perf_counter() - t0, len(requests))
+
+        t0 = time.perf_counter()
+        self._score_confidence(requests)
+        self._time("graph_confidence", time.perf_counter() - t0, len(requests))
+
+        t0 = time.perf_counter()
+        self._update_edges([r.node.id for r in requests])
+        self._time("graph_edges", time.perf_counter() - t0)
+        if self.room_map is not None:
+            self._last_rooms_count = kf + 1
+            try:
+                self._update_rooms(kf, means)
+            except Exception:
+                log.exception("room update at keyframe %d failed; the graph keeps its previous rooms", kf)
+
+        self._initialized = True
+        self.num_updates += 1
+        self.last_update_keyframe = kf
+        log.info(
+            "scene graph update at keyframe %d: %d nodes (%d new, %d re-captioned%s), %d edges, %.2f s",
+            kf,
+            len(self.nodes),
+            len(new),
+            len(requests) - len(new),
+            f", {len(retry)} of them after a fallback caption" if retry else "",
+            len(self.edges),
+            time.perf_counter() - t_start,
+        )
+        if self.out_path is not None:
+            try:
+                self.save(self.out_path)
+            except Exception as e:
+                log.warning("scene graph: could not write %s (%s)", self.out_path, e)
+
+    def _merge_geometry(self, kf: int, geo: dict[int, dict]) -> list[int]:
+        """Nodes from this update's geometry: those whose label left the map go (with their edges), the
+        others are made or updated. -> the new node ids. Call with the lock held."""
+        gone = [i for i in self.nodes if i not in geo]
+        for i in gone:
+            del self.nodes[i]
+        if gone:
+            self.edges = {k: e for k, e in self.edges.items() if k[0] in self.nodes and k[1] in self.nodes}
+            log.info("scene graph: %d node(s) left the map: %s", len(gone), gone[:10])
+        new = []
+        for lab, g in geo.items():
+            node = self.nodes.get(lab)
+            if node is None:
+                self.nodes[lab] = SceneNode(id=lab, first_seen=kf, last_updated=kf, **g)
+                new.append(lab)
+            else:
+                for k, v in g.items():
+                    setattr(node, k, v)
+                node._shape = None
+        return new
+
+    def _caption_requests(self, new: list[int]) -> tuple[list[CaptionRequest], set[int], SceneContext]:
+        """The nodes to describe at this update (all at the first; then the new ones, those under
+        tau_update and those awaiting a real caption) as caption requests, the ones awaiting a caption, and
+        the scene context. Call with the lock held."""
+        retry: set[int] = set()
+        if not self._initialized:
+            todo = sorted(self.nodes)
+        else:
+            low = [i for i, n in self.nodes.items() if n.confidence < self.config.tau_update and i not in new]
+            retry = self._awaiting_caption() - set(new) - set(low)
+            todo = sorted(set(new) | set(low) | retry)
+        ctx = self._scene_context()
+        requests = [
+            CaptionRequest(
+                node=self.nodes[i],
+                observations=self._obs[i].copy() if i in self._obs else ObservationSet(),
+                context=ctx,
+                gt_class_votes=dict(self._gt_class_votes.get(i, {})),
+                gt_instance_votes=dict(self._gt_instance_votes.get(i, {})),
+                detector_name_votes=dict(self._name_votes.get(i, {})),
+                label_pixels=self._label_pixels.get(i, 0),
+            )
+            for i in todo
+        ]
+        return requests, retry, ctx
+
+    def _caption(self, kf: int, requests: list[CaptionRequest], ctx: SceneContext) -> None:
+        """Describe the requested nodes (slow, possibly remote: outside the lock); nodes left without an
+        answer get (or refresh) the heuristic caption, and every heuristic caption follows its geometry."""
         try:
             descs = self.captioner.describe(requests) if requests else {}
         except Exception as e:
@@ -510,7 +676,11 @@ class SceneGraph:
                 fresh = self._fallback_captioner.describe(
                     [
                         CaptionRequest(
-                            n, ObservationSet(), ctx, detector_name_votes=dict(self._name_votes.get(n.id, {}))
+                            n,
+                            ObservationSet(),
+                            ctx,
+                            detector_name_votes=dict(self._name_votes.get(n.id, {})),
+                            label_pixels=self._label_pixels.get(n.id, 0),
                         )
                         for n in stale
                     ]
@@ -518,9 +688,9 @@ class SceneGraph:
                 for n in stale:
                     d = fresh[n.id]
                     n.caption, n.tag, n.caption_source = d.caption, d.tag, d.source
-        self._time("graph_caption", time.perf_counter() - t0, len(requests))
 
-        t0 = time.perf_counter()
+    def _score_confidence(self, requests: list[CaptionRequest]) -> None:
+        """The node confidence of the described nodes (the mean Gaussian confidence when the scorer fails)."""
         try:
             scores = self.node_confidence.score(requests) if requests else {}
         except Exception as e:
@@ -531,30 +701,6 @@ class SceneGraph:
                 s = scores.get(r.node.id)
                 if s is not None and math.isfinite(s):
                     r.node.confidence = float(s)
-        self._time("graph_confidence", time.perf_counter() - t0, len(requests))
-
-        t0 = time.perf_counter()
-        self._update_edges([r.node.id for r in requests])
-        self._time("graph_edges", time.perf_counter() - t0)
-
-        self._initialized = True
-        self.num_updates += 1
-        self.last_update_keyframe = kf
-        log.info(
-            "scene graph update at keyframe %d: %d nodes (%d new, %d re-captioned%s), %d edges, %.2f s",
-            kf,
-            len(self.nodes),
-            len(new),
-            len(requests) - len(new),
-            f", {len(retry)} of them after a fallback caption" if retry else "",
-            len(self.edges),
-            time.perf_counter() - t_start,
-        )
-        if self.out_path is not None:
-            try:
-                self.save(self.out_path)
-            except Exception as e:
-                log.warning("scene graph: could not write %s (%s)", self.out_path, e)
 
     def _awaiting_caption(self) -> set[int]:
         """Nodes whose heuristic caption stands in for the configured captioner's: its request failed or
@@ -625,19 +771,24 @@ class SceneGraph:
     # ------------------------------------------------------------------------------------------ output
 
     def to_json(self) -> dict:
-        """The graph.json document (README "File formats"): version, nodes sorted by id, edges, and
-        :meth:`stats` (derived from the nodes; readers may ignore it)."""
+        """The graph.json document (docs/formats.md): version, nodes sorted by id, edges, :meth:`stats`
+        (derived from the nodes; readers may ignore it), the world ``up`` vector and, with rooms on, the
+        ``floors`` and ``rooms`` (nodes name their room in ``room``)."""
         with self._lock:
-            return {
+            doc = {
                 "version": GRAPH_JSON_VERSION,
                 "nodes": [self.nodes[i].to_dict() for i in sorted(self.nodes)],
                 "edges": [self.edges[k].to_dict() for k in sorted(self.edges)],
                 "stats": self.stats(),
             }
+            doc["up"] = [float(v) for v in self.up]  # the vertical that rooms and relations used
+            if self.room_map is not None:
+                doc.update(self.room_map.to_dict())
+            return doc
 
     def stats(self) -> dict:
-        """Counts: ``nodes``, ``edges``, ``vlm_captioned`` (nodes whose caption came from a VLM, prose
-        replies included) and ``caption_sources`` (nodes per ``caption_source``; "" = no caption)."""
+        """Counts: ``nodes``, ``edges``, ``rooms``, ``vlm_captioned`` (nodes whose caption came from a VLM,
+        prose replies included) and ``caption_sources`` (nodes per ``caption_source``; "" = no caption)."""
         with self._lock:
             sources: dict[str, int] = {}
             for n in self.nodes.values():
@@ -645,6 +796,7 @@ class SceneGraph:
             return {
                 "nodes": len(self.nodes),
                 "edges": len(self.edges),
+                "rooms": len(self.rooms),
                 "vlm_captioned": sum(v for k, v in sources.items() if k in VLM_CAPTION_SOURCES),
                 "caption_sources": dict(sorted(sources.items())),
             }
@@ -676,7 +828,7 @@ class SceneGraph:
         g = cls(
             cfg,
             captioner=HeuristicCaptioner(),
-            relations=GeometricRelations(cfg.relations, cfg.up_axis),
+            relations=GeometricRelations(cfg.relations, up_vector(cfg.up_axis)),
             node_confidence=MeanConfidence(),
         )
         g._read_json(doc, source)
@@ -692,7 +844,9 @@ class SceneGraph:
                 "last_update_count": self._last_update_count,
                 "last_update_keyframe": self.last_update_keyframe,
                 "num_updates": self.num_updates,
+                "last_rooms_count": self._last_rooms_count,
                 "name_votes": {str(k): dict(v) for k, v in self._name_votes.items()},
+                "label_pixels": {str(k): int(v) for k, v in self._label_pixels.items()},
             }
 
     def load_state(self, state: Any, source: str = "checkpoint") -> None:
@@ -708,12 +862,15 @@ class SceneGraph:
             name_votes = {
                 int(k): {str(n): int(c) for n, c in v.items()} for k, v in state.get("name_votes", {}).items()
             }
+            label_pixels = {int(k): int(v) for k, v in state.get("label_pixels", {}).items()}
         except (AttributeError, TypeError, ValueError) as e:
             raise DataError(f"{source}: scene graph state has invalid name votes ({e})") from None
         with self._lock:
             self._name_votes = name_votes
+            self._label_pixels = label_pixels
             self._read_json(state["graph"], source)
             self._last_update_count, self.last_update_keyframe, self.num_updates = schedule
+            self._last_rooms_count = int(state.get("last_rooms_count", self._last_update_count))
             self._initialized = bool(self.num_updates)
 
     def _read_json(self, doc: Any, source: str) -> None:
@@ -757,6 +914,7 @@ class SceneGraph:
                 caption_source=str(d.get("caption_source", "")),
                 confidence=float(d.get("confidence", 0.0)),
                 stored_extent=vec(d, "extent", (3,), k) if "extent" in d else None,
+                room=int(d["room"]) if isinstance(d.get("room"), int) else None,
             )
             nodes[node.id] = node
         for k, e in enumerate(doc["edges"]):
@@ -770,16 +928,24 @@ class SceneGraph:
             if s not in nodes or t not in nodes:
                 raise DataError(f"{source}: edge #{k} refers to a node that is not in the graph ({s} -> {t})")
             edges[(min(s, t), max(s, t))] = SceneEdge(s, t, rel, score, str(e.get("predictor", "")))
+        if self.room_map is not None:
+            self.room_map.load(doc, source, self.up)
+            for i, rid in self.room_map.object_room.items():  # the rooms' object lists say it too
+                if i in nodes and nodes[i].room is None:
+                    nodes[i].room = rid
         self.nodes, self.edges = nodes, edges
         self._initialized = True
 
     def to_networkx(self):
-        """A ``networkx.DiGraph``: node attributes label, caption, tag, confidence, center_x/y/z, the
+        """A ``networkx.DiGraph``: object nodes (ids = labels, ``kind`` "object", ``room``: their room id or
+        -1) with attributes label, caption, tag, confidence, center_x/y/z, the
         axis-aligned box bbox_min_x/y/z and bbox_max_x/y/z, the oriented box obb_center_x/y/z,
         obb_extent_x/y/z (full side lengths) and obb_axes (its 3x3 rows, 9 numbers, as a JSON list),
         num_gaussians, first_seen, last_updated, caption_source; edge attributes relation, score,
-        predictor. GraphML holds scalars only, hence one attribute per coordinate. networkx is optional
-        (``pip install networkx``)."""
+        predictor. The hierarchy: room nodes ``room_<id>`` (``kind`` "room": type as tag and caption, area,
+        floor, first_seen, centre and box, ``outline`` as JSON) and storeys ``floor_<id>`` (``kind`` "floor",
+        height), with "in" edges object -> room -> floor. GraphML holds scalars only, hence one attribute per
+        coordinate. networkx is optional (``pip install networkx``)."""
         try:
             import networkx as nx
         except ImportError:
@@ -797,6 +963,8 @@ class SceneGraph:
                 }
                 G.add_node(
                     int(i),
+                    kind="object",
+                    room=int(n.room) if n.room is not None else -1,
                     label=int(n.label),
                     caption=n.caption,
                     tag=n.tag,
@@ -817,7 +985,37 @@ class SceneGraph:
                     score=float(e.score),
                     predictor=e.predictor,
                 )
+            self._hierarchy_to_networkx(G)
         return G
+
+    def _hierarchy_to_networkx(self, G) -> None:
+        """Floors (``floor_<id>``) and rooms (``room_<id>``) as nodes, with "in" edges object -> room ->
+        floor (edge attribute ``predictor`` "rooms"); call with the lock held."""
+        for f in self.floors:
+            if any(r.floor == f.id for r in self.rooms.values()):  # a storey holding no room is left out
+                G.add_node(f"floor_{f.id}", kind="floor", label=-1, height=float(f.height))
+        for i in sorted(self.rooms):
+            r = self.rooms[i]
+            G.add_node(
+                f"room_{r.id}",
+                kind="room",
+                label=-1,
+                caption=r.type,
+                tag=r.type,
+                type_source=r.type_source,
+                area=float(r.area),
+                floor=int(r.floor),
+                outline=json.dumps([[[round(float(v), 4) for v in p] for p in poly] for poly in r.outline]),
+                first_seen=int(r.first_seen),
+                **{f"center_{a}": float(r.center[k]) for k, a in enumerate("xyz")},
+                **{f"bbox_min_{a}": float(r.bbox_min[k]) for k, a in enumerate("xyz")},
+                **{f"bbox_max_{a}": float(r.bbox_max[k]) for k, a in enumerate("xyz")},
+            )
+            if any(f.id == r.floor for f in self.floors):
+                G.add_edge(f"room_{r.id}", f"floor_{r.floor}", relation="in", score=1.0, predictor="rooms")
+            for o in r.objects:
+                if o in self.nodes:
+                    G.add_edge(int(o), f"room_{r.id}", relation="in", score=1.0, predictor="rooms")
 
     def save_graphml(self, path: str | Path) -> None:
         """Write the graph as GraphML (atomically; needs networkx)."""
@@ -830,47 +1028,74 @@ class SceneGraph:
     # ------------------------------------------------------------------------------------------- query
 
     def query(self, text: str, top_k: int | None = None) -> list[SceneNode]:
-        """Nodes matching ``text``, best first (see :meth:`query_scored`)."""
+        """Object nodes answering ``text``, best first (see :meth:`ask`)."""
         return [n for n, _ in self.query_scored(text, top_k)]
 
     def query_scored(self, text: str, top_k: int | None = None) -> list[tuple[SceneNode, float]]:
-        """``[(node, score)]`` for nodes whose tag or caption match ``text``, best first.
+        """``[(node, score)]``: the object hits of :meth:`ask`, best first. ConfigError for an empty text."""
+        if not " ".join(str(text).split()):
+            raise ConfigError("SceneGraph.query: the query text is empty")
+        return [(h.node, h.score) for h in self.ask(text, top_k).hits if h.kind == "object"]
 
-        Offline matching: whole-word (plural-tolerant) matches of the query or of its synonyms
-        (:data:`SYNONYM_GROUPS`) in the tag (score 1.0 for the exact tag, 0.9 inside it) or the caption
-        (0.6); synonym matches count 0.9 times. When ``graph.query_embedding`` is "clip" or "openai", the
-        cosine similarity between the query and "tag: caption" embeddings is also used (kept when at least
-        ``graph.query_min_similarity``); a node's score is the larger of the two. ``#<id>`` names one
-        node by id (score 1.0).
-        """
+    def ask(self, text: str, top_k: int | None = None) -> QueryAnswer:
+        """Answer a query such as "chair", "pillow on the bed", "the mug on the desk in the office" or
+        "kitchen": ranked object (and room) hits, each with the reason it matched (:mod:`.query`). Never
+        raises on a bad query: an empty text or one without a known term gets a message and no hit.
+
+        Offline (``graph.query.kind: offline``): object terms are matched as whole words (plural-tolerant)
+        against tags (1.0 for the exact tag, 0.9 inside it) and captions (0.6), synonyms
+        (:data:`SYNONYM_GROUPS`) 0.9 times; with ``graph.query_embedding`` "clip" or "openai" the cosine
+        similarity of the term and "tag: caption" counts too (from ``graph.query_min_similarity``), and a
+        text without any known term is matched as a whole that way. Relations and rooms then weigh each
+        candidate (:func:`~ogscene3d.graph.query.rank`). ``#<id>`` names one node. With
+        ``graph.query.kind: llm`` the configured endpoint picks the nodes (:class:`~.query.LLMQuery`)."""
         q = " ".join(str(text).lower().split())
         if not q:
-            raise ConfigError("SceneGraph.query: the query text is empty")
+            return QueryAnswer(str(text), [], "the query is empty")
         by_id = re.fullmatch(r"#(\d+)", q)
         if by_id:
             with self._lock:
                 node = self.nodes.get(int(by_id.group(1)))
-            return [(node, 1.0)] if node is not None else []
-        terms = {q: 1.0}
-        for group in SYNONYM_GROUPS:
-            if q in group:
-                for w in group:
-                    terms.setdefault(w, 0.9)
+            if node is None:
+                return QueryAnswer(str(text), [], f"no node {q} in the graph")
+            return QueryAnswer(str(text), [QueryHit("object", node.id, 1.0, "node id", node)])
+        ctx = self._query_context()
+        if self._llm_query is not None:
+            return self._llm_query.answer(str(text), ctx, top_k)
+        answer = answer_offline(str(text), ctx, top_k)
+        if answer.parsed is None and self.config.query_embedding != "none":
+            ranked = sorted(self._term_scores(q).items(), key=lambda kv: (-kv[1], kv[0]))[:top_k]
+            hits = [QueryHit("object", i, s, "text / embedding similarity", ctx.nodes[i]) for i, s in ranked]
+            return QueryAnswer(str(text), hits, "" if hits else answer.message)
+        return answer
+
+    def _query_context(self) -> QueryContext:
+        with self._lock:
+            nodes = dict(self.nodes)
+            return QueryContext(
+                nodes=nodes,
+                edges=dict(self.edges),
+                rooms=dict(self.rooms),
+                object_room={i: n.room for i, n in nodes.items() if n.room is not None},
+                up=self.up,
+                term_scores=self._term_scores,
+            )
+
+    def _term_scores(self, term: str) -> dict[int, float]:
+        """{node id: score} of the nodes an object term names: words (:func:`~.terms.text_score`) and, when
+        configured, embedding similarity (the larger of the two)."""
         with self._lock:
             nodes = [self.nodes[i] for i in sorted(self.nodes)]
-        pats = [(term, w, re.compile(r"\b" + re.escape(term) + r"(?:s|es)?\b")) for term, w in terms.items()]
-        scores: dict[int, float] = {}
-        for n in nodes:
-            best = 0.0
-            tag, cap = n.tag.lower().strip(), n.caption.lower()
-            for term, w, pat in pats:
-                s = 1.0 if tag == term else 0.9 if pat.search(tag) else 0.6 if pat.search(cap) else 0.0
-                best = max(best, s * w)
-            if best > 0:
-                scores[n.id] = best
+        # an offline caption repeats the tag and describes geometry ("12 % of it detected as book"): only
+        # the words of a model's caption count
+        scores = {
+            n.id: s
+            for n in nodes
+            if (s := text_score(term, n.tag, "" if n.caption_source in OFFLINE_SOURCES else n.caption)) > 0
+        }
         if self.config.query_embedding != "none" and nodes:
             try:
-                sims = self._embedding_scores(q, nodes)
+                sims = self._embedding_scores(" ".join(str(term).lower().split()), nodes)
                 for n, s in zip(nodes, sims):
                     if s >= self.config.query_min_similarity:
                         scores[n.id] = max(scores.get(n.id, 0.0), float(s))
@@ -878,31 +1103,18 @@ class SceneGraph:
                 log.warning(
                     "scene graph query: embedding similarity unavailable (%s); using text matching", e
                 )
-        by_id = {n.id: n for n in nodes}
-        ranked = sorted(scores.items(), key=lambda kv: (-kv[1], kv[0]))
-        if top_k is not None:
-            ranked = ranked[:top_k]
-        return [(by_id[i], s) for i, s in ranked]
+        return scores
 
     def _embed(self, texts: list[str]) -> np.ndarray:
         kind = self.config.query_embedding
         if self._query_encoder is None:
             if kind == "clip":
-                from .confidence import ClipConfidence
-
                 enc = self.node_confidence if isinstance(self.node_confidence, ClipConfidence) else None
                 self._query_encoder = enc or ClipConfidence.from_config(self.config.confidence)
             elif kind == "openai":
-                from .openai_client import ChatClient
-
-                cc = self.config.captioner
-                self._query_encoder = ChatClient(
-                    cc.base_url,
-                    self.config.embedding_model or cc.model,
-                    cc.api_key_env,
-                    cc.timeout_s,
-                    cc.max_retries,
-                    model_setting="graph.embedding_model",
+                model = self.config.embedding_model or self.config.captioner.model
+                self._query_encoder = ChatClient.from_config(
+                    self.config.endpoint, model, "graph.embedding_model"
                 )
             else:
                 raise ConfigError(f"graph.query_embedding must be none, clip or openai, got {kind!r}")

@@ -125,7 +125,7 @@ class SceneNode:
     asked for again at later updates), "groundtruth" or "" (none yet). ``confidence`` is C_i (paper
     Eq. 19, or the documented fallback). ``first_seen`` is the keyframe index of the graph update that
     created the node, ``last_updated`` the one that last re-captioned and re-scored it (selective update;
-    heuristic captions additionally follow the geometry at every update).
+    heuristic captions additionally follow the geometry at every update). ``room``: the room node it is in.
     ``points`` (not serialised) is the thinned set of the node's Gaussian means used for edges,
     ``color`` the median Gaussian colour in [0, 1], ``mean_confidence`` the mean Gaussian confidence.
     """
@@ -149,6 +149,7 @@ class SceneNode:
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
     # graph.json's "extent", for a node read back from the file (which does not store ``points``)
     stored_extent: np.ndarray | None = field(default=None, repr=False)
+    room: int | None = None  # the id of the room node the node is "in" (None: none, or rooms are off)
     _shape: Shape | None = field(default=None, repr=False)
     _shape_up: tuple[float, ...] | None = field(default=None, repr=False)
 
@@ -212,6 +213,7 @@ class SceneNode:
             "obb_extent": [float(v) for v in self.obb_extent],
             "caption_source": self.caption_source,
             **({"extent": [float(v) for v in extent]} if extent is not None else {}),
+            **({"room": int(self.room)} if self.room is not None else {}),
         }
 
 
@@ -258,6 +260,8 @@ class CaptionRequest:
     gt_instance_votes: dict[int, int] = field(default_factory=dict)
     # {class name: pixels} of the segments a detector named that were given this node's label
     detector_name_votes: dict[str, int] = field(default_factory=dict)
+    # the node's label's pixels in the same keyframes, named or not (0: not counted)
+    label_pixels: int = 0
 
 
 @dataclass

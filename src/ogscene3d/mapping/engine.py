@@ -77,7 +77,12 @@ class MappingEngine:
 
     ``hooks``, called from the loop's thread: ``before_frame()`` (may block, e.g. while paused),
     ``after_frame(frame, is_keyframe)``, ``status_changed(text)``; ``guard``: a context manager held
-    around each change of the mapper and each save (the live viewer's lock against its GUI's saves)."""
+    around each change of the mapper and each save (the live viewer's lock against its GUI's saves).
+
+    ``observers`` watch the run without steering it (Rerun logging, the run-time estimate): each has
+    ``keyframe(mapper, frame, seconds)``, called after every keyframe with the seconds its ``process`` took,
+    and ``finished(mapper)``, after the final pass. One that raises is dropped with a warning: an observer
+    never costs the run its map."""
 
     def __init__(
         self,
@@ -87,8 +92,10 @@ class MappingEngine:
         *,
         hooks: Any = None,
         guard: Callable[[], contextlib.AbstractContextManager] | None = None,
+        observers: Iterable[Any] = (),
     ) -> None:
         self.mapper = mapper
+        self.observers = list(observers)
         self.out = Path(out) if out is not None else None
         self.data = str(data)
         self.hooks = hooks
@@ -219,8 +226,11 @@ class MappingEngine:
             self._before_frame()
             if self.stop.requested:
                 break
+            t0 = time.perf_counter()
             with self.guard():
                 is_kf = mapper.process(frame)
+            if is_kf:
+                self._observe("keyframe", mapper, frame, time.perf_counter() - t0)
             self._given += 1
             self._last_index = getattr(frame, "index", None)
             if hasattr(it, "set_postfix"):
@@ -248,6 +258,15 @@ class MappingEngine:
             with self.guard():
                 mapper.finalize()
         self._check_not_empty()
+        self._observe("finished", mapper)
+
+    def _observe(self, event: str, *args: Any) -> None:
+        for obs in list(self.observers):
+            try:
+                getattr(obs, event)(*args)
+            except Exception as e:  # noqa: BLE001 - watching the run must not end it
+                log.warning("%s stopped after an error: %s: %s", type(obs).__name__, type(e).__name__, e)
+                self.observers.remove(obs)
 
     def _before_frame(self) -> None:
         if self.hooks is not None:

@@ -55,6 +55,7 @@ from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame, implausible_median_depth
 from ..gaussians import GaussianMap, corrupt_npz_message
 from ..runs import RunFolder, save_run
+from ..up_axis import AGREE_DEG, CameraUp, angle_deg, axis_name, is_auto
 from .checkpoint import CheckpointArrays, read_checkpoint
 import os
 
@@ -279,8 +280,8 @@ class Mapper:
         # what the frames come from (set by the caller, e.g. {"path", "frames", "first"}), kept in
         # checkpoints so that a resume can tell another sequence from the same one
         self.source: dict = {}
-        # sum of the mapped cameras' up vectors in the world (-y of an OpenCV camera): checks graph.up_axis
-        self._camera_up_sum = np.zeros(3)
+        # the mapped cameras' up direction in the world: chooses graph.up_axis auto, or checks a given one
+        self._camera_up = CameraUp()
 
     # ------------------------------------------------------------------ switches
     @property
@@ -312,27 +313,40 @@ class Mapper:
         return SceneGraph(self.config.graph)
 
     def _check_up_axis(self) -> None:
-        """Warn (once, at the first graph update: the mean over the keyframes until then) when graph.up_axis
-        is far from where the cameras' up points on average: relations (on, under) and floor / wall /
-        ceiling tags would then use a wrong vertical (worlds differ: Replica's and ScanNet's are z-up, an
-        OpenCV camera's first frame is -y up). 75 deg leaves room for cameras pitched down at a table."""
+        """At the first graph update (the cameras over the frames mapped until then): choose graph.up_axis
+        when it is still auto (nothing told it when the run opened: a recording tracked by odometry, a live
+        camera), logged; else warn (once) when the given one is far from where the cameras' up points:
+        relations (on, under) and floor / wall / ceiling tags would then use a wrong vertical (worlds differ:
+        Replica's and ScanNet's are z-up, an OpenCV camera's first frame is -y up).
+        :data:`~ogscene3d.up_axis.AGREE_DEG` leaves room for cameras pitched down at a table."""
         if self._up_checked:
             return
         self._up_checked = True
-        norm = float(np.linalg.norm(self._camera_up_sum))
-        up = np.asarray(self.config.graph.up_axis, dtype=np.float64)
-        if norm < 1e-9 or up.shape != (3,) or not np.linalg.norm(up) > 0:
+        cam_up = self._camera_up.estimate()
+        if is_auto(self.config.graph.up_axis):
+            if cam_up is None:
+                return  # no camera mapped yet: the provisional up stays
+            self.config.graph.up_axis = [float(v) for v in cam_up]
+            if self._graph is not None:
+                self._graph.set_up_axis(cam_up)
+            log.info(
+                "graph.up_axis auto: %s (the cameras' up direction over the %d frames mapped)",
+                axis_name(cam_up),
+                self._camera_up.count,
+            )
             return
-        cam_up = self._camera_up_sum / norm
-        angle = math.degrees(math.acos(float(np.clip(cam_up @ up / np.linalg.norm(up), -1.0, 1.0))))
-        if angle > 75.0:
+        up = np.asarray(self.config.graph.up_axis, dtype=np.float64)
+        if cam_up is None or up.shape != (3,) or not np.linalg.norm(up) > 0:
+            return
+        angle = angle_deg(up, cam_up)
+        if angle > AGREE_DEG:
             axis = int(np.argmax(np.abs(cam_up)))
             guess = [0.0, 0.0, 0.0]
             guess[axis] = 1.0 if cam_up[axis] > 0 else -1.0
             log.warning(
                 "graph.up_axis %s is %.0f deg from the cameras' mean up direction %s over %d frames: the "
                 "scene graph's on/under relations and floor/wall/ceiling tags would use a wrong vertical; if "
-                "this world is %s-up, set --set graph.up_axis=%s",
+                "this world is %s-up, set --set graph.up_axis=%s (or leave graph.up_axis auto)",
                 up.tolist(),
                 angle,
                 np.round(cam_up, 2).tolist(),
@@ -449,7 +463,7 @@ class Mapper:
             self.trajectory.append(np.array(frame.pose, dtype=np.float64) if tracked else None)
         if not tracked or jumped:
             return False
-        self._camera_up_sum -= np.asarray(frame.pose, dtype=np.float64)[:3, 1]
+        self._camera_up.add(frame.pose)
         self._check_depth_range(frame)
         self.frames_seen += 1
         self.timings.add("frames")

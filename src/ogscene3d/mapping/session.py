@@ -58,13 +58,16 @@ def open_frames(
     cfg: Config, data: str | Path, segments: str | Path | None = None, max_frames: int | None = None
 ):
     """The dataset of a run (its path, and ``segments`` when given, recorded in ``cfg``: the run's
-    ``config.yaml`` then tells ``eval`` the ground truth and ``--resume`` the frames)."""
+    ``config.yaml`` then tells ``eval`` the ground truth and ``--resume`` the frames); ``graph.up_axis``
+    auto is chosen for it, where its format or poses tell (:func:`~ogscene3d.up_axis.choose_up_axis`)."""
     from ..datasets import open_dataset
+    from ..up_axis import choose_up_axis
 
     record_data(cfg, data, segments)
     ds = open_dataset(max_frames=max_frames, config=cfg.data)
     if len(ds) == 0:
         raise DataError(f"{data}: the dataset has no frames")
+    choose_up_axis(cfg.graph, ds)
     return ds
 
 

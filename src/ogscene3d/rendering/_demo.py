@@ -11,6 +11,7 @@ import torch
 
 from ..device import resolve_device
 from ..errors import ConfigError, DataError
+from ._rasterization import rasterization
 
 
 def procedural_scene(n: int, seed: int = 0, device: torch.device | str = "cpu") -> list[torch.Tensor]:
@@ -72,8 +73,6 @@ def render_demo(
 ) -> Path:
     """Render ``views`` orbit views of :func:`procedural_scene` side by side into the image file ``out``."""
     import cv2
-
-    from ._rasterization import rasterization
 
     out = Path(out)
     check_demo_args(out, n, width, height, views)

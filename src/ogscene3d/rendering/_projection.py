@@ -21,10 +21,22 @@ def warp_module():
     return init_warp()
 
 
-def kernel_modules():
-    from ogscene3d.kernels import binning, projection, raster
+@dataclass(frozen=True)
+class KernelModules:
+    projection: Any
+    binning: Any
+    raster: Any
+    semantic: Any
+    validate: Any
 
-    return projection, binning, raster
+
+@functools.cache
+def kernel_modules() -> KernelModules:
+    """The Warp kernel modules the renderers launch, imported on first use: they import Warp, which
+    importing the renderers (and the mapping, which imports them) does not load."""
+    from ogscene3d.kernels import binning, projection, raster, semantic, validate
+
+    return KernelModules(projection, binning, raster, semantic, validate)
 
 
 # torch dtype -> the Warp scalar type a launch argument of that tensor holds
@@ -103,7 +115,7 @@ class Project(torch.autograd.Function):
         """``opacities`` (not differentiated here) give gsplat's opacity-aware screen radius (see
         kernels/projection.py)."""
         wp = warp_module()
-        projection, _, _ = kernel_modules()
+        projection = kernel_modules().projection
         C, N = viewmats.shape[0], means.shape[0]
         dev = means.device
         # the kernel writes every entry (zeros where it culls)
@@ -138,7 +150,7 @@ class Project(torch.autograd.Function):
     @staticmethod
     def backward(ctx, v_means2d, v_conics, v_depths, _v_radii):
         wp = warp_module()
-        projection, _, _ = kernel_modules()
+        projection = kernel_modules().projection
         means, quats, scales, viewmats, Ks, means2d, conics, depths, radii = ctx.saved_tensors
         N, width, height, near_plane, far_plane, eps2d = ctx.params
         C = viewmats.shape[0]
@@ -281,7 +293,7 @@ def bin_gaussians(
     ``voters``: (labels [N] int32, confidences [N]) to bin only the Gaussians that vote (label >= 0,
     confidence > 0), as the semantic kernels need (the others neither vote nor occlude)."""
     wp = warp_module()
-    _, binning, _ = kernel_modules()
+    binning = kernel_modules().binning
     C, N = radii.shape
     dev = radii.device
     tiles_x = (width + tile_size - 1) // tile_size
@@ -340,6 +352,35 @@ def bin_gaussians(
     return TileBins(tile_size, tiles_x, tiles_y, tile_start, tile_end, values[:total], counts, extents)
 
 
+def project_and_bin(
+    means: torch.Tensor,
+    quats: torch.Tensor,
+    scales: torch.Tensor,
+    opacities: torch.Tensor,
+    viewmats: torch.Tensor,
+    Ks: torch.Tensor,
+    width: int,
+    height: int,
+    near_plane: float,
+    far_plane: float,
+    eps2d: float,
+    tile_size: int,
+    checks: ValueChecks,
+    voters: tuple[torch.Tensor, torch.Tensor] | None = None,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, TileBins]:
+    """The step both renderers start with: project every Gaussian into every camera (differentiable where
+    autograd records) and bin them into tiles (``voters``: only those, see :func:`bin_gaussians`), which
+    settles the pending input ``checks``. -> (means2d, conics, depths, radii, bins)."""
+    means2d, conics, depths, radii = Project.apply(
+        means, quats, scales, opacities, viewmats, Ks, width, height, near_plane, far_plane, eps2d
+    )
+    with torch.no_grad():
+        bins = bin_gaussians(
+            means2d, conics, opacities, radii, depths, width, height, tile_size, checks, voters
+        )
+    return means2d, conics, depths, radii, bins
+
+
 # kernels/validate.py flag order
 _VALUE_MESSAGES = [
     "means contains NaN or inf",
@@ -388,8 +429,7 @@ def check_values(
 ) -> None:
     """Queue every value check of the rendering inputs (one kernel); ``checks`` settles them later."""
     wp = warp_module()
-    from ogscene3d.kernels import validate
-
+    validate = kernel_modules().validate
     dev = means.device
     flags = torch.zeros(validate.NUM_FLAGS, dtype=torch.int32, device=dev)
     none = torch.zeros(0, device=dev)

@@ -13,14 +13,13 @@ import torch
 from .._validate import ValueChecks, check_int, check_tensor
 from ..device import warp_stream
 from ._projection import (
-    Project,
     TileBins,
     as_wp,
-    bin_gaussians,
     check_shapes,
     check_values,
     kernel_modules,
     on_torch_stream,
+    project_and_bin,
     warp_module,
 )
 
@@ -34,11 +33,25 @@ def _chunks(D: int) -> list[tuple[int, int]]:
     return [(s, min(D, s + MAX_CHANNELS_PER_PASS)) for s in range(0, D, MAX_CHANNELS_PER_PASS)]
 
 
+def _chunk_inputs(colors, opac, backgrounds, s: int, e: int, vec) -> list:
+    """The launch arguments of channels [s, e) that the forward and backward blending kernels share:
+    colours, opacities, backgrounds and whether there are any (without, a placeholder the kernel never
+    reads: use_background = 0)."""
+    C = colors.shape[0]
+    bg = backgrounds[:, s:e] if backgrounds is not None else torch.empty(C, e - s, device=colors.device)
+    return [
+        as_wp(colors[..., s:e].detach(), vec),
+        opac,
+        as_wp(bg.detach(), vec),
+        int(backgrounds is not None),
+    ]
+
+
 class _Rasterize(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means2d, conics, colors, opacities, backgrounds, bins: TileBins, width, height):
         wp = warp_module()
-        _, _, raster = kernel_modules()
+        raster = kernel_modules().raster
         C, N, D = colors.shape
         dev = colors.device
         out_colors = torch.empty(C, height, width, D, device=dev)
@@ -62,17 +75,12 @@ class _Rasterize(torch.autograd.Function):
                 vec = wp.types.vector(length=e - s, dtype=wp.float32)
                 # one chunk (D <= 32, the usual case) writes the output in place
                 part = out_colors if len(chunks) == 1 else torch.empty(C, height, width, e - s, device=dev)
-                # without backgrounds the kernel never reads them (use_background = 0)
-                bg = backgrounds[:, s:e] if backgrounds is not None else torch.empty(C, e - s, device=dev)
                 wp.launch(
                     fwd,
                     dim=bins.blend_launch_dim,
                     inputs=[
                         *geometry,
-                        as_wp(colors[..., s:e].detach(), vec),
-                        opac,
-                        as_wp(bg.detach(), vec),
-                        int(backgrounds is not None),
+                        *_chunk_inputs(colors, opac, backgrounds, s, e, vec),
                         tile_start,
                         as_wp(bins.tile_end),
                         isect_ids,
@@ -103,7 +111,7 @@ class _Rasterize(torch.autograd.Function):
     @staticmethod
     def backward(ctx, v_colors_out, v_alphas_out, _v_last):
         wp = warp_module()
-        _, _, raster = kernel_modules()
+        raster = kernel_modules().raster
         means2d, conics, colors, opacities, backgrounds, out_alphas, last_ids = ctx.saved_tensors
         bins: TileBins = ctx.bins
         width, height = ctx.size
@@ -122,7 +130,6 @@ class _Rasterize(torch.autograd.Function):
             for chunk, (s, e) in enumerate(chunks):
                 _, bwd = raster.raster_kernels(e - s)
                 vec = wp.types.vector(length=e - s, dtype=wp.float32)
-                bg = backgrounds[:, s:e] if ctx.has_bg else torch.empty(C, e - s, device=dev)
                 v_part = v_colors if len(chunks) == 1 else torch.zeros(C, N, e - s, device=dev)
                 # The alpha output depends on geometry only: count its gradient in one chunk.
                 v_a = v_alpha if chunk == 0 else torch.zeros_like(v_alpha)
@@ -131,10 +138,7 @@ class _Rasterize(torch.autograd.Function):
                     dim=bins.blend_launch_dim,
                     inputs=[
                         *geometry,
-                        as_wp(colors[..., s:e].detach(), vec),
-                        opac,
-                        as_wp(bg.detach(), vec),
-                        int(ctx.has_bg),
+                        *_chunk_inputs(colors, opac, backgrounds if ctx.has_bg else None, s, e, vec),
                         tile_start,
                         isect_ids,
                         alphas_arg,
@@ -179,43 +183,73 @@ def rasterization(
     eps2d: float = 0.3,
     tile_size: int = 16,
 ) -> tuple[torch.Tensor, torch.Tensor, dict]:
-    """Render C views of N Gaussians.
+    """Rasterize N 3D Gaussians into C views: any number of channels alpha-blended per pixel.
 
-    Args (float32, all on one device; quats wxyz, scales and opacities already activated):
-        means [N, 3], quats [N, 4], scales [N, 3], opacities [N], colors [N, D] or [C, N, D],
-        viewmats [C, 4, 4] world-to-camera (OpenCV axes), Ks [C, 3, 3], backgrounds [C, D] or None.
+    As gsplat 1.5's ``rasterization`` with its defaults (pinhole, classic mode, radius_clip=0); the math:
+    docs/design.md, "Kernel math". Deliberate differences ("Differences from gsplat" there): alpha clamped
+    at 0.99 (3DGS, gsplat's main branch); ``meta["radii"]`` [C, N], the larger per-axis radius; always
+    unpacked; ``tile_start`` / ``tile_end`` instead of isect_ids / isect_offsets; no SH colours, batch
+    dimensions, absgrad, sparse_grad, antialiased mode or other camera models. Differentiable w.r.t.
+    means, quats, scales, opacities, colors and viewmats (not Ks). Tensors float32, all on one device.
+
+    Args:
+        means: Gaussian centres, world frame. [N, 3]
+        quats: rotations, wxyz (need not be unit length). [N, 4]
+        scales: activated scales, > 0. [N, 3]
+        opacities: activated opacities in [0, 1]. [N]
+        colors: the channels to blend, shared by the views or one set per view. [N, D] or [C, N, D]
+        viewmats: world-to-camera matrices, OpenCV axes (x right, y down, z forward). [C, 4, 4]
+        Ks: pinhole intrinsics, pixel centres at +0.5. [C, 3, 3]
+        width: image width in pixels.
+        height: image height in pixels.
+        near_plane: Gaussians whose centre is not beyond this depth are culled.
+        far_plane: Gaussians whose centre is beyond this depth are culled.
+        backgrounds: added as T * bg where the Gaussians leave the pixel transparent; None: none. [C, D]
         render_mode: "RGB" (colors), "D" (accumulated depth), "ED" (expected depth = D / alpha),
-        "RGB+D", "RGB+ED" (depth appended as the last channel).
-    Returns:
-        colors [C, H, W, D] (+1 channel with depth in the "+D"/"+ED" modes, D = 1 in "D"/"ED"),
-        alphas [C, H, W, 1], meta (projection and binning results under gsplat's names: radii [C, N] (the
-        larger of gsplat's per-axis radii, see below), means2d
-        (retain_grad() it for densification), depths, conics, opacities, tiles_per_gauss, flatten_ids (the
-        sorted intersections' c * N + n), n_cameras, width, height, tile_size, tile_width, tile_height;
-        and ours: tile_start / tile_end [C * tiles] (each tile's range of flatten_ids), n_intersections,
-        last_ids).
-    Differentiable w.r.t. means, quats, scales, opacities, colors and viewmats (camera poses, as in gsplat;
-    not Ks).
+            "RGB+D" or "RGB+ED" (colors, then depth as the last channel).
+        eps2d: added to the 2D covariance's diagonal, in pixels squared (a low-pass filter).
+        tile_size: tile side in pixels, 1 to 32.
 
-    As gsplat 1.5's ``rasterization`` with its defaults (pinhole, rasterize_mode="classic", radius_clip=0):
-    EWA projection with the Jacobian's x/z, y/z clamped to the view +- 0.3 tan(fov), eps2d on the 2D
-    covariance's diagonal, culled where det <= 0, z outside (near, far), opacity < 1/255 or the screen
-    radius box off the image; that box is gsplat's opacity-aware one, per axis
-    ceil(min(3.33, sqrt(2 ln(255 o))) * sqrt(cov2d_ii)), i.e. the alpha >= 1/255 ellipse's, and the tiles
-    are bounded as gsplat's isect_tiles does, so every pixel where alpha >= 1/255 is blended. Pixel
-    centres at +0.5; alpha = min(0.99, o exp(-sigma)), skipped where sigma < 0 or alpha < 1/255; a Gaussian
-    that would take the transmittance to <= 1e-4 is not blended and ends the pixel; background added as
-    T * bg (zeros for the depth channel); "ED" divides by alpha clamped at 1e-10. Deliberate differences:
-    alpha is clamped at 0.99 as in 3DGS and gsplat's main branch (its 1.5.3 release and earlier clamp at
-    0.999); radii are [C, N], the larger of gsplat's two per-axis radii (gsplat: [C, N, 2]), so
-    ``radii > 0`` marks the same Gaussians as gsplat's ``(radii > 0).all(-1)``; always unpacked (gsplat
-    defaults to packed=True, whose meta holds [nnz] entries and camera_ids / gaussian_ids: the images are
-    the same); no isect_ids / isect_offsets (tile_start / tile_end instead), no SH colours, batch
-    dimensions, absgrad, sparse_grad, antialiased mode or other camera models; a Gaussian whose 2D
-    determinant overflows float32 is culled; a Gaussian exactly at z = near_plane is culled (as gsplat's
-    torch reference does; its CUDA kernel keeps it).
+    Returns:
+        A tuple:
+
+        **render_colors**: the blended channels. [C, H, W, D] (D + 1 in "RGB+D" / "RGB+ED", 1 in "D" / "ED")
+
+        **render_alphas**: accumulated opacity. [C, H, W, 1]
+
+        **meta**: gsplat's keys ``radii``, ``means2d`` (``retain_grad()`` it for densification), ``depths``,
+        ``conics``, ``opacities``, ``tiles_per_gauss``, ``flatten_ids`` (the sorted intersections'
+        c * N + n), ``n_cameras``, ``width``, ``height``, ``tile_size``, ``tile_width``, ``tile_height``;
+        and ``tile_start`` / ``tile_end`` [C * tiles] (each tile's range of flatten_ids),
+        ``n_intersections``, ``last_ids``.
     """
+    checks = ValueChecks()  # settled by the binning's sync
     width, height = check_shapes(means, quats, scales, opacities, viewmats, Ks, width, height)
+    tile_size = _check_settings(render_mode, near_plane, far_plane, eps2d, tile_size)
+    _check_colors(colors, backgrounds, means, viewmats)
+    check_values(checks, means, quats, scales, opacities, viewmats, Ks, colors, backgrounds)
+    C, N, D = viewmats.shape[0], means.shape[0], colors.shape[-1]
+    if colors.dim() == 2:
+        colors = colors.unsqueeze(0).expand(C, N, D)
+    means2d, conics, depths, radii, bins = project_and_bin(
+        means, quats, scales, opacities, viewmats, Ks, width, height, near_plane, far_plane, eps2d, tile_size,
+        checks,
+    )  # fmt: skip
+    blend, bg = _blend_channels(render_mode, colors, depths, backgrounds)
+    render, alphas, last_ids = _Rasterize.apply(
+        means2d, conics, blend.contiguous(), opacities, bg, bins, width, height
+    )
+    if render_mode in ("ED", "RGB+ED"):
+        expected = render[..., -1:] / alphas.clamp_min(1e-10)
+        render = torch.cat([render[..., :-1], expected], dim=-1)
+    projected = {"radii": radii, "means2d": means2d, "depths": depths, "conics": conics}
+    return render, alphas, _meta(projected, opacities, bins, last_ids, C, width, height, tile_size)
+
+
+def _check_settings(
+    render_mode: str, near_plane: float, far_plane: float, eps2d: float, tile_size: int
+) -> int:
+    """The checks of :func:`rasterization`'s settings. -> tile_size."""
     if render_mode not in RENDER_MODES:
         raise ValueError(f"render_mode must be one of {RENDER_MODES}, got {render_mode!r}")
     tile_size = check_int("tile_size", tile_size, 1, 32)
@@ -225,50 +259,47 @@ def rasterization(
         )
     if not eps2d >= 0:
         raise ValueError(f"eps2d must be >= 0, got {eps2d}")
+    return tile_size
+
+
+def _check_colors(
+    colors: torch.Tensor, backgrounds: torch.Tensor | None, means: torch.Tensor, viewmats: torch.Tensor
+) -> None:
+    """Shape checks of the channels to blend, [N, D] or [C, N, D], and of the backgrounds, [C, D]."""
     dev = means.device
     N, C = means.shape[0], viewmats.shape[0]
     check_tensor("colors", colors, (N, None) if colors.dim() == 2 else (C, N, None), dev, finite=False)
     if colors.shape[-1] == 0:
         raise ValueError("colors must have at least one channel")
-    D = colors.shape[-1]
     if backgrounds is not None:
-        check_tensor("backgrounds", backgrounds, (C, D), dev, finite=False)
-    checks = ValueChecks()
-    check_values(checks, means, quats, scales, opacities, viewmats, Ks, colors, backgrounds)
-    if colors.dim() == 2:
-        colors = colors.unsqueeze(0).expand(C, N, D)
+        check_tensor("backgrounds", backgrounds, (C, colors.shape[-1]), dev, finite=False)
 
-    means2d, conics, depths, radii = Project.apply(
-        means, quats, scales, opacities, viewmats, Ks, width, height, near_plane, far_plane, eps2d
-    )
-    with torch.no_grad():
-        # settles checks
-        bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, tile_size, checks)
 
+def _blend_channels(
+    render_mode: str, colors: torch.Tensor, depths: torch.Tensor, backgrounds: torch.Tensor | None
+) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """What ``render_mode`` blends ([C, N, D'] channels) and over which backgrounds (zeros for depth)."""
     if render_mode in ("D", "ED"):
-        blend, bg = depths.unsqueeze(-1), None
-    elif render_mode in ("RGB+D", "RGB+ED"):
-        blend = torch.cat([colors, depths.unsqueeze(-1)], dim=-1)
+        return depths.unsqueeze(-1), None
+    if render_mode in ("RGB+D", "RGB+ED"):
+        C = colors.shape[0]
         bg = None if backgrounds is None else torch.cat([backgrounds, backgrounds.new_zeros(C, 1)], dim=-1)
-    else:
-        blend, bg = colors, backgrounds
-    render, alphas, last_ids = _Rasterize.apply(
-        means2d, conics, blend.contiguous(), opacities, bg, bins, width, height
-    )
-    if render_mode in ("ED", "RGB+ED"):
-        expected = render[..., -1:] / alphas.clamp_min(1e-10)
-        render = torch.cat([render[..., :-1], expected], dim=-1)
-    # gsplat's keys where the meaning is the same (its densification strategies read these): not packed,
-    # so no camera_ids / gaussian_ids. Tiles are ranges [tile_start, tile_end) where gsplat has isect_offsets
-    # and its int64 sort keys isect_ids
-    meta = {
+        return torch.cat([colors, depths.unsqueeze(-1)], dim=-1), bg
+    return colors, backgrounds
+
+
+def _meta(
+    projected: dict, opacities: torch.Tensor, bins: TileBins, last_ids: torch.Tensor, C: int, width: int,
+    height: int, tile_size: int,
+) -> dict:  # fmt: skip
+    """gsplat's keys where the meaning is the same (its densification strategies read these): not packed,
+    so no camera_ids / gaussian_ids. Tiles are ranges [tile_start, tile_end) where gsplat has isect_offsets
+    and its int64 sort keys isect_ids."""
+    return {
         "camera_ids": None,
         "gaussian_ids": None,
-        "radii": radii,
-        "means2d": means2d,
-        "depths": depths,
-        "conics": conics,
-        "opacities": opacities.detach().expand(C, N),
+        **projected,
+        "opacities": opacities.detach().expand(C, opacities.shape[0]),
         "tiles_per_gauss": bins.tiles_per_gaussian,
         "flatten_ids": bins.isect_ids,
         "tile_start": bins.tile_start,
@@ -282,7 +313,6 @@ def rasterization(
         "tile_width": bins.tiles_x,
         "tile_height": bins.tiles_y,
     }
-    return render, alphas, meta
 
 
 __all__ = ["RENDER_MODES", "MAX_CHANNELS_PER_PASS", "rasterization"]

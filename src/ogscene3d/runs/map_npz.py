@@ -40,6 +40,33 @@ def corrupt_npz_message(path: Path, error: Exception) -> str:
     )
 
 
+def pop_npz_version(arrays: dict[str, np.ndarray], path: str | Path, what: str, to: str) -> int:
+    """Take the file format's number out of the arrays :func:`read_map_npz` read from ``path``.
+
+    Args:
+        arrays: the arrays read, ``version`` among them where the file holds one (removed here).
+        path: the file, for the messages.
+        what: what its owner reads it as ("map", "checkpoint"), for the messages.
+        to: what a newer ogscene3d is needed to do ("read it", "resume it").
+
+    Returns:
+        The format's number: 1 for files written before it was recorded.
+
+    Raises:
+        DataError: it is not a number (a damaged file), or newer than :data:`NPZ_VERSION`.
+    """
+    try:
+        version = int(arrays.pop("version", 1))
+    except (TypeError, ValueError) as e:
+        raise DataError(corrupt_npz_message(Path(path), e)) from e
+    if version > NPZ_VERSION:
+        raise DataError(
+            f"{path}: written by a newer ogscene3d ({what} format {version}; this one reads up to "
+            f"{NPZ_VERSION}): update ogscene3d to {to}"
+        )
+    return version
+
+
 def write_map_npz(path: str | Path, arrays: dict[str, np.ndarray]) -> None:
     """Write ``arrays`` (uncompressed) to ``path`` atomically."""
     with atomic_path(path) as tmp:
@@ -79,6 +106,7 @@ __all__ = [
     "NPZ_READ_ERRORS",
     "NPZ_VERSION",
     "corrupt_npz_message",
+    "pop_npz_version",
     "read_map_npz",
     "write_map_npz",
 ]

@@ -89,16 +89,26 @@ def recorded_data_path(run_dir: str | Path) -> Path | None:
     return p if p.is_absolute() else Path(run_dir) / p
 
 
-def recorded_up(run_dir: str | Path) -> np.ndarray | None:
-    """The unit world-up vector a run recorded (``graph.up_axis``); None, with a warning when the file is
-    unreadable, when there is none (it only orients a viewer's camera)."""
+def recorded_up(run_dir: str | Path, trajectory: Any = None) -> np.ndarray | None:
+    """The unit world-up vector a run recorded (``graph.up_axis``), or where that stayed ``auto`` (chosen from
+    the tracked cameras during the run) the up direction of the keyframe cameras ``trajectory`` ([T, 4, 4]
+    camera-to-world); None, with a warning when the file is unreadable, when there is none (it only orients
+    a viewer's camera)."""
     import numpy as np  # not at the top: `ogscene3d --help` reads this module without numpy
+
+    from ..up_axis import CameraUp, is_auto
 
     try:
         doc = _recorded(run_dir)
         if doc is None:
             return None
-        up = np.asarray(doc["graph"]["up_axis"], dtype=np.float64)
+        value = doc["graph"]["up_axis"]
+        if is_auto(value):
+            cams = CameraUp()
+            for pose in trajectory if trajectory is not None else ():
+                cams.add(pose)
+            return cams.estimate()
+        up = np.asarray(value, dtype=np.float64)
     except Exception:  # noqa: BLE001 - the up vector only orients the camera; a default is fine
         log.warning(
             "%s: no readable graph.up_axis; using the viewer's default up direction",

@@ -12,10 +12,11 @@ import numpy as np
 class Segmentation:
     """One frame's open-set segmentation.
 
-    ``ids``: int32 [H, W], 0 (or negative) = no segment, ids are per-frame only (never consistent across
-    frames).
-    ``scores``: {id: predicted IoU in [0, 1]} (SAM's, or the front-end's own estimate).
-    ``names``: {id: class name} for segments that came with a detector label.
+    Attributes:
+        ids: segment ids, 0 (or negative) = no segment; per frame only (never consistent across frames).
+            int32 [H, W]
+        scores: {id: predicted IoU in [0, 1]} (SAM's, or the front-end's own estimate).
+        names: {id: class name} for segments that came with a detector label.
     """
 
     ids: np.ndarray
@@ -33,4 +34,20 @@ class Segmentation:
 
 @runtime_checkable
 class Segmenter(Protocol):
-    def __call__(self, rgb: np.ndarray, depth: np.ndarray | None = None) -> Segmentation: ...
+    """What every 2D front-end is: ``segmenter(rgb, depth)`` gives one frame's :class:`Segmentation`.
+
+    The front-ends (``SamOnnx``, ``SamDetectorSegmenter``, ``ClassicalSegmenter``) are built from the
+    ``segmentation`` config section by ``ogscene3d.segmentation.make_segmenter``.
+    """
+
+    def __call__(self, rgb: np.ndarray, depth: np.ndarray | None = None) -> Segmentation:
+        """Segment one frame.
+
+        Args:
+            rgb: the colour image. uint8 [H, W, 3]
+            depth: its depth in metres (0 = invalid), for the front-ends that use it. float32 [H, W]
+
+        Returns:
+            The frame's segments.
+        """
+        ...

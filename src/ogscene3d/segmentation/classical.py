@@ -40,6 +40,7 @@ import logging
 import cv2
 import numpy as np
 
+from ..config import SegmentationConfig, section_values
 from .base import Segmentation
 from .sam_onnx import check_rgb
 
@@ -343,6 +344,27 @@ class ClassicalSegmenter:
             raise ValueError(f"focal lengths must be positive, got fx={fx}, fy={fy}")
         self.fx = None if fx is None else float(fx)
         self.fy = None if fy is None else float(fy)
+
+    @classmethod
+    def from_config(cls, config: SegmentationConfig, K: np.ndarray | None = None) -> ClassicalSegmenter:
+        """The classical segmenter that a ``segmentation`` config section describes.
+
+        Args:
+            config: the section; read are ``classical_k``, ``classical_min_size``, ``classical_max_side``,
+                ``classical_depth_weight`` and ``classical_normal_weight``.
+            K: 3x3 intrinsics (optional): their focal lengths, for the normals.
+
+        Returns:
+            The segmenter.
+        """
+        fx = fy = None
+        if K is not None:
+            K = np.asarray(K, dtype=np.float64)
+            if K.shape != (3, 3):
+                raise ValueError(f"K must be 3x3, got shape {K.shape}")
+            fx, fy = float(K[0, 0]), float(K[1, 1])
+        names = ("k", "min_size", "max_side", "depth_weight", "normal_weight")
+        return cls(**section_values(config, names, "classical_"), fx=fx, fy=fy)
 
     def __call__(
         self,

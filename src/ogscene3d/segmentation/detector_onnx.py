@@ -31,6 +31,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from ..config import SegmentationConfig, section_values
 from ..errors import ConfigError
 from .masks import nms
 from .onnx_session import OnnxModel
@@ -70,6 +71,15 @@ def cxcywh_to_xyxy(b: np.ndarray) -> np.ndarray:
     out[..., 2] = b[..., 0] + b[..., 2] / 2
     out[..., 3] = b[..., 1] + b[..., 3] / 2
     return out
+
+
+def require_detector(config: SegmentationConfig) -> None:
+    """ConfigError unless the section names a detector file (``segmentation.detector``)."""
+    if not config.detector:
+        raise ConfigError(
+            "segmentation backend 'sam+detector' needs a detector ONNX file: set segmentation.detector "
+            "(config or --set; `ogscene3d segment` also takes --detector)"
+        )
 
 
 class DetectorOnnx:
@@ -113,6 +123,28 @@ class DetectorOnnx:
         self._input = info.name
         self._hw = tuple(int(d) if d is not None else int(input_size) for d in info.shape[2:4])
         self._nms_rows = self._ultralytics_nms_rows()
+
+    @classmethod
+    def from_config(cls, config: SegmentationConfig) -> DetectorOnnx:
+        """The detector that a ``segmentation`` config section describes.
+
+        Args:
+            config: the section; read are ``detector`` (the ONNX file), ``detector_classes`` (the
+                vocabulary, in the export's order), ``detector_score_thresh``, ``detector_nms_thresh``,
+                ``detector_max_detections``, ``detector_input_size``, ``detector_box_format`` and
+                ``execution_provider``.
+
+        Returns:
+            The detector, its model file opened (ConfigError when ``detector`` is not set).
+        """
+        require_detector(config)
+        names = ("score_thresh", "nms_thresh", "max_detections", "input_size", "box_format")
+        return cls(
+            config.detector,
+            config.detector_classes,
+            **section_values(config, names, "detector_"),
+            provider=config.execution_provider,
+        )
 
     def _ultralytics_nms_rows(self) -> bool:
         """Whether the file is an Ultralytics export with NMS inside (output [1, N, 6] of x0, y0, x1, y1,

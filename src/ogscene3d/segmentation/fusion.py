@@ -29,8 +29,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config import SegmentationConfig
 from .base import Segmentation
-from .detector_onnx import Detections, DetectorOnnx
+from .detector_onnx import Detections, DetectorOnnx, require_detector
 from .masks import paint_masks
 from .sam_onnx import SamOnnx, check_rgb
 
@@ -124,6 +125,22 @@ class SamDetectorSegmenter:
         self.sam = sam
         self.detector = detector
         self.tau_m = float(tau_m)
+
+    @classmethod
+    def from_config(cls, config: SegmentationConfig) -> SamDetectorSegmenter:
+        """The ``sam+detector`` front-end that a ``segmentation`` config section describes.
+
+        Args:
+            config: the section: the SAM settings (:meth:`SamOnnx.from_config`), the detector's
+                (:meth:`DetectorOnnx.from_config`) and ``tau_m``.
+
+        Returns:
+            The front-end, every model file opened; a missing detector file is reported before SAM's
+            files are opened.
+        """
+        require_detector(config)
+        sam = SamOnnx.from_config(config)
+        return cls(sam, DetectorOnnx.from_config(config), tau_m=config.tau_m)
 
     def segment(self, rgb: np.ndarray) -> OpenSetResult:
         """M_s, M_d and M_f of one uint8 RGB frame [H, W, 3]."""

@@ -44,6 +44,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from ..config import SegmentationConfig, section_values
+from ..errors import ConfigError
 from .base import Segmentation
 from .masks import MaskRecord, mask_nms, masks_to_records, paint_masks, remove_small_regions
 from .onnx_session import OnnxModel
@@ -124,6 +126,19 @@ class SamImage:
         )
 
 
+#: SamOnnx's prompt grid and mask filters: the segmentation settings of the same names
+_GRID_AND_FILTERS = (
+    "points_per_side",
+    "points_per_batch",
+    "pred_iou_thresh",
+    "stability_score_thresh",
+    "stability_score_offset",
+    "box_nms_thresh",
+    "min_region_area",
+    "mask_threshold",
+)
+
+
 class SamOnnx:
     """Automatic SAM segmentation (paper Sec. III-B.1, M_s) with the split ONNX export.
 
@@ -162,6 +177,40 @@ class SamOnnx:
         self.decoder = OnnxModel(decoder, "SAM mask decoder", provider)
         self._inspect_encoder(int(input_size))
         self._inspect_decoder()
+
+    @classmethod
+    def from_config(cls, config: SegmentationConfig) -> SamOnnx:
+        """The SAM front-end that a ``segmentation`` config section describes.
+
+        Args:
+            config: the section; read are ``sam_encoder`` and ``sam_decoder`` (the split export's files),
+                the prompt grid (``points_per_side``, ``points_per_batch``), the mask filters
+                (``pred_iou_thresh``, ``stability_score_thresh``, ``stability_score_offset``,
+                ``box_nms_thresh``, ``min_region_area``, ``mask_threshold``), ``sam_input_size`` and
+                ``execution_provider``.
+
+        Returns:
+            The segmenter, its model files opened. A missing file setting or a grid that is not a whole
+            number >= 1 raises ConfigError naming the setting.
+        """
+        if not config.sam_encoder or not config.sam_decoder:
+            raise ConfigError(
+                f"segmentation backend {config.backend!r} needs the ONNX files of the split SAM export: set "
+                "segmentation.sam_encoder and segmentation.sam_decoder (config or --set; `ogscene3d segment` "
+                "also takes --sam-encoder/--sam-decoder)"
+            )
+        # the constructor checks its grid too, but as a plain ValueError; name the setting here
+        for key in ("points_per_side", "points_per_batch"):
+            value = getattr(config, key)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ConfigError(f"segmentation.{key} must be an integer >= 1, got {value!r}")
+        return cls(
+            config.sam_encoder,
+            config.sam_decoder,
+            **section_values(config, _GRID_AND_FILTERS),
+            input_size=config.sam_input_size,
+            provider=config.execution_provider,
+        )
 
     # ------------------------------------------------------------------ model signatures
     def _inspect_encoder(self, default_size: int) -> None:

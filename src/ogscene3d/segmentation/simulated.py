@@ -263,6 +263,45 @@ def simulate_segments(
     relation); without it an absorbed instance goes to the touching surface behind it, and no support
     merges happen. ``merges``: instance id -> the partner it is merged with in this frame (step 1a: a long
     scan's first-view plan)."""
+    inst = _checked_instances(instances, depth)
+    H, W = inst.shape
+    npx = float(H * W)
+    n_ids = int(inst.max(initial=0)) + 1
+    area = np.bincount(inst.ravel(), minlength=n_ids).astype(np.float64)
+    corrupted: set[int] = set()
+    # 1. missed instances, merged in a long scan's first views, absorbed into the surface behind, merged with
+    # the support
+    lut, grown = _miss_and_absorb(inst, depth, area, npx, support, merges, level, rng)
+    # 2. merging of touching small instances
+    if level.merge_prob > 0:
+        _merge_small(lut, inst, area < level.merge_area * npx, level.merge_prob, rng, corrupted)
+    labels = lut[inst]
+    if grown:
+        # an absorbing segment is corrupted when what it took makes up more than 10 % of it
+        own = np.bincount(inst[labels == inst], minlength=n_ids)
+        total = np.bincount(labels.ravel(), minlength=n_ids)
+        corrupted.update(g for g in grown if total[g] - own[g] > 0.1 * total[g])
+    # 3. over-segmentation of large regions (and, SAM-like, of medium ones: objects cut in two)
+    next_id = _split_regions(labels, n_ids, npx, level, rng, corrupted)
+    before = labels.copy()
+    # 4. boundary noise: smooth displacement field, then unlabeled boundary pixels
+    labels = _boundary_noise(labels, level, rng)
+    # 5. spurious segments
+    next_id = _spurious_segments(labels, next_id, level, rng, corrupted)
+    # Segments whose pixels changed a lot under boundary noise count as corrupted too.
+    changed = labels != before
+    seg_area = np.bincount(labels.ravel(), minlength=next_id)
+    changed_area = np.bincount(labels[changed].ravel(), minlength=next_id)
+    corrupted.update(int(s) for s in np.nonzero(changed_area > 0.1 * np.maximum(seg_area, 1))[0])
+    # 6. tiny fragments, then a fresh random id permutation
+    small = seg_area < level.min_area
+    small[0] = False
+    labels[small[labels]] = 0
+    return _renumbered(labels, next_id, corrupted, level, rng)
+
+
+def _checked_instances(instances: np.ndarray, depth: np.ndarray | None) -> np.ndarray:
+    """``instances`` as an int64 [H, W] id map, after the checks of its shape, ids and ``depth``'s shape."""
     inst = np.asarray(instances)
     if inst.ndim != 2:
         raise ValueError(f"gt_instances must be a 2D id map, got shape {inst.shape}")
@@ -270,62 +309,77 @@ def simulate_segments(
         raise ValueError("gt_instances must hold ids >= 0")
     if depth is not None and np.shape(depth) != inst.shape:
         raise ValueError(f"depth shape {np.shape(depth)} differs from gt_instances shape {inst.shape}")
-    H, W = inst.shape
-    npx = float(H * W)
-    inst = inst.astype(np.int64)
-    n_ids = int(inst.max(initial=0)) + 1
-    area = np.bincount(inst.ravel(), minlength=n_ids).astype(np.float64)
-    present = np.nonzero(area)[0]
-    present = present[present > 0]
-    corrupted: set[int] = set()
+    return inst.astype(np.int64)
 
-    # 1. missed instances
+
+def _miss_and_absorb(
+    inst: np.ndarray,
+    depth: np.ndarray | None,
+    area: np.ndarray,
+    npx: float,
+    support: Mapping[int, int] | None,
+    merges: Mapping[int, int] | None,
+    level: NoiseLevel,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, set[int]]:
+    """The instance -> segment table after missing instances (small or far ones more often), merging those
+    of a long scan's first-view plan (``merges``) and absorbing or merging them into what is behind or under
+    them; the segments that grew by absorbing or merging."""
+    n_ids = len(area)
     lut = np.arange(n_ids, dtype=np.int64)
-    grown: set[int] = set()
-    if len(present):
-        far = np.zeros(n_ids, dtype=bool)
-        mean_d = None
-        if depth is not None:
-            d = np.asarray(depth, dtype=np.float64)
-            valid = (d > 0) & np.isfinite(d)
-            cnt = np.bincount(inst[valid], minlength=n_ids)
-            mean_d = np.bincount(inst[valid], weights=d[valid], minlength=n_ids) / np.maximum(cnt, 1)
-            if level.far_depth > 0:
-                far = (mean_d > level.far_depth) & (cnt > 0)
-        hard = (area < level.small_area * npx) | far
-        p_miss = level.drop_prob + np.where(hard, level.miss_small_prob, 0.0)
-        missed = rng.uniform(size=n_ids) < p_miss
-        missed[0] = False
-        lut[missed] = 0
-        # 1a. a long scan's first views: merged with the floor or a neighbour
-        if merges:
-            grown = _first_view_merges(inst, lut, merges)
-        # 1b, 1c. absorbed into the surface behind, merged with the support
-        if level.absorb_prob > 0 or level.support_merge_prob > 0:
-            grown |= _absorb_and_merge(inst, lut, hard, mean_d, area, support, level, rng)
+    present = np.nonzero(area)[0]
+    if not len(present[present > 0]):
+        return lut, set()
+    far = np.zeros(n_ids, dtype=bool)
+    mean_d = None
+    if depth is not None:
+        d = np.asarray(depth, dtype=np.float64)
+        valid = (d > 0) & np.isfinite(d)
+        cnt = np.bincount(inst[valid], minlength=n_ids)
+        mean_d = np.bincount(inst[valid], weights=d[valid], minlength=n_ids) / np.maximum(cnt, 1)
+        if level.far_depth > 0:
+            far = (mean_d > level.far_depth) & (cnt > 0)
+    hard = (area < level.small_area * npx) | far
+    p_miss = level.drop_prob + np.where(hard, level.miss_small_prob, 0.0)
+    missed = rng.uniform(size=n_ids) < p_miss
+    missed[0] = False
+    lut[missed] = 0
+    grown: set[int] = _first_view_merges(inst, lut, merges) if merges else set()
+    if level.absorb_prob > 0 or level.support_merge_prob > 0:
+        grown |= _absorb_and_merge(inst, lut, hard, mean_d, area, support, level, rng)
+    return lut, grown
 
-    # 2. merging of touching small instances (union-find over the few candidate pairs)
-    if level.merge_prob > 0:
-        pairs = _touching_pairs(lut[inst])
-        small = area < level.merge_area * npx
-        for a, b in pairs:
-            if small[a] and small[b] and rng.uniform() < level.merge_prob:
-                ra, rb = lut[a], lut[b]
-                while lut[ra] != ra:
-                    ra = lut[ra]
-                while lut[rb] != rb:
-                    rb = lut[rb]
-                if ra != rb and ra > 0 and rb > 0:
-                    lut[lut == rb] = ra
-                    corrupted.add(int(ra))
-    labels = lut[inst]
-    if grown:
-        # an absorbing segment is corrupted when what it took makes up more than 10 % of it
-        own = np.bincount(inst[labels == inst], minlength=n_ids)
-        total = np.bincount(labels.ravel(), minlength=n_ids)
-        corrupted.update(g for g in grown if total[g] - own[g] > 0.1 * total[g])
 
-    # 3. over-segmentation of large regions (and, SAM-like, of medium ones: objects cut in two)
+def _merge_small(
+    lut: np.ndarray,
+    inst: np.ndarray,
+    small: np.ndarray,
+    merge_prob: float,
+    rng: np.random.Generator,
+    corrupted: set[int],
+) -> None:
+    """Merge touching small instances in ``lut`` (union-find over the few candidate pairs)."""
+    for a, b in _touching_pairs(lut[inst]):
+        if small[a] and small[b] and rng.uniform() < merge_prob:
+            ra, rb = lut[a], lut[b]
+            while lut[ra] != ra:
+                ra = lut[ra]
+            while lut[rb] != rb:
+                rb = lut[rb]
+            if ra != rb and ra > 0 and rb > 0:
+                lut[lut == rb] = ra
+                corrupted.add(int(ra))
+
+
+def _split_regions(
+    labels: np.ndarray,
+    n_ids: int,
+    npx: float,
+    level: NoiseLevel,
+    rng: np.random.Generator,
+    corrupted: set[int],
+) -> int:
+    """Cut large regions into pieces and medium ones in two, in place. -> the next free segment id."""
     next_id = n_ids
     if level.split_prob > 0 or level.object_split_prob > 0:
         seg_area = np.bincount(labels.ravel(), minlength=n_ids)
@@ -342,9 +396,12 @@ def simulate_segments(
             k = int(rng.integers(2, level.max_pieces + 1)) if large else 2
             corrupted.update(_cut(labels, int(s), k, next_id, rng))
             next_id += k - 1
-    before = labels.copy()
+    return next_id
 
-    # 4. boundary noise: smooth displacement field, then unlabeled boundary pixels
+
+def _boundary_noise(labels: np.ndarray, level: NoiseLevel, rng: np.random.Generator) -> np.ndarray:
+    """Boundaries moved by a smooth random displacement field, then boundary pixels left unlabelled."""
+    H, W = labels.shape
     if level.boundary_px > 0:
         gh, gw = max(2, H // 8), max(2, W // 8)
         field = rng.normal(0.0, level.boundary_px, size=(gh, gw, 2)).astype(np.float32)
@@ -357,8 +414,14 @@ def simulate_segments(
     if level.unlabeled_boundary > 0:
         drop = _boundary_mask(labels) & (rng.uniform(size=labels.shape) < level.unlabeled_boundary)
         labels[drop] = 0
+    return labels
 
-    # 5. spurious segments
+
+def _spurious_segments(
+    labels: np.ndarray, next_id: int, level: NoiseLevel, rng: np.random.Generator, corrupted: set[int]
+) -> int:
+    """Random ellipses painted in as segments of their own, in place. -> the next free segment id."""
+    H, W = labels.shape
     for _ in range(int(rng.poisson(level.spurious_rate))):
         mask = np.zeros((H, W), dtype=np.uint8)
         center = (int(rng.integers(0, W)), int(rng.integers(0, H)))
@@ -367,17 +430,13 @@ def simulate_segments(
         labels[mask > 0] = next_id
         corrupted.add(next_id)
         next_id += 1
+    return next_id
 
-    # Segments whose pixels changed a lot under boundary noise count as corrupted too.
-    changed = labels != before
-    seg_area = np.bincount(labels.ravel(), minlength=next_id)
-    changed_area = np.bincount(labels[changed].ravel(), minlength=next_id)
-    corrupted.update(int(s) for s in np.nonzero(changed_area > 0.1 * np.maximum(seg_area, 1))[0])
 
-    # 6. tiny fragments, then a fresh random id permutation
-    small = seg_area < level.min_area
-    small[0] = False
-    labels[small[labels]] = 0
+def _renumbered(
+    labels: np.ndarray, next_id: int, corrupted: set[int], level: NoiseLevel, rng: np.random.Generator
+) -> Segmentation:
+    """The segments under fresh random ids, each with a SAM-like score (lower for corrupted ones)."""
     final = np.unique(labels)
     final = final[final > 0]
     perm = rng.permutation(len(final)) + 1

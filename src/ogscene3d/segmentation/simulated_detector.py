@@ -31,7 +31,7 @@ Then class-wise NMS (``nms_thresh``) as the ONNX detector runs it. Everything is
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -124,6 +124,23 @@ def _displace(mask: np.ndarray, amplitude: float, rng: np.random.Generator) -> n
     return moved.astype(bool)
 
 
+@dataclass
+class _Boxes:
+    """The boxes a simulated detection found, before the threshold and NMS: each with its score, class name
+    and owner (the instance whose pixels its box-prompted mask takes; -1: a false positive)."""
+
+    boxes: list[list[float]] = field(default_factory=list)
+    scores: list[float] = field(default_factory=list)
+    names: list[str] = field(default_factory=list)
+    owners: list[int] = field(default_factory=list)
+
+    def add(self, box: list[float], score: float, name: str, owner: int) -> None:
+        self.boxes.append(box)
+        self.scores.append(score)
+        self.names.append(name)
+        self.owners.append(owner)
+
+
 class SimulatedDetector:
     """Detections and box-prompted masks from a ground-truth instance map, with detector errors.
 
@@ -180,14 +197,27 @@ class SimulatedDetector:
         if inst.ndim != 2:
             raise ValueError(f"gt_instances must be a 2D id map, got shape {inst.shape}")
         inst = inst.astype(np.int64)
+        rng = self._rng(frame_index)  # every step below draws from it in turn: keep their order
+        found = _Boxes()
+        self._object_boxes(inst, rng, found)
+        self._false_positives(inst.shape, rng, found)
+        b, s, idx = self._kept_boxes(found, inst.shape, rng)
+        records, kept = self._box_masks(inst, b, idx, found, rng)
+        names = found.names
+        dets = Detections(
+            boxes=b[kept].astype(np.float32).reshape(-1, 4),
+            scores=s[kept].astype(np.float32),
+            labels=np.asarray([self.vocabulary.index(names[k]) for k in kept], dtype=np.int64),
+            names=[names[k] for k in kept],
+        )
+        return dets, records
+
+    def _object_boxes(self, inst: np.ndarray, rng: np.random.Generator, found: _Boxes) -> None:
+        """Errors 1-4 on the boxes of the visible vocabulary objects: misses, wrong classes, low scores,
+        duplicates."""
         H, W = inst.shape
-        rng = self._rng(frame_index)
         nz = self.noise
         area = np.bincount(inst.ravel(), minlength=1)
-        boxes: list[list[float]] = []
-        scores: list[float] = []
-        names: list[str] = []
-        owners: list[int] = []  # the instance whose pixels a box-prompted mask takes (0: background)
         for i in np.flatnonzero(area):
             cls = self.instance_classes.get(int(i))
             if i == 0 or cls is None or cls not in self.vocabulary or area[i] < max(1, nz.min_pixels):
@@ -205,36 +235,53 @@ class SimulatedDetector:
                 name, score = cls, float(rng.uniform(0.05, 0.35))
             else:
                 name, score = cls, float(rng.uniform(0.45, 0.95))
-            boxes.append(box), scores.append(score), names.append(name), owners.append(int(i))
+            found.add(box, score, name, int(i))
             if rng.uniform() < nz.duplicate_prob:
                 other = self._confused(cls, rng)
                 if other != name:
-                    boxes.append(list(box)), names.append(other), owners.append(int(i))
-                    scores.append(float(rng.uniform(0.25, 0.9)) * score)
-        for _ in range(int(rng.poisson(nz.false_positive_rate))):
+                    found.add(list(box), float(rng.uniform(0.25, 0.9)) * score, other, int(i))
+
+    def _false_positives(self, shape: tuple[int, int], rng: np.random.Generator, found: _Boxes) -> None:
+        """Error 5: boxes around random patches, of a random vocabulary class and a low score."""
+        H, W = shape
+        for _ in range(int(rng.poisson(self.noise.false_positive_rate))):
             w, h = rng.uniform(0.05, 0.3) * W, rng.uniform(0.05, 0.3) * H
             x, y = rng.uniform(0, W - w), rng.uniform(0, H - h)
-            boxes.append([x, y, x + w, y + h]), owners.append(-1)
-            names.append(self.vocabulary[int(rng.integers(len(self.vocabulary)))])
-            scores.append(float(rng.uniform(0.2, 0.45)))
-        b = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
-        if nz.box_jitter > 0 and len(b):
+            name = self.vocabulary[int(rng.integers(len(self.vocabulary)))]
+            found.add([x, y, x + w, y + h], float(rng.uniform(0.2, 0.45)), name, -1)
+
+    def _kept_boxes(
+        self, found: _Boxes, shape: tuple[int, int], rng: np.random.Generator
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Error 6's box jitter, then the score threshold and class-wise NMS. -> (boxes [M, 4], scores [M],
+        the indices kept, best first)."""
+        H, W = shape
+        b = np.asarray(found.boxes, dtype=np.float64).reshape(-1, 4)
+        if self.noise.box_jitter > 0 and len(b):
             size = np.repeat(b[:, 2:] - b[:, :2], 2, axis=0).reshape(-1, 4)
-            b = b + rng.normal(0.0, nz.box_jitter, b.shape) * size
+            b = b + rng.normal(0.0, self.noise.box_jitter, b.shape) * size
         b = np.clip(b, 0.0, [W, H, W, H])
-        s = np.asarray(scores, dtype=np.float64)
+        s = np.asarray(found.scores, dtype=np.float64)
         ok = (s >= self.score_thresh) & (b[:, 2] - b[:, 0] >= 1) & (b[:, 3] - b[:, 1] >= 1)
         idx = np.flatnonzero(ok)
-        labels = np.asarray([self.vocabulary.index(names[k]) for k in idx], dtype=np.int64)
+        labels = np.asarray([self.vocabulary.index(found.names[k]) for k in idx], dtype=np.int64)
         idx = idx[nms(b[idx], s[idx], self.nms_thresh, classes=labels)] if len(idx) else idx
+        return b, s, idx
+
+    def _box_masks(
+        self, inst: np.ndarray, b: np.ndarray, idx: np.ndarray, found: _Boxes, rng: np.random.Generator
+    ) -> tuple[list[MaskRecord], np.ndarray]:
+        """Error 6's masks: what SAM returns for each kept box (its object, or for a false positive the most
+        prominent surface inside it), the boundary displaced. -> (records, the indices that got one)."""
+        nz = self.noise
         records: list[MaskRecord] = []
         kept: list[int] = []
         for k in idx:
             rx0, ry0 = int(np.floor(b[k, 0])), int(np.floor(b[k, 1]))
             rx1, ry1 = int(np.ceil(b[k, 2])), int(np.ceil(b[k, 3]))
             window = inst[ry0:ry1, rx0:rx1]
-            if owners[k] > 0:
-                crop = window == owners[k]
+            if found.owners[k] > 0:
+                crop = window == found.owners[k]
             else:  # a false positive: SAM returns the most prominent surface inside the box
                 ids, counts = np.unique(window[window > 0], return_counts=True)
                 if ids.size == 0:
@@ -243,22 +290,9 @@ class SimulatedDetector:
             if nz.mask_boundary_px > 0:
                 crop = _displace(crop, nz.mask_boundary_px, rng)
             kept.append(int(k))
-            records.append(
-                MaskRecord(
-                    (rx0, ry0, rx1, ry1),
-                    crop,
-                    1.0 if nz.clean else float(rng.uniform(0.88, 0.99)),
-                    name=names[k],
-                )  # fmt: skip
-            )
-        idx = np.asarray(kept, dtype=np.int64)
-        dets = Detections(
-            boxes=b[idx].astype(np.float32).reshape(-1, 4),
-            scores=s[idx].astype(np.float32),
-            labels=np.asarray([self.vocabulary.index(names[k]) for k in idx], dtype=np.int64),
-            names=[names[k] for k in idx],
-        )
-        return dets, records
+            score = 1.0 if nz.clean else float(rng.uniform(0.88, 0.99))
+            records.append(MaskRecord((rx0, ry0, rx1, ry1), crop, score, name=found.names[k]))
+        return records, np.asarray(kept, dtype=np.int64)
 
     def segment(self, ms: Segmentation, gt_instances: np.ndarray, frame_index: int) -> OpenSetResult:
         """M_s (the grid segments given), M_d (box-prompted masks), M_f (fused, with class names)."""

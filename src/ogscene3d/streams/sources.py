@@ -11,6 +11,8 @@ from typing import Any
 
 from ..errors import ConfigError
 from .base import SOURCES, CameraStream
+from .realsense import RealSenseStream
+from .record3d import Record3DUSBStream
 
 log = logging.getLogger(__name__)
 
@@ -21,14 +23,10 @@ def open_stream(source: str, max_frames: int | None = None, **options: Any) -> C
     kind, _, arg = source.partition(":")
     kind = kind.strip().lower()
     if kind == "realsense":
-        from .realsense import RealSenseStream
-
         if arg.lower().endswith((".db3", ".bag")):
             return RealSenseStream(playback=arg, max_frames=max_frames, **options)
         return RealSenseStream(serial=arg or None, max_frames=max_frames, **options)
     if kind == "record3d":
-        from .record3d import Record3DUSBStream
-
         if arg and not arg.isdigit():
             raise ConfigError(
                 f"--source record3d:{arg}: the device index must be a number (0: the first device)"

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import errno
+import json
 import logging
 import socket
 import threading
@@ -37,12 +38,13 @@ from .scene import (
     drawable_graph,
     legend_html,
     node_text,
+    scene_bounds,
 )
 from .snapshot import MapSnapshot
 
 log = logging.getLogger(__name__)
 
-_COLOR_LABELS = {"rgb": "RGB", "semantic": "Semantic label", "confidence": "Confidence"}
+_COLOR_LABELS = {"rgb": "RGB", "semantic": "Semantic label", "confidence": "Confidence", "room": "Room"}
 _RENDER_LABELS = {"auto": "Auto", "splats": "Splats", "points": "Points"}
 _NO_NODE = "(none)"
 # graph.json caption_source values as the node details panel names them
@@ -362,11 +364,19 @@ class LiveViewer:
             view.request("texts")
 
     def find(self, graph: dict | None, text: str) -> tuple[list[int], str]:
-        """Ids of the nodes of ``graph`` (a graph.json document) that match ``text``, best first, as
-        ``ogscene3d graph -q`` finds them (:meth:`SceneGraph.query_scored`), and an error text ("" when
-        none). Runs on the push thread; the graph is rebuilt only when its document changes."""
+        """Ids of the nodes of ``graph`` (a graph.json document) that answer ``text``, best first, as
+        ``ogscene3d graph -q`` answers it (:meth:`SceneGraph.ask`; a room found stands for the nodes in
+        it), and the answer's message or an error text ("" when none)."""
+        answer, error = self.answer(graph, text)
+        if answer is None:
+            return [], error
+        return answer_ids(answer), answer.message
+
+    def answer(self, graph: dict | None, text: str):
+        """(the :class:`~ogscene3d.graph.query.QueryAnswer` to ``text`` over ``graph``, or None, and an error
+        text). Runs on the push thread; the graph is rebuilt only when its document changes."""
         if not text.strip() or not graph:
-            return [], ""
+            return None, ""
         from ..graph.scenegraph import SceneGraph
 
         if graph != self._query_doc:
@@ -377,8 +387,8 @@ class LiveViewer:
             except OGSceneError as e:
                 self._query_graph, self._query_error = None, f"Find is unavailable: {e}"
         if self._query_graph is None:
-            return [], self._query_error
-        return [n.id for n, _ in self._query_graph.query_scored(text)], ""
+            return None, self._query_error
+        return self._query_graph.ask(text), ""
 
     def close(self) -> None:
         """Stop the push thread and the server."""
@@ -446,7 +456,6 @@ class LiveViewer:
         following them as the map grows."""
         if not len(snap):
             return
-        from .scene import scene_bounds
 
         c, ext = scene_bounds(snap.means)
         if self._framed is not None:
@@ -490,6 +499,7 @@ class BrowserView:
         # the published snapshot whose map is shown, held: without a map_rev it is recognised by identity
         self._shown_map_snap: MapSnapshot | None = None
         self._shown_graph_key: tuple | None = None
+        self._shown_rooms_key: str | None = None  # the rooms the map's room colours show
         self._shown_texts: dict[str, str] = {}
         self._camera_goal: np.ndarray | None = None  # where _place_camera put the camera
         self._camera_again = False
@@ -532,6 +542,7 @@ class BrowserView:
                 ("show_nodes", "Graph nodes", None),
                 ("show_edges", "Graph edges", None),
                 ("show_edge_labels", "All relation labels", "otherwise only the selected node's"),
+                ("show_rooms", "Rooms", "each room's outline at floor height with its type"),
             ):
                 cb = gui.add_checkbox(label, initial_value=getattr(st, key), hint=hint)
                 cb.on_update(lambda _, key=key: self._on_toggle(key))
@@ -542,7 +553,8 @@ class BrowserView:
             self._txt_query = gui.add_text(
                 "Find",
                 initial_value="",
-                hint="words of a node's tag or caption (as ogscene3d graph -q) or #id",
+                hint='an object, a relation, a room: "pillow on the bed", "chair in the kitchen", "kitchen", '
+                "#id (as ogscene3d graph -q)",
             )
             self._txt_query.on_update(lambda _: self._on_query())
             self._md_matches = gui.add_markdown("")
@@ -657,13 +669,16 @@ class BrowserView:
         snap = published.finite()
         st = self.settings
         graph = drawable_graph(snap.graph)
-        found, error = self.viewer.find(graph, self.query)
+        answer, error = self.viewer.answer(graph, self.query)
+        found = answer_ids(answer) if answer is not None else []
         matches = set(found)
         stats = self.viewer.stats
         with self.client.atomic():
-            if not same_map or "map" in dirty:
+            rooms_key = json.dumps((graph or {}).get("rooms")) if st.color_mode == "room" else None
+            if not same_map or "map" in dirty or rooms_key != self._shown_rooms_key:
                 self.layers.update_bounds(snap)
-                self.layers.update_map(snap, st, matches or None)
+                self.layers.update_map(snap, st, matches or None, graph, self.viewer.up)
+                self._shown_rooms_key = rooms_key
                 self._shown_map_snap = published
                 stats["map_pushes"] += 1
             if len(snap) and (self._camera_goal is None or self._camera_again):
@@ -674,9 +689,10 @@ class BrowserView:
                 self.layers.update_graph(graph, st, matches, self.selected)
                 self._shown_graph_key = graph_key
                 stats["graph_pushes"] += 1
+            self.layers.update_rooms(graph, st)
             if "visibility" in dirty:
                 self.layers.apply_visibility(st)
-            self._update_texts(snap, graph, found, error)
+            self._update_texts(snap, graph, found, error, answer)
         self.pushed_snap = published
 
     def _place_camera(self, snap: MapSnapshot) -> None:
@@ -730,7 +746,9 @@ class BrowserView:
             handle.content = text
             self._shown_texts[key] = text
 
-    def _update_texts(self, snap: MapSnapshot, graph: dict | None, found: list[int], error: str) -> None:
+    def _update_texts(
+        self, snap: MapSnapshot, graph: dict | None, found: list[int], error: str, answer=None
+    ) -> None:
         control = self.viewer.control
         status = snap.status or "running"
         if control is not None and control.paused and not getattr(control, "done", False):
@@ -768,14 +786,16 @@ class BrowserView:
         by_id = {int(n["id"]): n for n in nodes}
         if error:
             self._set_text(self._md_matches, "matches", f"*{error}*")
-        elif self.query.strip():
-            hits = [by_id[i] for i in found if i in by_id]
+        elif self.query.strip() and answer is not None:
             lines = [
-                f"- **{node_text(n)}** (#{n['id']}, conf {float(n.get('confidence', 0)):.2f})" for n in hits
+                f"- **{node_text(by_id[h.id]) if h.kind == 'object' and h.id in by_id else h.node.type}** "
+                f"({'#' if h.kind == 'object' else 'room #'}{h.id}, score {h.score:.2f}): {h.reason}"
+                for h in answer.hits[:20]
             ]
-            lines = lines[:20]
-            more = f"\n- ... {len(hits) - 20} more" if len(hits) > 20 else ""
-            self._set_text(self._md_matches, "matches", f"{len(hits)} match(es)\n" + "\n".join(lines) + more)
+            more = f"\n- ... {len(answer.hits) - 20} more" if len(answer.hits) > 20 else ""
+            note = f"\n\n*{answer.message}*" if answer.message else ""
+            text = f"{len(answer.hits)} match(es)\n" + "\n".join(lines) + more + note
+            self._set_text(self._md_matches, "matches", text)
         else:
             self._set_text(self._md_matches, "matches", "")
         self._set_text(self._md_selected, "selected", node_details(graph, self.selected))
@@ -786,6 +806,17 @@ class BrowserView:
         want = next((o for o in options if o.startswith(f"#{self.selected} ")), _NO_NODE)
         if self._dd_node.value != want:
             self._dd_node.value = want
+
+
+def answer_ids(answer) -> list[int]:
+    """The node ids a query answer points at, best first: its object hits, and for a room hit the nodes in
+    the room."""
+    ids: list[int] = []
+    for h in answer.hits:
+        for i in [h.id] if h.kind == "object" else h.node.objects:
+            if i not in ids:
+                ids.append(i)
+    return ids
 
 
 def _pause_label(control: MappingControl | None) -> str:

@@ -103,7 +103,7 @@ def load_run(run_dir: str | Path) -> tuple[MapSnapshot, RunInfo]:
         map_rev=0,
         status=f"browsing {root.name}",
     )
-    return snap, RunInfo(path=root, up=recorded_up(root))
+    return snap, RunInfo(path=root, up=recorded_up(root, trajectory))
 
 
 __all__ = ["RunInfo", "load_run"]

@@ -13,15 +13,28 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..colors import UNLABELED_RGB, confidence_colors, dim, label_color_uint8, label_colors, turbo
+from ..colors import (
+    UNLABELED_RGB,
+    confidence_colors,
+    dim,
+    label_color_uint8,
+    label_colors,
+    room_colors,
+    turbo,
+)
+from ..errors import OGSceneError
+from ..graph.rooms import assign_rooms, read_rooms
 from .snapshot import MapSnapshot, covariances, decimate_indices, rotmat_to_wxyz
 
 log = logging.getLogger(__name__)
 
-COLOR_MODES = ("rgb", "semantic", "confidence")
+COLOR_MODES = ("rgb", "semantic", "confidence", "room")
 RENDER_MODES = ("auto", "splats", "points")
 HIGHLIGHT_RGB = (255, 196, 0)
 EDGE_RGB = (70, 70, 70)
+# the camera's trajectory and its frustum are drawn alike
+CAMERA_RGB = (230, 60, 30)
+CAMERA_LINE_WIDTH = 2.0
 
 
 @dataclass
@@ -31,7 +44,9 @@ class ViewerSettings:
     ``max_splats``: at most this many Gaussians are sent as splats; ``max_points``: as points. In
     ``render="auto"`` a map up to ``max_splats`` is drawn as splats, a larger one as points.
     ``point_size`` is in metres (0 = from the median Gaussian scale). ``show_edge_labels``: every
-    relation's label (otherwise only those of the selected node's relations). ``label_spacing``: a node
+    relation's label (otherwise only those of the selected node's relations). ``show_rooms``: the rooms'
+    outlines at floor height with their type. Colour mode "room": every Gaussian in its room's colour (the
+    room whose outline holds it, as ``ogscene3d eval`` counts it), grey outside all. ``label_spacing``: a node
     label is left out where a larger node's label is nearer than this fraction of the map's size (the
     selected node and Find matches are always labelled; 0 labels every node).
     """
@@ -47,6 +62,7 @@ class ViewerSettings:
     show_nodes: bool = True
     show_edges: bool = True
     show_edge_labels: bool = False
+    show_rooms: bool = True
     max_edge_labels: int = 300
     label_spacing: float = 0.08
 
@@ -117,10 +133,42 @@ def _swatch(rgb: tuple[int, int, int] | np.ndarray, text: str) -> str:
     )
 
 
+def shown_rooms(graph: dict | None):
+    """(up, floors, rooms) of a graph document for drawing (:func:`~ogscene3d.graph.rooms.read_rooms`);
+    no rooms when it has none or they are malformed (a live graph half-way through an update must not
+    break the viewer)."""
+    if not isinstance(graph, dict) or not graph.get("rooms"):
+        return None, [], []
+    try:
+        return read_rooms(graph, "the shown graph")
+    except OGSceneError as e:
+        log.debug("rooms not drawn: %s", e)
+        return None, [], []
+
+
+def gaussian_rooms(means: np.ndarray, graph: dict | None, up: np.ndarray) -> np.ndarray:
+    """The room id of every Gaussian (-1: none), by the rooms' outlines."""
+    doc_up, floors, rooms = shown_rooms(graph)
+    if not rooms:
+        return np.full(len(means), -1, dtype=np.int64)
+    return assign_rooms(means, doc_up if doc_up is not None else up, floors, rooms)
+
+
 def legend_html(color_mode: str, graph: dict | None, max_rows: int = 40) -> str:
     """The colour legend of ``color_mode`` as HTML: per scene-graph node its label colour and text
-    (largest nodes first) in "semantic" mode, the colour ramp in "confidence" mode, "" in "rgb"."""
+    (largest nodes first) in "semantic" mode, per room its colour and type in "room" mode, the colour ramp
+    in "confidence" mode, "" in "rgb"."""
     grey = tuple(int(round(float(v) * 255)) for v in UNLABELED_RGB)
+    if color_mode == "room":
+        _, _, rooms = shown_rooms(graph)
+        rows = [
+            _swatch(tuple(int(round(float(v) * 255)) for v in room_colors(np.array([r.id]))[0]),
+                    f"{r.type} (room #{r.id}, {len(r.objects)} objects)")
+            for r in rooms[:max_rows]
+        ]  # fmt: skip
+        if not rooms:
+            rows.append("<div><i>no rooms yet</i></div>")
+        return "".join(rows) + _swatch(grey, "in no room")
     if color_mode == "confidence":
         ts = np.linspace(0.0, 1.0, 6)
         ramp = np.round(turbo(ts) * 255).astype(int)
@@ -174,6 +222,13 @@ def drawable_graph(graph: dict | None) -> dict | None:
     return {**graph, "nodes": nodes, "edges": edges}
 
 
+def _remove(*handles) -> None:
+    """Take scene handles off the scene (None: nothing drawn there)."""
+    for h in handles:
+        if h is not None:
+            h.remove()
+
+
 def _box_segments(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """The 12 edges of the axis-aligned box [lo, hi] as [12, 2, 3]."""
     c = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=np.float64)
@@ -215,13 +270,23 @@ class SceneLayers:
         self._edge_labels_key: tuple | None = None
         self._highlight_handle = None
         self._highlight_key: tuple | None = None
+        self._rooms_key: tuple | None = None
+        self._room_handles: list = []
 
     # ------------------------------------------------------------------ Gaussians
     def update_bounds(self, snap: MapSnapshot) -> None:
         self.center, self.extent = scene_bounds(snap.means)
 
-    def update_map(self, snap: MapSnapshot, st: ViewerSettings, highlight_labels: set[int] | None) -> None:
-        """(Re)send the Gaussians with the current colour mode, render mode and budgets."""
+    def update_map(
+        self,
+        snap: MapSnapshot,
+        st: ViewerSettings,
+        highlight_labels: set[int] | None,
+        graph: dict | None = None,
+        up: np.ndarray | None = None,
+    ) -> None:
+        """(Re)send the Gaussians with the current colour mode, render mode and budgets (``graph`` and the
+        world ``up``: the rooms of colour mode "room")."""
         n = len(snap)
         kind = st.render
         if kind == "auto":
@@ -233,6 +298,9 @@ class SceneLayers:
             rgb = label_colors(s.labels)
         elif st.color_mode == "confidence":
             rgb = confidence_colors(s.confidences, s.labels)
+        elif st.color_mode == "room":
+            default_up = np.array([0.0, -1.0, 0.0]) if up is None else up
+            rgb = room_colors(gaussian_rooms(s.means, graph, default_up))
         else:
             rgb = np.clip(s.colors, 0.0, 1.0)
         if highlight_labels:
@@ -278,12 +346,18 @@ class SceneLayers:
         self.shown_kind = kind
 
     def _remove_gaussians(self) -> None:
-        if self._gauss_handle is not None:
-            self._gauss_handle.remove()
+        _remove(self._gauss_handle)
         self._gauss_handle = None
         self._gauss_kind = None
         self.shown_gaussians = 0
         self.shown_kind = ""
+
+    def _lines(self, name: str, points: np.ndarray, rgb: tuple[int, ...], width: float, visible: bool = True):
+        """Add line segments ``points`` [M, 2, 3] of one colour, ``width`` screen pixels wide (the look of
+        every line layer: trajectory, edges, highlight boxes, room outlines)."""
+        return self.scene.add_line_segments(
+            name, points=points, colors=rgb, thickness=width, thickness_units="screen", visible=visible
+        )
 
     # ------------------------------------------------------------------ camera
     def update_camera(self, snap: MapSnapshot, st: ViewerSettings) -> None:
@@ -291,19 +365,13 @@ class SceneLayers:
         traj = snap.trajectory
         key = (len(traj), tuple(np.round(traj[-1, :3, 3], 6)) if len(traj) else ())
         if key != self._traj_key:
-            if self._traj_handle is not None:
-                self._traj_handle.remove()
-                self._traj_handle = None
+            _remove(self._traj_handle)
+            self._traj_handle = None
             if len(traj) >= 2:
                 pos = traj[:, :3, 3]
                 seg = np.stack([pos[:-1], pos[1:]], axis=1).astype(np.float32)
-                self._traj_handle = self.scene.add_line_segments(
-                    "/camera/trajectory",
-                    points=seg,
-                    colors=(230, 60, 30),
-                    thickness=2.0,
-                    thickness_units="screen",
-                    visible=st.show_trajectory,
+                self._traj_handle = self._lines(
+                    "/camera/trajectory", seg, CAMERA_RGB, CAMERA_LINE_WIDTH, st.show_trajectory
                 )
             self._traj_key = key
         if snap.pose is None:
@@ -314,15 +382,14 @@ class SceneLayers:
         scale = float(np.clip(0.06 * self.extent, 0.05, 0.5))
         fkey = (round(fov, 5), round(aspect, 5), round(scale, 3))
         if self._frustum is None or fkey != self._frustum_key:
-            if self._frustum is not None:
-                self._frustum.remove()
+            _remove(self._frustum)
             self._frustum = self.scene.add_camera_frustum(
                 "/camera/current",
                 fov=fov,
                 aspect=aspect,
                 scale=scale,
-                color=(230, 60, 30),
-                thickness=2.0,
+                color=CAMERA_RGB,
+                thickness=CAMERA_LINE_WIDTH,
                 thickness_units="screen",
                 visible=st.show_camera,
             )
@@ -420,20 +487,14 @@ class SceneLayers:
             for e in edges
         )
         if key != self._edges_key:
-            if self._edge_segments is not None:
-                self._edge_segments.remove()
-                self._edge_segments = None
+            _remove(self._edge_segments)
+            self._edge_segments = None
             self._edges_key = key
             if edges:
                 src = np.array([k[3] for k in key], dtype=np.float32)
                 dst = np.array([k[4] for k in key], dtype=np.float32)
-                self._edge_segments = self.scene.add_line_segments(
-                    "/graph/edges",
-                    points=np.stack([src, dst], axis=1),
-                    colors=EDGE_RGB,
-                    thickness=1.5,
-                    thickness_units="screen",
-                    visible=st.show_edges,
+                self._edge_segments = self._lines(
+                    "/graph/edges", np.stack([src, dst], axis=1), EDGE_RGB, 1.5, st.show_edges
                 )
         # Relation labels: on a room-sized graph (a hundred edges) all of them at once are a pile of
         # overlapping text, so by default only the selected node's relations are labelled.
@@ -443,8 +504,7 @@ class SceneLayers:
         label_key = (key, tuple(shown))
         if label_key == self._edge_labels_key:
             return
-        for h in self._edge_labels:
-            h.remove()
+        _remove(*self._edge_labels)
         self._edge_labels = []
         self._edge_labels_key = label_key
         for i in shown:
@@ -469,9 +529,8 @@ class SceneLayers:
         key = tuple((tuple(lo), tuple(hi)) for lo, hi in boxes)
         if key == self._highlight_key:
             return
-        if self._highlight_handle is not None:
-            self._highlight_handle.remove()
-            self._highlight_handle = None
+        _remove(self._highlight_handle)
+        self._highlight_handle = None
         self._highlight_key = key
         good = [
             (lo, hi)
@@ -480,9 +539,41 @@ class SceneLayers:
         ]
         if good:
             seg = np.concatenate([_box_segments(lo, hi) for lo, hi in good]).astype(np.float32)
-            self._highlight_handle = self.scene.add_line_segments(
-                "/graph/highlight", points=seg, colors=HIGHLIGHT_RGB, thickness=3.0, thickness_units="screen"
+            self._highlight_handle = self._lines("/graph/highlight", seg, HIGHLIGHT_RGB, 3.0)
+
+    # ------------------------------------------------------------------ rooms
+    def update_rooms(self, graph: dict | None, st: ViewerSettings) -> None:
+        """Each room's outline at its floor's height, in its colour, with its type at its centre."""
+        _, _, rooms = shown_rooms(graph)
+        key = tuple((r.id, r.type, tuple(np.round(np.concatenate(r.outline), 4).ravel())) for r in rooms
+                    if r.outline)  # fmt: skip
+        if key == self._rooms_key:
+            return
+        _remove(*self._room_handles)
+        self._room_handles = []
+        self._rooms_key = key
+        for r in rooms:
+            if not r.outline:
+                continue
+            seg = np.concatenate([np.stack([p, np.roll(p, -1, axis=0)], axis=1) for p in r.outline])
+            color = tuple(int(round(float(v) * 255)) for v in room_colors(np.array([r.id]))[0])
+            self._room_handles.append(
+                self._lines(f"/rooms/{r.id}/outline", seg.astype(np.float32), color, 3.0, st.show_rooms)
             )
+            self._room_handles.append(
+                self.scene.add_label(
+                    f"/rooms/{r.id}/label",
+                    f"{r.type} #{r.id}",
+                    position=np.concatenate(r.outline).mean(axis=0),
+                    anchor="center-center",
+                    font_screen_scale=1.1,
+                    visible=st.show_rooms,
+                )
+            )
+
+    @property
+    def shown_rooms(self) -> int:
+        return len(self._rooms_key or ())
 
     @property
     def shown_nodes(self) -> int:
@@ -508,6 +599,8 @@ class SceneLayers:
             self._edge_segments.visible = st.show_edges
         for h in self._edge_labels:
             h.visible = st.show_edges
+        for h in self._room_handles:
+            h.visible = st.show_rooms
 
 
 __all__ = [
