@@ -307,9 +307,11 @@ def test_a_retired_key_in_an_older_runs_config_is_dropped_not_refused(tmp_path):
 
 
 def test_the_retired_evidence_rules_of_an_older_run_load_with_a_notice(tmp_path, caplog):
-    # the repair rules that mapping.evidence replaced (issue 39): a run's config.yaml written before holds them
+    # the repair rules that mapping.evidence replaced (issue 39): an older run's config.yaml holds them
     old = tmp_path / "config.yaml"
-    old.write_text("mapping:\n  evidence_split: true\n  evidence_partition_apart: 0.25\n  evidence_veto: false\n")
+    old.write_text(
+        "mapping:\n  evidence_split: true\n  evidence_partition_apart: 0.25\n  evidence_veto: false\n"
+    )
     with caplog.at_level("INFO", logger="ogscene3d.config"):
         cfg = load_config(old)
     assert cfg.mapping.evidence and not hasattr(cfg.mapping, "evidence_split")

@@ -67,7 +67,8 @@ def test_pair_table_sums_unordered_pairs(device):
     a = torch.tensor([3, 1, 5], device=device)
     b = torch.tensor([1, 3, 2], device=device)
     t.add(a, b, torch.tensor([[1.0, 0.0], [0.5, 1.0], [2.0, 2.0]], device=device))
-    t.add(torch.tensor([2], device=device), torch.tensor([5], device=device), torch.ones((1, 2), device=device))
+    two, five = torch.tensor([2], device=device), torch.tensor([5], device=device)
+    t.add(two, five, torch.ones((1, 2), device=device))
     got = t.get(torch.tensor([1, 5, 7], device=device), torch.tensor([3, 2, 8], device=device)).cpu()
     assert got.tolist() == [[1.5, 1.0], [3.0, 3.0], [0.0, 0.0]]
     pa, pb = t.pairs()
@@ -277,8 +278,9 @@ def test_a_revisited_view_votes_only_for_what_was_made_since(device):
     n0 = len(gm)
     xs, ys = np.meshgrid(np.arange(-0.9, -0.6, 0.05), np.arange(-0.3, 0.0, 0.05))
     pts = torch.tensor(np.stack([xs.ravel(), ys.ravel(), np.full(xs.size, 2.0)], 1), dtype=torch.float32)
-    gm.append(pts, torch.full((len(pts), 3), 0.5), torch.full((len(pts),), -3.0),
-              labels=torch.full((len(pts),), 5, dtype=torch.int32), confidences=torch.full((len(pts),), 0.9))  # fmt: skip
+    n = len(pts)
+    gm.append(pts, torch.full((n, 3), 0.5), torch.full((n,), -3.0),
+              labels=torch.full((n,), 5, dtype=torch.int32), confidences=torch.full((n,), 0.9))  # fmt: skip
     rows = torch.arange(n0, len(gm), device=gm.device)
     ev.assign(gm, rows, ev.new_parts(1).expand(rows.numel()))
     ev.observe(gm, vase_view(), POSE, K, DEPTH, view=0, revisit=True)

@@ -102,7 +102,9 @@ def test_no_relabel_across_a_clear_separation(device):
     exposed = torch.zeros(41, dtype=torch.bool, device=device)
     exposed[36] = True
     labels, conf = base.clone(), conf0.clone()
-    global_refinement(means, labels, conf, r_search=0.1, cluster_radius=0.3, separated=separated, exposed=exposed)
+    global_refinement(
+        means, labels, conf, r_search=0.1, cluster_radius=0.3, separated=separated, exposed=exposed
+    )
     assert labels[36].item() == 3 and labels[37:40].tolist() == [5] * 3
     labels, conf = base.clone(), conf0.clone()
     global_refinement(means, labels, conf, r_search=0.1, cluster_radius=0.3)

@@ -1,4 +1,5 @@
-"""One multi-view evidence model for the map's labels (beyond the paper; ``mapping.evidence``, docs/consistency.md).
+"""One multi-view evidence model for the map's labels (beyond the paper; ``mapping.evidence``,
+docs/consistency.md).
 
 The paper fixes a Gaussian's label at first sight, and its two repairs judge confidence, not co-segmentation:
 a later, clean view of a vase that the first view merged with its cabinet matches the cabinet's Gaussians and
@@ -21,15 +22,16 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
 
 * *cells*: a cell lies in the segment most of its visible Gaussians are in. Two neighbouring cells of one
   part (one among the other's ``NEIGHBOURS`` nearest visible cells of the part, within ``mapping.r_search``)
-  are *together* in a view that puts them in one segment, *apart* in one that puts them in two; summed per cell pair over all views (``PairTable``), with the number of views.
+  are *together* in a view that puts them in one segment, *apart* in one that puts them in two; summed per
+  cell pair over all views (``PairTable``), with the number of views.
 * *parts*: a part is judged in a view where at least ``MIN_VISIBLE`` of its Gaussians are visible and
   ``CONTAIN`` of those lie in one segment. Two judged parts in one segment are *held together*: firmly when
   each holds ``mapping.merge_min_part`` of the segment's visible Gaussians (the two halves of a sofa), weakly
   otherwise (a cup inside the table's segment: SAM absorbs small objects into their support in most frames,
   which says little). Two judged parts in two segments are *clearly separated* where each is the main part
   of its segment (``MAJOR``): one segment holds one and at most 1 - ``CONTAIN`` of the other, and it is about
-  that part, not a piece of a surface that SAM cut at a random place. A part *owns* a view's segment when it holds
-  ``OWN`` of it.
+  that part, not a piece of a surface that SAM cut at a random place. A part *owns* a view's segment when it
+  holds ``OWN`` of it.
 * *Gaussians*: a labelled Gaussian in a segment other than its label's main one (the segment holding most of
   the label) that is mostly other labels is *disputed* in that view (the label ran over into a neighbour);
   one in its label's main segment is *confirmed*. An unlabelled Gaussian votes for the label holding most of
@@ -79,9 +81,11 @@ from .neighbors import knn
 
 CONTAIN = 0.8  # a part is judged in a view when this share of its visible Gaussians lies in one segment
 OWN = 0.8  # a part owns a segment when it holds this share of the segment's visible Gaussians
-MAJOR = float(os.environ.get("EV_MAJOR", 0.5))  # two parts are separated by a view only where each holds this share of its own segment
+# two parts are separated by a view only where each holds this share of its own segment
+MAJOR = float(os.environ.get("EV_MAJOR", 0.5))
 MIN_VISIBLE = 3  # visible Gaussians a part needs to be judged
-MIN_PART = int(os.environ.get("EV_MINPART", 8))  # a segment's Gaussians apart in space start parts of their own from this many on
+# a segment's Gaussians apart in space start parts of their own from this many on
+MIN_PART = int(os.environ.get("EV_MINPART", 8))
 CELL_MIN = 1  # visible Gaussians (in its segment) a cell needs to be judged
 NEIGHBOURS = 8  # a cell's neighbours in a view: its nearest visible cells (within ``radius``)
 FIRM_OWN = os.environ.get("EV_FIRMOWN", "0") == "1"  # firm: each part's own share (not its label's)
@@ -90,7 +94,8 @@ SPLIT_MIN = int(os.environ.get("EV_SPLITMIN", 3))  # Gaussians a group of cells 
 SPLIT_VIEWS = float(os.environ.get("EV_SPLITVIEWS", 1.5))  # weighted views apart a split needs (about two)
 ANCHOR = 8  # a part's oldest visible cells whose segment anchors its cells' votes in a view
 CONF_APART = os.environ.get("EV_CONFAPART", "1") == "1"
-UNSURE_APART = float(os.environ.get("EV_UNSURE", 1.0))  # weight of a cell's apart vote from a low-scored segment
+# weight of a cell's apart vote from a low-scored segment
+UNSURE_APART = float(os.environ.get("EV_UNSURE", 1.0))
 LINK_RATIO = float(os.environ.get("EV_LINKRATIO", 3.0))  # together at least this many times apart: linked
 LINK_VIEWS = 2  # views that must judge two cells of a part before they count as linked
 WEAK_OWNERS = os.environ.get("EV_WEAKOWN", "1") == "1"
@@ -306,7 +311,8 @@ class EvidenceModel:
             uk, inv = torch.unique(keys[miss], return_inverse=True)
             first = torch.zeros(uk.numel(), dtype=torch.long, device=keys.device)
             first.scatter_(0, inv, torch.nonzero(miss).squeeze(1))
-            ids = torch.arange(self.cell_part.numel(), self.cell_part.numel() + uk.numel(), device=keys.device)
+            n0 = self.cell_part.numel()
+            ids = torch.arange(n0, n0 + uk.numel(), device=keys.device)
             cell[miss] = ids[inv]
             self.cell_part = torch.cat([self.cell_part, parts.long()[first]])
             self.cell_vox = torch.cat([self.cell_vox, vox[first]])
@@ -487,8 +493,8 @@ class EvidenceModel:
         w: torch.Tensor,
         since: int = 0,
     ) -> None:
-        """Part pairs of one view (``part``, ``lab``, ``s`` per visible Gaussian). A part's share of a segment is
-        its label's (the parts of one object share the segment that shows it): each of two parts in one
+        """Part pairs of one view (``part``, ``lab``, ``s`` per visible Gaussian). A part's share of a segment
+        is its label's (the parts of one object share the segment that shows it): each of two parts in one
         segment is a real part of it when its label holds ``min_part`` of it, and a view separates two parts
         in two segments where each one's label is the main one of its segment (``MAJOR``)."""
         P, S = self.next_part, int(n_seg.numel())
@@ -518,8 +524,8 @@ class EvidenceModel:
         same = si == sj
         big = (own_share if FIRM_OWN else share) >= self.min_part
         firm = same & big[i] & big[j]
-        # apart: each part's label the main one in its segment. A SAM cut through a wall puts a small piece of it
-        # in a segment of its own now and then, but that segment is mostly the rest of the wall; an object
+        # apart: each part's label the main one in its segment. A SAM cut through a wall puts a small piece of
+        # it in a segment of its own now and then, but that segment is mostly the rest of the wall; an object
         # that SAM shows on its own is most of its segment
         major = share >= MAJOR
         apart = ~same & major[i] & major[j]
@@ -613,7 +619,7 @@ class EvidenceModel:
         inside = (pa == pb) & self.part_touched[pa]
         if not bool(inside.any()):
             return 0
-        a, b, part = a[inside], b[inside], pa[inside]
+        a, b = a[inside], b[inside]
         t, x, nv = (self.cell_pairs.vals[inside, i] for i in range(3))
         n_cells = int(self.cell_part.numel())
         # linked: together at least twice as often as apart, in two views at least: a cell that only its first

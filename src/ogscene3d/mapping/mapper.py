@@ -39,6 +39,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
 import time
 from collections import deque
 from contextlib import contextmanager
@@ -57,11 +58,7 @@ from ..gaussians import GaussianMap, corrupt_npz_message
 from ..runs import RunFolder, save_run
 from ..up_axis import AGREE_DEG, CameraUp, angle_deg, axis_name, is_auto
 from .checkpoint import CheckpointArrays, read_checkpoint
-import os
-
 from .evidence import MIN_PART, EvidenceModel
-
-REVISIT = os.environ.get("EV_REVISIT", "1") == "1"
 from .init import make_probes
 from .keyframes import KeyframeSelector
 from .local import (
@@ -83,6 +80,8 @@ from .pose_jump import PoseJumpCheck, PoseJumpError
 from .refine import connected_clusters, global_refinement
 
 log = logging.getLogger(__name__)
+
+REVISIT = os.environ.get("EV_REVISIT", "1") == "1"  # work in progress: 0 skips the memory views' revisit
 
 ABLATIONS = choices("mapping.ablation")
 
@@ -638,7 +637,9 @@ class Mapper:
         if fresh.numel():
             group = torch.full((len(probes),), S, dtype=torch.int32, device=self.device)  # S: no segment
             group[sel] = seg.to(torch.int32)
-            comp = connected_clusters(probes.means[fresh], group[fresh], self.cfg.r_search, self.cfg.refine_graph_k)
+            comp = connected_clusters(
+                probes.means[fresh], group[fresh], self.cfg.r_search, self.cfg.refine_graph_k
+            )
             # a few Gaussians apart from the rest of their segment (a hole the map did not explain) join the
             # segment's largest component: a part too small to be judged says nothing
             size = torch.bincount(comp)
