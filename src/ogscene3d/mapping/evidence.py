@@ -68,7 +68,6 @@ The pair tables grow with the scene's surface, not with the stream: a view adds 
 from __future__ import annotations
 
 import heapq
-import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -82,23 +81,18 @@ from .neighbors import knn
 CONTAIN = 0.8  # a part is judged in a view when this share of its visible Gaussians lies in one segment
 OWN = 0.8  # a part owns a segment when it holds this share of the segment's visible Gaussians
 # two parts are separated by a view only where each holds this share of its own segment
-MAJOR = float(os.environ.get("EV_MAJOR", 0.5))
+MAJOR = 0.5
 MIN_VISIBLE = 3  # visible Gaussians a part needs to be judged
 # a segment's Gaussians apart in space start parts of their own from this many on
-MIN_PART = int(os.environ.get("EV_MINPART", 8))
+MIN_PART = 8
 CELL_MIN = 1  # visible Gaussians (in its segment) a cell needs to be judged
 NEIGHBOURS = 8  # a cell's neighbours in a view: its nearest visible cells (within ``radius``)
-FIRM_OWN = os.environ.get("EV_FIRMOWN", "0") == "1"  # firm: each part's own share (not its label's)
-COHERE = float(os.environ.get("EV_COHERE", 2.0))  # apart segments hold at most this many times the group
-SPLIT_MIN = int(os.environ.get("EV_SPLITMIN", 3))  # Gaussians a group of cells needs to be split off
-SPLIT_VIEWS = float(os.environ.get("EV_SPLITVIEWS", 1.5))  # weighted views apart a split needs (about two)
+COHERE = 2.0  # apart segments hold at most this many times the group
+SPLIT_MIN = 3  # Gaussians a group of cells needs to be split off
+SPLIT_VIEWS = 1.5  # weighted views apart a split needs (about two)
 ANCHOR = 8  # a part's oldest visible cells whose segment anchors its cells' votes in a view
-CONF_APART = os.environ.get("EV_CONFAPART", "1") == "1"
-# weight of a cell's apart vote from a low-scored segment
-UNSURE_APART = float(os.environ.get("EV_UNSURE", 1.0))
-LINK_RATIO = float(os.environ.get("EV_LINKRATIO", 3.0))  # together at least this many times apart: linked
+LINK_RATIO = 3.0  # together at least this many times apart: linked
 LINK_VIEWS = 2  # views that must judge two cells of a part before they count as linked
-WEAK_OWNERS = os.environ.get("EV_WEAKOWN", "1") == "1"
 DISPUTE = 0.5  # a Gaussian is disputed when this share of its judged views disputed its label
 _VOX = 2048  # voxel coordinates are packed in 12 bits each (+-2048 cells)
 _PART_SHIFT = 36
@@ -348,14 +342,13 @@ class EvidenceModel:
         depth: np.ndarray,
         *,
         weights: dict[int, float] | None = None,
-        confident: set[int] | None = None,
         margin: float = 0.1,
         view: int | None = None,
         revisit: bool = False,
     ) -> None:
         """Add one view's evidence (see the module docstring). ``segments`` [H,W] ids (0 = none); ``pose``
         c2w, ``K``, ``depth`` the view's (metres); ``weights`` each segment's weight (its rescaled SAM
-        score; 1 where missing); ``confident``: the segments SAM scored high; ``view``: the keyframe index
+        score; 1 where missing); ``view``: the keyframe index
         of this view, whose own new Gaussians cast no Gaussian-level vote (their label came from these
         segments). A view judged again (``revisit``: the long-term step's memory views) votes only where it
         has not yet: for the cells and parts made since it was last judged, and the Gaussians made after it,
@@ -389,15 +382,10 @@ class EvidenceModel:
         for i, v in (weights or {}).items():
             if 0 < int(i) < S:
                 w[int(i)] = float(v)
-        sure = torch.ones(S, dtype=torch.bool, device=dev)
-        if confident is not None and CONF_APART:
-            sure[:] = False
-            ids = [int(i) for i in confident if 0 < int(i) < S]
-            sure[torch.tensor(ids, dtype=torch.long, device=dev)] = True
         cell = gm.aux("ev_cell", -1.0)[g].long()
         # cells: every visible Gaussian (a Gaussian at an edge, in its object's segment in most views, links
         # with its object's cells; an even split links nothing)
-        self._observe_cells(cell, gm.labels[g].long(), s, w, sure, since[0])
+        self._observe_cells(cell, gm.labels[g].long(), s, w, since[0])
         # parts and Gaussians: a big segment's boundary pixels are left out (spills across an edge)
         ok = ~spill_pixels(seg).reshape(-1)[px]
         g, s, cell = g[ok], s[ok], cell[ok]
@@ -413,7 +401,6 @@ class EvidenceModel:
         lab: torch.Tensor,
         s: torch.Tensor,
         w: torch.Tensor,
-        sure: torch.Tensor,
         since: int = 0,
     ) -> None:
         n_cell = torch.bincount(cell, minlength=int(self.cell_part.numel()))
@@ -453,10 +440,7 @@ class EvidenceModel:
         ok = n_part[pc] >= MIN_VISIBLE
         inside = sc == anchor[pc]
         wc = w[sc] * ok
-        # apart from segments that SAM scored low counts less: it cuts a wall at random places, and scores the
-        # pieces low
-        both_sure = sure[sc] & sure[anchor[pc].clamp(min=0)]
-        wa = wc * torch.where(both_sure, 1.0, UNSURE_APART)
+        wa = wc
         fresh = c >= since
         away = wa * (~inside & own)
         # and, for the apart votes, how much of the part that segment held: an object the part took in is
@@ -481,7 +465,7 @@ class EvidenceModel:
         # apart where both segments are mostly the part's (see above)
         apart = ~same & (held(pa, sa) >= MAJOR * n_seg[sa]) & (held(pa, sb) >= MAJOR * n_seg[sb])
         wt = torch.minimum(w[sa], w[sb])
-        wx = wt * torch.where(sure[sa] & sure[sb], 1.0, UNSURE_APART)
+        wx = wt
         self.cell_pairs.add(a, b, torch.stack([wt * same, wx * apart, torch.ones_like(wt)], 1))
 
     def _observe_parts(
@@ -512,7 +496,6 @@ class EvidenceModel:
         L = int(lab.max()) + 2 if lab.numel() else 1
         held = torch.bincount((lab + 1) * S + s, minlength=L * S).float()
         share = torch.where(lp >= 0, held[(lp + 1) * S + sp], cnt[p].float()) / n_seg[sp]
-        own_share = cnt[p].float() / n_seg[sp]  # the part's own share: a real part of the segment
         self.part_owned[p[(share >= OWN) & (p >= since)]] += 1
         if p.numel() < 2:
             return
@@ -522,7 +505,7 @@ class EvidenceModel:
             i, j = i[keep], j[keep]
         si, sj = sp[i], sp[j]
         same = si == sj
-        big = (own_share if FIRM_OWN else share) >= self.min_part
+        big = share >= self.min_part
         firm = same & big[i] & big[j]
         # apart: each part's label the main one in its segment. A SAM cut through a wall puts a small piece of
         # it in a segment of its own now and then, but that segment is mostly the rest of the wall; an object
@@ -811,7 +794,7 @@ class EvidenceModel:
         firm, weak, apart = float(v[0]), float(v[1]), float(v[2])
         if firm > 0:
             return apart <= self.separation * firm
-        return apart == 0 and weak > 0 and not (owners and WEAK_OWNERS)
+        return apart == 0 and weak > 0 and not owners
 
     @staticmethod
     def _score(v: np.ndarray) -> float:

@@ -39,7 +39,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 import time
 from collections import deque
 from contextlib import contextmanager
@@ -80,8 +79,6 @@ from .pose_jump import PoseJumpCheck, PoseJumpError
 from .refine import connected_clusters, global_refinement
 
 log = logging.getLogger(__name__)
-
-REVISIT = os.environ.get("EV_REVISIT", "1") == "1"  # work in progress: 0 skips the memory views' revisit
 
 ABLATIONS = choices("mapping.ablation")
 
@@ -839,7 +836,7 @@ class Mapper:
 
     def _judge(self, view: int, segments, scores: dict[int, float], source, revisit: bool = False) -> None:
         """One view's evidence (``evidence.py``): ``source`` its Frame or MemoryEntry; its segments weighted
-        by their rescaled SAM score (Eq. 5's c_sam), confident where scored ``merge_min_score`` or more."""
+        by their rescaled SAM score (Eq. 5's c_sam)."""
         if segments is None:
             return
         ids = list(scores)
@@ -851,10 +848,9 @@ class Mapper:
                 tuple(self.config.segmentation.conf_range),
             )
             weights = dict(zip(ids, w.tolist()))
-        confident = {i for i, v in scores.items() if v >= self.cfg.merge_min_score}
         with self.timings.section("evidence"):
             self.evidence.observe(
-                self.map, segments, source.pose, source.K, source.depth, weights=weights, confident=confident,
+                self.map, segments, source.pose, source.K, source.depth, weights=weights,
                 margin=self.cfg.init_depth_margin, view=view, revisit=revisit,
             )  # fmt: skip
 
@@ -865,7 +861,7 @@ class Mapper:
             with self.timings.section("evidence"):
                 self.timings.add("evidence_lowered", self.evidence.lower_disputed(self.map))
         views = self.memory.next_views(cfg.longterm_views)
-        if self._collects_evidence() and REVISIT:
+        if self._collects_evidence():
             # the memory views judged again, against the map as it is now: what was made since they were
             # keyframes has had no word from them
             for entry in views:
