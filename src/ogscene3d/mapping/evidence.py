@@ -90,6 +90,8 @@ NEIGHBOURS = 8  # a cell's neighbours in a view: its nearest visible cells (with
 COHERE = 2.0  # apart segments hold at most this many times the group
 SPLIT_MIN = 3  # Gaussians a group of cells needs to be split off
 SPLIT_VIEWS = 1.5  # weighted views apart a split needs (about two)
+SMALL = 5.0  # a group at most 1/SMALL of its part splits on its apart views alone
+SMALL_APART = 3.0  # weight of a cell pair's apart view where one segment is at most 1/SMALL of the other
 ANCHOR = 8  # a part's oldest visible cells whose segment anchors its cells' votes in a view
 LINK_RATIO = 3.0  # together at least this many times apart: linked
 LINK_VIEWS = 2  # views that must judge two cells of a part before they count as linked
@@ -465,7 +467,11 @@ class EvidenceModel:
         # apart where both segments are mostly the part's (see above)
         apart = ~same & (held(pa, sa) >= MAJOR * n_seg[sa]) & (held(pa, sb) >= MAJOR * n_seg[sb])
         wt = torch.minimum(w[sa], w[sb])
-        wx = wt
+        # a view that shows one of the two in a segment at most 1/SMALL of the other's (a light switch's own
+        # segment beside the wall's) outweighs LINK_RATIO views that hold them in one: SAM absorbs small
+        # objects into their support in most frames (the yardstick's separation rule)
+        lo, hi = torch.minimum(n_seg[sa], n_seg[sb]), torch.maximum(n_seg[sa], n_seg[sb])
+        wx = wt * torch.where(SMALL * lo <= hi, SMALL_APART, 1.0)
         self.cell_pairs.add(a, b, torch.stack([wt * same, wx * apart, torch.ones_like(wt)], 1))
 
     def _observe_parts(
@@ -484,10 +490,14 @@ class EvidenceModel:
         P, S = self.next_part, int(n_seg.numel())
         n_part = torch.bincount(part, minlength=P)
         top, cnt = _majority(part, s, P)
-        p = torch.nonzero((n_part >= MIN_VISIBLE) & (cnt >= CONTAIN * n_part)).squeeze(1)
+        judged = (n_part >= MIN_VISIBLE) & (cnt >= CONTAIN * n_part)
+        # a part whose main segment holds most of it (not all: SAM cuts a wall at random places) can still be
+        # shown apart from another part; only a judged one can be shown with one
+        loose = (n_part >= MIN_VISIBLE) & (cnt >= MAJOR * n_part)
+        p = torch.nonzero(loose).squeeze(1)
         if p.numel() == 0:
             return
-        self.part_touched[p[p >= since]] = True
+        self.part_touched[p[(p >= since) & judged[p]]] = True
         sp = top[p]
         # each judged part's label (the one most of its visible Gaussians carry) and that label's share of the
         # part's segment; an unlabelled part counts alone
@@ -496,7 +506,7 @@ class EvidenceModel:
         L = int(lab.max()) + 2 if lab.numel() else 1
         held = torch.bincount((lab + 1) * S + s, minlength=L * S).float()
         share = torch.where(lp >= 0, held[(lp + 1) * S + sp], cnt[p].float()) / n_seg[sp]
-        self.part_owned[p[(share >= OWN) & (p >= since)]] += 1
+        self.part_owned[p[(share >= OWN) & (p >= since) & judged[p]]] += 1
         if p.numel() < 2:
             return
         i, j = torch.triu_indices(p.numel(), p.numel(), 1, device=p.device)
@@ -504,14 +514,15 @@ class EvidenceModel:
             keep = p[j] >= since
             i, j = i[keep], j[keep]
         si, sj = sp[i], sp[j]
-        same = si == sj
+        both = judged[p[i]] & judged[p[j]]
+        same = (si == sj) & both
         big = share >= self.min_part
         firm = same & big[i] & big[j]
         # apart: each part's label the main one in its segment. A SAM cut through a wall puts a small piece of
         # it in a segment of its own now and then, but that segment is mostly the rest of the wall; an object
         # that SAM shows on its own is most of its segment
         major = share >= MAJOR
-        apart = ~same & major[i] & major[j]
+        apart = (si != sj) & major[i] & major[j]
         wt = torch.where(same, w[si], torch.minimum(w[si], w[sj]))
         vals = torch.stack([wt * firm, wt * (same & ~firm), wt * apart], 1)
         self.part_apart.index_add_(0, p[i], wt * apart).index_add_(0, p[j], wt * apart)
@@ -628,9 +639,15 @@ class EvidenceModel:
         # SAM cuts a floor at random places, each time another piece; an object is its segment every time
         size = votes[:, 2] / votes[:, 1].clamp(min=1e-9)
         coherent = size <= COHERE * comp_mass
+        # a component that is small beside the rest of its part (a light switch in the wall's part, a cup in
+        # the table's) splits on the views that showed it apart, however many absorbed it: SAM merges small
+        # objects into their support in most frames, so those frames say little (the yardstick's rule)
+        part_mass = torch.zeros(self.next_part, device=self.device)
+        part_mass.index_add_(0, comp_part[comp_mass > 0], comp_mass[comp_mass > 0])
+        small = SMALL * comp_mass <= part_mass[comp_part.clamp(min=0)]
         go = (
             (comp_mass >= SPLIT_MIN) & (apart >= SPLIT_VIEWS) & coherent
-            & (apart >= self.split_ratio * (apart + together))
+            & ((apart >= self.split_ratio * (apart + together)) | small)
         )  # fmt: skip
         # a part keeps the components that stay; if none would, its largest
         stays = torch.zeros(self.next_part, dtype=torch.bool, device=self.device)
@@ -652,12 +669,30 @@ class EvidenceModel:
         self.cell_part[sel] = moved[sel]
         self.cell_main[sel] = 0.0  # their part's main segment is another now
         self._reindex_cells()
+        self._inherit(old[is_main[go_ids]], new[is_main[go_ids]])
         # the new part starts its history with what the cells said about it and its former part (the views
         # that held them in one segment held two real parts of it)
         self.part_pairs.add(new, old, torch.stack([t_cross[go_ids], torch.zeros_like(t_cross[go_ids]),
                                                    x_cross[go_ids]], 1))  # fmt: skip
         self.part_touched[new] = True
         return int(go_ids.numel())
+
+    def _inherit(self, old: torch.Tensor, new: torch.Tensor) -> None:
+        """A part's largest component that leaves it (only smaller pieces stayed, with the anchor) is most of
+        what the views judged: the new part takes over the old part's statistics with every other part."""
+        if old.numel() == 0 or len(self.part_pairs) == 0:
+            return
+        lut = torch.full((self.next_part,), -1, dtype=torch.long, device=self.device)
+        lut[old] = new
+        a, b = self.part_pairs.pairs()
+        vals = self.part_pairs.vals
+        la, lb = lut[a], lut[b]
+        for keep, x, y in ((la >= 0, la, b), (lb >= 0, a, lb)):
+            keep &= (x != y) & ((la < 0) | (lb < 0))
+            if bool(keep.any()):
+                self.part_pairs.add(x[keep], y[keep], vals[keep].clone())
+        self.part_owned[new] = self.part_owned[old]
+        self.part_apart[new] = self.part_apart[old]
 
     def _group_parts(self, part_label: torch.Tensor, part_mass: torch.Tensor) -> torch.Tensor:
         """Step 2: a group id per part. Each label's parts start as one group; a part that the views separate
