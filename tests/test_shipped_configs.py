@@ -39,7 +39,7 @@ def test_a_file_that_exists_wins_over_a_shipped_name(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     Path("replica").write_text("mapping:\n  opt_iters: 7\n")
     assert resolve_config_path("replica") == Path("replica")
-    assert load_config("replica").mapping.opt_iters == 7
+    assert load_config("replica").mapping.optimize.iters == 7
 
 
 def test_an_unknown_name_or_a_missing_path_names_the_shipped_configs(tmp_path, monkeypatch):

@@ -99,7 +99,7 @@ def test_new_object_matched_only_at_its_border_gets_a_label(device):
     border = torch.tensor([[0.01, 0.0, 0.0], [0.01, 0.1, 0.0]])
     probes = torch.cat([border, _patch(2.0)]).to(device)
     seg = torch.zeros(18, dtype=torch.long, device=device)
-    default = MappingConfig().knn_k
+    default = MappingConfig().association.knn_k
     out = {}
     for k in (default, 5):
         conf = torch.full((6,), 0.6, device=device)
@@ -128,7 +128,7 @@ def test_small_new_object_between_two_surfaces(device, novel_first):
     case (iii) first and gives the bin a new label; the paper's order leaves it unlabelled."""
     from ogscene3d.config import MappingConfig
 
-    assert MappingConfig().novel_before_ambiguous
+    assert MappingConfig().association.novel_before_ambiguous
     means = torch.tensor([[0.0, 0.0, 0.0], [0.05, 0.0, 0.0], [0.0, 1.0, 0.0]], device=device)
     labels = torch.tensor([3, 3, 4], dtype=torch.int32, device=device)
     border = torch.tensor([[0.0, 0.0, 0.005], [0.05, 0.0, 0.005], [0.0, 1.0, 0.005]])

@@ -9,6 +9,7 @@ from ogscene3d.mapping.longterm import (
     class_iou_map,
     eq16_update,
     frustum_ratio,
+    inner_pixels,
     label_edges,
     remap_segments,
 )
@@ -218,3 +219,13 @@ def test_associate_pixels_only_with_rendered_class(device):
         means, labels, pts, p, seg_label, k=2, radius=0.05, pixel_rendered=torch.tensor([3], device=device)
     )
     assert hit.cpu().tolist() == [0] and cons.cpu().tolist() == [True]
+
+
+def test_inner_pixels_are_off_segment_boundaries(device):
+    segments = np.zeros((4, 6), dtype=np.int32)
+    segments[:, 3:] = 5  # columns 2 and 3 touch the boundary
+    # flat v * 6 + u of (v, u) = (0,0) (0,2) (0,3) (0,5) (1,1) (3,4)
+    pix = torch.tensor([0, 2, 3, 5, 6 + 1, 18 + 4], device=device)
+    for dtype in (np.int32, np.uint16):  # segment PNGs load as uint16
+        inner = inner_pixels(segments.astype(dtype), pix)
+        assert inner.tolist() == [True, False, False, True, True, True]

@@ -16,8 +16,8 @@ from .timings import Timings
 
 class EvidenceFeed:
     """The run's :class:`EvidenceModel` and the mapper's calls into it. ``enabled``: whether the evidence
-    is collected (where the global refinement runs and ``mapping.evidence`` is on); off, every call here
-    does nothing."""
+    is collected (where the global refinement runs and ``mapping.evidence.enabled`` is on); off, every call
+    here does nothing."""
 
     def __init__(self, config: Config, device: torch.device, timings: Timings, enabled: bool) -> None:
         cfg = config.mapping
@@ -25,12 +25,12 @@ class EvidenceFeed:
         self.device = device
         self.timings = timings
         self.segmentation = config.segmentation
-        self.margin = cfg.init_depth_margin
-        self.r_search, self.graph_k = cfg.r_search, cfg.refine_graph_k
+        self.margin = cfg.init.depth_margin
+        self.r_search, self.graph_k = cfg.refine.r_search, cfg.refine.graph_k
         self.model = EvidenceModel(
-            device, cell=cfg.evidence_cell, radius=cfg.r_search, separation=cfg.evidence_separation,
-            split_ratio=cfg.evidence_split_ratio, min_part=cfg.merge_min_part,
-            min_views=cfg.evidence_dispute_views,
+            device, cell=cfg.evidence.cell, radius=cfg.refine.r_search, separation=cfg.evidence.separation,
+            split_ratio=cfg.evidence.split_ratio, min_part=cfg.merge.min_part,
+            min_views=cfg.evidence.dispute_views,
         )  # fmt: skip
 
     def new_parts(self, gm: GaussianMap, probes, sel: torch.Tensor, res) -> torch.Tensor:

@@ -14,6 +14,8 @@ import torch
 from ..config import Config
 from ..frame import Frame
 from ..gaussians import GaussianMap
+from ..graph import SceneGraph
+from ..rendering import render_semantics
 from ..up_axis import AGREE_DEG, CameraUp, angle_deg, axis_name, is_auto
 from .timings import Timings
 
@@ -54,8 +56,6 @@ class GraphFeed:
         return None if self.failed else self.graph
 
     def _new_graph(self):
-        from ..graph import SceneGraph
-
         return SceneGraph(self.config.graph)
 
     def check_up_axis(self, frames_seen: int) -> None:
@@ -193,8 +193,6 @@ def _warn_up_axis(up: np.ndarray, cam_up: np.ndarray, angle: float, frames_seen:
 
 def render_labels(gm: GaussianMap, frame: Frame, device: torch.device) -> np.ndarray:
     """The map's label per pixel [H,W] int32 (-1 where nothing labelled renders) at the frame's pose."""
-    from ..rendering import render_semantics
-
     viewmat = torch.as_tensor(np.linalg.inv(frame.pose), dtype=torch.float32, device=device)[None]
     K = torch.as_tensor(frame.K, dtype=torch.float32, device=device)[None]
     with torch.no_grad():

@@ -1,37 +1,26 @@
 """The incremental semantic mapper: runs the paper's per-keyframe loop on a stream of frames.
 
-Per keyframe:
-1. segments (the frame's precomputed ones, else the optional segmenter; none -> geometry only);
-2. render the map at the frame's pose (alpha + expected depth) to find the pixels it does not explain;
-3. probes: grid-subsampled back-projected pixels per segment (``init.make_probes``);
-4. local 3D optimization: KNN association, r(m)/p(m), three cases (``local.associate_segments``);
-   beyond the paper, an ambiguous confident segment that holds the whole visible extent of its two labels
-   merges them and becomes case (ii) (``merge.py``, ``mapping.merge_duplicates``); then Eq. 5 for every
-   case-(ii) segment, merged ones included (``local.update_confidences``); unlabeled Gaussians under a
-   now-labeled segment take its label (``mapping.fill_unlabeled``);
-5. the unexplained probes become Gaussians with their segment's label and rescaled SAM confidence
-   (unlabeled Gaussians, from ambiguous segments or pixels outside every segment, get confidence 0, so
-   the individual refinement may label them: ``mapping.refine_unlabeled``);
-6. geometry/appearance optimization over the keyframe + memory frames, then pruning;
-7. memory buffer update (frustum + overlap criteria);
-8. every ``longterm_every`` keyframes the long-term Eq. 16 update over a few memory views, then every
-   ``refine_every`` keyframes the global refinement (Alg. 1): the long-term step lowers confidences of
-   inconsistent Gaussians and the refinement relabels them in the same keyframe;
-9. scene-graph observation/update when ``config.graph.enabled`` (failures there never stop mapping).
+``process`` reads as the stages of a keyframe, each a method and one timed section of ``timings``:
 
-``process`` reads as these stages, each a method and one timed section of ``timings``: ``_admit`` (the
-frame's checks, tracking and pose-jump test; where the frame starts to count as read, the rule a resume
-depends on), ``_render_check`` (2), ``_init`` (3), ``_local`` (4), ``_add`` (5), ``_optimize`` (6),
-``_memory`` (7), ``_scheduled_passes`` (8: ``_longterm``, ``_refine``), ``_graph_update`` (9) and
-``_checkpoint`` (``mapping.checkpoint_every``).
-
-Every frame's pose (the dataset's, or the tracker's under ``tracking.poses: odometry``) is first compared
-with the last accepted frame's: a jump beyond ``mapping.max_pose_step`` / ``max_pose_step_deg`` warns, leaves
-the frame out or stops the run (``mapping.on_pose_jump``, ``pose_jump.py``).
+1. ``_admit``: the frame's checks, tracking (``tracking.poses: odometry``) and pose-jump test
+   (``pose_jump.py``); where the frame starts to count as read, the rule a resume depends on;
+2. ``_begin_keyframe``: its segments (precomputed, else the segmenter: ``segments.py``);
+3. ``_render_check``: the map rendered at its pose finds the pixels it does not explain (``init.py``);
+4. ``_init``: probes, grid-subsampled back-projected pixels per segment (``init.make_probes``);
+5. ``_local``: local 3D optimisation: KNN association, r(m)/p(m), the three cases (``local.py``), duplicate
+   merging beyond the paper (``merge.py``), Eq. 5, unlabelled Gaussians under a labelled segment filled;
+6. ``_add``: the unexplained probes become Gaussians (label, rescaled SAM confidence; 0 where unlabelled);
+7. ``_observe_evidence``: the view's co-segmentation evidence (``evidence_feed.py``, ``evidence.py``);
+8. ``_optimize``: geometry/appearance over the keyframe + memory frames, then pruning (``optimize.py``);
+9. ``_memory``: memory buffer update (frustum + overlap criteria, ``longterm.py``);
+10. ``_scheduled_passes``: every ``longterm_every`` keyframes the long-term Eq. 16 update, then every
+    ``refine_every`` the global refinement (Alg. 1, ``refine.py``), in the same keyframe;
+11. ``_graph_update``: the scene graph when ``config.graph.enabled`` (``graph_feed.py``; failures there
+    never stop mapping), then ``_checkpoint`` (``mapping.checkpoint_every``, ``checkpoint.py``).
 
 Ablations (``mapping.ablation``): "naive" (majority label of the KNN matches or a new label, no ambiguity
 test, all confidences 1, no refinement, no long-term), "local", "local+global", "full".
-Per-module wall time and counts are kept in ``timings`` (written to ``timings.json``).
+Per-module wall time and counts are kept in ``timings`` (``timings.py``, written to ``timings.json``).
 """
 
 from __future__ import annotations
@@ -49,19 +38,21 @@ import torch
 from ..config import Config, check_config, choices
 from ..device import resolve_device
 from ..errors import ConfigError, DataError
-from ..frame import Frame, implausible_median_depth
+from ..frame import Frame, warn_implausible_depth
 from ..gaussians import GaussianMap
-from ..runs import RunFolder, save_run
-from .checkpoint import CheckpointArrays, mapper_state, read_checkpoint, restore_mapper, write_checkpoint
+from ..runs import RunFolder
+from ..segmentation.base import Segmenter
+from ..tracking import Tracker
 from .evidence_feed import EvidenceFeed
 from .graph_feed import GraphFeed
-from .init import make_probes
+from .init import make_probes, render_coverage
 from .keyframes import KeyframeSelector
-from .local import associate_segments, fill_unlabeled, update_confidences
-from .longterm import MemoryBuffer, MemoryEntry, label_edges, longterm_view_update
+from .local import associate_probes, fill_from_probes, update_confidences
+from .longterm import MemoryBuffer, MemoryEntry, inner_pixels, longterm_view_update
 from .merge import merge_duplicate_segments
-from .optimize import View, optimize_map
-from .pose_jump import PoseJumpCheck, PoseJumpError
+from .optimize import optimize_map, training_views
+from .persistence import MapperFiles
+from .pose_jump import PoseJumpCheck
 from .refine import global_refinement
 from .segments import KeyframeSegments
 from .timings import Timings
@@ -94,26 +85,45 @@ class _Keyframe:
     parts: torch.Tensor | None = None  # per probe: the evidence part its new Gaussian joins (evidence.py)
 
 
-class Mapper:
-    """Incremental semantic Gaussian mapper: ``process(frame)`` per frame, ``finalize()``, ``save(dir)``."""
+class Mapper(MapperFiles):
+    """Incremental semantic Gaussian mapper: ``process(frame)`` per frame, ``finalize()``, ``save(dir)``.
 
-    def __init__(self, config: Config, device: str | torch.device | None = None, segmenter=None) -> None:
+    Args:
+        config: the run's settings (``mapping`` above all; ``data``, ``segmentation``, ``graph`` and
+            ``tracking`` for what they own); checked here too.
+        device: ``cpu``, ``cuda``, ``cuda:N`` or a torch device; None: ``config.device``, else CUDA when
+            available.
+        segmenter: what segments the frames that carry no precomputed segments (None: built from
+            ``config.segmentation`` on first need, or none under ``backend: none``).
+
+    Attributes:
+        map: the semantic Gaussians (:class:`~ogscene3d.gaussians.GaussianMap`).
+        timings: per-module wall time and counters (written to ``timings.json``).
+        keyframe_count: keyframes mapped so far; ``frames_seen``: frames mapped (keyframes or not).
+        source: what the frames come from, kept in checkpoints (set by the caller).
+
+    Raises:
+        ConfigError: a setting out of its rules.
+    """
+
+    def __init__(
+        self, config: Config, device: str | torch.device | None = None, segmenter: Segmenter | None = None
+    ) -> None:
         check_config(config)  # the numeric ranges, also of a Config() built and changed in Python
         self.config = config
         self.cfg = cfg = config.mapping
-        if cfg.ablation not in ABLATIONS:
-            raise ConfigError(f"mapping.ablation must be one of {ABLATIONS}, got {cfg.ablation!r}")
         self.device = resolve_device(device if device is not None else config.device)
         self._tracker = None
         self.map = GaussianMap(self.device)
         self.keyframes = KeyframeSelector(
             cfg.keyframe_every, cfg.keyframe_translation, cfg.keyframe_rotation_deg
         )
-        self.memory = MemoryBuffer(cfg.tau_long, cfg.r_search, cfg.memory_max, cfg.memory_point_step)
+        lt = cfg.longterm
+        self.memory = MemoryBuffer(lt.tau_long, cfg.refine.r_search, lt.memory_max, lt.memory_point_step)
         self.pose_check = PoseJumpCheck(
             cfg.max_pose_step, cfg.max_pose_step_deg, cfg.on_pose_jump, stride=config.data.stride
         )
-        self.recent: deque[MemoryEntry] = deque(maxlen=max(1, cfg.opt_memory_frames))
+        self.recent: deque[MemoryEntry] = deque(maxlen=max(1, cfg.optimize.memory_frames))
         self.timings = Timings(self.device)
         self.segments = KeyframeSegments(config, segmenter, self.timings)
         self.frames_seen = 0
@@ -123,7 +133,9 @@ class Mapper:
         self.keyframe_count = 0
         self.rng = np.random.default_rng(config.seed)
         # the views' co-segmentation evidence (evidence.py), collected where the refinement runs
-        self.evidence = EvidenceFeed(config, self.device, self.timings, self.use_refine and cfg.evidence)
+        self.evidence = EvidenceFeed(
+            config, self.device, self.timings, self.use_refine and cfg.evidence.enabled
+        )
         self.graph_feed = GraphFeed(config, self.device, self.timings)
         self._checked_depth_range = False
         self._checkpoint_dir: Path | None = None
@@ -180,36 +192,25 @@ class Mapper:
         frame.pose = pose
         return True
 
-    def _pose_jumped(self, frame: Frame) -> bool:
-        """Check the frame's pose against the last accepted frame's (``pose_jump.py``). True: leave the frame
-        out (``on_pose_jump: skip``); raises :class:`PoseJumpError` under ``on_pose_jump: error``."""
-        jump = self.pose_check.check(frame.index, frame.pose, frame.name or "unnamed")
-        if jump is not None:
-            action = self.pose_check.action
-            if action == "error":
-                raise PoseJumpError(
-                    f"{jump.describe()}; fix the pose, or set mapping.on_pose_jump to skip (leave the frame "
-                    "out) or warn (map it anyway)"
-                )
-            self.timings.add("pose_jumps")
-            if action == "skip":
-                log.warning("%s: frame left out (mapping.on_pose_jump: skip)", jump.describe())
-                self.timings.add("frames_skipped_pose_jump")
-                return True
-            log.warning("%s: mapped anyway (mapping.on_pose_jump: warn)", jump.describe())
-        self.pose_check.accept(frame.index, frame.pose)
-        return False
-
     def _get_tracker(self):
         if self._tracker is None:
-            from ..tracking import Tracker
-
             # device None: Open3D's CUDA when it has it
             self._tracker = Tracker(self.config.tracking, device=None, frame_step=self.config.data.stride)
         return self._tracker
 
     def process(self, frame: Frame) -> bool:
-        """Map one frame. Returns True when it was a keyframe (non-keyframes are only counted)."""
+        """Map one frame (its pose checked, tracked under odometry; a keyframe runs every stage).
+
+        Args:
+            frame: the RGB-D frame, depth in metres, with its pose unless ``tracking.poses`` is odometry.
+
+        Returns:
+            True when it was a keyframe (the others are only counted).
+
+        Raises:
+            DataError: depth with NaN or inf, a frame without a pose, or bad segments.
+            PoseJumpError: a pose jump under ``mapping.on_pose_jump: error``.
+        """
         if not self._admit(frame) or not self.keyframes(frame.pose):
             return False
         k = self._begin_keyframe(frame)
@@ -245,7 +246,9 @@ class Mapper:
                 "poses or track them (--poses odometry, config tracking.poses: odometry)"
             )
         tracked = self._track(frame)
-        jumped = tracked and self._pose_jumped(frame)  # may raise (mapping.on_pose_jump: error)
+        jumped = tracked and self.pose_check.leave_out(
+            frame.index, frame.pose, frame.name or "unnamed", self.timings
+        )
         # ---- from here on the frame counts as read
         self.next_index = frame.index + 1
         if odometry:
@@ -253,25 +256,11 @@ class Mapper:
         if not tracked or jumped:
             return False
         self.graph_feed.camera_up.add(frame.pose)
-        self._check_depth_range(frame)
+        if not self._checked_depth_range:
+            self._checked_depth_range = warn_implausible_depth(frame)
         self.frames_seen += 1
         self.timings.add("frames")
         return True
-
-    def _check_depth_range(self, frame: Frame) -> None:
-        if self._checked_depth_range or not np.any(frame.depth > 0):
-            return
-        self._checked_depth_range = True
-        # a dataset's frame: the dataset has warned already, naming the setting to fix
-        median = None if frame.depth_scale_checked else implausible_median_depth(frame.depth)
-        if median is not None:
-            log.warning(
-                "frame %d (%s): median depth %.3g m is implausible for an RGB-D camera; Frame.depth "
-                "must be in metres (0 = invalid), or the map will be empty or wrong",
-                frame.index,
-                frame.name or "unnamed",
-                median,
-            )
 
     def _begin_keyframe(self, frame: Frame) -> _Keyframe:
         self.timings.begin_keyframe(frame.index)
@@ -293,30 +282,8 @@ class Mapper:
 
     def _render_check(self, k: _Keyframe) -> None:
         """The map rendered at the keyframe's pose (alpha + expected depth): the pixels it explains."""
-        from ..rendering import rasterization
-
         with self.timings.section("render_check"):
-            if len(self.map) == 0:
-                return
-            gm, frame = self.map, k.frame
-            viewmat = torch.as_tensor(np.linalg.inv(frame.pose), dtype=torch.float32, device=self.device)[
-                None
-            ]
-            K = torch.as_tensor(frame.K, dtype=torch.float32, device=self.device)[None]
-            with torch.no_grad():
-                depth, alpha, _ = rasterization(
-                    gm.means,
-                    gm.quats,
-                    gm.scales,
-                    gm.opacities,
-                    gm.colors[:, :1],
-                    viewmat,
-                    K,
-                    frame.width,
-                    frame.height,
-                    render_mode="ED",
-                )
-            k.alpha, k.depth = alpha[0, ..., 0], depth[0, ..., 0]
+            k.alpha, k.depth = render_coverage(self.map, k.frame)
 
     def _init(self, k: _Keyframe) -> None:
         """Probes: grid-subsampled back-projected pixels per segment, those the map explains marked."""
@@ -327,16 +294,16 @@ class Mapper:
                 k.segments,
                 k.scores,
                 self.device,
-                step=max(1, round(math.sqrt(cfg.pixels_per_gaussian))),
+                step=max(1, round(math.sqrt(cfg.init.pixels_per_gaussian))),
                 score_range=tuple(self.config.segmentation.sam_score_range),
                 conf_range=tuple(self.config.segmentation.conf_range),
                 rendered_alpha=k.alpha,
                 rendered_depth=k.depth,
-                alpha_thresh=cfg.init_alpha_thresh,
-                depth_margin=cfg.init_depth_margin,
+                alpha_thresh=cfg.init.alpha_thresh,
+                depth_margin=cfg.init.depth_margin,
                 min_depth=self.config.data.min_depth,
                 max_depth=self.config.data.max_depth,
-                dense_below=cfg.init_dense_below,
+                dense_below=cfg.init.dense_below,
             )
 
     def _local(self, k: _Keyframe) -> None:
@@ -346,57 +313,22 @@ class Mapper:
         with self.timings.section("local"):
             k.labels = torch.full((len(probes),), -1, dtype=torch.int32, device=self.device)
             k.conf = torch.zeros(len(probes), dtype=torch.float32, device=self.device)
-            S = int(probes.seg_ids.numel())
             in_seg = probes.seg >= 0
-            if not (S and bool(in_seg.any())):
+            if not (probes.seg_ids.numel() and bool(in_seg.any())):
                 return
             sel = torch.nonzero(in_seg).squeeze(1)
-            res = associate_segments(
-                probes.means[sel],
-                probes.seg[sel],
-                probes.conf[sel],
-                S,
-                self.map.means,
-                self.map.labels,
-                self.map.confidences,
-                self.map.new_labels,
-                k=cfg.knn_k,
-                radius=cfg.knn_radius,
-                tau_valid=cfg.tau_valid,
-                tau_p=cfg.tau_p,
-                naive=self.naive,
-                novel_before_ambiguous=cfg.novel_before_ambiguous,
-                # a probe's log-scale is log(grid spacing at its depth): see init.make_probes
-                probe_radius=(
-                    torch.exp(probes.log_scales[sel]) * cfg.knn_radius_spacing
-                    if cfg.knn_radius_spacing > 0
-                    else None
-                ),
-                eq5=False,  # below, once the merge has turned some ambiguous segments into matched ones
-            )
-            if self._merging(k.segments):
+            res = associate_probes(self.map, probes, sel, cfg.association, self.naive)
+            merging = cfg.merge.enabled and not self.naive and k.segments is not None
+            if merging and bool((self.map.labels >= 0).any()):  # labels in the map to merge
                 merge_duplicate_segments(
                     self.map, k.frame, k.segments, k.scores, probes, res, cfg, self.timings
                 )
             if not self.naive:
-                update_confidences(
-                    res,
-                    probes.conf[sel],
-                    self.map.labels,
-                    self.map.confidences,
-                    self._inner_probes(k.segments, probes.pix[sel]) if cfg.eq5_skip_edges else None,
-                )
-            if cfg.fill_unlabeled:
-                pconf = probes.conf[sel]
-                res.filled = fill_unlabeled(
-                    probes.means[sel],
-                    probes.seg[sel],
-                    torch.ones_like(pconf) if self.naive else pconf,  # naive: every confidence is 1
-                    res.seg_labels,
-                    self.map.means,
-                    self.map.labels,
-                    self.map.confidences,
-                    cfg.knn_radius,
+                inner = inner_pixels(k.segments, probes.pix[sel]) if cfg.association.eq5_skip_edges else None
+                update_confidences(res, probes.conf[sel], self.map.labels, self.map.confidences, inner)
+            if cfg.association.fill_unlabeled:
+                res.filled = fill_from_probes(
+                    self.map, probes, sel, res, cfg.association.knn_radius, self.naive
                 )
             k.labels[sel] = res.seg_labels[probes.seg[sel]]
             k.seg_to_label = (probes.seg_ids.cpu().numpy(), res.seg_labels.cpu().numpy())
@@ -417,7 +349,7 @@ class Mapper:
                 probes.log_scales[new],
                 labels=k.labels[new],
                 confidences=k.conf[new],
-                opacity_logits=math.log(cfg.init_opacity / (1 - cfg.init_opacity)),
+                opacity_logits=math.log(cfg.init.opacity / (1 - cfg.init.opacity)),
                 origin_kf=k.index,
             )
             self.timings.add("gaussians_added", int(new.sum()))
@@ -427,17 +359,10 @@ class Mapper:
         """Geometry/appearance optimisation over the keyframe and memory views, then pruning."""
         cfg, frame = self.cfg, k.frame
         with self.timings.section("optimize"):
-            views = [View.from_arrays(frame.rgb, frame.depth, frame.pose, frame.K, self.device)]
             pool = list(self.recent) + [e for e in self.memory.entries if e not in self.recent]
-            pool = [e for e in pool if e.depth.shape == frame.depth.shape]
-            if pool and cfg.opt_memory_frames > 0:
-                pick = self.rng.choice(len(pool), size=min(cfg.opt_memory_frames, len(pool)), replace=False)
-                views += [
-                    View.from_arrays(pool[i].rgb, pool[i].depth, pool[i].pose, pool[i].K, self.device)
-                    for i in sorted(pick)
-                ]
-            opt = optimize_map(self.map, views, cfg)
-            removed = self.map.prune(cfg.prune_opacity, cfg.prune_scale)
+            views = training_views(frame, pool, cfg.optimize.memory_frames, self.rng, self.device)
+            opt = optimize_map(self.map, views, cfg.optimize)
+            removed = self.map.prune(cfg.optimize.prune_opacity, cfg.optimize.prune_scale)
             self.timings.add("gaussians_pruned", removed)
             if opt["iters"]:
                 self.timings.counts["last_loss"] = opt["loss_last"]
@@ -455,9 +380,9 @@ class Mapper:
 
     def _scheduled_passes(self) -> None:
         """The long-term update, then the global refinement, at the keyframes of their schedules."""
-        if self.use_longterm and _ran_at(self.keyframe_count, self.cfg.longterm_every):
+        if self.use_longterm and _ran_at(self.keyframe_count, self.cfg.longterm.every):
             self._longterm()
-        if self.use_refine and _ran_at(self.keyframe_count, self.cfg.refine_every):
+        if self.use_refine and _ran_at(self.keyframe_count, self.cfg.refine.every):
             self._refine()
 
     def _graph_update(self, k: _Keyframe) -> None:
@@ -488,19 +413,6 @@ class Mapper:
                 )
                 self.timings.add("checkpoint_errors")
 
-    def _inner_probes(self, segments: np.ndarray, pix: torch.Tensor) -> torch.Tensor:
-        """[P] bool: probes whose pixel is off every segment boundary (they may make Eq. 5 updates)."""
-        ids = torch.from_numpy(np.ascontiguousarray(segments, dtype=np.int64)).to(self.device)
-        return ~label_edges(ids).reshape(-1)[pix]
-
-    def _merging(self, segments: np.ndarray | None) -> bool:
-        return (
-            self.cfg.merge_duplicates
-            and not self.naive
-            and segments is not None
-            and bool((self.map.labels >= 0).any())
-        )
-
     def _observe_evidence(self, k: _Keyframe) -> None:
         """The keyframe's co-segmentation evidence, once its new Gaussians are in the map (its segments made
         them: the view is their first judge)."""
@@ -509,18 +421,18 @@ class Mapper:
     def _longterm(self) -> None:
         """The long-term Eq. 16 update over the next memory views of the round-robin."""
         cfg = self.cfg
-        views = self.memory.next_views(cfg.longterm_views)
+        views = self.memory.next_views(cfg.longterm.views)
         self.evidence.before_longterm(self.map, views)
         with self.timings.section("longterm"):
             for entry in views:
                 st = longterm_view_update(
                     self.map,
                     entry,
-                    k=cfg.longterm_knn_k,
-                    radius=cfg.knn_radius,
-                    pixel_step=cfg.longterm_pixel_step,
-                    skip_edges=cfg.longterm_skip_edges,
-                    same_class=cfg.longterm_same_class,
+                    k=cfg.longterm.knn_k,
+                    radius=cfg.association.knn_radius,
+                    pixel_step=cfg.longterm.pixel_step,
+                    skip_edges=cfg.longterm.skip_edges,
+                    same_class=cfg.longterm.same_class,
                 )
                 for k, v in st.as_dict().items():
                     if k != "mean_iou":
@@ -536,12 +448,12 @@ class Mapper:
                 self.map.means,
                 self.map.labels,
                 self.map.confidences,
-                tau_low=cfg.tau_low,
-                tau_high=cfg.tau_high,
-                r_search=cfg.r_search,
-                cluster_radius=cfg.refine_cluster_radius,
-                graph_k=cfg.refine_graph_k,
-                include_unlabeled=cfg.refine_unlabeled,
+                tau_low=cfg.refine.tau_low,
+                tau_high=cfg.refine.tau_high,
+                r_search=cfg.refine.r_search,
+                cluster_radius=cfg.refine.cluster_radius,
+                graph_k=cfg.refine.graph_k,
+                include_unlabeled=cfg.refine.unlabeled,
                 separated=separated,
                 exposed=exposed,
             )
@@ -566,57 +478,8 @@ class Mapper:
         if self.use_refine:
             self._refine()
         with self.timings.section("prune"):
-            self.map.prune(cfg.prune_opacity, cfg.prune_scale)
+            self.map.prune(cfg.optimize.prune_opacity, cfg.optimize.prune_scale)
         # timed with the per-keyframe updates ("graph")
         self.graph_feed.finalize(self.map, self.keyframe_count - 1, self.frames_seen)
         self._count_map()  # the final map's: pruning and refinement change the counts of the last keyframe
         self.finalized = True
-
-    def state(self) -> dict[str, np.ndarray]:
-        """The mapper's state besides the Gaussians, as the arrays of a checkpoint (``checkpoint.py``)."""
-        return mapper_state(self)
-
-    def save_checkpoint(self, path: str | Path) -> None:
-        """Write ``map.npz``: the Gaussians plus the mapper state needed to resume, and the memory views it
-        does not have on disk yet (``checkpoint.write_checkpoint``)."""
-        write_checkpoint(self, path)
-
-    def load_checkpoint(self, path: str | Path) -> None:
-        """Restore the map and mapper state from ``map.npz`` (written by ``save``/``save_checkpoint``, by
-        this version or, upgraded by ``checkpoint.upgrade``, an older one)."""
-        p = Path(path)
-        self.map = GaussianMap.load_npz(p, self.device)
-        self.load_state(read_checkpoint(p, self.config.seed), p)
-
-    def load_state(self, state: CheckpointArrays, path: Path) -> None:
-        """Restore :meth:`state` (read from the checkpoint ``path`` by ``checkpoint.read_checkpoint``),
-        and the memory views its lists name (from their files beside ``path``)."""
-        restore_mapper(self, state, path)
-
-    def save(self, out_dir: str | Path) -> Path:
-        """Write the run directory: config.yaml and map.npz (with its memory views in map_memory/) first,
-        which is what a resume needs, then the exports: gaussians.ply, timings.json, under odometry traj.txt
-        (the tracked poses, one row-major c2w 4x4 per frame read) and graph.json. A save cut short (a full
-        disk) thus leaves a map that ``run --resume`` writes the exports from. Saved outside a run that
-        records its id (``source["run_id"]``), an earlier run's ``run_id`` file there is removed. The run
-        folder's files and their order are :func:`ogscene3d.runs.save_run`'s.
-
-        Raises:
-            SaveError: a write failed; it names the file and those written before it.
-        """
-        return save_run(
-            out_dir,
-            config=self.config,
-            checkpoint=self.save_checkpoint,
-            gaussians=self.map.export_ply,
-            timings=lambda: self.timings.document(self.cfg.ablation, self.finalized),
-            trajectory=self._trajectory_text,
-            graph=lambda: self.graph_feed.document(self.map, self.keyframe_count),
-            keeps_run_id="run_id" in self.source,
-        )
-
-    def _trajectory_text(self) -> str | None:
-        from ..tracking import hold_last_good, trajectory_text
-
-        filled = hold_last_good(self.trajectory)  # as `ogscene3d track` writes it: one pose per frame read
-        return trajectory_text(filled) if filled else None

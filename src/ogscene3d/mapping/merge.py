@@ -1,4 +1,4 @@
-"""Merging duplicate scene labels (an extension beyond the paper, ``mapping.merge_duplicates``).
+"""Merging duplicate scene labels (an extension beyond the paper, ``mapping.merge.enabled``).
 
 The paper's local association leaves a segment unlabeled when its KNN matches are split between two
 scene labels (case i, r(m) >= tau_valid). Two situations produce that: the segment covers two objects
@@ -17,10 +17,10 @@ segment that spills over onto a neighbouring object fails the containment test f
 two small objects that SAM fused are usually scored low, and the score gate keeps them apart. A small
 object that the mask took in (a far chair absorbed into the wall behind it, a plant into the floor) lies
 whole inside it too, at a high score when it is a small part of the mask; each label must therefore hold at
-least ``min_part`` (``mapping.merge_min_part``, 0.1) of the mapped Gaussians inside the segment, as both
+least ``min_part`` (``mapping.merge.min_part``, 0.1) of the mapped Gaussians inside the segment, as both
 halves of one object do.
 
-With ``mapping.merge_novel`` the test also judges a would-be novel segment (p < tau_p, case iii tested
+With ``mapping.merge.novel`` the test also judges a would-be novel segment (p < tau_p, case iii tested
 first) whose few matches fall on two labels (r >= tau_valid): a wall or floor that the first view cut in
 two, seen again further back, where the mapped part is a few percent of the segment. Without it each such
 view started a third label on the surface. A confident novel segment that holds the whole visible extent
@@ -208,28 +208,28 @@ def merge_duplicate_segments(
     score = torch.tensor(
         [scores.get(int(i), 1.0) for i in seg_ids.tolist()], dtype=torch.float32, device=device
     )
-    confident = score >= cfg.merge_min_score
-    novel = (res.seg_case == CASE_NOVEL) & confident & bool(cfg.merge_novel)
+    confident = score >= cfg.merge.min_score
+    novel = (res.seg_case == CASE_NOVEL) & confident & bool(cfg.merge.novel)
     # ambiguous segments, and novel ones whose few matches fall on two labels, may merge those; a novel
     # one may hold its most matched label whole
     amb = torch.nonzero(
-        (res.seg_case == CASE_AMBIGUOUS) & confident | novel & (res.r >= cfg.tau_valid)
+        (res.seg_case == CASE_AMBIGUOUS) & confident | novel & (res.r >= cfg.association.tau_valid)
     ).squeeze(1)
     ext = torch.nonzero(novel & (res.top_label >= 0)).squeeze(1)
     if amb.numel() == 0 and ext.numel() == 0:
         return
     with timings.section("merge"):
-        items, item_labels = _visible_items(gm, frame, segments, seg_ids, cfg.init_depth_margin)
+        items, item_labels = _visible_items(gm, frame, segments, seg_ids, cfg.init.depth_margin)
         if ext.numel():
             # it shows more of that object (a small one seen closer, whose few probes missed its
             # Gaussians): the segment takes its label instead of a new one
             held = label_containment(items, item_labels, ext, res.top_label[ext])
-            grow = ext[held >= cfg.merge_contain]
+            grow = ext[held >= cfg.merge.contain]
             res.seg_labels[grow] = res.top_label[grow].to(torch.int32)
             res.seg_case[grow] = CASE_MATCHED
             timings.add("segments_extended", int(grow.numel()))
         pairs = duplicate_label_pairs(
-            items, item_labels, amb, res.top_label, res.second_label, cfg.merge_contain, cfg.merge_min_part
+            items, item_labels, amb, res.top_label, res.second_label, cfg.merge.contain, cfg.merge.min_part
         )
         mapping = merge_labels(gm.labels, pairs)
         if mapping:

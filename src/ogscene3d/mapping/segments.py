@@ -11,6 +11,7 @@ import numpy as np
 from ..config import Config
 from ..errors import DataError
 from ..frame import Frame
+from ..segmentation import make_segmenter
 from .timings import Timings
 
 log = logging.getLogger(__name__)
@@ -68,8 +69,6 @@ class KeyframeSegments:
 
 def default_segmenter(config: Config, K: np.ndarray):
     """The live segmenter for frames that carry no precomputed segments (None: map geometry only)."""
-    from ..segmentation import make_segmenter
-
     backend = config.segmentation.backend
     if backend == "none":
         return None
