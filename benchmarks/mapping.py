@@ -6,7 +6,7 @@ Two modes:
 Gaussian count, peak host RSS and peak CUDA memory every ``--report-every`` keyframes (the bounded-memory
 check on long runs: ``--frames 2000``).
 
-    python benchmarks/mapping.py stream --frames 120 --size 160x120 --device cpu \
+    python benchmarks/mapping.py stream --frames 120 --size 160x120 --device cpu \\
         [--set mapping.optimize.iters=0]
 
 ``modules``: the semantic modules alone at a given image size on a map of ``--gaussians`` Gaussians (random
