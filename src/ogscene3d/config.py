@@ -546,9 +546,8 @@ class RefineConfig:
 class EvidenceConfig:
     """The views' co-segmentation evidence, beyond the paper (mapping/evidence.py, docs/consistency.md)."""
 
-    # the multi-view evidence model (mapping/evidence.py), beyond the paper; evidence: false = the paper's
-    # long-term step and Algorithm 1 (with the extensions above). docs/consistency.md has the model and each
-    # threshold's measured effect.
+    # enabled: false = the paper's long-term step and Algorithm 1 (with the extensions of the other
+    # sections). docs/consistency.md has the model and each threshold's measured effect.
     enabled: bool = setting(
         True,
         "the views' co-segmentation evidence decides merges and splits of labels at the global refinement, "
