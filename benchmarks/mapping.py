@@ -25,6 +25,7 @@ import json
 import resource
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -140,7 +141,6 @@ def modules(args) -> dict | None:
 
     rgb = np.zeros((h, w, 3), np.uint8)
     frame = Frame(0, rgb, depth, K, np.eye(4), segments=seg, segment_scores={i: 0.95 for i in range(1, 41)})
-    step = max(1, round(cfg.init.pixels_per_gaussian**0.5))
     times: dict[str, list[float]] = {"local": [], "refine": [], "longterm": []}
     for rep in range(args.repeat + 1):  # the first round compiles / warms up and is not counted
         _sync(dev)
@@ -150,9 +150,8 @@ def modules(args) -> dict | None:
             seg,
             frame.segment_scores,
             dev,
-            step=step,
-            rendered_alpha=torch.zeros(h, w, device=dev),
-            rendered_depth=torch.zeros(h, w, device=dev),
+            replace(cfg.init, dense_below=0),  # the grid alone, as measured before the dense small segments
+            rendered=(torch.zeros(h, w, device=dev), torch.zeros(h, w, device=dev)),
         )
         res = associate_segments(
             probes.means,
@@ -199,13 +198,7 @@ def modules(args) -> dict | None:
         _sync(dev)
         t2 = time.perf_counter()
         entry = MemoryEntry(0, rgb, depth, K, np.eye(4), seg, frame.segment_scores)
-        longterm_view_update(
-            gm,
-            entry,
-            k=cfg.longterm.knn_k,
-            radius=cfg.association.knn_radius,
-            pixel_step=cfg.longterm.pixel_step,
-        )
+        longterm_view_update(gm, entry, cfg.longterm, cfg.association.knn_radius)
         _sync(dev)
         t3 = time.perf_counter()
         if rep:

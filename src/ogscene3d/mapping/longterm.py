@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from ..config import LongtermConfig
 from ..rendering import rendering_contribution
 from .init import grid_mask
 from .local import group_top2
@@ -260,20 +261,14 @@ class LongTermStats:
         return dict(self.__dict__)
 
 
-def longterm_view_update(
-    gm,
-    entry: MemoryEntry,
-    *,
-    k: int = 5,
-    radius: float = 0.05,
-    pixel_step: int = 2,
-    skip_edges: bool = True,
-    same_class: bool = True,
-) -> LongTermStats:
-    """One memory view's Eq. 16 update of ``gm.confidences`` (in place). ``gm`` is a GaussianMap.
-    ``skip_edges``: leave out pixels on a boundary of the stored segments or of the rendered labels.
-    ``same_class``: a pixel reaches only Gaussians of its rendered label (see ``associate_pixels``); False
-    is the paper's rule, its nearest Gaussians whatever their label."""
+def longterm_view_update(gm, entry: MemoryEntry, cfg: LongtermConfig, radius: float) -> LongTermStats:
+    """One memory view's Eq. 16 update of ``gm.confidences`` (in place). ``gm`` is a GaussianMap, ``cfg``
+    the ``mapping.longterm`` section: each pixel of its ``pixel_step`` grid is associated with its ``knn_k``
+    nearest Gaussians within ``radius`` (the association's ``knn_radius``). ``skip_edges``: leave out pixels
+    on a boundary of the stored segments or of the rendered labels. ``same_class``: a pixel reaches only
+    Gaussians of its rendered label (see ``associate_pixels``); False is the paper's rule, its nearest
+    Gaussians whatever their label."""
+    k, pixel_step, skip_edges, same_class = cfg.knn_k, cfg.pixel_step, cfg.skip_edges, cfg.same_class
     stats = LongTermStats(views=1)
     if len(gm) == 0 or entry.segments is None:
         return stats

@@ -76,8 +76,7 @@ class _Keyframe:
     segments: np.ndarray | None
     scores: dict[int, float]
     names: dict[int, str]
-    alpha: torch.Tensor | None = None  # the map rendered at the keyframe's pose (None: empty map)
-    depth: torch.Tensor | None = None
+    rendered: tuple | None = None  # the map rendered at the keyframe's pose: alpha, depth (None: empty map)
     probes: Any = None
     labels: torch.Tensor | None = None  # per probe: scene label (-1: none) and confidence
     conf: torch.Tensor | None = None
@@ -283,27 +282,23 @@ class Mapper(MapperFiles):
     def _render_check(self, k: _Keyframe) -> None:
         """The map rendered at the keyframe's pose (alpha + expected depth): the pixels it explains."""
         with self.timings.section("render_check"):
-            k.alpha, k.depth = render_coverage(self.map, k.frame)
+            k.rendered = render_coverage(self.map, k.frame)
 
     def _init(self, k: _Keyframe) -> None:
         """Probes: grid-subsampled back-projected pixels per segment, those the map explains marked."""
         cfg = self.cfg
         with self.timings.section("init"):
+            seg, data = self.config.segmentation, self.config.data
             k.probes = make_probes(
                 k.frame,
                 k.segments,
                 k.scores,
                 self.device,
-                step=max(1, round(math.sqrt(cfg.init.pixels_per_gaussian))),
-                score_range=tuple(self.config.segmentation.sam_score_range),
-                conf_range=tuple(self.config.segmentation.conf_range),
-                rendered_alpha=k.alpha,
-                rendered_depth=k.depth,
-                alpha_thresh=cfg.init.alpha_thresh,
-                depth_margin=cfg.init.depth_margin,
-                min_depth=self.config.data.min_depth,
-                max_depth=self.config.data.max_depth,
-                dense_below=cfg.init.dense_below,
+                cfg.init,
+                score_range=tuple(seg.sam_score_range),
+                conf_range=tuple(seg.conf_range),
+                rendered=k.rendered,
+                depth_range=(data.min_depth, data.max_depth),
             )
 
     def _local(self, k: _Keyframe) -> None:
@@ -425,15 +420,7 @@ class Mapper(MapperFiles):
         self.evidence.before_longterm(self.map, views)
         with self.timings.section("longterm"):
             for entry in views:
-                st = longterm_view_update(
-                    self.map,
-                    entry,
-                    k=cfg.longterm.knn_k,
-                    radius=cfg.association.knn_radius,
-                    pixel_step=cfg.longterm.pixel_step,
-                    skip_edges=cfg.longterm.skip_edges,
-                    same_class=cfg.longterm.same_class,
-                )
+                st = longterm_view_update(self.map, entry, cfg.longterm, cfg.association.knn_radius)
                 for k, v in st.as_dict().items():
                     if k != "mean_iou":
                         self.timings.add(f"longterm_{k}", v)
