@@ -81,7 +81,7 @@ def test_empty_map(device):
 
 
 def test_no_relabel_across_a_clear_separation(device):
-    """Beyond the paper (mapping.evidence): a label the views separated from its neighbour's keeps its
+    """Beyond the paper (mapping.evidence.enabled): a label the views separated from its neighbour's keeps its
     low-confidence Gaussians at both levels, and still gives its label to others; a disputed (exposed)
     Gaussian is not held back. The same map without the guard loses the small label."""
     big = _patch(0.0, n=6)  # label 3, confident

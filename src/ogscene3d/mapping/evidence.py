@@ -8,7 +8,7 @@ segment holds together, and which it clearly keeps apart. This module accumulate
 judged view, at three grains, and the refinement and the long-term step decide from it.
 
 **Units.** Every Gaussian belongs to a *cell*: the Gaussians one *part* has in one voxel of
-``mapping.evidence_cell`` metres. A *part* is what one segment made: the new Gaussians of a novel (or
+``mapping.evidence.cell`` metres. A *part* is what one segment made: the new Gaussians of a novel (or
 ambiguous, or unsegmented) segment start a part; those of a segment that local association matched with a
 label join the part most of its matched Gaussians belong to. Labels are groups of parts. Parts never merge
 (a merge of labels is a grouping, so it can be undone); a part is split when its cells are clearly
@@ -21,12 +21,12 @@ pixels of a big segment are left out, ``spill_pixels``). Weights are the segment
 c_sam of Eq. 5): a view's vote counts its segments' confidence.
 
 * *cells*: a cell lies in the segment most of its visible Gaussians are in. Two neighbouring cells of one
-  part (one among the other's ``NEIGHBOURS`` nearest visible cells of the part, within ``mapping.r_search``)
+  part (one among the other's ``NEIGHBOURS`` nearest visible cells of the part, within ``refine.r_search``)
   are *together* in a view that puts them in one segment, *apart* in one that puts them in two; summed per
   cell pair over all views (``PairTable``), with the number of views.
 * *parts*: a part is judged in a view where at least ``MIN_VISIBLE`` of its Gaussians are visible and
   ``CONTAIN`` of those lie in one segment. Two judged parts in one segment are *held together*: firmly when
-  each holds ``mapping.merge_min_part`` of the segment's visible Gaussians (the two halves of a sofa), weakly
+  each holds ``mapping.merge.min_part`` of the segment's visible Gaussians (the two halves of a sofa), weakly
   otherwise (a cup inside the table's segment: SAM absorbs small objects into their support in most frames,
   which says little). Two judged parts in two segments are *clearly separated* where each is the main part
   of its segment (``MAJOR``): one segment holds one and at most 1 - ``CONTAIN`` of the other, and it is about
@@ -42,12 +42,12 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
 1. *split parts*: a part's cells are linked where views held them together more often than apart
    (judged in ``LINK_VIEWS`` views at least);
    a linked group other than the part's largest that views put apart from the rest of the part in at least
-   ``mapping.evidence_split_ratio`` of their cross views becomes a part of its own (a fridge that the first
+   ``mapping.evidence.split_ratio`` of their cross views becomes a part of its own (a fridge that the first
    view merged with the floor, books that it merged with each other). A SAM cut at random places separates a
    pair of cells in a few of its views only.
 2. *group parts into labels*, from scratch every time, greedily by firm support: two groups merge when the
    views held them together (firmly at least once, or weakly with no separation ever) and separated them in
-   at most ``mapping.evidence_separation`` (0.5) of their firm views. A small object that SAM absorbs into
+   at most ``mapping.evidence.separation`` (0.5) of their firm views. A small object that SAM absorbs into
    its support in most views, but showed apart once, stays apart; a surface that its first view cut in two
    joins once later views hold it whole; a merge made earlier, by the association or a previous decision,
    is undone when the views grow to separate the parts.

@@ -16,11 +16,11 @@ undefined s_new (argmax over an empty L_k), while the text records only the Gaus
 refined", which we follow, so its low-confidence members may still be refined individually.
 
 Individual level: every remaining labelled Gaussian with conf < tau_low (unlabeled ones too, whose
-confidence is 0, with ``include_unlabeled`` / ``mapping.refine_unlabeled``, off by default: the paper's
+confidence is 0, with ``include_unlabeled`` / ``mapping.refine.unlabeled``, off by default: the paper's
 unlabelled Gaussians do not exist at confidence 0) takes the label of the nearest Gaussian with
 conf > tau_high within r_search and conf := 0.5.
 
-Beyond the paper (``mapping.evidence``, on by default): Algorithm 1 decides from the views' evidence
+Beyond the paper (``mapping.evidence.enabled``, on by default): Algorithm 1 decides from the views' evidence
 (``evidence.EvidenceModel``). A cluster or a Gaussian does not take a label from which the views clearly
 separated its own (``separated``): under SAM-like segments a small object's confidence is low from its birth
 (a low SAM score) and falls in the views that absorb it into its support, and Algorithm 1 gave it the
@@ -29,7 +29,7 @@ label's segment (``exposed``, disputed) are not held back, and take the label of
 Gaussian of *another* label at the individual level: their own label is what the views contradict, and the
 nearest confident neighbour of a wide run-over part is often one of its own label's Gaussians.
 
-Schedule (``mapper.py``): every ``mapping.refine_every`` = 6 keyframes, right after the long-term update,
+Schedule (``mapper.py``): every ``mapping.refine.every`` = 6 keyframes, right after the long-term update,
 as Sec. IV-A.4 states ("performed every 6 keyframes"); Sec. III-B.3's "intervals determined by cumulative
 camera motion" is read as that, keyframes being selected by camera motion where ``keyframe_translation`` /
 ``keyframe_rotation_deg`` are set. Both operate on the whole map.
