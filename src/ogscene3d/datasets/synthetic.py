@@ -223,6 +223,7 @@ class MeshRenderer:
         shadows: bool = True,
         light_range: float = 4.0,
     ):
+        # Warp and torch only where a scene is rendered: open_dataset imports this module to read scenes
         import warp as wp
 
         from ..device import resolve_device, warp_device
