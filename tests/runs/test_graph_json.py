@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from ogscene3d.errors import DataError
-from ogscene3d.graph.rooms import read_rooms
 from ogscene3d.runs import graph_up, read_graph_json
 from ogscene3d.up_axis import PROVISIONAL_UP
 
@@ -28,11 +27,3 @@ def test_graph_up_of_a_graph_without_one_is_the_default_given():
 def test_graph_up_names_the_file_for_a_bad_up(bad):
     with pytest.raises(DataError, match=r"run/graph\.json: 'up' must be a finite non-zero 3-vector"):
         graph_up({"up": bad}, "run/graph.json")
-
-
-def test_the_rooms_reader_takes_the_graphs_up_from_it():
-    up, floors, rooms = read_rooms({"nodes": [], "edges": [], "up": [0, -3, 0]})
-    assert np.allclose(up, [0.0, -1.0, 0.0]) and floors == [] and rooms == []
-    assert read_rooms({"nodes": [], "edges": []})[0] is None
-    with pytest.raises(DataError, match="shown graph: 'up'"):
-        read_rooms({"up": [0, 0, 0]}, "the shown graph")
