@@ -301,7 +301,7 @@ def evaluate_scene(
     The record holds, per protocol, ``miou``/``fmiou``/``macc``/``oacc`` (fractions, None when not
     defined) and the protocol text, plus relation recall when the graph was scored.
     """
-    from .eval import evaluate_run, find_ground_truth, iou_bar_chart, write_png  # torch: as above
+    from .eval import evaluate_run, find_ground_truth, write_iou_chart  # torch: as above
 
     opts = options or EvalOptions()
     run = Path(run_dir)
@@ -317,13 +317,7 @@ def evaluate_scene(
     report = res.report
     if opts.plots:
         for proto, m in res.semantic.items():
-            chart = iou_bar_chart(
-                m.class_names,
-                m.iou,
-                title=f"per-class IoU, {proto} protocol (mIoU {100 * m.miou:.1f})",
-                nan_text=["ignored" if n in m.ignored else "not in GT" for n in m.class_names],
-            )
-            report["semantic_3d"][proto]["bar_chart"] = write_png(run / f"iou_{proto}.png", chart).name
+            report["semantic_3d"][proto]["bar_chart"] = write_iou_chart(run, proto, m).name
     write_metrics(RunFolder(run).metrics, report)
     rec: dict[str, Any] = {
         "name": name or run.name,

@@ -21,6 +21,7 @@ import numpy as np
 from .atomic import atomic_path
 from .colors import label_colors
 from .errors import DataError
+from .graph.scenegraph import SceneGraph
 from .runs import RunFolder
 from .runs.gaussians_ply import read_gaussians_ply
 
@@ -134,8 +135,6 @@ def export_run(
     result = ExportResult()
     graph = None
     if nodes or graphml:
-        from .graph.scenegraph import SceneGraph
-
         graph = SceneGraph.load(root)  # DataError naming the run when graph.json is missing
     if cloud or nodes:
         arrays = read_gaussians_ply(RunFolder(root).gaussians).arrays()

@@ -52,6 +52,18 @@ def up_vector(value: Any, default: Iterable[float] = PROVISIONAL_UP) -> tuple[fl
     return x, y, z
 
 
+def unit_up(up: np.ndarray | Iterable[float]) -> np.ndarray:
+    """An up vector (a ``graph.up_axis`` vector, a graph's ``up``) as a float64 unit 3-vector.
+
+    Raises:
+        ValueError: it is not a finite non-zero 3-vector.
+    """
+    u = np.asarray(up, dtype=np.float64).reshape(-1)
+    if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) < 1e-9:
+        raise ValueError(f"graph.up_axis must be a finite non-zero 3-vector, got {np.asarray(up).tolist()}")
+    return u / np.linalg.norm(u)
+
+
 def angle_deg(a: Iterable[float], b: Iterable[float]) -> float:
     """Degrees between two non-zero 3-vectors."""
     u, v = np.asarray(list(a), dtype=np.float64), np.asarray(list(b), dtype=np.float64)

@@ -4,12 +4,14 @@ import cv2
 import numpy as np
 import pytest
 
+from ogscene3d.eval.metrics import segmentation_metrics
 from ogscene3d.eval.plots import (
     colorize_confidence,
     colorize_labels,
     iou_bar_chart,
     label_colors,
     side_by_side,
+    write_iou_chart,
     write_png,
 )
 
@@ -60,3 +62,12 @@ def test_bar_lengths_follow_iou():
     assert bar_pixels(2) == pytest.approx(4 * bar_pixels(0), rel=0.05)
     with pytest.raises(ValueError, match="3 class names"):
         iou_bar_chart(["a", "b", "c"], [0.1])
+
+
+def test_the_iou_chart_of_a_protocol_is_written_beside_the_run(tmp_path):
+    confusion = np.array([[3, 1, 0], [0, 2, 0], [0, 0, 0]])  # wall: ignored; a class with no points: n/a
+    m = segmentation_metrics(confusion, ["chair", "table", "wall"], ignore=["wall"])
+    path = write_iou_chart(tmp_path, "hovsg", m)
+    assert path == tmp_path / "iou_hovsg.png"
+    img = cv2.imread(str(path))
+    assert img is not None and img.shape[1] == 720

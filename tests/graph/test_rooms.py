@@ -16,6 +16,7 @@ from ogscene3d.graph.rooms import (
     RuleRoomTyper,
     assign_rooms,
     find_floors,
+    read_rooms,
     room_type_of,
     segment_rooms,
 )
@@ -250,3 +251,11 @@ def test_an_llm_typer_is_asked_only_when_the_update_may():
     assert (typed.type, typed.type_source) == ("bedroom", "llm")
     rm.update(2, np.concatenate([a, b, bed]), up, {1: (bed, "big bed")}, ask_model=False)
     assert Client.calls == 1 and rm.rooms[typed.id].type_source == "llm"
+
+
+def test_read_rooms_takes_the_graphs_up_from_graph_up():
+    up, floors, rooms = read_rooms({"nodes": [], "edges": [], "up": [0, -3, 0]})
+    assert np.allclose(up, [0.0, -1.0, 0.0]) and floors == [] and rooms == []
+    assert read_rooms({"nodes": [], "edges": []})[0] is None
+    with pytest.raises(DataError, match="shown graph: 'up'"):
+        read_rooms({"up": [0, 0, 0]}, "the shown graph")

@@ -999,10 +999,10 @@ def test_cli_rejects_bad_settings():
 
 
 def test_cli_screenshot_without_chromium_is_a_clear_error(monkeypatch, tmp_path, capsys):
-    import ogscene3d.viewer.headless as headless
+    import ogscene3d.commands.live as live
     from ogscene3d.commands.live import main
 
-    monkeypatch.setattr(headless, "find_chromium", lambda: None)
+    monkeypatch.setattr(live, "find_chromium", lambda: None)
     run = _write_run(tmp_path / "run", make_scene(10))
     assert main([str(run), "--port", "0", "--screenshot", str(tmp_path / "x.png")]) == 2
     assert "needs chromium" in capsys.readouterr().err

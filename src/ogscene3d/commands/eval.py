@@ -111,7 +111,7 @@ def _gaussians_line(report: dict[str, Any]) -> str:
 
 def _run(args: argparse.Namespace) -> int:
     from ..eval.metrics import format_metrics_table
-    from ..eval.plots import iou_bar_chart, write_png
+    from ..eval.plots import write_iou_chart
     from ..eval.readers import find_ground_truth
     from ..eval.run_eval import evaluate_run
 
@@ -156,14 +156,7 @@ def _run(args: argparse.Namespace) -> int:
         print()
         print(format_metrics_table(metrics))
         if options.plots:
-            chart = iou_bar_chart(
-                metrics.class_names,
-                metrics.iou,
-                title=f"per-class IoU, {name} protocol (mIoU {100 * metrics.miou:.1f})",
-                nan_text=["ignored" if n in metrics.ignored else "not in GT" for n in metrics.class_names],
-            )
-            png = write_png(Path(out) / f"iou_{name}.png", chart)
-            report["semantic_3d"][name]["bar_chart"] = png.name
+            report["semantic_3d"][name]["bar_chart"] = write_iou_chart(out, name, metrics).name
     v = report.get("semantic_2d")
     if v:
         print()

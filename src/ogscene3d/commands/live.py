@@ -23,6 +23,7 @@ from ..cli_types import add_rerun_arguments, add_size_argument, port, positive_f
 from ..config import load_config
 from ..errors import ConfigError, DataError, OGSceneError
 from ..runs import RunFolder, run_directory
+from ..viewer.headless import HeadlessBrowser, find_chromium
 from .options import add_override_argument, add_shared_arguments
 from .run import run_observers
 
@@ -175,8 +176,6 @@ def take_screenshot(
     sorted and faded in; software WebGL can take tens of seconds for the first full frame) or
     ``timeout`` seconds have passed.
     """
-    from ..viewer.headless import HeadlessBrowser, find_chromium
-
     if find_chromium() is None:
         raise ConfigError("--screenshot needs chromium (e.g. apt-get install chromium)")
     before = viewer.stats["pushes"]

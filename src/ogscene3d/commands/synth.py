@@ -7,7 +7,6 @@ Defaults come from the config's `synthetic` section.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import time
 from pathlib import Path
@@ -54,15 +53,9 @@ def _reusable(out: str | Path, params: dict, overwrite: bool) -> bool:
     """Whether ``make_synthetic_scene`` will reuse ``out`` as is: it holds a scene made with the same
     arguments (its scene.json) and --force was not given. Decided before the call, so that the final
     line can say "reused" instead of "written"."""
-    from ..datasets.synthetic import _scene_params
+    from ..datasets.synthetic import holds_scene, scene_params  # numpy and OpenCV: not for `--help`
 
-    marker = Path(out) / "scene.json"
-    if overwrite or not marker.is_file():
-        return False
-    try:
-        return json.loads(marker.read_text()) == _scene_params(**params)
-    except (OSError, json.JSONDecodeError):
-        return False
+    return not overwrite and holds_scene(out, scene_params(**params))
 
 
 def _frame_count(out: Path) -> int:

@@ -2,9 +2,9 @@
 path that walks from room to room.
 
 The builder works in the z-up frame of :mod:`.procedural` and reuses its parts and placement (furniture
-against walls, small objects on top surfaces, books in shelves, wall decorations); ``_finish`` converts the
-result into the ogscene3d world (up = -y). Rooms lie in a row along x, aligned on their -y walls; every room
-is a box with its own floor, ceiling and four walls (neighbours' walls stand back to back, 2 x 5 cm), and
+against walls, small objects on top surfaces, books in shelves, wall decorations); ``finish_room`` converts
+the result into the ogscene3d world (up = -y). Rooms lie in a row along x, aligned on their -y walls; every
+room is a box with its own floor, ceiling and four walls (neighbours' walls stand back to back, 2 x 5 cm), and
 each pair of neighbours shares a doorway :data:`DOOR_WIDTH` wide and :data:`DOOR_HEIGHT` high cut through
 both walls. A room's type (:data:`ROOM_TYPES`) chooses its furniture: a bed with pillows and nightstands in
 a bedroom, a counter with a sink, a refrigerator, a stove and a table with chairs in a kitchen, and so on.
@@ -28,28 +28,28 @@ from .procedural import (
     WORLD_FROM_ZUP,
     Part,
     Room,
+    SceneBuilder,
     SceneObject,
-    _against_wall,
-    _books_in_shelf,
-    _Builder,
-    _cabinet,
-    _chair,
-    _decoration,
-    _finish,
-    _floor_and_ceiling,
-    _floor_lamp,
-    _furniture_spot,
-    _light_switches,
-    _local,
-    _place_small,
-    _rot_size,
-    _shelf,
-    _small_object,
-    _sofa,
-    _table,
-    _wall_frame,
-    _yaw_matrix,
+    add_books_in_shelf,
+    add_floor_and_ceiling,
+    add_floor_lamp,
+    add_light_switches,
+    against_wall,
+    cabinet_parts,
+    chair_parts,
+    decoration_parts,
+    finish_room,
+    furniture_spot,
+    local_point,
     make_part,
+    place_small,
+    rotated_size,
+    shelf_parts,
+    small_object_parts,
+    sofa_parts,
+    table_parts,
+    wall_frame,
+    yaw_matrix,
 )
 
 #: The room types of an apartment, each with its typical furniture.
@@ -125,16 +125,18 @@ def _wall_parts(side: str, W: float, D: float, H: float, color, openings: list[f
     return parts
 
 
-def _room_shell(b: _Builder, W: float, D: float, H: float, doors: dict[str, list[float]]) -> dict[str, int]:
+def _room_shell(
+    b: SceneBuilder, W: float, D: float, H: float, doors: dict[str, list[float]]
+) -> dict[str, int]:
     """Floor, ceiling and four walls (with doorways at ``doors`` {side: offsets}) of a room centred on the
-    origin, and a keep-out box in front of every doorway; the instance ids by name as ``_structure``'s."""
-    ids = _floor_and_ceiling(b, W, D, H, WALL_THICKNESS)
+    origin, and a keep-out box in front of every doorway; the instance ids by name as ``add_structure``'s."""
+    ids = add_floor_and_ceiling(b, W, D, H, WALL_THICKNESS)
     wall_color = b.color((0.78, 0.76, 0.7), 0.1)
     for side in _SIDES:
         color = wall_color * b.rng.uniform(0.93, 1.05)
         ids[side] = b.add("wall", _wall_parts(side, W, D, H, color, doors.get(side, []))).instance_id
     for side, offsets in doors.items():
-        p, n, _, _ = _wall_frame(side, W, D)
+        p, n, _, _ = wall_frame(side, W, D)
         for o in offsets:
             along = np.array([1.0, 0, 0]) if side in ("+y", "-y") else np.array([0, 1.0, 0])
             c = p + n * 0.65 + along * o + [0, 0, (DOOR_HEIGHT + 0.05) / 2]
@@ -144,18 +146,18 @@ def _room_shell(b: _Builder, W: float, D: float, H: float, doors: dict[str, list
 
 
 def _along(side: str, W: float, D: float, center: np.ndarray) -> float:
-    """The offset along wall ``side`` (as :func:`_against_wall` takes it) of a point."""
-    p, n, _, _ = _wall_frame(side, W, D)
+    """The offset along wall ``side`` (as :func:`against_wall` takes it) of a point."""
+    p, n, _, _ = wall_frame(side, W, D)
     return float((np.asarray(center) - p)[:2] @ np.array([-n[1], n[0]]))
 
 
-def _wall_piece(b: _Builder, cls: str, make, size, W: float, D: float, floor: int, margin: float = 0.1):
+def _wall_piece(b: SceneBuilder, cls: str, make, size, W: float, D: float, floor: int, margin: float = 0.1):
     """A piece of furniture of ``size`` (length along the wall, depth, height) against a random wall:
     ``make(center, yaw, size) -> (parts, tops)``; (object, side, centre, yaw) or None when it found no
     place."""
     size = np.asarray(size, dtype=np.float64)
     for _ in range(40):
-        spot = _furniture_spot(b, _SIDES, W, D, size[:2])
+        spot = furniture_spot(b, _SIDES, W, D, size[:2])
         if spot is None:
             continue
         center, yaw, side = spot
@@ -166,54 +168,59 @@ def _wall_piece(b: _Builder, cls: str, make, size, W: float, D: float, floor: in
     return None
 
 
-def _cabinet_piece(b: _Builder, cls: str, base, jitter: float, size, W: float, D: float, floor: int):
-    """A closed box of furniture (:func:`~.procedural._cabinet`) of colour ``base`` +- ``jitter`` against a
-    random wall, as :func:`_wall_piece` places it."""
-    return _wall_piece(b, cls, lambda c, y, s: _cabinet(c, y, s, b.color(base, jitter)), size, W, D, floor)
+def _cabinet_piece(b: SceneBuilder, cls: str, base, jitter: float, size, W: float, D: float, floor: int):
+    """A closed box of furniture (:func:`~.procedural.cabinet_parts`) of colour ``base`` +- ``jitter``
+    against a random wall, as :func:`_wall_piece` places it."""
+    return _wall_piece(
+        b, cls, lambda c, y, s: cabinet_parts(c, y, s, b.color(base, jitter)), size, W, D, floor
+    )
 
 
-def _on_top(b: _Builder, support: SceneObject | None, classes, k: tuple[int, int]) -> None:
+def _on_top(b: SceneBuilder, support: SceneObject | None, classes, k: tuple[int, int]) -> None:
     """``k`` = (at least, at most) random ``classes`` on the support's first top surface."""
     if support is None or not support.top_surfaces:
         return
     n = int(b.rng.integers(k[0], k[1] + 1))
     for cls in b.rng.choice(list(classes), size=min(n, len(classes)), replace=False):
-        _place_small(b, str(cls), support, support.top_surfaces[0])
+        place_small(b, str(cls), support, support.top_surfaces[0])
 
 
 def _bed(center, yaw, size, col) -> tuple[list[Part], list]:
     """A bed of ``size`` (width along the wall, length, mattress top height), its headboard on the wall."""
     width, length, top = size
     parts = [
-        make_part("box", center + [0, 0, 0.15], col, size=_rot_size([length, width, 0.3], yaw)),
+        make_part("box", center + [0, 0, 0.15], col, size=rotated_size([length, width, 0.3], yaw)),
         make_part(
             "box",
-            _local(center, yaw, [0.02, 0, 0.3 + (top - 0.3) / 2]),
+            local_point(center, yaw, [0.02, 0, 0.3 + (top - 0.3) / 2]),
             np.array([0.92, 0.9, 0.86]),
-            size=_rot_size([length - 0.08, width - 0.06, top - 0.3], yaw),
+            size=rotated_size([length - 0.08, width - 0.06, top - 0.3], yaw),
             texture=TEXTURE_NOISE,
             texture_scale=0.1,
         ),
         make_part(
             "box",
-            _local(center, yaw, [-length / 2 + 0.04, 0, 0.5]),
+            local_point(center, yaw, [-length / 2 + 0.04, 0, 0.5]),
             col * 0.85,
-            size=_rot_size([0.08, width, 1.0], yaw),
+            size=rotated_size([0.08, width, 1.0], yaw),
         ),
     ]
-    mid = _local(center, yaw, [0.06, 0, 0])[:2]
-    half = _rot_size([length - 0.3, width - 0.1, 0], yaw)[:2] / 2
+    mid = local_point(center, yaw, [0.06, 0, 0])[:2]
+    half = rotated_size([length - 0.3, width - 0.1, 0], yaw)[:2] / 2
     return parts, [(mid - half, mid + half, top)]
 
 
 def _toilet(center, yaw, size, col) -> tuple[list[Part], list]:
     """A toilet facing into the room: bowl, seat and the tank against the wall."""
     _, depth, _ = size
-    bowl_c = _local(center, yaw, [0.08, 0, 0])
+    bowl_c = local_point(center, yaw, [0.08, 0, 0])
     return [
         make_part("cylinder", bowl_c, col, radius=0.17, radius_top=0.2, height=0.4),
         make_part(
-            "box", _local(center, yaw, [-depth / 2 + 0.1, 0, 0.6]), col, size=_rot_size([0.2, 0.42, 0.4], yaw)
+            "box",
+            local_point(center, yaw, [-depth / 2 + 0.1, 0, 0.6]),
+            col,
+            size=rotated_size([0.2, 0.42, 0.4], yaw),
         ),
     ], []
 
@@ -222,28 +229,28 @@ def _bathtub(center, yaw, size, col) -> tuple[list[Part], list]:
     """An open tub: a bottom and four rims (its inside shows from above)."""
     L, Dp, Ht = size
     r = 0.08
-    parts = [make_part("box", center + [0, 0, 0.05], col, size=_rot_size([Dp, L, 0.1], yaw))]
+    parts = [make_part("box", center + [0, 0, 0.05], col, size=rotated_size([Dp, L, 0.1], yaw))]
     for s in (-1, 1):
         parts.append(
             make_part(
                 "box",
-                _local(center, yaw, [s * (Dp / 2 - r / 2), 0, Ht / 2]),
+                local_point(center, yaw, [s * (Dp / 2 - r / 2), 0, Ht / 2]),
                 col,
-                size=_rot_size([r, L, Ht], yaw),
+                size=rotated_size([r, L, Ht], yaw),
             )
         )
         parts.append(
             make_part(
                 "box",
-                _local(center, yaw, [0, s * (L / 2 - r / 2), Ht / 2]),
+                local_point(center, yaw, [0, s * (L / 2 - r / 2), Ht / 2]),
                 col * 0.97,
-                size=_rot_size([Dp - 2 * r, r, Ht], yaw),
+                size=rotated_size([Dp - 2 * r, r, Ht], yaw),
             )
         )
     return parts, []
 
 
-def _free_spot(b: _Builder, W: float, D: float, wall_gap: float) -> np.ndarray:
+def _free_spot(b: SceneBuilder, W: float, D: float, wall_gap: float) -> np.ndarray:
     """A random floor point at least ``wall_gap`` from the walls."""
     return np.array(
         [
@@ -255,7 +262,7 @@ def _free_spot(b: _Builder, W: float, D: float, wall_gap: float) -> np.ndarray:
 
 
 def _attached(
-    b: _Builder,
+    b: SceneBuilder,
     cls: str,
     wall: int,
     side: str,
@@ -268,19 +275,19 @@ def _attached(
     color,
 ) -> SceneObject | None:
     """A thin box (mirror, towel) on wall ``side`` at offset ``along``, its bottom at ``z0``."""
-    p, n, _, yaw = _wall_frame(side, W, D)
+    p, n, _, yaw = wall_frame(side, W, D)
     t_axis = np.array([-n[1], n[0], 0.0])
     c = p + n * 0.015 + t_axis * along + [0, 0, z0 + h / 2]
-    part = make_part("box", c, color, size=_rot_size([0.03, w, h], yaw))
+    part = make_part("box", c, color, size=rotated_size([0.03, w, h], yaw))
     return b.try_add(cls, [part], wall, "attached to", margin=0.03)
 
 
-def _bookshelf(b: _Builder, W: float, D: float, floor: int, size, boards: int) -> None:
+def _bookshelf(b: SceneBuilder, W: float, D: float, floor: int, size, boards: int) -> None:
     """A bookshelf of ``size`` with ``boards`` boards against a random wall, books on every board."""
     shelf = _wall_piece(
         b,
         "bookshelf",
-        lambda c, y, s: _shelf(c, y, s, b.color((0.55, 0.38, 0.22)), boards),
+        lambda c, y, s: shelf_parts(c, y, s, b.color((0.55, 0.38, 0.22)), boards),
         size,
         W,
         D,
@@ -288,15 +295,15 @@ def _bookshelf(b: _Builder, W: float, D: float, floor: int, size, boards: int) -
     )
     if shelf is not None:
         for top in shelf[0].top_surfaces:
-            _books_in_shelf(b, shelf[0], top)
+            add_books_in_shelf(b, shelf[0], top)
 
 
-def _living_room(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
+def _living_room(b: SceneBuilder, ids: dict[str, int], W: float, D: float) -> None:
     floor, rng = ids["floor"], b.rng
     sofa = _wall_piece(
         b,
         "sofa",
-        lambda c, y, s: _sofa(c, y, s, b.color((0.35, 0.4, 0.55), 0.12)),
+        lambda c, y, s: sofa_parts(c, y, s, b.color((0.35, 0.4, 0.55), 0.12)),
         [rng.uniform(1.8, 2.2), 0.85, 0.85],
         W,
         D,
@@ -306,10 +313,10 @@ def _living_room(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
     if sofa is not None:
         obj, side, center, yaw = sofa
         for _ in range(int(rng.integers(1, 3))):
-            _place_small(b, "pillow", obj, obj.top_surfaces[0])
-        n = _wall_frame(side, W, D)[1]
+            place_small(b, "pillow", obj, obj.top_surfaces[0])
+        n = wall_frame(side, W, D)[1]
         tc = center + n * (0.85 / 2 + 0.45 + 0.3)
-        parts, tops = _table(tc, yaw + np.pi / 2, [1.0, 0.55, 0.45], b.color((0.5, 0.35, 0.22)))
+        parts, tops = table_parts(tc, yaw + np.pi / 2, [1.0, 0.55, 0.45], b.color((0.5, 0.35, 0.22)))
         table = b.try_add("table", parts, floor, "on", tops, margin=0.05)
         _on_top(b, table, ["cup", "book", "vase", "bowl"], (1, 3))
     stand = _cabinet_piece(
@@ -317,8 +324,8 @@ def _living_room(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
     )
     if stand is not None:
         obj, _, center, yaw = stand
-        parts, _ = _small_object(b, "tv", 2.0)
-        turn = _yaw_matrix(yaw + np.pi / 2)
+        parts, _ = small_object_parts(b, "tv", 2.0)
+        turn = yaw_matrix(yaw + np.pi / 2)
         top = obj.top_surfaces[0][2]
         moved = [
             Part(
@@ -334,20 +341,20 @@ def _living_room(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
     _bookshelf(b, W, D, floor, [rng.uniform(0.8, 1.1), 0.34, rng.uniform(1.5, 1.8)], 3)
 
 
-def _kitchen(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
+def _kitchen(b: SceneBuilder, ids: dict[str, int], W: float, D: float) -> None:
     floor, rng = ids["floor"], b.rng
     counter = _cabinet_piece(
         b, "counter", (0.8, 0.78, 0.72), 0.06, [rng.uniform(1.6, 2.2), 0.6, 0.9], W, D, floor
     )
     if counter is not None:
-        _place_small(b, "sink", counter[0], counter[0].top_surfaces[0])
+        place_small(b, "sink", counter[0], counter[0].top_surfaces[0])
         _on_top(b, counter[0], ["bottle", "bowl", "cup", "box"], (1, 3))
     _cabinet_piece(b, "refrigerator", (0.9, 0.9, 0.92), 0.03, [0.7, 0.7, rng.uniform(1.7, 1.9)], W, D, floor)
     _cabinet_piece(b, "stove", (0.2, 0.2, 0.22), 0.03, [0.6, 0.6, 0.9], W, D, floor)
     for _ in range(30):
         size = np.array([rng.uniform(1.0, 1.2), rng.uniform(0.7, 0.8), 0.75])
         yaw = float(rng.integers(2)) * np.pi / 2
-        parts, tops = _table(_free_spot(b, W, D, 1.0), yaw, size, b.color((0.6, 0.42, 0.26)))
+        parts, tops = table_parts(_free_spot(b, W, D, 1.0), yaw, size, b.color((0.6, 0.42, 0.26)))
         table = b.try_add("table", parts, floor, "on", tops, margin=0.55)
         if table is not None:
             lo, hi = table.aabb
@@ -358,12 +365,12 @@ def _kitchen(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
                 c = np.array([mid[0], mid[1], 0.0])
                 c[short] = (hi if sgn > 0 else lo)[short] + sgn * 0.3
                 chair_yaw = np.arctan2(0, -sgn) if short == 0 else np.arctan2(-sgn, 0)
-                b.try_add("chair", _chair(c, chair_yaw, color), floor, "on", margin=0.05)
+                b.try_add("chair", chair_parts(c, chair_yaw, color), floor, "on", margin=0.05)
             _on_top(b, table, ["bowl", "cup", "bottle"], (1, 2))
             break
 
 
-def _bedroom(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
+def _bedroom(b: SceneBuilder, ids: dict[str, int], W: float, D: float) -> None:
     floor, rng = ids["floor"], b.rng
     bed = None
     for width in (rng.uniform(1.4, 1.6), rng.uniform(0.9, 1.0)):  # a double bed, else a single one
@@ -382,11 +389,11 @@ def _bedroom(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
     if bed is not None:
         obj, side, center, _ = bed
         for _ in range(int(rng.integers(1, 3))):
-            _place_small(b, "pillow", obj, obj.top_surfaces[0])
+            place_small(b, "pillow", obj, obj.top_surfaces[0])
         along = _along(side, W, D, center)
         for sgn in (-1, 1):
-            c, yaw = _against_wall(side, W, D, 0.4, along + sgn * (width / 2 + 0.3))
-            parts, tops = _cabinet(c, yaw, [0.45, 0.4, 0.55], b.color((0.5, 0.36, 0.24)))
+            c, yaw = against_wall(side, W, D, 0.4, along + sgn * (width / 2 + 0.3))
+            parts, tops = cabinet_parts(c, yaw, [0.45, 0.4, 0.55], b.color((0.5, 0.36, 0.24)))
             stand = b.try_add("nightstand", parts, floor, "on", tops, margin=0.02)
             _on_top(b, stand, ["lamp", "book", "cup"], (1, 1))
     _cabinet_piece(
@@ -401,7 +408,7 @@ def _bedroom(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
     )
 
 
-def _bathroom(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
+def _bathroom(b: SceneBuilder, ids: dict[str, int], W: float, D: float) -> None:
     floor, rng = ids["floor"], b.rng
     white = np.array([0.93, 0.93, 0.92])
     _wall_piece(b, "toilet", lambda c, y, s: _toilet(c, y, s, white), [0.45, 0.7, 0.8], W, D, floor)
@@ -410,7 +417,7 @@ def _bathroom(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
     )
     if vanity is not None:
         obj, side, center, _ = vanity
-        _place_small(b, "sink", obj, obj.top_surfaces[0])
+        place_small(b, "sink", obj, obj.top_surfaces[0])
         _attached(
             b,
             "mirror",
@@ -435,7 +442,7 @@ def _bathroom(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
     )
     for _ in range(30):
         side = _SIDES[rng.integers(4)]
-        half = _wall_frame(side, W, D)[2]
+        half = wall_frame(side, W, D)[2]
         if (
             _attached(
                 b,
@@ -455,20 +462,20 @@ def _bathroom(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
             break
     for _ in range(30):
         side = _SIDES[rng.integers(4)]
-        half = _wall_frame(side, W, D)[2]
-        c, _ = _against_wall(side, W, D, 0.3, rng.uniform(-half + 0.3, half - 0.3))
+        half = wall_frame(side, W, D)[2]
+        c, _ = against_wall(side, W, D, 0.3, rng.uniform(-half + 0.3, half - 0.3))
         can = [make_part("cylinder", c, b.color((0.5, 0.52, 0.55)), radius=0.13, height=0.3)]
         if b.try_add("trash can", can, floor, "on", margin=0.05) is not None:
             break
 
 
-def _office(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
+def _office(b: SceneBuilder, ids: dict[str, int], W: float, D: float) -> None:
     floor, rng = ids["floor"], b.rng
     depth = rng.uniform(0.65, 0.75)
     desk = _wall_piece(
         b,
         "desk",
-        lambda c, y, s: _table(c, y, [s[1], s[0], s[2]], b.color((0.45, 0.3, 0.2))),
+        lambda c, y, s: table_parts(c, y, [s[1], s[0], s[2]], b.color((0.45, 0.3, 0.2))),
         [rng.uniform(1.2, 1.6), depth, 0.75],
         W,
         D,
@@ -478,10 +485,10 @@ def _office(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
     if desk is not None:
         obj, side, center, yaw = desk
         _on_top(b, obj, ["monitor", "laptop", "lamp", "cup", "book"], (2, 4))
-        n = _wall_frame(side, W, D)[1]
+        n = wall_frame(side, W, D)[1]
         b.try_add(
             "chair",
-            _chair(center + n * (depth / 2 + 0.35), yaw + np.pi, b.color((0.15, 0.15, 0.17), 0.03)),
+            chair_parts(center + n * (depth / 2 + 0.35), yaw + np.pi, b.color((0.15, 0.15, 0.17), 0.03)),
             floor,
             "on",
             margin=0.02,
@@ -519,9 +526,9 @@ def _build_one(
     doors: dict[str, list[float]],
     entrance: bool,
     switch_seed: int,
-) -> _Builder:
+) -> SceneBuilder:
     """One furnished room centred on the origin (z-up), keep-out boxes included."""
-    b = _Builder(rng)
+    b = SceneBuilder(rng)
     ids = _room_shell(b, W, D, H, doors)
     _FURNISH[kind](b, ids, W, D)
     exterior = [s for s in _SIDES if s not in doors]
@@ -537,14 +544,14 @@ def _build_one(
                 if cls in ("door", "window")
                 else _SIDES[rng.integers(4)]
             )
-            parts = _decoration(b, cls, side, W, D)
+            parts = decoration_parts(b, cls, side, W, D)
             if parts is not None and b.try_add(cls, parts, ids[side], "attached to", margin=0.05) is not None:
                 if cls == "door":
                     b.extra_relations.append((b.objects[-1].instance_id, "on", ids["floor"]))
                 break
-    _light_switches(b, ids, W, D, switch_seed)
+    add_light_switches(b, ids, W, D, switch_seed)
     if kind in ("living room", "bedroom", "office"):
-        _floor_lamp(b, ids, W, D)
+        add_floor_lamp(b, ids, W, D)
     return b
 
 
@@ -567,7 +574,7 @@ def build_apartment(seed: int = 0) -> Apartment:
     ]
     total = (x0s[-1] + dims[-1][0], max(D for _, D in dims))
     shift = -np.array(total) / 2
-    merged = _Builder(rng)
+    merged = SceneBuilder(rng)
     rooms, instance_room, doors = [], {}, []
     for i, (kind, (W, D)) in enumerate(zip(kinds, dims)):
         lo = np.array([x0s[i], 0.0]) + shift
@@ -584,13 +591,13 @@ def build_apartment(seed: int = 0) -> Apartment:
         _merge(merged, b, np.array([center[0], center[1], 0.0]), i + 1, instance_room)
         corners = np.array([[lo[0], lo[1], 0.0], [hi[0], hi[1], H]]) @ WORLD_FROM_ZUP.T
         rooms.append(ApartmentRoom(i + 1, kind, 0, corners.min(0), corners.max(0), lo, hi))
-    room = _finish(merged, (float(total[0]), float(total[1]), H), np.array([0.0, 0.0, H - 0.3]))
+    room = finish_room(merged, (float(total[0]), float(total[1]), H), np.array([0.0, 0.0, H - 0.3]))
     base = {f.name: getattr(room, f.name) for f in fields(Room)}
     return Apartment(**base, rooms=rooms, instance_room=instance_room, doors=doors)
 
 
 def _merge(
-    into: _Builder, b: _Builder, offset: np.ndarray, room_id: int, instance_room: dict[int, int]
+    into: SceneBuilder, b: SceneBuilder, offset: np.ndarray, room_id: int, instance_room: dict[int, int]
 ) -> None:
     """Move ``b``'s objects (keep-outs left out) by ``offset`` into ``into`` with new instance ids."""
     new_id: dict[int, int] = {}

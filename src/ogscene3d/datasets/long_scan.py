@@ -36,22 +36,22 @@ from .procedural import (
     WORLD_FROM_ZUP,
     Part,
     Room,
+    SceneBuilder,
     SceneObject,
-    _against_wall,
-    _books_in_shelf,
-    _Builder,
-    _chair,
-    _chair_slots,
-    _finish,
-    _light_switches,
-    _local,
-    _place_small,
-    _rot_size,
-    _shelf,
-    _structure,
-    _table,
-    _wall_frame,
+    add_books_in_shelf,
+    add_light_switches,
+    add_structure,
+    against_wall,
+    chair_parts,
+    chair_slots,
+    finish_room,
+    local_point,
     make_part,
+    place_small,
+    rotated_size,
+    shelf_parts,
+    table_parts,
+    wall_frame,
 )
 
 # furniture that stands on the floor and that SAM may merge with the floor or with its neighbour
@@ -78,18 +78,18 @@ def _boxy(center, yaw, size, color, fronts: int, top_slab: bool = False, texture
     panels stacked on the front, a worktop slab. Returns (parts, tops)."""
     L, Dp, Ht = size
     body_h = Ht - (0.04 if top_slab else 0.0)
-    parts = [make_part("box", center + [0, 0, body_h / 2], color, size=_rot_size([Dp, L, body_h], yaw),
+    parts = [make_part("box", center + [0, 0, body_h / 2], color, size=rotated_size([Dp, L, body_h], yaw),
                        texture=texture, texture_scale=0.12)]  # fmt: skip
     edges = np.linspace(0.04, body_h - 0.03, fronts + 1)
     for lo, hi in zip(edges[:-1], edges[1:]):
-        c = _local(center, yaw, [Dp / 2 + 0.006, 0, (lo + hi) / 2])
+        c = local_point(center, yaw, [Dp / 2 + 0.006, 0, (lo + hi) / 2])
         parts.append(
-            make_part("box", c, color * 0.88, size=_rot_size([0.012, L * 0.9, (hi - lo) - 0.02], yaw))
+            make_part("box", c, color * 0.88, size=rotated_size([0.012, L * 0.9, (hi - lo) - 0.02], yaw))
         )
     if top_slab:
-        c = _local(center, yaw, [0.01, 0, Ht - 0.02])
-        parts.append(make_part("box", c, color * 0.6, size=_rot_size([Dp + 0.02, L, 0.04], yaw)))
-    half = _rot_size([Dp, L, 0], yaw)[:2] / 2
+        c = local_point(center, yaw, [0.01, 0, Ht - 0.02])
+        parts.append(make_part("box", c, color * 0.6, size=rotated_size([Dp + 0.02, L, 0.04], yaw)))
+    half = rotated_size([Dp, L, 0], yaw)[:2] / 2
     return parts, [(center[:2] - half, center[:2] + half, Ht)]
 
 
@@ -98,20 +98,20 @@ def _sofa_with_cushions(center, yaw, size, color):
     L, Dp, Ht = size
     back, arm, seat = 0.22, 0.16, 0.3
     parts = [
-        make_part("box", center + [0, 0, seat / 2], color * 0.8, size=_rot_size([Dp, L, seat], yaw)),
-        make_part("box", _local(center, yaw, [-Dp / 2 + back / 2, 0, (Ht + seat) / 2]), color,
-                  size=_rot_size([back, L, Ht - seat], yaw)),
+        make_part("box", center + [0, 0, seat / 2], color * 0.8, size=rotated_size([Dp, L, seat], yaw)),
+        make_part("box", local_point(center, yaw, [-Dp / 2 + back / 2, 0, (Ht + seat) / 2]), color,
+                  size=rotated_size([back, L, Ht - seat], yaw)),
     ]  # fmt: skip
     for s in (-1, 1):
-        c = _local(center, yaw, [back / 2, s * (L / 2 - arm / 2), seat + 0.16])
-        parts.append(make_part("box", c, color * 0.92, size=_rot_size([Dp - back, arm, 0.32], yaw)))
+        c = local_point(center, yaw, [back / 2, s * (L / 2 - arm / 2), seat + 0.16])
+        parts.append(make_part("box", c, color * 0.92, size=rotated_size([Dp - back, arm, 0.32], yaw)))
     width = (L - 2 * arm) / 3
     for k in (-1, 0, 1):
-        c = _local(center, yaw, [back / 2, k * width, seat + 0.07])
-        size = _rot_size([Dp - back - 0.02, width - 0.01, 0.14], yaw)
+        c = local_point(center, yaw, [back / 2, k * width, seat + 0.07])
+        size = rotated_size([Dp - back - 0.02, width - 0.01, 0.14], yaw)
         parts.append(make_part("box", c, color * 1.05, size=size, texture=TEXTURE_NOISE, texture_scale=0.06))
-    inner = _rot_size([Dp - back - 0.1, L - 2 * arm - 0.05, 0], yaw)[:2] / 2
-    mid = _local(center, yaw, [back / 2, 0, 0])[:2]
+    inner = rotated_size([Dp - back - 0.1, L - 2 * arm - 0.05, 0], yaw)[:2] / 2
+    mid = local_point(center, yaw, [back / 2, 0, 0])[:2]
     return parts, [(mid - inner, mid + inner, seat + 0.14)]
 
 
@@ -121,17 +121,17 @@ def _bed(center, yaw, size, color):
     Wd, Ln, Ht = size
     head = 0.06
     body = Ln - head
-    mid = _local(center, yaw, [head / 2, 0, 0])
+    mid = local_point(center, yaw, [head / 2, 0, 0])
     parts = [
-        make_part("box", mid + [0, 0, 0.15], color * 0.7, size=_rot_size([body, Wd, 0.3], yaw)),
+        make_part("box", mid + [0, 0, 0.15], color * 0.7, size=rotated_size([body, Wd, 0.3], yaw)),
         make_part("box", mid + [0, 0, 0.3 + (Ht - 0.3) / 2], np.clip(0.35 * color + 0.55, 0, 1),
-                  size=_rot_size([body - 0.04, Wd - 0.04, Ht - 0.3], yaw), texture=TEXTURE_NOISE,
+                  size=rotated_size([body - 0.04, Wd - 0.04, Ht - 0.3], yaw), texture=TEXTURE_NOISE,
                   texture_scale=0.1),
-        make_part("box", _local(center, yaw, [-Ln / 2 + head / 2, 0, 0.5]), color * 0.6,
-                  size=_rot_size([head, Wd, 1.0], yaw)),
+        make_part("box", local_point(center, yaw, [-Ln / 2 + head / 2, 0, 0.5]), color * 0.6,
+                  size=rotated_size([head, Wd, 1.0], yaw)),
     ]  # fmt: skip
-    lo = _local(center, yaw, [-Ln / 2 + head + 0.05, -(Wd / 2 - 0.06), 0])[:2]
-    hi = _local(center, yaw, [-Ln / 2 + head + 0.55, Wd / 2 - 0.06, 0])[:2]
+    lo = local_point(center, yaw, [-Ln / 2 + head + 0.05, -(Wd / 2 - 0.06), 0])[:2]
+    hi = local_point(center, yaw, [-Ln / 2 + head + 0.55, Wd / 2 - 0.06, 0])[:2]
     return parts, [(np.minimum(lo, hi), np.maximum(lo, hi), Ht)]
 
 
@@ -143,7 +143,7 @@ class _Piece:
     make: Callable[[np.ndarray, float], tuple[list[Part], list]]  # (centre, yaw) -> parts, tops
 
 
-def _zone_pieces(b: _Builder, zone: str) -> list[_Piece]:
+def _zone_pieces(b: SceneBuilder, zone: str) -> list[_Piece]:
     """The large furniture of a zone, in its order along the wall (each next to the one before)."""
     rng, c = b.rng, b.color
     if zone == "kitchen":
@@ -160,7 +160,7 @@ def _zone_pieces(b: _Builder, zone: str) -> list[_Piece]:
         side = np.array([0.45, 0.45, rng.uniform(0.5, 0.6)])
         sofa = np.array([rng.uniform(1.9, 2.3), 0.9, 0.85])
         wood, cloth = c((0.45, 0.3, 0.2)), c((0.3, 0.38, 0.5), 0.12)
-        side_table = _Piece("table", *side[:2], partial(_table, size=side[[1, 0, 2]], color=wood))
+        side_table = _Piece("table", *side[:2], partial(table_parts, size=side[[1, 0, 2]], color=wood))
         couch = _Piece("sofa", *sofa[:2], partial(_sofa_with_cushions, size=sofa, color=cloth))
         return [side_table, couch, side_table] if rng.uniform() < 0.6 else [side_table, couch]
     if zone == "bedroom":
@@ -175,8 +175,8 @@ def _zone_pieces(b: _Builder, zone: str) -> list[_Piece]:
         wood, top = c((0.55, 0.38, 0.22)), c((0.62, 0.5, 0.36))
         boards = int(rng.integers(3, 5))
         pieces = [
-            _Piece("bookshelf", *shelf[:2], partial(_shelf, size=shelf, color=wood, n_boards=boards)),
-            _Piece("desk", *desk[:2], partial(_table, size=desk[[1, 0, 2]], color=top)),
+            _Piece("bookshelf", *shelf[:2], partial(shelf_parts, size=shelf, color=wood, n_boards=boards)),
+            _Piece("desk", *desk[:2], partial(table_parts, size=desk[[1, 0, 2]], color=top)),
         ]
         return pieces[::-1] if rng.uniform() < 0.5 else pieces
     if zone == "tv":
@@ -186,14 +186,14 @@ def _zone_pieces(b: _Builder, zone: str) -> list[_Piece]:
     raise ValueError(f"unknown zone {zone!r}")
 
 
-def _place_zone(b: _Builder, zone: str, W: float, D: float, tries: int = 60) -> list[SceneObject]:
+def _place_zone(b: SceneBuilder, zone: str, W: float, D: float, tries: int = 60) -> list[SceneObject]:
     """Lay a zone's pieces along a wall, each touching the one before (gaps of 0 to 2 cm), at a random free
     spot that keeps :data:`_WALKWAY` from other furniture; [] when none is found."""
     pieces = _zone_pieces(b, zone)
     rng = b.rng
     for _ in range(tries):
         side = _SIDES[int(rng.integers(4))]
-        _, _, half_len, _ = _wall_frame(side, W, D)
+        _, _, half_len, _ = wall_frame(side, W, D)
         gaps = rng.uniform(0.0, 0.02, len(pieces))
         total = sum(p.length for p in pieces) + gaps[1:].sum()
         span = half_len - total / 2 - 0.1
@@ -203,7 +203,7 @@ def _place_zone(b: _Builder, zone: str, W: float, D: float, tries: int = 60) -> 
         placed = []
         for p, g in zip(pieces, gaps):
             pos += g if placed else 0.0
-            center, yaw = _against_wall(side, W, D, p.depth, pos + p.length / 2)
+            center, yaw = against_wall(side, W, D, p.depth, pos + p.length / 2)
             parts, tops = p.make(center, yaw)
             placed.append((p.cls, parts, tops, center, yaw))
             pos += p.length
@@ -215,7 +215,7 @@ def _place_zone(b: _Builder, zone: str, W: float, D: float, tries: int = 60) -> 
 
 
 def _in_front(
-    b: _Builder, obj: SceneObject, cls: str, size: np.ndarray, gap: float, color, W: float, D: float
+    b: SceneBuilder, obj: SceneObject, cls: str, size: np.ndarray, gap: float, color, W: float, D: float
 ) -> SceneObject | None:
     """A table (a coffee table before the sofa, ``size`` = length, depth, height) or a chair (before the desk,
     facing it) ``gap`` metres in front of ``obj``, which stands against a wall."""
@@ -232,12 +232,12 @@ def _in_front(
     yaw = (0.0 if sgn > 0 else np.pi) if axis == 0 else (np.pi / 2 if sgn > 0 else -np.pi / 2)
     floor = next(o for o in b.objects if o.class_name == "floor")
     if cls == "chair":
-        return b.try_add("chair", _chair(pos, yaw + np.pi, color), floor.instance_id, "on", margin=0.02)
-    parts, tops = _table(pos, yaw, size[[1, 0, 2]], color)
+        return b.try_add("chair", chair_parts(pos, yaw + np.pi, color), floor.instance_id, "on", margin=0.02)
+    parts, tops = table_parts(pos, yaw, size[[1, 0, 2]], color)
     return b.try_add("table", parts, floor.instance_id, "on", tops, margin=0.2)
 
 
-def _dining(b: _Builder, W: float, D: float) -> SceneObject | None:
+def _dining(b: SceneBuilder, W: float, D: float) -> SceneObject | None:
     """A dining table with two to four chairs on the free floor, at least a walkway from everything else."""
     rng = b.rng
     floor = next(o for o in b.objects if o.class_name == "floor")
@@ -245,29 +245,31 @@ def _dining(b: _Builder, W: float, D: float) -> SceneObject | None:
         size = np.array([rng.uniform(1.0, 1.3), rng.uniform(0.7, 0.85), 0.75])
         yaw = float(rng.integers(2)) * np.pi / 2
         center = np.array([rng.uniform(-0.35, 0.35) * W, rng.uniform(-0.35, 0.35) * D, 0.0])
-        parts, tops = _table(center, yaw, size, b.color((0.6, 0.42, 0.26)))
+        parts, tops = table_parts(center, yaw, size, b.color((0.6, 0.42, 0.26)))
         table = b.try_add("table", parts, floor.instance_id, "on", tops, margin=0.75)
         if table is None:
             continue
         lo, hi = table.aabb
         color = b.color((0.3, 0.22, 0.15), 0.08)
-        slots = _chair_slots(lo, hi, lambda: rng.uniform(0.28, 0.34))
+        slots = chair_slots(lo, hi, lambda: rng.uniform(0.28, 0.34))
         order = rng.permutation(len(slots))
         for i in order[: int(rng.integers(2, 5))]:
-            b.try_add("chair", _chair(slots[i][0], slots[i][1], color), floor.instance_id, "on", margin=0.05)
+            b.try_add(
+                "chair", chair_parts(slots[i][0], slots[i][1], color), floor.instance_id, "on", margin=0.05
+            )
         return table
     return None
 
 
-def _standing_extras(b: _Builder, W: float, D: float) -> None:
+def _standing_extras(b: SceneBuilder, W: float, D: float) -> None:
     """A tall plant and a trash can by the walls, where there is room."""
     rng = b.rng
     floor = next(o for o in b.objects if o.class_name == "floor")
     for cls in ("plant", "trash can"):
         for _ in range(40):
             side = _SIDES[int(rng.integers(4))]
-            _, _, half_len, _ = _wall_frame(side, W, D)
-            center, _ = _against_wall(side, W, D, 0.62, rng.uniform(-half_len + 0.4, half_len - 0.4))
+            _, _, half_len, _ = wall_frame(side, W, D)
+            center, _ = against_wall(side, W, D, 0.62, rng.uniform(-half_len + 0.4, half_len - 0.4))
             if cls == "plant":
                 leaves = b.color((0.2, 0.42, 0.2))
                 parts = [
@@ -284,7 +286,7 @@ def _standing_extras(b: _Builder, W: float, D: float) -> None:
                 break
 
 
-def _wall_decor(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
+def _wall_decor(b: SceneBuilder, ids: dict[str, int], W: float, D: float) -> None:
     """A door, a window, two or three pictures and a clock on the walls, clear of the furniture."""
     rng = b.rng
     # (class, width, height, bottom, thickness, colour, texture)
@@ -310,16 +312,16 @@ def _wall_decor(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
     for cls, w, h, z0, thick, col, tex in items:  # fmt: skip
         for _ in range(40):
             side = _SIDES[int(rng.integers(4))]
-            p, n, half_len, yaw = _wall_frame(side, W, D)
+            p, n, half_len, yaw = wall_frame(side, W, D)
             along = rng.uniform(-half_len + w / 2 + 0.2, half_len - w / 2 - 0.2)
             c = p + n * thick / 2 + np.array([-n[1], n[0], 0.0]) * along + [0, 0, z0 + h / 2]
-            part = make_part("box", c, col, size=_rot_size([thick, w, h], yaw), texture=tex,
+            part = make_part("box", c, col, size=rotated_size([thick, w, h], yaw), texture=tex,
                              texture_scale=float(rng.uniform(0.06, 0.2)))  # fmt: skip
             if b.try_add(cls, [part], ids[side], "attached to", margin=0.05) is not None:
                 break
 
 
-def _small_things(b: _Builder, furniture: list[SceneObject]) -> None:
+def _small_things(b: SceneBuilder, furniture: list[SceneObject]) -> None:
     """Small objects on the tops of the large furniture, pillows on the sofa and the bed, books on the
     shelves, a TV on its cabinet."""
     rng = b.rng
@@ -335,27 +337,27 @@ def _small_things(b: _Builder, furniture: list[SceneObject]) -> None:
         if obj.class_name == "bookshelf":
             for k, top in enumerate(obj.top_surfaces):
                 if k == 0 or rng.uniform() < 0.35:
-                    _books_in_shelf(b, obj, top)
+                    add_books_in_shelf(b, obj, top)
             continue
         if obj.class_name == "cabinet":
-            _place_small(b, "monitor", obj, obj.top_surfaces[0])
+            place_small(b, "monitor", obj, obj.top_surfaces[0])
             continue
         if obj.class_name == "desk":
-            _place_small(b, "monitor", obj, obj.top_surfaces[0])
+            place_small(b, "monitor", obj, obj.top_surfaces[0])
         if obj.class_name not in choices or not obj.top_surfaces:
             continue
         pool, (lo, hi) = choices[obj.class_name]
         n = int(rng.integers(lo, hi))
         for cls in rng.choice(pool, size=n, replace=n > len(pool) or pool == ["pillow"]):
-            _place_small(b, str(cls), obj, obj.top_surfaces[0])
+            place_small(b, str(cls), obj, obj.top_surfaces[0])
 
 
 def build_scan_room(seed: int = 0) -> Room:
     """A deterministic random furnished room for a long scan (see the module docstring), world frame."""
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x5CA7]))
-    b = _Builder(rng)
+    b = SceneBuilder(rng)
     W, D, H = rng.uniform(6.8, 7.8), rng.uniform(5.8, 6.6), rng.uniform(2.6, 2.9)
-    ids = _structure(b, W, D, H)
+    ids = add_structure(b, W, D, H)
     furniture: list[SceneObject] = []
     for zone in ("bedroom", "living", "kitchen", "study", "tv"):
         placed = _place_zone(b, zone, W, D)
@@ -375,8 +377,8 @@ def build_scan_room(seed: int = 0) -> Room:
     _standing_extras(b, W, D)
     _wall_decor(b, ids, W, D)
     _small_things(b, furniture)
-    _light_switches(b, ids, W, D, seed)
-    return _finish(b, (W, D, H), np.array([0.0, 0.0, H - 0.45]))
+    add_light_switches(b, ids, W, D, seed)
+    return finish_room(b, (W, D, H), np.array([0.0, 0.0, H - 0.45]))
 
 
 # --------------------------------------------------------------------------------------- the camera path

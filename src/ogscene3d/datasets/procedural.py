@@ -14,6 +14,7 @@ their support (floor, table, cabinet, shelf board, sofa seat, another book), so 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -32,7 +33,8 @@ _EPS = 1e-4
 # --------------------------------------------------------------------------------------- primitives
 
 
-def _yaw_matrix(yaw: float) -> np.ndarray:
+def yaw_matrix(yaw: float) -> np.ndarray:
+    """The z-up builder frame's rotation by ``yaw`` radians about +z."""
     c, s = np.cos(yaw), np.sin(yaw)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
@@ -191,7 +193,12 @@ def _overlaps(
 # --------------------------------------------------------------------------------------- the builder
 
 
-class _Builder:
+class SceneBuilder:
+    """The objects of a room as they are placed (z-up builder frame), with the seeded ``rng`` that chooses
+    sizes, colours and places; the builders of the room (:func:`build_room`), the apartment and the long
+    scan share it and the part and placement helpers below, and :func:`finish_room` turns it into a
+    :class:`Room`."""
+
     def __init__(self, rng: np.random.Generator):
         self.rng = rng
         self.objects: list[SceneObject] = []
@@ -247,9 +254,11 @@ class _Builder:
         return self.add(cls, parts, support, relation, tops)
 
 
-def _structure(b: _Builder, W: float, D: float, H: float) -> dict[str, int]:
+def add_structure(b: SceneBuilder, W: float, D: float, H: float) -> dict[str, int]:
+    """Floor, ceiling and four walls of a W x D x H room centred on the origin; their instance ids by name
+    (``floor``, ``ceiling``, ``+x``, ``-x``, ``+y``, ``-y``)."""
     t = 0.05
-    ids = _floor_and_ceiling(b, W, D, H, t)
+    ids = add_floor_and_ceiling(b, W, D, H, t)
     wall_color = b.color((0.78, 0.76, 0.7), 0.1)
     walls = {
         "+x": ([W / 2 + t / 2, 0, H / 2], [t, D, H]),
@@ -265,7 +274,7 @@ def _structure(b: _Builder, W: float, D: float, H: float) -> dict[str, int]:
     return ids
 
 
-def _floor_and_ceiling(b: _Builder, W: float, D: float, H: float, t: float) -> dict[str, int]:
+def add_floor_and_ceiling(b: SceneBuilder, W: float, D: float, H: float, t: float) -> dict[str, int]:
     """A W x D room's floor (top at z = 0) and ceiling (bottom at z = H), ``t`` thick, reaching under and
     over its walls; their instance ids by name."""
     ids = {}
@@ -285,7 +294,7 @@ def _floor_and_ceiling(b: _Builder, W: float, D: float, H: float, t: float) -> d
     return ids
 
 
-def _wall_frame(side: str, W: float, D: float) -> tuple[np.ndarray, np.ndarray, float, float]:
+def wall_frame(side: str, W: float, D: float) -> tuple[np.ndarray, np.ndarray, float, float]:
     """(point on wall at floor level, inward normal, half-length along the wall, yaw facing into the room)."""
     if side == "+x":
         return np.array([W / 2, 0, 0]), np.array([-1.0, 0, 0]), D / 2, np.pi
@@ -296,24 +305,28 @@ def _wall_frame(side: str, W: float, D: float) -> tuple[np.ndarray, np.ndarray, 
     return np.array([0, -D / 2, 0]), np.array([0, 1.0, 0]), W / 2, np.pi / 2
 
 
-def _against_wall(side: str, W: float, D: float, depth: float, along: float, z: float = 0.0):
+def against_wall(side: str, W: float, D: float, depth: float, along: float, z: float = 0.0):
     """Centre of a footprint ``depth`` deep touching wall ``side`` at offset ``along``; yaw into the room."""
-    p, n, _, yaw = _wall_frame(side, W, D)
+    p, n, _, yaw = wall_frame(side, W, D)
     t = np.array([-n[1], n[0], 0.0])
     return p + n * depth / 2 + t * along + np.array([0, 0, z]), yaw
 
 
-def _rot_size(size: np.ndarray, yaw: float) -> np.ndarray:
+def rotated_size(size: np.ndarray, yaw: float) -> np.ndarray:
     """World AABB size of a box of local ``size`` turned by a multiple of 90 degrees."""
     quarter = int(round(yaw / (np.pi / 2))) % 2
     return np.array([size[1], size[0], size[2]]) if quarter else np.asarray(size, dtype=np.float64)
 
 
-def _local(center: np.ndarray, yaw: float, offset) -> np.ndarray:
-    return np.asarray(center) + _yaw_matrix(yaw) @ np.asarray(offset, dtype=np.float64)
+def local_point(center: np.ndarray, yaw: float, offset: Sequence[float] | np.ndarray) -> np.ndarray:
+    """The point ``offset`` of a piece's own frame (turned by ``yaw`` about ``center``) in the builder
+    frame."""
+    return np.asarray(center) + yaw_matrix(yaw) @ np.asarray(offset, dtype=np.float64)
 
 
-def _table(center, yaw, size, color) -> tuple[list[Part], list]:
+def table_parts(center: np.ndarray, yaw: float, size, color: np.ndarray) -> tuple[list[Part], list]:
+    """A table standing at ``center`` (floor level), ``size`` = (length, width, height) in its own frame:
+    its parts and its top surface (``SceneObject.top_surfaces``)."""
     L, Wd, Ht = size
     top_t = 0.04
     parts = [
@@ -321,21 +334,21 @@ def _table(center, yaw, size, color) -> tuple[list[Part], list]:
             "box",
             center + [0, 0, Ht - top_t / 2],
             color,
-            size=_rot_size([L, Wd, top_t], yaw),
+            size=rotated_size([L, Wd, top_t], yaw),
             texture=TEXTURE_NOISE,
             texture_scale=0.15,
         )
     ]
     for sx in (-1, 1):
         for sy in (-1, 1):
-            c = _local(center, yaw, [sx * (L / 2 - 0.06), sy * (Wd / 2 - 0.06), (Ht - top_t) / 2])
+            c = local_point(center, yaw, [sx * (L / 2 - 0.06), sy * (Wd / 2 - 0.06), (Ht - top_t) / 2])
             parts.append(make_part("box", c, color * 0.8, size=[0.05, 0.05, Ht - top_t]))
-    half = _rot_size([L, Wd, 0], yaw)[:2] / 2
+    half = rotated_size([L, Wd, 0], yaw)[:2] / 2
     top = (np.asarray(center)[:2] - half, np.asarray(center)[:2] + half, Ht)
     return parts, [top]
 
 
-def _chair_slots(lo: np.ndarray, hi: np.ndarray, gap) -> list[tuple[np.ndarray, float]]:
+def chair_slots(lo: np.ndarray, hi: np.ndarray, gap) -> list[tuple[np.ndarray, float]]:
     """The four places (floor point, yaw) of a chair facing a table's sides (its box ``lo``, ``hi``), each
     ``gap()`` metres out (a draw per side, in this order)."""
     slots = []
@@ -348,108 +361,118 @@ def _chair_slots(lo: np.ndarray, hi: np.ndarray, gap) -> list[tuple[np.ndarray, 
     return slots
 
 
-def _chair(center, yaw, color) -> list[Part]:
+def chair_parts(center: np.ndarray, yaw: float, color: np.ndarray) -> list[Part]:
+    """A chair standing at ``center`` (floor level) and facing ``yaw``: seat, four legs and backrest."""
     s, seat_h, back_h = 0.44, 0.45, 0.45
     parts = [make_part("box", center + [0, 0, seat_h - 0.025], color, size=[s, s, 0.05])]
     for sx in (-1, 1):
         for sy in (-1, 1):
-            c = _local(center, yaw, [sx * (s / 2 - 0.03), sy * (s / 2 - 0.03), (seat_h - 0.05) / 2])
+            c = local_point(center, yaw, [sx * (s / 2 - 0.03), sy * (s / 2 - 0.03), (seat_h - 0.05) / 2])
             parts.append(make_part("box", c, color * 0.75, size=[0.04, 0.04, seat_h - 0.05]))
     # backrest on the local -x side: the chair faces +x (its yaw)
-    c = _local(center, yaw, [-s / 2 + 0.02, 0, seat_h + back_h / 2])
-    parts.append(make_part("box", c, color, size=_rot_size([0.04, s, back_h], yaw)))
+    c = local_point(center, yaw, [-s / 2 + 0.02, 0, seat_h + back_h / 2])
+    parts.append(make_part("box", c, color, size=rotated_size([0.04, s, back_h], yaw)))
     return parts
 
 
-def _shelf(center, yaw, size, color, n_boards):
+def shelf_parts(
+    center: np.ndarray, yaw: float, size, color: np.ndarray, n_boards: int
+) -> tuple[list[Part], list]:
+    """An open bookshelf at ``center`` (floor level) with ``n_boards`` boards, ``size`` = (length, depth,
+    height): its parts and the free space above each board (lo, hi, z, clearance) for books."""
     L, Dp, Ht = size
     t = 0.025
     parts = []
     for sx in (-1, 1):
-        c = _local(center, yaw, [0, sx * (L / 2 - t / 2), Ht / 2])
-        parts.append(
-            make_part(
-                "box", c, color, size=_rot_size([Dp, t, Ht], yaw), texture=TEXTURE_NOISE, texture_scale=0.15
-            )
-        )
-    back = _local(center, yaw, [-Dp / 2 + t / 2, 0, Ht / 2])
-    parts.append(make_part("box", back, color * 0.85, size=_rot_size([t, L - 2 * t, Ht], yaw)))
-    levels = np.linspace(0.0, Ht - t, n_boards + 1)
-    tops = []
-    for k, z in enumerate(levels):
-        c = _local(center, yaw, [t / 2, 0, z + t / 2])
+        c = local_point(center, yaw, [0, sx * (L / 2 - t / 2), Ht / 2])
         parts.append(
             make_part(
                 "box",
                 c,
                 color,
-                size=_rot_size([Dp - t, L - 2 * t, t], yaw),
+                size=rotated_size([Dp, t, Ht], yaw),
+                texture=TEXTURE_NOISE,
+                texture_scale=0.15,
+            )
+        )
+    back = local_point(center, yaw, [-Dp / 2 + t / 2, 0, Ht / 2])
+    parts.append(make_part("box", back, color * 0.85, size=rotated_size([t, L - 2 * t, Ht], yaw)))
+    levels = np.linspace(0.0, Ht - t, n_boards + 1)
+    tops = []
+    for k, z in enumerate(levels):
+        c = local_point(center, yaw, [t / 2, 0, z + t / 2])
+        parts.append(
+            make_part(
+                "box",
+                c,
+                color,
+                size=rotated_size([Dp - t, L - 2 * t, t], yaw),
                 texture=TEXTURE_NOISE,
                 texture_scale=0.15,
             )
         )
         if k < n_boards:
-            inner = _rot_size([Dp - t, L - 2 * t, 0], yaw)[:2] / 2
-            mid = _local(center, yaw, [t / 2, 0, 0])[:2]
+            inner = rotated_size([Dp - t, L - 2 * t, 0], yaw)[:2] / 2
+            mid = local_point(center, yaw, [t / 2, 0, 0])[:2]
             tops.append((mid - inner, mid + inner, z + t, levels[k + 1] - (z + t)))
     return parts, tops
 
 
-def _cabinet(center, yaw, size, col) -> tuple[list[Part], list]:
+def cabinet_parts(center, yaw, size, col) -> tuple[list[Part], list]:
     """A closed cabinet of ``size`` (length along the wall, depth, height) with two door panels on its front
     (local +x), and its top surface."""
     body = make_part(
-        "box", center + [0, 0, size[2] / 2], col, size=_rot_size([size[1], size[0], size[2]], yaw)
+        "box", center + [0, 0, size[2] / 2], col, size=rotated_size([size[1], size[0], size[2]], yaw)
     )
     parts = [body]
     for k in range(2):
-        fc = _local(center, yaw, [size[1] / 2 + 0.005, 0, size[2] * (0.28 + 0.42 * k)])
+        fc = local_point(center, yaw, [size[1] / 2 + 0.005, 0, size[2] * (0.28 + 0.42 * k)])
         parts.append(
-            make_part("box", fc, col * 0.9, size=_rot_size([0.01, size[0] * 0.9, size[2] * 0.38], yaw))
+            make_part("box", fc, col * 0.9, size=rotated_size([0.01, size[0] * 0.9, size[2] * 0.38], yaw))
         )
-    half = _rot_size([size[1], size[0], 0], yaw)[:2] / 2
+    half = rotated_size([size[1], size[0], 0], yaw)[:2] / 2
     return parts, [(center[:2] - half, center[:2] + half, size[2])]
 
 
-def _sofa(center, yaw, size, col) -> tuple[list[Part], list]:
+def sofa_parts(center, yaw, size, col) -> tuple[list[Part], list]:
     """A sofa of ``size`` (length, depth, height) facing local +x (seat, backrest, two arms) and its seat."""
     L, Dp, Hs = size
     seat_h, back_t, arm_w = 0.42, 0.2, 0.18
     parts = [
         make_part(
             "box",
-            _local(center, yaw, [back_t / 2, 0, seat_h / 2]),
+            local_point(center, yaw, [back_t / 2, 0, seat_h / 2]),
             col,
-            size=_rot_size([Dp - back_t, L - 2 * arm_w, seat_h], yaw),
+            size=rotated_size([Dp - back_t, L - 2 * arm_w, seat_h], yaw),
             texture=TEXTURE_NOISE,
             texture_scale=0.08,
         ),
         make_part(
             "box",
-            _local(center, yaw, [-Dp / 2 + back_t / 2, 0, Hs / 2]),
+            local_point(center, yaw, [-Dp / 2 + back_t / 2, 0, Hs / 2]),
             col * 0.9,
-            size=_rot_size([back_t, L, Hs], yaw),
+            size=rotated_size([back_t, L, Hs], yaw),
         ),
     ]
     for s in (-1, 1):
         parts.append(
             make_part(
                 "box",
-                _local(center, yaw, [back_t / 2, s * (L / 2 - arm_w / 2), 0.3]),
+                local_point(center, yaw, [back_t / 2, s * (L / 2 - arm_w / 2), 0.3]),
                 col * 0.95,
-                size=_rot_size([Dp - back_t, arm_w, 0.6], yaw),
+                size=rotated_size([Dp - back_t, arm_w, 0.6], yaw),
             )
         )
-    seat_c = _local(center, yaw, [back_t / 2, 0, 0])[:2]
-    half = _rot_size([Dp - back_t - 0.1, L - 2 * arm_w - 0.05, 0], yaw)[:2] / 2
+    seat_c = local_point(center, yaw, [back_t / 2, 0, 0])[:2]
+    half = rotated_size([Dp - back_t - 0.1, L - 2 * arm_w - 0.05, 0], yaw)[:2] / 2
     return parts, [(seat_c - half, seat_c + half, seat_h)]
 
 
-def _decoration(b: _Builder, cls: str, side: str, W: float, D: float) -> list[Part] | None:
+def decoration_parts(b: SceneBuilder, cls: str, side: str, W: float, D: float) -> list[Part] | None:
     """The parts of a wall decoration (door, window, picture or clock) at a random spot of wall ``side``,
     or None when the wall is too short for it."""
     rng = b.rng
-    p, n, half_len, yaw = _wall_frame(side, W, D)
+    p, n, half_len, yaw = wall_frame(side, W, D)
     t_axis = np.array([-n[1], n[0], 0.0])
     if cls == "door":
         w, h, z0, thick, col = 0.9, 2.05, 0.0, 0.04, b.color((0.55, 0.4, 0.28))
@@ -466,22 +489,22 @@ def _decoration(b: _Builder, cls: str, side: str, W: float, D: float) -> list[Pa
     along = rng.uniform(-half_len + w / 2 + 0.15, half_len - w / 2 - 0.15)
     c = p + n * thick / 2 + t_axis * along + [0, 0, z0 + h / 2]
     if cls == "clock":
-        axis_rot = _yaw_matrix(yaw) @ np.array([[0, 0, 1.0], [0, 1.0, 0], [-1.0, 0, 0]])
+        axis_rot = yaw_matrix(yaw) @ np.array([[0, 0, 1.0], [0, 1.0, 0], [-1.0, 0, 0]])
         return [make_part("cylinder", c - n * thick / 2, col, radius=w / 2, height=thick, rotation=axis_rot)]
     tex = TEXTURE_STRIPES if cls in ("picture", "window") else TEXTURE_PLAIN
     scale = float(rng.uniform(0.06, 0.2))
-    return [make_part("box", c, col, size=_rot_size([thick, w, h], yaw), texture=tex, texture_scale=scale)]
+    return [make_part("box", c, col, size=rotated_size([thick, w, h], yaw), texture=tex, texture_scale=scale)]
 
 
-def _place_small(
-    b: _Builder, cls: str, support: SceneObject, top, relation: str = "on"
+def place_small(
+    b: SceneBuilder, cls: str, support: SceneObject, top, relation: str = "on"
 ) -> SceneObject | None:
     """Try a few random spots on support surface ``top`` = (xy min, xy max, z[, clearance])."""
     lo, hi, z = top[0], top[1], top[2]
     clearance = top[3] if len(top) > 3 else 1.0
     rng = b.rng
     for _ in range(12):
-        parts, footprint = _small_object(b, cls, clearance)
+        parts, footprint = small_object_parts(b, cls, clearance)
         if parts is None:
             return None
         room = (hi - lo) - footprint - 0.04
@@ -501,7 +524,7 @@ def _place_small(
     return None
 
 
-def _small_object(b: _Builder, cls: str, clearance: float) -> tuple[list[Part] | None, np.ndarray]:
+def small_object_parts(b: SceneBuilder, cls: str, clearance: float) -> tuple[list[Part] | None, np.ndarray]:
     """Parts of a small object, base centred at the origin (z = 0 on the support), and its xy footprint."""
     rng = b.rng
     c = b.vivid()
@@ -597,7 +620,7 @@ def _small_object(b: _Builder, cls: str, clearance: float) -> tuple[list[Part] |
     if hi[2] > clearance - 0.02:
         return None, np.zeros(2)
     if cls in ("book", "box", "laptop", "monitor", "pillow") and rng.uniform() < 0.5:
-        rot = _yaw_matrix(np.pi / 2)
+        rot = yaw_matrix(np.pi / 2)
         parts = [Part(p.vertices @ rot.T, p.triangles, p.color, p.texture, p.texture_scale) for p in parts]
         lo, hi = np.min([p.aabb[0] for p in parts], 0), np.max([p.aabb[1] for p in parts], 0)
     return parts, (hi - lo)[:2]
@@ -613,7 +636,9 @@ def _screen(color, w: float, h: float, thick: float, foot, stem) -> list[Part]:
     ]
 
 
-def _books_in_shelf(b: _Builder, shelf: SceneObject, top) -> None:
+def add_books_in_shelf(b: SceneBuilder, shelf: SceneObject, top) -> None:
+    """A row of a few books standing "in" ``shelf`` on one of its boards (``top``: as :func:`shelf_parts`
+    gives it)."""
     lo, hi, z, clearance = top
     rng = b.rng
     axis = int(np.argmax(hi - lo))  # books stand in a row along the long side of the board
@@ -639,24 +664,24 @@ def _books_in_shelf(b: _Builder, shelf: SceneObject, top) -> None:
         pos += thick + gap
 
 
-def _furniture_spot(b: _Builder, sides: list[str], W: float, D: float, footprint: np.ndarray):
+def furniture_spot(b: SceneBuilder, sides: list[str], W: float, D: float, footprint: np.ndarray):
     """Random wall-adjacent placement of a footprint (length along wall, depth): (centre, yaw, side)."""
     side = sides[b.rng.integers(len(sides))]
-    _, _, half_len, _ = _wall_frame(side, W, D)
+    _, _, half_len, _ = wall_frame(side, W, D)
     span = half_len - footprint[0] / 2 - 0.1
     if span <= 0:
         return None
     along = b.rng.uniform(-span, span)
-    center, yaw = _against_wall(side, W, D, footprint[1], along)
+    center, yaw = against_wall(side, W, D, footprint[1], along)
     return center, yaw, side
 
 
 def build_room(seed: int = 0) -> Room:
     """A deterministic random furnished room for ``seed`` (see module docstring for the frames)."""
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x5CE7E]))
-    b = _Builder(rng)
+    b = SceneBuilder(rng)
     W, D, H = rng.uniform(4.4, 5.4), rng.uniform(3.8, 4.6), rng.uniform(2.5, 2.8)
-    ids = _structure(b, W, D, H)
+    ids = add_structure(b, W, D, H)
     floor = b.objects[ids["floor"] - 1]
     sides = ["+x", "-x", "+y", "-y"]
 
@@ -668,14 +693,14 @@ def build_room(seed: int = 0) -> Room:
     _wall_decorations(b, sides, W, D, ids)
     light = _ceiling_lamp(b, ids, H, table)
     _small_objects(b, table, wall_objs)
-    _light_switches(b, ids, W, D, seed)
-    _floor_lamp(b, ids, W, D)
+    add_light_switches(b, ids, W, D, seed)
+    add_floor_lamp(b, ids, W, D)
 
-    return _finish(b, (W, D, H), light)
+    return finish_room(b, (W, D, H), light)
 
 
 def _wall_furniture(
-    b: _Builder, sides: list[str], W: float, D: float, floor: SceneObject
+    b: SceneBuilder, sides: list[str], W: float, D: float, floor: SceneObject
 ) -> list[SceneObject]:
     """Shelves, cabinets and a sofa against the walls, placed first."""
     rng = b.rng
@@ -691,17 +716,19 @@ def _wall_furniture(
                 size = np.array([rng.uniform(0.8, 1.2), 0.45, rng.uniform(0.7, 0.85)])
             else:
                 size = np.array([rng.uniform(1.6, 2.0), 0.85, 0.85])
-            spot = _furniture_spot(b, sides, W, D, size[:2])
+            spot = furniture_spot(b, sides, W, D, size[:2])
             if spot is None:
                 continue
             center, yaw, side = spot
             tops = []
             if cls == "bookshelf":
-                parts, tops = _shelf(center, yaw, size, b.color((0.55, 0.38, 0.22)), int(rng.integers(3, 5)))
+                parts, tops = shelf_parts(
+                    center, yaw, size, b.color((0.55, 0.38, 0.22)), int(rng.integers(3, 5))
+                )
             elif cls == "cabinet":
-                parts, tops = _cabinet(center, yaw, size, b.color((0.85, 0.83, 0.78), 0.1))
+                parts, tops = cabinet_parts(center, yaw, size, b.color((0.85, 0.83, 0.78), 0.1))
             else:
-                parts, tops = _sofa(center, yaw, size, b.color((0.35, 0.4, 0.55), 0.12))
+                parts, tops = sofa_parts(center, yaw, size, b.color((0.35, 0.4, 0.55), 0.12))
             # Keep 0.9 m clear in front of wall furniture so the camera path never runs into it.
             obj = b.try_add(cls, parts, floor.instance_id, "on", tops, margin=0.15)
             if obj is not None:
@@ -710,7 +737,7 @@ def _wall_furniture(
     return wall_objs
 
 
-def _central_table(b: _Builder, W: float, D: float, floor: SceneObject) -> SceneObject | None:
+def _central_table(b: SceneBuilder, W: float, D: float, floor: SceneObject) -> SceneObject | None:
     """The central table (None when it found no free spot)."""
     rng = b.rng
     table = None
@@ -720,32 +747,32 @@ def _central_table(b: _Builder, W: float, D: float, floor: SceneObject) -> Scene
         center = np.array(
             [rng.uniform(-0.3, 0.3) * (W / 2 - 1.4), rng.uniform(-0.3, 0.3) * (D / 2 - 1.4), 0.0]
         )
-        parts, tops = _table(center, yaw, size, b.color((0.6, 0.42, 0.26)))
+        parts, tops = table_parts(center, yaw, size, b.color((0.6, 0.42, 0.26)))
         table = b.try_add("table", parts, floor.instance_id, "on", tops, margin=0.6)
         if table is not None:
             break
     return table
 
 
-def _chairs(b: _Builder, table: SceneObject, floor: SceneObject) -> None:
+def _chairs(b: SceneBuilder, table: SceneObject, floor: SceneObject) -> None:
     """Two to four chairs around the table."""
     rng = b.rng
     lo, hi = table.aabb
     chair_color = b.color((0.3, 0.22, 0.15), 0.08)
-    slots = _chair_slots(lo, hi, lambda: 0.22 + rng.uniform(0.05, 0.12))
+    slots = chair_slots(lo, hi, lambda: 0.22 + rng.uniform(0.05, 0.12))
     rng.shuffle(slots)
     for c, yaw in slots[: int(rng.integers(2, 5))]:
-        b.try_add("chair", _chair(c, yaw, chair_color), floor.instance_id, "on", margin=0.05)
+        b.try_add("chair", chair_parts(c, yaw, chair_color), floor.instance_id, "on", margin=0.05)
 
 
-def _floor_items(b: _Builder, sides: list[str], W: float, D: float, floor: SceneObject) -> None:
+def _floor_items(b: SceneBuilder, sides: list[str], W: float, D: float, floor: SceneObject) -> None:
     """A plant and a trash can in free spots near the walls."""
     rng = b.rng
     for cls in ("plant", "trash can"):
         for _ in range(30):
             side = sides[rng.integers(4)]
-            _, _, half_len, _ = _wall_frame(side, W, D)
-            center, _ = _against_wall(side, W, D, 0.7, rng.uniform(-half_len + 0.4, half_len - 0.4))
+            _, _, half_len, _ = wall_frame(side, W, D)
+            center, _ = against_wall(side, W, D, 0.7, rng.uniform(-half_len + 0.4, half_len - 0.4))
             if cls == "plant":
                 parts = [
                     make_part(
@@ -766,13 +793,13 @@ def _floor_items(b: _Builder, sides: list[str], W: float, D: float, floor: Scene
                 break
 
 
-def _wall_decorations(b: _Builder, sides: list[str], W: float, D: float, ids: dict[str, int]) -> None:
+def _wall_decorations(b: SceneBuilder, sides: list[str], W: float, D: float, ids: dict[str, int]) -> None:
     """A door, a window, pictures and a clock on the walls."""
     rng = b.rng
     for cls in ("door", "window", "picture", "picture", "picture", "clock"):
         for _ in range(30):
             side = sides[rng.integers(4)]
-            parts = _decoration(b, cls, side, W, D)
+            parts = decoration_parts(b, cls, side, W, D)
             if parts is None:
                 continue
             wall_id = ids[side]
@@ -783,7 +810,7 @@ def _wall_decorations(b: _Builder, sides: list[str], W: float, D: float, ids: di
                 break
 
 
-def _ceiling_lamp(b: _Builder, ids: dict[str, int], H: float, table: SceneObject | None) -> np.ndarray:
+def _ceiling_lamp(b: SceneBuilder, ids: dict[str, int], H: float, table: SceneObject | None) -> np.ndarray:
     """A ceiling lamp above the table. -> where the scene's point light is (just below the lamp)."""
     light = np.array([0.0, 0.0, H - 0.45])
     if table is not None:
@@ -807,7 +834,7 @@ def _ceiling_lamp(b: _Builder, ids: dict[str, int], H: float, table: SceneObject
     return light
 
 
-def _small_objects(b: _Builder, table: SceneObject | None, wall_objs: list[SceneObject]) -> None:
+def _small_objects(b: SceneBuilder, table: SceneObject | None, wall_objs: list[SceneObject]) -> None:
     """Small objects on the top surfaces: the table, shelves, cabinets, sofa, then on some lying books."""
     rng = b.rng
     # Small objects on top surfaces.
@@ -817,24 +844,24 @@ def _small_objects(b: _Builder, table: SceneObject | None, wall_objs: list[Scene
             size=int(rng.integers(4, 7)),
             replace=False,
         ):
-            _place_small(b, str(cls), table, table.top_surfaces[0])
+            place_small(b, str(cls), table, table.top_surfaces[0])
     for obj in wall_objs:
         if obj.class_name == "bookshelf":
             for k, top in enumerate(obj.top_surfaces):
                 if k == 0 or rng.uniform() < 0.85:
-                    _books_in_shelf(b, obj, top)
+                    add_books_in_shelf(b, obj, top)
                 if rng.uniform() < 0.4:
-                    _place_small(b, str(rng.choice(["box", "vase", "plant"])), obj, top, "in")
+                    place_small(b, str(rng.choice(["box", "vase", "plant"])), obj, top, "in")
         elif obj.class_name == "cabinet":
             for cls in rng.choice(
                 ["lamp", "monitor", "plant", "book", "vase", "box"],
                 size=int(rng.integers(1, 4)),
                 replace=False,
             ):
-                _place_small(b, str(cls), obj, obj.top_surfaces[0])
+                place_small(b, str(cls), obj, obj.top_surfaces[0])
         elif obj.class_name == "sofa":
             for _ in range(int(rng.integers(1, 3))):
-                _place_small(b, "pillow", obj, obj.top_surfaces[0])
+                place_small(b, "pillow", obj, obj.top_surfaces[0])
     # A cup or a second book on some lying book: small objects resting on small objects.
     for obj in list(b.objects):
         if (
@@ -843,10 +870,10 @@ def _small_objects(b: _Builder, table: SceneObject | None, wall_objs: list[Scene
             and obj.top_surfaces
             and rng.uniform() < 0.7
         ):
-            _place_small(b, str(rng.choice(["cup", "book"])), obj, obj.top_surfaces[0])
+            place_small(b, str(rng.choice(["cup", "book"])), obj, obj.top_surfaces[0])
 
 
-def _light_switches(b: _Builder, ids: dict[str, int], W: float, D: float, seed: int) -> None:
+def add_light_switches(b: SceneBuilder, ids: dict[str, int], W: float, D: float, seed: int) -> None:
     """One or two light switches on the walls: objects a few pixels wide from across the room, that SAM
     tends to absorb into the wall. Drawn from their own random stream, so that adding them moved no other
     object of a seed's room."""
@@ -855,17 +882,19 @@ def _light_switches(b: _Builder, ids: dict[str, int], W: float, D: float, seed: 
     for _ in range(int(rng.integers(1, 3))):
         for _ in range(30):
             side = sides[rng.integers(4)]
-            p, n, half_len, yaw = _wall_frame(side, W, D)
+            p, n, half_len, yaw = wall_frame(side, W, D)
             t_axis = np.array([-n[1], n[0], 0.0])
             w, h, thick = 0.09, 0.13, 0.015
             along = rng.uniform(-half_len + 0.3, half_len - 0.3)
             c = p + n * thick / 2 + t_axis * along + [0, 0, rng.uniform(1.05, 1.3)]
-            part = make_part("box", c, b.color((0.95, 0.95, 0.93), 0.02), size=_rot_size([thick, w, h], yaw))
+            part = make_part(
+                "box", c, b.color((0.95, 0.95, 0.93), 0.02), size=rotated_size([thick, w, h], yaw)
+            )
             if b.try_add("light switch", [part], ids[side], "attached to", margin=0.05) is not None:
                 break
 
 
-def _floor_lamp(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
+def add_floor_lamp(b: SceneBuilder, ids: dict[str, int], W: float, D: float) -> None:
     """A floor lamp by a wall when no lamp stands anywhere: the ceiling lamp is mostly above the camera, and
     a room's named objects should include a lamp one sees. Placed last, so that it moved no other object of
     a seed's room."""
@@ -876,7 +905,7 @@ def _floor_lamp(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
     shade = b.color((0.95, 0.9, 0.75), 0.04)
     metal = b.color((0.25, 0.25, 0.25), 0.03)
     for _ in range(40):
-        p, n, half_len, _ = _wall_frame(sides[rng.integers(4)], W, D)
+        p, n, half_len, _ = wall_frame(sides[rng.integers(4)], W, D)
         t_axis = np.array([-n[1], n[0], 0.0])
         c = p + n * 0.3 + t_axis * rng.uniform(-half_len + 0.4, half_len - 0.4)
         parts = [
@@ -888,7 +917,7 @@ def _floor_lamp(b: _Builder, ids: dict[str, int], W: float, D: float) -> None:
             return
 
 
-def _relations(b: _Builder) -> list[tuple[int, str, int]]:
+def _relations(b: SceneBuilder) -> list[tuple[int, str, int]]:
     rel: list[tuple[int, str, int]] = []
     for obj in b.objects:
         if obj.support is not None and obj.support_relation:
@@ -928,7 +957,9 @@ def _relations(b: _Builder) -> list[tuple[int, str, int]]:
     return rel
 
 
-def _finish(b: _Builder, size: tuple[float, float, float], light_zup: np.ndarray) -> Room:
+def finish_room(b: SceneBuilder, size: tuple[float, float, float], light_zup: np.ndarray) -> Room:
+    """The built objects as a :class:`Room` in the ogscene3d world (up = -y): one mesh with per-triangle
+    instance ids, colours and textures, and the relations; ``light_zup``: the point light (builder frame)."""
     verts, tris, inst, cols, tex, tex_s = [], [], [], [], [], []
     offset = 0
     zup_objects = b.objects

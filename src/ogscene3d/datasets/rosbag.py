@@ -27,6 +27,7 @@ a corrupt message is a DataError naming the topic and its time (skipped with ``d
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -252,6 +253,17 @@ class RosBagDataset(DecodedDataset):
             raise DataError(f"{msg}; set data.on_bad_frame: skip to leave such messages out")
         log.warning("%s; leaving it out (data.on_bad_frame: skip)", msg)
 
+    def _deserialized(self, conns: list[Any], what: str = "message") -> Iterator[tuple[Any, Any]]:
+        """(connection, message) of every message on ``conns`` in order; one that does not deserialize is
+        :meth:`_bad` (an error, or left out with ``data.on_bad_frame: skip``)."""
+        for k, (c, t, raw) in enumerate(self.bag.messages(conns)):
+            try:
+                msg = self.bag.deserialize(raw, c)
+            except DataError as e:
+                self._bad(f"{self.bag.path}: {what} {k} on {c.topic} (t={t * 1e-9:.6f}): {e}")
+                continue
+            yield c, msg
+
     def _scan_images(self, conn: Any) -> list[_Image]:
         """Header stamp, frame and size of every image on ``conn`` (pixels are not decoded)."""
         out: list[_Image] = []
@@ -470,12 +482,7 @@ class RosBagDataset(DecodedDataset):
         if not conns:
             return None
         tree = TfTree()
-        for k, (c, t, raw) in enumerate(self.bag.messages(conns)):
-            try:
-                msg = self.bag.deserialize(raw, c)
-            except DataError as e:
-                self._bad(f"{self.bag.path}: tf message {k} on {c.topic} (t={t * 1e-9:.6f}): {e}")
-                continue
+        for c, msg in self._deserialized(conns, "tf message"):
             static = c.topic.rstrip("/").endswith("tf_static")
             for tr in msg.transforms:
                 v, q = tr.transform.translation, tr.transform.rotation
@@ -488,12 +495,7 @@ class RosBagDataset(DecodedDataset):
 
     def _read_pose_topic(self, conn: Any) -> Track:
         track: Track | None = None
-        for k, (c, t, raw) in enumerate(self.bag.messages([conn])):
-            try:
-                msg = self.bag.deserialize(raw, c)
-            except DataError as e:
-                self._bad(f"{self.bag.path}: message {k} on {conn.topic} (t={t * 1e-9:.6f}): {e}")
-                continue
+        for _, msg in self._deserialized([conn]):
             pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
             if track is None:
                 track = Track(

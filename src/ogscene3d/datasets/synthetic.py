@@ -223,6 +223,7 @@ class MeshRenderer:
         shadows: bool = True,
         light_range: float = 4.0,
     ):
+        # Warp and torch only where a scene is rendered: open_dataset imports this module to read scenes
         import warp as wp
 
         from ..device import resolve_device, warp_device
@@ -491,7 +492,18 @@ def _pose_lines(poses: np.ndarray) -> str:
     return "".join(" ".join(f"{v:.9e}" for v in p.reshape(-1)) + "\n" for p in poses)
 
 
-def _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise, layout: str = "room") -> dict:
+def scene_params(
+    seed: int,
+    frames: int,
+    width: int,
+    height: int,
+    noise: str,
+    depth_noise: float,
+    pose_noise: float,
+    layout: str = "room",
+) -> dict[str, Any]:
+    """The generator parameters a scene made with these arguments of :func:`make_synthetic_scene` records in
+    its ``scene.json``: two scenes with the same ones are the same scene (see :func:`holds_scene`)."""
     # the default layout is left out, so that scenes written before layouts existed are still reused
     extra = {} if layout == "room" else {"layout": str(layout)}
     return {
@@ -559,7 +571,7 @@ def make_synthetic_scene(
     """
     _check_scene_args(frames, layout, width, height, noise, depth_noise, pose_noise)
     out = Path(out_dir)
-    params = _scene_params(seed, frames, width, height, noise, depth_noise, pose_noise, layout)
+    params = scene_params(seed, frames, width, height, noise, depth_noise, pose_noise, layout)
     if _reuse_or_clear(out, params, overwrite, remedy):
         log.info("reusing synthetic scene %s", out)
         return out
@@ -605,18 +617,25 @@ def _check_scene_args(frames, layout, width, height, noise, depth_noise, pose_no
             raise ValueError(f"{name} must be a finite number >= 0, got {val}")
 
 
+def holds_scene(out_dir: str | Path, params: dict[str, Any]) -> bool:
+    """Whether ``out_dir`` holds a complete synthetic scene made with ``params`` (:func:`scene_params`): its
+    ``scene.json``, written last, records them (an unreadable one: no)."""
+    marker = Path(out_dir) / "scene.json"
+    if not marker.is_file():
+        return False
+    try:
+        return json.loads(marker.read_text()) == params
+    except (OSError, json.JSONDecodeError):
+        return False
+
+
 def _reuse_or_clear(out: Path, params: dict, overwrite: bool, remedy: str) -> bool:
     """True when ``out`` holds a complete scene made with ``params`` (and no ``overwrite``); else ``out`` is
     made ready for a new scene (emptied of an earlier one with ``overwrite``; an error when it holds
     something else)."""
     marker = out / "scene.json"
-    if marker.is_file():
-        try:
-            same = json.loads(marker.read_text()) == params
-        except json.JSONDecodeError:
-            same = False
-        if same and not overwrite:
-            return True
+    if not overwrite and holds_scene(out, params):
+        return True
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise DataError(f"{out}: folder is not empty and holds no synthetic scene made with these arguments "
                         f"(an earlier one?); {remedy}")  # fmt: skip

@@ -38,6 +38,7 @@ __getattr__, __dir__ = lazy_exports(
             "iou_bar_chart",
             "label_colors",
             "side_by_side",
+            "write_iou_chart",
             "write_png",
         ],
         ".protocols": [
@@ -121,5 +122,6 @@ __all__ = [
     "umeyama_alignment",
     "void_predictions",
     "voxel_resample",
+    "write_iou_chart",
     "write_png",
 ]

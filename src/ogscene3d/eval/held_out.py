@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from ..datasets import open_dataset
+from ..datasets.identity import frame_names, sequence_change
 from ..errors import ConfigError, DataError
 from ..runs import RunFolder, read_config
 from ..runs.map_npz import read_map_npz
@@ -81,8 +83,6 @@ def pick_frames(num_frames: int, num_views: int) -> list[int]:
 def _mapped_count(run_dir: Path, selection: Any, data: Any) -> tuple[int, str]:
     """How many frames of ``selection`` (the run's, opened now) the run read, from ``map.npz``; the whole
     selection without one."""
-    from ..datasets.identity import frame_names, sequence_change
-
     num_selected = len(selection)
     ckpt = RunFolder(run_dir).map
     if not ckpt.is_file():
@@ -148,8 +148,6 @@ def run_frames(run_dir: str | Path, ds: Any) -> RunFrames:
         DataError: the run has no readable ``config.yaml``, its selection is empty in ``ds``, or its
             ``map.npz`` disagrees with the selection.
     """
-    from ..datasets import open_dataset
-
     run = Path(run_dir)
     cfg_path = RunFolder(run).config
     if not cfg_path.is_file():

@@ -10,13 +10,16 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
 
 from ..atomic import atomic_write_bytes
 from ..colors import label_colors as _palette
+
+if TYPE_CHECKING:
+    from .metrics import SegmentationMetrics
 
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
 
@@ -161,6 +164,27 @@ def iou_bar_chart(
             text = f"{100 * v:.1f}"
         cv2.putText(img, text, (x0 + bar_w + 10, y + row_height - 6), _FONT, scale, (0, 0, 0), 1, cv2.LINE_AA)
     return img
+
+
+def write_iou_chart(folder: str | Path, protocol: str, metrics: SegmentationMetrics) -> Path:
+    """Write ``iou_<protocol>.png`` in ``folder``: the :func:`iou_bar_chart` of one protocol's scores, its
+    title giving the mIoU, a class without a value marked "ignored" or "not in GT".
+
+    Args:
+        folder: where the picture goes (the run folder, or ``eval --out``).
+        protocol: the protocol's name (``hovsg``, ``conceptgraphs``).
+        metrics: its :class:`~ogscene3d.eval.metrics.SegmentationMetrics`.
+
+    Returns:
+        The PNG's path.
+    """
+    chart = iou_bar_chart(
+        metrics.class_names,
+        metrics.iou,
+        title=f"per-class IoU, {protocol} protocol (mIoU {100 * metrics.miou:.1f})",
+        nan_text=["ignored" if n in metrics.ignored else "not in GT" for n in metrics.class_names],
+    )
+    return write_png(Path(folder) / f"iou_{protocol}.png", chart)
 
 
 def write_png(path: str | Path, rgb: np.ndarray) -> Path:

@@ -41,7 +41,9 @@ from typing import Any
 
 import numpy as np
 
+from ..datasets import open_dataset
 from ..datasets.replica_semantic import class_entries
+from ..datasets.scannet import BUILTIN_CLASS_TABLES, NYU40_CLASSES
 from ..errors import DataError
 from ..runs import RunFolder, recorded_data_path
 from ..runs.gaussians_ply import SEMANTIC_FIELDS, read_gaussians_ply
@@ -92,8 +94,6 @@ def _scannet_label_ply(folder: Path) -> Path | None:
 
 def _frame_classes(folder: Path) -> Any:
     """The dataset in ``folder`` when it is an RGB-D sequence whose frames carry class maps, else None."""
-    from ..datasets import open_dataset
-
     try:
         ds = open_dataset(folder)
     except DataError:
@@ -173,8 +173,6 @@ def read_class_table(path: str | Path) -> dict[int, str]:
     """Class id -> name from a JSON list of names or of ``{"id", "name"}`` objects (Replica's
     ``info_semantic.json``), an ``{"<id>": name}`` object, or any of these under ``"classes"``; or a
     built-in table by name (``nyu40``, ``scannet20``: ScanNet's NYU40 ids) when no such file exists."""
-    from ..datasets.scannet import BUILTIN_CLASS_TABLES
-
     key = str(path).strip().lower()
     if key in BUILTIN_CLASS_TABLES and not Path(path).exists():
         return dict(BUILTIN_CLASS_TABLES[key])
@@ -434,8 +432,6 @@ def _load_labelled_ply(ply: Path, classes: str | Path | None) -> GroundTruth:
             if cand.is_file():
                 table_path = cand
                 break
-    from ..datasets.scannet import BUILTIN_CLASS_TABLES, NYU40_CLASSES
-
     scannet = ply.name.endswith(SCANNET_LABELS_SUFFIX)
     if table_path is None and scannet:
         table = dict(NYU40_CLASSES)  # ScanNet's labels PLY holds NYU40 ids

@@ -25,9 +25,10 @@ from typing import Any
 import numpy as np
 
 from ..config import RoomsConfig
-from ..graph.geometry import horizontal_basis, unit_up
+from ..graph.geometry import horizontal_basis
 from ..graph.rooms import assign_rooms, raster_outline, read_rooms
-from ..up_axis import PROVISIONAL_UP
+from ..runs.graph_json import graph_up
+from ..up_axis import PROVISIONAL_UP, unit_up
 
 
 @dataclass
@@ -166,15 +167,6 @@ def room_scores(
     )
 
 
-def run_up(graph: Mapping[str, Any] | None) -> np.ndarray:
-    """The up vector a run's graph.json was built with (its ``up``; files without one: the up direction an
-    upright OpenCV camera's world has, ``ogscene3d.up_axis.PROVISIONAL_UP``)."""
-    try:
-        return unit_up((graph or {}).get("up") or PROVISIONAL_UP)
-    except ValueError:
-        return unit_up(PROVISIONAL_UP)
-
-
 def rooms_block(
     graph: Mapping[str, Any],
     means: np.ndarray,
@@ -188,7 +180,8 @@ def rooms_block(
     ``gt_points`` (``gt_point_rooms``: -1 = none), with the Gaussians ``means`` put in rooms by their
     outlines; with ``gt_types`` (GT room id -> type) each matched room's type is checked too
     (``types_correct``)."""
-    up = run_up(graph)
+    # the up the graph was built with (files without one: an upright OpenCV camera's world's)
+    up = graph_up(graph, source, default=PROVISIONAL_UP)
     _, floors, rooms = read_rooms(graph, source)
     pred = assign_rooms(means, up, floors, rooms, RoomsConfig().assign_radius)
     first = {r.id: r.first_frame for r in rooms if r.first_frame >= 0}

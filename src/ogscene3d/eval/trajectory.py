@@ -16,6 +16,7 @@ import numpy as np
 
 from ..errors import DataError
 from .held_out import run_frames
+from .views import open_view_dataset
 
 Alignment = Literal["se3", "sim3", "none"]
 
@@ -178,8 +179,6 @@ def dataset_trajectory(folder: str | Path, run_dir: str | Path) -> list[np.ndarr
     """The dataset's own c2w poses of the frames the run in ``run_dir`` read from ``folder``, in order (the
     rows of its ``traj.txt`` under odometry); None for a frame whose pose is missing or invalid (lost
     tracking: ScanNet writes -inf)."""
-    from .views import open_view_dataset
-
     ds = open_view_dataset(folder, run_dir)
     poses: list[np.ndarray | None] = []
     for i in run_frames(run_dir, ds).mapped:

@@ -26,12 +26,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 
 from ..config import DataConfig
 from ..datasets import detect_kind, open_dataset
 from ..datasets.identity import mapped_intrinsics, matching_pixel_centers
 from ..datasets.semantic_nerf import is_sequence, sequence_dirs
 from ..errors import ConfigError, DataError
+from ..gaussians import GaussianMap
+from ..rendering import render_semantics
 from ..runs import RunFolder, read_config, recorded_data_path
 from .held_out import HeldOut, check_held_out, naming_frames, pick_frames, pick_held_out, run_frames
 from .label_mapping import majority_overlap_mapping
@@ -144,11 +147,6 @@ def render_views(
     Raises:
         DataError: a frame index is out of range, or a frame has no ground-truth class map or no pose.
     """
-    import torch
-
-    from ..gaussians import GaussianMap
-    from ..rendering import render_semantics
-
     idx = sorted(set(frames))
     for i in idx:
         if not 0 <= i < len(ds):

@@ -14,17 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..up_axis import unit_up
+
 #: Percentiles used for robust extents (a few outlier Gaussians do not change a box).
 LO_PCT = 2.0
 HI_PCT = 98.0
-
-
-def unit_up(up: np.ndarray | list[float] | tuple[float, ...]) -> np.ndarray:
-    """The configured up vector as a float64 unit 3-vector (ValueError unless finite and non-zero)."""
-    u = np.asarray(up, dtype=np.float64).reshape(-1)
-    if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) < 1e-9:
-        raise ValueError(f"graph.up_axis must be a finite non-zero 3-vector, got {np.asarray(up).tolist()}")
-    return u / np.linalg.norm(u)
 
 
 def horizontal_basis(up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

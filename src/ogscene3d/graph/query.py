@@ -29,7 +29,8 @@ from typing import Any
 import numpy as np
 
 from ..config import EndpointConfig, QueryConfig
-from .geometry import horizontal_basis, unit_up
+from ..up_axis import unit_up
+from .geometry import horizontal_basis
 from .openai_client import ChatClient, extract_json
 from .relations import RELATION_PHRASES, normalize_relation
 from .rooms import ROOM_SYNONYMS, ROOM_TYPE_CUES, UNKNOWN_ROOM, RoomNode, room_type_of

@@ -33,7 +33,8 @@ import numpy as np
 
 from ..config import EndpointConfig, RelationsConfig, check_section
 from ..errors import ConfigError
-from .geometry import Shape, unit_up
+from ..up_axis import unit_up
+from .geometry import Shape
 from .openai_client import ChatClient, extract_json
 from .types import SceneNode
 

@@ -37,7 +37,9 @@ import numpy as np
 
 from ..config import EndpointConfig, RoomsConfig
 from ..errors import DataError
-from .geometry import horizontal_basis, unit_up
+from ..runs.graph_json import graph_up
+from ..up_axis import unit_up
+from .geometry import horizontal_basis
 from .openai_client import ChatClient, extract_json
 
 log = logging.getLogger(__name__)
@@ -558,14 +560,11 @@ def build_room_typer(config: RoomsConfig, endpoint: EndpointConfig | None = None
 
 def read_rooms(doc: Mapping[str, Any], source: str = "graph.json") -> tuple[np.ndarray | None, list[Floor],
                                                                             list[RoomNode]]:  # fmt: skip
-    """The up vector (None when the document has none), storeys and rooms of a graph.json document (none in
-    files written before rooms); DataError naming ``source`` for malformed ones."""
+    """The up vector (:func:`~ogscene3d.runs.graph_json.graph_up`; None when the document has none), storeys
+    and rooms of a graph.json document (none in files written before rooms); DataError naming ``source`` for
+    malformed ones."""
     rm = RoomMap(RoomsConfig(), typer=RuleRoomTyper())
-    up = doc.get("up")
-    try:
-        u = unit_up(up) if up is not None else None
-    except ValueError:
-        raise DataError(f"{source}: 'up' must be a finite non-zero 3-vector, got {up!r}") from None
+    u = graph_up(doc, source)
     rm.load(doc, source, u if u is not None else np.array([0.0, 0.0, 1.0]))
     return u, rm.floors, [rm.rooms[i] for i in sorted(rm.rooms)]
 

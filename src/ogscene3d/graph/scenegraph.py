@@ -50,10 +50,10 @@ from ..errors import ConfigError, DataError, OGSceneError
 from ..frame import Frame
 from ..runs import RunFolder
 from ..runs.graph_json import read_graph_json, write_graph_json
-from ..up_axis import up_vector
+from ..up_axis import unit_up, up_vector
 from .captioner import Captioner, GroundTruthCaptioner, HeuristicCaptioner, build_captioner
 from .confidence import MeanConfidence, NodeConfidence, build_confidence
-from .geometry import directed_ratios, proximate_points, unit_up
+from .geometry import directed_ratios, proximate_points
 from .query import LLMQuery, QueryAnswer, QueryContext, QueryHit, answer_offline
 from .relations import GeometricRelations, RelationPredictor, build_relations
 from .rooms import Floor, RoomMap, RoomNode, build_room_typer

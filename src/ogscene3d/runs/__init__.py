@@ -55,14 +55,14 @@ __getattr__, __dir__ = lazy_exports(
         ],
         ".save": ["SaveError", "save_run"],
         ".gaussians_ply": ["GaussianPly", "read_gaussians_ply", "write_gaussians_ply"],
-        ".graph_json": ["read_graph_json", "write_graph_json"],
+        ".graph_json": ["graph_up", "read_graph_json", "write_graph_json"],
         ".map_npz": ["CorruptMapError", "read_map_npz", "write_map_npz"],
     },
 )
 
 if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .gaussians_ply import GaussianPly, read_gaussians_ply, write_gaussians_ply
-    from .graph_json import read_graph_json, write_graph_json
+    from .graph_json import graph_up, read_graph_json, write_graph_json
     from .layout import (
         CONFIG,
         EXPORT,
@@ -119,6 +119,7 @@ __all__ = [
     "TIMINGS",
     "TRAJECTORY",
     "config_digest",
+    "graph_up",
     "json_safe",
     "read_config",
     "read_gaussians_ply",

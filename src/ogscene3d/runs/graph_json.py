@@ -1,7 +1,8 @@
 """``graph.json``: the one reader and writer of a run's scene graph document (docs/formats.md
 "graph.json"): ``{"version", "nodes": [...], "edges": [...]}``, a node with an integer ``id`` and a finite
 ``center`` (3 numbers; a graph made by another tool for ``eval`` may leave it out), an edge with a
-``relation`` between the ``source`` and ``target`` ids of two nodes.
+``relation`` between the ``source`` and ``target`` ids of two nodes, and the world up vector the graph was
+built with (``up``: the vertical its rooms and relations used; :func:`graph_up` reads it).
 
 The document is read and checked here; :meth:`ogscene3d.graph.SceneGraph.from_json` builds a graph from it.
 """
@@ -9,6 +10,7 @@ The document is read and checked here; :meth:`ogscene3d.graph.SceneGraph.from_js
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +18,7 @@ import numpy as np
 
 from ..atomic import atomic_write_text
 from ..errors import DataError
+from ..up_axis import unit_up
 
 
 def write_graph_json(path: str | Path, doc: dict[str, Any]) -> None:
@@ -68,6 +71,36 @@ def read_graph_json(path: str | Path, centers: bool = False) -> dict[str, Any]:
     return doc
 
 
+def graph_up(
+    doc: Mapping[str, Any], source: str | Path = "graph.json", default: Iterable[float] | None = None
+) -> np.ndarray | None:
+    """The up vector a scene graph was built with: its document's ``up`` (the world vertical its rooms and
+    relations used, settled by the run by the time it wrote the graph).
+
+    This is the graph's own up, the one to read rooms and heights with; the up a run was *configured* with
+    (``config.yaml``'s ``graph.up_axis``, possibly ``auto``) is
+    :func:`ogscene3d.runs.record.recorded_up`'s.
+
+    Args:
+        doc: a graph.json document (:func:`read_graph_json`; an in-memory graph's too).
+        source: what ``doc`` was read from, for the error message.
+        default: the up of a document without one (written before graphs recorded theirs); None: None.
+
+    Returns:
+        The unit up vector (float64, [3]), or ``default`` (as a unit vector) when ``doc`` has none.
+
+    Raises:
+        DataError: ``up`` is not a finite non-zero 3-vector; the message names ``source``.
+    """
+    up = doc.get("up")
+    if up is None:
+        return None if default is None else unit_up(default)
+    try:
+        return unit_up(up)
+    except ValueError:
+        raise DataError(f"{source}: 'up' must be a finite non-zero 3-vector, got {up!r}") from None
+
+
 def _check_node(p: Path, i: int, node: object, centers: bool) -> None:
     """DataError naming the file, the node and the field unless ``node`` has an integer id and a finite
     3-vector center (where it has one, or ``centers`` asks for one)."""
@@ -93,4 +126,4 @@ def _known(node_id: object, ids: set[int]) -> bool:
     return isinstance(node_id, int) and not isinstance(node_id, bool) and node_id in ids
 
 
-__all__ = ["read_graph_json", "write_graph_json"]
+__all__ = ["graph_up", "read_graph_json", "write_graph_json"]

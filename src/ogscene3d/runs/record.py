@@ -90,13 +90,16 @@ def recorded_data_path(run_dir: str | Path) -> Path | None:
 
 
 def recorded_up(run_dir: str | Path, trajectory: Any = None) -> np.ndarray | None:
-    """The unit world-up vector a run recorded (``graph.up_axis``), or where that stayed ``auto`` (chosen from
-    the tracked cameras during the run) the up direction of the keyframe cameras ``trajectory`` ([T, 4, 4]
-    camera-to-world); None, with a warning when the file is unreadable, when there is none (it only orients
-    a viewer's camera)."""
-    import numpy as np  # not at the top: `ogscene3d --help` reads this module without numpy
+    """The unit world-up vector a run was configured with (``config.yaml``'s ``graph.up_axis``), or where
+    that stayed ``auto`` (chosen from the tracked cameras during the run) the up direction of the keyframe
+    cameras ``trajectory`` ([T, 4, 4] camera-to-world); None, with a warning when the file is unreadable,
+    when there is none (it only orients a viewer's camera).
 
-    from ..up_axis import CameraUp, is_auto
+    This is the run's configured up, known without a scene graph; the up its scene graph was built with
+    (``graph.json``'s ``up``, which rooms and heights are read with) is
+    :func:`ogscene3d.runs.graph_json.graph_up`'s.
+    """
+    from ..up_axis import CameraUp, is_auto, unit_up  # numpy: `ogscene3d --help` reads this module without
 
     try:
         doc = _recorded(run_dir)
@@ -108,16 +111,13 @@ def recorded_up(run_dir: str | Path, trajectory: Any = None) -> np.ndarray | Non
             for pose in trajectory if trajectory is not None else ():
                 cams.add(pose)
             return cams.estimate()
-        up = np.asarray(value, dtype=np.float64)
+        return unit_up(value)
     except Exception:  # noqa: BLE001 - the up vector only orients the camera; a default is fine
         log.warning(
             "%s: no readable graph.up_axis; using the viewer's default up direction",
             RunFolder(run_dir).config,
         )
         return None
-    if up.shape != (3,) or not np.isfinite(up).all() or np.linalg.norm(up) == 0:
-        return None
-    return up / np.linalg.norm(up)
 
 
 def config_digest(cfg: Config) -> str:

@@ -30,6 +30,7 @@ from typing import Protocol
 import numpy as np
 
 from ..errors import ConfigError, OGSceneError
+from ..graph.scenegraph import SceneGraph
 from .scene import (
     COLOR_MODES,
     RENDER_MODES,
@@ -377,8 +378,6 @@ class LiveViewer:
         text). Runs on the push thread; the graph is rebuilt only when its document changes."""
         if not text.strip() or not graph:
             return None, ""
-        from ..graph.scenegraph import SceneGraph
-
         if graph != self._query_doc:
             self._query_doc = graph
             try:
