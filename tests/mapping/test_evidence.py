@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from ogscene3d.config import EvidenceConfig
 from ogscene3d.gaussians import GaussianMap
 from ogscene3d.mapping.evidence import EvidenceModel, PairTable, spill_pixels
 from ogscene3d.mapping.refine import global_refinement
@@ -36,7 +37,7 @@ def plane_map(device: str) -> tuple[GaussianMap, torch.Tensor]:
 
 def with_parts(gm: GaussianMap, masks: list[torch.Tensor]) -> EvidenceModel:
     """An evidence model whose parts are ``masks`` (one part each, in order) and one more for the rest."""
-    ev = EvidenceModel(gm.device, cell=0.05)
+    ev = EvidenceModel(gm.device, EvidenceConfig(cell=0.05))
     part = torch.full((len(gm),), len(masks), dtype=torch.long, device=gm.device)
     for i, m in enumerate(masks):
         part[m] = i
@@ -202,7 +203,7 @@ def test_unlabelled_gaussians_take_the_label_of_their_segments(device):
     gm, vase = plane_map(device)
     sparse = vase & (torch.arange(len(gm), device=gm.device) % 5 == 0)
     gm.labels[sparse] = -1
-    ev = EvidenceModel(gm.device, cell=0.15)
+    ev = EvidenceModel(gm.device, EvidenceConfig(cell=0.15))
     part = torch.zeros(len(gm), dtype=torch.long, device=gm.device)
     part[sparse] = torch.arange(1, int(sparse.sum()) + 1, device=gm.device)
     ev.new_parts(int(part.max()) + 1)
@@ -244,7 +245,7 @@ def test_a_resumed_map_gets_one_part_per_label(device):
     gm, vase = plane_map(device)
     gm.labels[vase] = 3
     gm.labels[:4] = -1
-    ev = EvidenceModel(gm.device, cell=0.15)
+    ev = EvidenceModel(gm.device, EvidenceConfig(cell=0.15))
     ev.ensure_cells(gm)
     parts = ev.parts_of(gm)
     assert bool((parts >= 0).all()) and torch.unique(parts).numel() == 3

@@ -73,10 +73,12 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ..config import EvidenceConfig
 from .local import group_top2
 from .longterm import label_edges
 from .merge import visible_pixels
 from .neighbors import knn
+from .timings import Counters
 
 CONTAIN = 0.8  # a part is judged in a view when this share of its visible Gaussians lies in one segment
 OWN = 0.8  # a part owns a segment when it holds this share of the segment's visible Gaussians
@@ -212,7 +214,7 @@ def _n_labels(gm) -> int:
 
 
 @dataclass
-class EvidenceStats:
+class EvidenceStats(Counters):
     views: int = 0
     parts: int = 0
     cells: int = 0
@@ -223,9 +225,6 @@ class EvidenceStats:
     filled: int = 0
     lowered: int = 0
 
-    def as_dict(self) -> dict[str, int]:
-        return dict(self.__dict__)
-
 
 class EvidenceModel:
     """Co-segmentation evidence between cells, parts and labels (see the module docstring)."""
@@ -234,22 +233,20 @@ class EvidenceModel:
     FIRM, WEAK, APART = 0, 1, 2
 
     def __init__(
-        self,
-        device: torch.device,
-        cell: float = 0.05,
-        radius: float = 0.1,
-        separation: float = 0.5,
-        split_ratio: float = 0.5,
+        self, device: torch.device, cfg: EvidenceConfig | None = None, *, radius: float = 0.1,
         min_part: float = 0.1,
-        min_views: int = 2,
     ) -> None:
+        """``cfg``: the ``mapping.evidence`` section (its defaults when None); ``radius``: the refinement's
+        ``r_search`` (a cell's neighbours); ``min_part``: ``mapping.merge.min_part`` (a real part of a
+        segment)."""
+        cfg = cfg if cfg is not None else EvidenceConfig()
         self.device = device
-        self.cell = float(cell)
+        self.cell = float(cfg.cell)
         self.radius = float(radius)
-        self.separation = float(separation)
-        self.split_ratio = float(split_ratio)
+        self.separation = float(cfg.separation)
+        self.split_ratio = float(cfg.split_ratio)
         self.min_part = float(min_part)
-        self.min_views = int(min_views)
+        self.min_views = int(cfg.dispute_views)
         self.cell_part = torch.zeros(0, dtype=torch.long, device=device)
         self.cell_vox = torch.zeros((0, 3), dtype=torch.long, device=device)
         # per cell: views in / apart from its part's anchor segment, and the part's Gaussians in the segments
@@ -726,7 +723,16 @@ class EvidenceModel:
         sep = (rest[:, 2] > 0) & (rest[:, 2] > self.separation * rest[:, 0])
         for label in torch.unique(lab[sep]).tolist():
             root = self._detach(label, lab, part_mass, a, b, vals, root)
-        # 2. the groups' summed statistics, and greedy merges (in Python: a few hundred groups)
+        return self._merge_groups(root, a, b, vals)
+
+    def _merge_groups(
+        self, root: torch.Tensor, a: torch.Tensor, b: torch.Tensor, vals: torch.Tensor
+    ) -> torch.Tensor:
+        """Step 2's merges: the groups' (``root`` per part) summed statistics over the part pairs (a, b,
+        ``vals``), merged greedily, the most firmly held first, in Python (a few hundred groups); returns
+        each part's group."""
+        n = self.next_part
+        dev = self.device
         ra, rb = root[a], root[b]
         cross = ra != rb
         keys, inv = torch.unique(PairTable.key(ra[cross], rb[cross]), return_inverse=True)

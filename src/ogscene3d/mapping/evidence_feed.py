@@ -28,10 +28,8 @@ class EvidenceFeed:
         self.margin = cfg.init.depth_margin
         self.r_search, self.graph_k = cfg.refine.r_search, cfg.refine.graph_k
         self.model = EvidenceModel(
-            device, cell=cfg.evidence.cell, radius=cfg.refine.r_search, separation=cfg.evidence.separation,
-            split_ratio=cfg.evidence.split_ratio, min_part=cfg.merge.min_part,
-            min_views=cfg.evidence.dispute_views,
-        )  # fmt: skip
+            device, cfg.evidence, radius=cfg.refine.r_search, min_part=cfg.merge.min_part
+        )
 
     def new_parts(self, gm: GaussianMap, probes, sel: torch.Tensor, res) -> torch.Tensor:
         """Per probe: the evidence part its new Gaussian joins. A segment matched with a label (case ii)

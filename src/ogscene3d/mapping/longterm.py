@@ -35,6 +35,7 @@ from ..rendering import rendering_contribution
 from .init import grid_mask
 from .local import group_top2
 from .neighbors import any_within, knn
+from .timings import Counters
 
 # a memory candidate needs this many back-projected points (on the memory_point_step grid): a view with
 # (almost) no valid depth can judge no Gaussian, and would evict one that can
@@ -250,15 +251,12 @@ def associate_pixels(
 
 
 @dataclass
-class LongTermStats:
+class LongTermStats(Counters):
     views: int = 0
     updated: int = 0
     increased: int = 0
     decreased: int = 0
     mean_iou: float = 0.0
-
-    def as_dict(self) -> dict:
-        return dict(self.__dict__)
 
 
 def longterm_view_update(gm, entry: MemoryEntry, cfg: LongtermConfig, radius: float) -> LongTermStats:

@@ -44,6 +44,7 @@ import torch
 
 from .local import group_top2
 from .neighbors import knn, knn_components, knn_int32
+from .timings import Counters
 
 
 def connected_clusters(
@@ -70,15 +71,12 @@ def connected_clusters(
 
 
 @dataclass
-class RefineStats:
+class RefineStats(Counters):
     clusters: int = 0
     low_clusters: int = 0
     relabeled_clusters: int = 0
     cluster_gaussians: int = 0
     individual_gaussians: int = 0
-
-    def as_dict(self) -> dict[str, int]:
-        return dict(self.__dict__)
 
 
 def global_refinement(
@@ -106,59 +104,84 @@ def global_refinement(
     if n == 0:
         return stats
     dev = means.device
-    processed = torch.zeros(n, dtype=torch.bool, device=dev)
     free = exposed.to(dev) if exposed is not None else torch.zeros(n, dtype=torch.bool, device=dev)
 
-    # ---- cluster level
-    cluster = connected_clusters(means, labels, r_search, graph_k)
-    num_c = int(cluster.max()) + 1 if n else 0
-    stats.clusters = num_c
-    if num_c:
-        inc = cluster >= 0
-        csize = torch.bincount(cluster[inc], minlength=num_c).float()
-        cmean = torch.bincount(cluster[inc], weights=conf[inc].float(), minlength=num_c) / csize.clamp(min=1)
-        low = cmean < tau_low
-        stats.low_clusters = int(low.sum())
-        high = torch.nonzero((conf > tau_high) & (labels >= 0)).squeeze(1)
-        if stats.low_clusters and high.numel():
-            q = torch.nonzero(inc & low[cluster.clamp(min=0)]).squeeze(1)
-            idx, _ = knn(means[high], means[q], 1, cluster_radius, cluster[high], cluster[q], "different")
-            found = idx[:, 0] >= 0
-            qc = cluster[q][found]
-            nl = labels[high[idx[found, 0]]]
-            s_new, cnt, _, _ = group_top2(qc, nl, num_c)
-            relabel = low & (cnt > 0)
-            if separated is not None:  # not across a clear separation (a cluster is one label's)
-                own = torch.full((num_c,), -1, dtype=torch.int64, device=dev)
-                own[cluster[inc]] = labels[inc].long()
-                c = torch.nonzero(relabel).squeeze(1)
-                relabel[c[separated(own[c], s_new[c])]] = False
-            members = inc & relabel[cluster.clamp(min=0)]
-            labels[members] = s_new[cluster[members]].to(labels.dtype)
-            processed |= members
-            stats.relabeled_clusters = int(relabel.sum())
-            stats.cluster_gaussians = int(members.sum())
-
-    # ---- individual level (uses the labels after the cluster level)
-    high = torch.nonzero((conf > tau_high) & (labels >= 0)).squeeze(1)
+    processed = _cluster_level(
+        means, labels, conf, stats, tau_low, tau_high, r_search, cluster_radius, graph_k, separated
+    )
     cand = ~processed & (conf < tau_low)
     if not include_unlabeled:
         cand &= labels >= 0
-    if high.numel():
-        wrong = free & cand
-        for sel, other in ((cand & ~wrong, False), (wrong, True)):
-            q = torch.nonzero(sel).squeeze(1)
-            if q.numel() == 0:
-                continue
-            # an exposed Gaussian's own label is what the views contradict: it takes another one
-            grp = (labels[high], labels[q], "different") if other else ()
-            idx, _ = knn(means[high], means[q], 1, r_search, *grp, two_pass=True)
-            found = idx[:, 0] >= 0
-            tgt, src = q[found], high[idx[found, 0]]
-            if separated is not None and not other:
-                ok = ~separated(labels[tgt].long(), labels[src].long())
-                tgt, src = tgt[ok], src[ok]
-            labels[tgt] = labels[src]
-            conf[tgt] = 0.5
-            stats.individual_gaussians += int(tgt.numel())
+    stats.individual_gaussians = _individual_level(
+        means, labels, conf, cand, free, tau_high, r_search, separated
+    )
     return stats
+
+
+def _cluster_level(
+    means, labels, conf, stats: RefineStats, tau_low, tau_high, r_search, cluster_radius, graph_k, separated
+) -> torch.Tensor:
+    """Algorithm 1's cluster level (in place): a low-confidence cluster takes the label most of its members'
+    nearest confident Gaussians of other clusters carry, not across a clear separation. -> [N] bool, the
+    Gaussians relabelled here."""
+    n = means.shape[0]
+    dev = means.device
+    processed = torch.zeros(n, dtype=torch.bool, device=dev)
+    cluster = connected_clusters(means, labels, r_search, graph_k)
+    num_c = int(cluster.max()) + 1 if n else 0
+    stats.clusters = num_c
+    if not num_c:
+        return processed
+    inc = cluster >= 0
+    csize = torch.bincount(cluster[inc], minlength=num_c).float()
+    cmean = torch.bincount(cluster[inc], weights=conf[inc].float(), minlength=num_c) / csize.clamp(min=1)
+    low = cmean < tau_low
+    stats.low_clusters = int(low.sum())
+    high = torch.nonzero((conf > tau_high) & (labels >= 0)).squeeze(1)
+    if not stats.low_clusters or not high.numel():
+        return processed
+    q = torch.nonzero(inc & low[cluster.clamp(min=0)]).squeeze(1)
+    idx, _ = knn(means[high], means[q], 1, cluster_radius, cluster[high], cluster[q], "different")
+    found = idx[:, 0] >= 0
+    qc = cluster[q][found]
+    nl = labels[high[idx[found, 0]]]
+    s_new, cnt, _, _ = group_top2(qc, nl, num_c)
+    relabel = low & (cnt > 0)
+    if separated is not None:  # not across a clear separation (a cluster is one label's)
+        own = torch.full((num_c,), -1, dtype=torch.int64, device=dev)
+        own[cluster[inc]] = labels[inc].long()
+        c = torch.nonzero(relabel).squeeze(1)
+        relabel[c[separated(own[c], s_new[c])]] = False
+    members = inc & relabel[cluster.clamp(min=0)]
+    labels[members] = s_new[cluster[members]].to(labels.dtype)
+    processed |= members
+    stats.relabeled_clusters = int(relabel.sum())
+    stats.cluster_gaussians = int(members.sum())
+    return processed
+
+
+def _individual_level(means, labels, conf, cand, free, tau_high, r_search, separated) -> int:
+    """Algorithm 1's individual level (in place, on the labels after the cluster level): each candidate
+    takes its nearest confident Gaussian's label (a disputed one, in ``free``, another label than its own).
+    -> the number relabelled."""
+    high = torch.nonzero((conf > tau_high) & (labels >= 0)).squeeze(1)
+    if not high.numel():
+        return 0
+    done = 0
+    wrong = free & cand
+    for sel, other in ((cand & ~wrong, False), (wrong, True)):
+        q = torch.nonzero(sel).squeeze(1)
+        if q.numel() == 0:
+            continue
+        # an exposed Gaussian's own label is what the views contradict: it takes another one
+        grp = (labels[high], labels[q], "different") if other else ()
+        idx, _ = knn(means[high], means[q], 1, r_search, *grp, two_pass=True)
+        found = idx[:, 0] >= 0
+        tgt, src = q[found], high[idx[found, 0]]
+        if separated is not None and not other:
+            ok = ~separated(labels[tgt].long(), labels[src].long())
+            tgt, src = tgt[ok], src[ok]
+        labels[tgt] = labels[src]
+        conf[tgt] = 0.5
+        done += int(tgt.numel())
+    return done

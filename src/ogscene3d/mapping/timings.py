@@ -8,6 +8,13 @@ from contextlib import contextmanager
 import torch
 
 
+class Counters:
+    """A stage's counters (a dataclass of ints and floats): ``as_dict`` gives them to ``Timings.add``."""
+
+    def as_dict(self) -> dict[str, float]:
+        return dict(self.__dict__)
+
+
 class Timings:
     """Accumulated wall time (s) and call counts per module, plus free-form counters, and each keyframe's
     time per module (``per_keyframe``: how a module's cost grows along the stream)."""
