@@ -566,7 +566,8 @@ class EvidenceConfig:
     split_ratio: float = setting(
         0.5,
         "a group of a part's cells becomes a part of its own when this share of its views across the cut "
-        "put it apart from the rest of the part",
+        "put it apart from the rest of the part (a group at most a fifth of its part: when about two views "
+        "did, however many absorbed it)",
         _float(0.0, 1.0, lo_open=True),
     )
     dispute_views: int = setting(

@@ -30,8 +30,10 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
   otherwise (a cup inside the table's segment: SAM absorbs small objects into their support in most frames,
   which says little). Two judged parts in two segments are *clearly separated* where each is the main part
   of its segment (``MAJOR``): one segment holds one and at most 1 - ``CONTAIN`` of the other, and it is about
-  that part, not a piece of a surface that SAM cut at a random place. A part *owns* a view's segment when it
-  holds ``OWN`` of it.
+  that part, not a piece of a surface that SAM cut at a random place. A part can be shown apart where
+  ``MAJOR`` of it lies in one segment (SAM cuts a large surface at random places, so it is rarely ``CONTAIN``
+  in one segment), and held together only where it is judged. A part *owns* a view's segment when it holds
+  ``OWN`` of it.
 * *Gaussians*: a labelled Gaussian in a segment other than its label's main one (the segment holding most of
   the label) that is mostly other labels is *disputed* in that view (the label ran over into a neighbour);
   one in its label's main segment is *confirmed*. An unlabelled Gaussian votes for the label holding most of
@@ -44,7 +46,11 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
    a linked group other than the part's largest that views put apart from the rest of the part in at least
    ``mapping.evidence.split_ratio`` of their cross views becomes a part of its own (a fridge that the first
    view merged with the floor, books that it merged with each other). A SAM cut at random places separates a
-   pair of cells in a few of its views only.
+   pair of cells in a few of its views only. A group at most 1/``SMALL`` of its part (a light switch in the
+   wall's part) splits on about two views apart however many absorbed it, and a view that shows one of two
+   cells in a segment at most 1/``SMALL`` of the other's counts ``SMALL_APART`` views against their link:
+   SAM merges small objects into their support in most frames, so the few that show them apart are the
+   evidence. Where the part's largest group leaves, it takes the part's history with other parts along.
 2. *group parts into labels*, from scratch every time, greedily by firm support: two groups merge when the
    views held them together (firmly at least once, or weakly with no separation ever) and separated them in
    at most ``mapping.evidence.separation`` (0.5) of their firm views. A small object that SAM absorbs into
