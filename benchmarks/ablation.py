@@ -31,8 +31,9 @@ graph is off (it does not change the semantic map). Long scans map with ``mappin
 65 degrees (the check only warns; their jumps are meant). ``--reuse`` keeps the rows an earlier run of the
 same settings mapped into OUT (a stopped run goes on; scores and yardstick are computed again).
 
-    python benchmarks/ablation.py --seeds 0,1 --device cpu --set mapping.opt_iters=1   # quick look
-    python benchmarks/ablation.py --seeds 0-9 --layout both --device cpu --set mapping.opt_iters=1 --out abl
+    python benchmarks/ablation.py --seeds 0,1 --device cpu --set mapping.optimize.iters=1   # quick look
+    python benchmarks/ablation.py --seeds 0-9 --layout both --device cpu --set mapping.optimize.iters=1 \
+        --out abl
     python benchmarks/ablation.py --seeds 0-9 --segments perfect --ablations naive,full --no-yardstick
 
 Writes OUT/ablation.json and OUT/ablation_<layout>.png (grouped bars of instance mIoU / class F-mIoU /

@@ -64,7 +64,7 @@ def _dir_bytes(path: Path) -> int:
 
 
 def _config(views: int):
-    return load_config(None, ["graph.enabled=false", f"mapping.memory_max={views}"])
+    return load_config(None, ["graph.enabled=false", f"mapping.longterm.memory_max={views}"])
 
 
 def _view(keyframe: int, width: int, height: int, rng: np.random.Generator) -> MemoryEntry:
@@ -134,7 +134,7 @@ def resume(path: Path, views: int) -> dict:
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--size", type=image_size(1), default=(1200, 680), help="WxH of the memory views")
-    p.add_argument("--views", type=positive_int, default=64, help="memory views (mapping.memory_max)")
+    p.add_argument("--views", type=positive_int, default=64, help="memory views (longterm.memory_max)")
     p.add_argument("--checkpoints", type=positive_int, default=4, help="checkpoints to write")
     p.add_argument("--gaussians", type=parse_count, default=200_000, help="Gaussians in the map (200k)")
     p.add_argument("--out", type=Path, default=None, help="run directory (default: a temporary one)")

@@ -9,7 +9,7 @@ out, as floaters) and the 3D mIoU (HOV-SG protocol, ``ogscene3d.eval.evaluate_ru
     python benchmarks/defaults.py                                  # defaults vs configs/synthetic.yaml
     python benchmarks/defaults.py --frames 20 --width 160 --height 120 --json out.json
     python benchmarks/defaults.py --config NAME=path.yaml --config NAME2=-   # '-' = the defaults
-    python benchmarks/defaults.py --config iters3=-,mapping.opt_iters=3      # a config plus overrides
+    python benchmarks/defaults.py --config iters3=-,mapping.optimize.iters=3      # a config plus overrides
 """
 
 from __future__ import annotations

@@ -55,7 +55,7 @@ import numpy as np
 
 PY = sys.executable
 # mapping kept cheap: the faults are in the data and the run's life, not in the optimisation
-FAST = ["--device", "cpu", "--set", "mapping.opt_iters=1"]
+FAST = ["--device", "cpu", "--set", "mapping.optimize.iters=1"]
 SECRET = "sk-faultmatrix-0123456789abcdefSECRET"
 
 
@@ -364,7 +364,7 @@ def _signal_mid_run(out: Path, sig: int) -> tuple[Watch, int | None, str | None]
     """Start a slow ``run`` into ``out``, send ``sig`` once keyframe 2 is reported and wait for the exit:
     (the watch, its exit code, a failure message when keyframe 2 never came)."""
     # a slower run so that the signal lands mid-way: more optimisation steps per keyframe
-    w = Watch(popen(_run_args(SCENES["long"], out, "--set", "mapping.opt_iters=6", progress=True)))
+    w = Watch(popen(_run_args(SCENES["long"], out, "--set", "mapping.optimize.iters=6", progress=True)))
     if not w.wait_for("kf=2", 240):
         w.finish(5)
         return w, None, f"never reached keyframe 2: {last_line(w.text)}"
@@ -389,7 +389,7 @@ def interrupt_live(sig: int) -> Callable[[Path], tuple[str, bool | None]]:
     def check(tmp: Path) -> tuple[str, bool | None]:
         out = tmp / "live"
         args = ["--data", str(SCENES["long"]), "--out", str(out), "--port", "0", *FAST]
-        args += ["--set", "mapping.opt_iters=6"]
+        args += ["--set", "mapping.optimize.iters=6"]
         w = Watch(popen(args, live=True))
         if not w.wait_for("open http", 240):
             w.finish(5)
@@ -427,9 +427,9 @@ def stop_then_eval(tmp: Path) -> tuple[str, bool | None]:
 
 def concurrent_writers(tmp: Path) -> tuple[str, bool | None]:
     out = tmp / "run"
-    a = Watch(popen(_run_args(SCENES["long"], out, "--set", "mapping.opt_iters=4", progress=True)))
+    a = Watch(popen(_run_args(SCENES["long"], out, "--set", "mapping.optimize.iters=4", progress=True)))
     a.wait_for("mapping", 120)
-    b = Watch(popen(_run_args(SCENES["long"], out, "--set", "mapping.opt_iters=4")))
+    b = Watch(popen(_run_args(SCENES["long"], out, "--set", "mapping.optimize.iters=4")))
     rb = b.finish(600)
     ra = a.finish(600)
     refused = (ra == 0) != (rb == 0)
@@ -443,7 +443,7 @@ def concurrent_writers(tmp: Path) -> tuple[str, bool | None]:
 
 def stale_lock(tmp: Path) -> tuple[str, bool | None]:
     out = tmp / "run"
-    w = Watch(popen(_run_args(SCENES["long"], out, "--set", "mapping.opt_iters=6", progress=True)))
+    w = Watch(popen(_run_args(SCENES["long"], out, "--set", "mapping.optimize.iters=6", progress=True)))
     if not w.wait_for("kf=1", 240):
         w.finish(5)
         return f"never reached keyframe 1: {last_line(w.text)}", False

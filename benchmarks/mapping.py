@@ -6,7 +6,8 @@ Two modes:
 Gaussian count, peak host RSS and peak CUDA memory every ``--report-every`` keyframes (the bounded-memory
 check on long runs: ``--frames 2000``).
 
-    python benchmarks/mapping.py stream --frames 120 --size 160x120 --device cpu [--set mapping.opt_iters=0]
+    python benchmarks/mapping.py stream --frames 120 --size 160x120 --device cpu \\
+        [--set mapping.optimize.iters=0]
 
 ``modules``: the semantic modules alone at a given image size on a map of ``--gaussians`` Gaussians (random
 points on the walls of a 6 x 3 x 6 m box, 50 labels): local 3D optimization (probe association + Eq. 5 + the
@@ -24,6 +25,7 @@ import json
 import resource
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -139,7 +141,6 @@ def modules(args) -> dict | None:
 
     rgb = np.zeros((h, w, 3), np.uint8)
     frame = Frame(0, rgb, depth, K, np.eye(4), segments=seg, segment_scores={i: 0.95 for i in range(1, 41)})
-    step = max(1, round(cfg.pixels_per_gaussian**0.5))
     times: dict[str, list[float]] = {"local": [], "refine": [], "longterm": []}
     for rep in range(args.repeat + 1):  # the first round compiles / warms up and is not counted
         _sync(dev)
@@ -149,9 +150,8 @@ def modules(args) -> dict | None:
             seg,
             frame.segment_scores,
             dev,
-            step=step,
-            rendered_alpha=torch.zeros(h, w, device=dev),
-            rendered_depth=torch.zeros(h, w, device=dev),
+            replace(cfg.init, dense_below=0),  # the grid alone, as measured before the dense small segments
+            rendered=(torch.zeros(h, w, device=dev), torch.zeros(h, w, device=dev)),
         )
         res = associate_segments(
             probes.means,
@@ -162,12 +162,12 @@ def modules(args) -> dict | None:
             gm.labels,
             gm.confidences,
             gm.new_labels,
-            k=cfg.knn_k,
-            radius=cfg.knn_radius,
-            tau_valid=cfg.tau_valid,
-            tau_p=cfg.tau_p,
+            k=cfg.association.knn_k,
+            radius=cfg.association.knn_radius,
+            tau_valid=cfg.association.tau_valid,
+            tau_p=cfg.association.tau_p,
         )
-        # duplicate-label check (mapping.merge_duplicates), as if every segment were ambiguous: the worst case
+        # duplicate-label check (mapping.merge.enabled), as if every segment were ambiguous: the worst case
         amb = torch.arange(int(probes.seg_ids.numel()), device=dev)
         involved = torch.cat([res.top_label, res.second_label])
         pick = torch.nonzero(torch.isin(gm.labels.long(), involved[involved >= 0])).squeeze(1)
@@ -176,12 +176,12 @@ def modules(args) -> dict | None:
             torch.eye(4, device=dev),
             torch.as_tensor(K, device=dev),
             torch.as_tensor(depth, device=dev),
-            cfg.init_depth_margin,
+            cfg.init.depth_margin,
         )
         vis = pix >= 0
         seg_index = torch.as_tensor(seg, device=dev).long().reshape(-1) - 1
         duplicate_label_pairs(
-            seg_index[pix[vis]], gm.labels[pick[vis]], amb, res.top_label, res.second_label, cfg.merge_contain
+            seg_index[pix[vis]], gm.labels[pick[vis]], amb, res.top_label, res.second_label, cfg.merge.contain
         )
         _sync(dev)
         t1 = time.perf_counter()
@@ -189,18 +189,16 @@ def modules(args) -> dict | None:
             gm.means,
             gm.labels,
             gm.confidences,
-            tau_low=cfg.tau_low,
-            tau_high=cfg.tau_high,
-            r_search=cfg.r_search,
-            cluster_radius=cfg.refine_cluster_radius,
-            graph_k=cfg.refine_graph_k,
+            tau_low=cfg.refine.tau_low,
+            tau_high=cfg.refine.tau_high,
+            r_search=cfg.refine.r_search,
+            cluster_radius=cfg.refine.cluster_radius,
+            graph_k=cfg.refine.graph_k,
         )
         _sync(dev)
         t2 = time.perf_counter()
         entry = MemoryEntry(0, rgb, depth, K, np.eye(4), seg, frame.segment_scores)
-        longterm_view_update(
-            gm, entry, k=cfg.longterm_knn_k, radius=cfg.knn_radius, pixel_step=cfg.longterm_pixel_step
-        )
+        longterm_view_update(gm, entry, cfg.longterm, cfg.association.knn_radius)
         _sync(dev)
         t3 = time.perf_counter()
         if rep:

@@ -13,7 +13,7 @@ Stages: ``local`` (its time includes ``merge``, shown apart but not added twice)
 on a shared machine it moves less than wall time; wall time is printed beside it.
 
     python benchmarks/semantic_growth.py RUN_DIR [RUN_DIR ...]          # runs mapped already (full row)
-    python benchmarks/semantic_growth.py --seeds 0-2 --device cpu --set mapping.opt_iters=1 --out growth
+    python benchmarks/semantic_growth.py --seeds 0-2 --device cpu --set mapping.optimize.iters=1 --out growth
 """
 
 from __future__ import annotations

@@ -3,12 +3,12 @@
 Layout: results/frame*.jpg, results/depth*.png, traj.txt.
 
     python examples/replica.py /path/to/room0 [--segments DIR] [--out runs/replica] [--device cuda]
-        [--max-frames N] [--set mapping.opt_iters=5 ...]
+        [--max-frames N] [--set mapping.optimize.iters=5 ...]
 
 Precomputed SAM segments are used when --segments is given (or when the scene has a segments/ folder);
 otherwise the weight-free classical segmenter runs on each keyframe. On the shared 20-frame room0 sample:
     python examples/replica.py ../shared/data/replica_room0_nice_slam/room0 --device cpu \
-        --set mapping.pixels_per_gaussian=64 --set mapping.opt_iters=2
+        --set mapping.init.pixels_per_gaussian=64 --set mapping.optimize.iters=2
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Generate a synthetic scene (simulated SAM noise), map it with each ablation and print the 3D mIoU table.
 
     python examples/synthetic.py [--out runs/synthetic] [--frames 60] [--noise default] [--device cpu]
-        [--ablations naive,local,local+global,full] [--set mapping.opt_iters=3 ...]
+        [--ablations naive,local,local+global,full] [--set mapping.optimize.iters=3 ...]
 
 The four rows are the paper's ablation (Tab. "Ablation study") plus the naive baseline: 3D semantic
 segmentation scored with the HOV-SG protocol on the scene's ground-truth surface points that some frame

@@ -31,8 +31,8 @@ TINY = [
     "synthetic.width=64",
     "synthetic.height=48",
     "mapping.keyframe_every=2",
-    "mapping.opt_iters=1",
-    "mapping.opt_memory_frames=1",
+    "mapping.optimize.iters=1",
+    "mapping.optimize.memory_frames=1",
     "graph.enabled=false",
 ]
 
@@ -58,15 +58,16 @@ def test_yaml_scenes_file(tmp_path: Path) -> None:
     f.write_text(
         "scenes:\n"
         "  - synthetic:1\n"
-        "  - {path: rooms/a, name: kitchen, gt: gt/a.ply, segments: seg/a, set: [mapping.tau_p=0.2]}\n"
-        "  - {synthetic: 2, set: {mapping: {opt_iters: 4}, graph: {enabled: false}}}\n"
+        "  - {path: rooms/a, name: kitchen, gt: gt/a.ply, segments: seg/a, "
+        "set: [mapping.association.tau_p=0.2]}\n"
+        "  - {synthetic: 2, set: {mapping: {optimize: {iters: 4}}, graph: {enabled: false}}}\n"
     )
     s1, s2, s3 = read_scenes_file(f)
     assert (s1.name, s1.synthetic_seed) == ("synthetic_1", 1)
     assert s2.name == "kitchen" and s2.data == str(tmp_path / "rooms" / "a")
     assert s2.gt == str(tmp_path / "gt" / "a.ply") and s2.segments == str(tmp_path / "seg" / "a")
-    assert s2.overrides == ("mapping.tau_p=0.2",)
-    assert set(s3.overrides) == {"mapping.opt_iters=4", "graph.enabled=false"}
+    assert s2.overrides == ("mapping.association.tau_p=0.2",)
+    assert set(s3.overrides) == {"mapping.optimize.iters=4", "graph.enabled=false"}
 
 
 @pytest.mark.parametrize(
@@ -320,4 +321,4 @@ def test_a_bad_frame_keeps_the_scenes_map_so_far(tmp_path: Path, tiny_scene: Pat
     import yaml
 
     saved = yaml.safe_load((run / "config.yaml").read_text())
-    assert saved["data"]["path"] == str(scene.resolve()) and saved["mapping"]["opt_iters"] == 1
+    assert saved["data"]["path"] == str(scene.resolve()) and saved["mapping"]["optimize"]["iters"] == 1

@@ -88,12 +88,13 @@ def test_config_yaml_lists_every_key_and_loads_back(tmp_path, capsys):
 
 
 def test_config_prefix_table_and_values(capsys):
-    assert cli.main(["config", "mapping.tau_", "--format", "table", "--set", "mapping.tau_p=0.2"]) == 0
+    args = ["config", "mapping.association.tau_", "--format", "table"]
+    args += ["--set", "mapping.association.tau_p=0.2"]
+    assert cli.main(args) == 0
     lines = capsys.readouterr().out.splitlines()
     keys = [ln.split()[0] for ln in lines[1:] if ln and not ln.startswith(" ")]
-    assert keys == ["mapping.tau_valid", "mapping.tau_p", "mapping.tau_high", "mapping.tau_low",
-                    "mapping.tau_long"]  # fmt: skip
-    tau_p = next(ln for ln in lines if ln.startswith("mapping.tau_p "))
+    assert keys == ["mapping.association.tau_valid", "mapping.association.tau_p"]
+    tau_p = next(ln for ln in lines if ln.startswith("mapping.association.tau_p "))
     assert tau_p.split()[1] == "0.2" and "in [0, 1]" in tau_p
     assert cli.main(["config", "mapping.nope"]) == 2
     assert "no config key starts with 'mapping.nope'" in capsys.readouterr().err

@@ -94,3 +94,75 @@ def test_every_moved_key_lands_on_a_setting():
 
     keys = {s.key for s in settings(Config)}
     assert MOVED and set(MOVED.values()) <= keys and not set(MOVED) & keys
+
+
+OLD_MAPPING_YAML = """
+mapping:
+  keyframe_every: 2
+  pixels_per_gaussian: 9
+  knn_radius: 0.03
+  opt_iters: 3
+  merge_duplicates: false
+  refine_every: 4
+  longterm_views: 2
+  evidence: false
+  evidence_cell: 0.08
+"""
+
+
+def test_an_old_yaml_loads_its_flat_mapping_keys_into_their_sections_with_one_notice(tmp_path, caplog):
+    p = tmp_path / "old.yaml"
+    p.write_text(OLD_MAPPING_YAML)
+    with caplog.at_level(logging.INFO, logger="ogscene3d.config"):
+        cfg = load_config(p)
+    m = cfg.mapping
+    assert (m.keyframe_every, m.init.pixels_per_gaussian, m.association.knn_radius, m.optimize.iters) == (
+        2, 9, 0.03, 3
+    )  # fmt: skip
+    assert not m.merge.enabled and m.refine.every == 4 and m.longterm.views == 2
+    assert not m.evidence.enabled and m.evidence.cell == 0.08  # the old switch is the section's enabled
+    (notice,) = _moved_notices(caplog)
+    assert "mapping.{pixels_per_gaussian,knn_radius," in notice and "opt_iters" in notice
+    assert "mapping.init" in notice and "mapping.optimize" in notice and "mapping.evidence" in notice
+    caplog.clear()
+    save_config(cfg, tmp_path / "new.yaml")
+    with caplog.at_level(logging.INFO, logger="ogscene3d.config"):
+        assert load_config(tmp_path / "new.yaml") == cfg
+    assert not _moved_notices(caplog) and "opt_iters" not in (tmp_path / "new.yaml").read_text()
+
+
+def test_old_mapping_overrides_keep_working_and_the_new_key_wins():
+    cfg = load_config(None, ["mapping.opt_iters=2", "mapping.tau_low=0.2", "mapping.merge_novel=false"])
+    assert cfg.mapping.optimize.iters == 2 and cfg.mapping.refine.tau_low == 0.2
+    assert not cfg.mapping.merge.novel
+    cfg = load_config(None, ["mapping.opt_iters=2", "mapping.optimize.iters=5"])
+    assert cfg.mapping.optimize.iters == 5
+    # the old rule across two settings now names the new keys
+    with pytest.raises(ConfigError, match=r"mapping\.refine\.tau_low must be <= mapping\.refine\.tau_high"):
+        load_config(None, ["mapping.tau_low=0.8"])
+
+
+def test_the_old_evidence_switch_over_a_file_with_an_evidence_section(tmp_path):
+    p = tmp_path / "new.yaml"
+    p.write_text("mapping:\n  evidence:\n    cell: 0.08\n")
+    cfg = load_config(p, ["mapping.evidence=false"])
+    assert not cfg.mapping.evidence.enabled and cfg.mapping.evidence.cell == 0.08  # merged, not replaced
+    assert load_config(p, ["mapping.evidence.enabled=false"]) == cfg
+    p.write_text("mapping:\n  evidence: false\n")
+    cfg = load_config(p, ["mapping.evidence.cell=0.08"])
+    assert not cfg.mapping.evidence.enabled and cfg.mapping.evidence.cell == 0.08
+
+
+def test_every_flat_mapping_key_of_the_old_layout_has_moved():
+    """Each leaf of MappingConfig before the sections (the run folder of 03e44a8 holds them all) is a
+    setting today, or moved, or retired."""
+    import yaml
+
+    from ogscene3d.config import RETIRED, settings
+
+    old = yaml.safe_load((RUN_FOLDER / "config.yaml").read_text())["mapping"]
+    keys = {s.key for s in settings(Config)}
+    for name in old:
+        key = f"mapping.{name}"
+        assert key in keys or key in MOVED or key in RETIRED, key
+    assert sum(f"mapping.{n}" in MOVED for n in old) == 47  # all but the 8 left at the top and the retired

@@ -138,17 +138,17 @@ def test_each_bound_is_enforced(key):
 
 
 def test_messages_name_key_value_and_range():
-    with pytest.raises(ConfigError, match=r"^mapping\.tau_high must be in \[0, 1\], got 2\.0$"):
-        check_config(_with("mapping.tau_high", 2.0))
-    with pytest.raises(ConfigError, match=r"mapping\.tau_high must be in \[0, 1\], got nan"):
-        load_config(None, ["mapping.tau_high=.nan"])
-    with pytest.raises(ConfigError, match=r"mapping\.opt_iters must be an integer >= 0 .*got -3"):
-        load_config(None, ["mapping.opt_iters=-3"])
-    with pytest.raises(ConfigError, match=r"mapping\.init_opacity must be in \(0, 1\)"):
-        load_config(None, ["mapping.init_opacity=1"])
+    with pytest.raises(ConfigError, match=r"^mapping\.refine\.tau_high must be in \[0, 1\], got 2\.0$"):
+        check_config(_with("mapping.refine.tau_high", 2.0))
+    with pytest.raises(ConfigError, match=r"mapping\.refine\.tau_high must be in \[0, 1\], got nan"):
+        load_config(None, ["mapping.refine.tau_high=.nan"])
+    with pytest.raises(ConfigError, match=r"mapping\.optimize\.iters must be an integer >= 0 .*got -3"):
+        load_config(None, ["mapping.optimize.iters=-3"])
+    with pytest.raises(ConfigError, match=r"mapping\.init\.opacity must be in \(0, 1\)"):
+        load_config(None, ["mapping.init.opacity=1"])
     # 0 = off / no limit stays allowed
     zeros = ["mapping.checkpoint_every", "data.max_depth", "tracking.max_width", "mapping.max_pose_step",
-             "mapping.opt_iters", "mapping.refine_every", "mapping.opt_memory_frames"]  # fmt: skip
+             "mapping.optimize.iters", "mapping.refine.every", "mapping.optimize.memory_frames"]  # fmt: skip
     load_config(None, [f"{key}=0" for key in zeros])
 
 
@@ -188,9 +188,9 @@ def test_list_settings_pass_when_sensible():
 
 
 def test_cross_field_rules():
-    with pytest.raises(ConfigError, match=r"mapping\.tau_low must be <= mapping\.tau_high"):
-        load_config(None, ["mapping.tau_low=0.8"])
-    load_config(None, ["mapping.tau_low=0.7"])
+    with pytest.raises(ConfigError, match=r"mapping\.refine\.tau_low must be <= mapping\.refine\.tau_high"):
+        load_config(None, ["mapping.refine.tau_low=0.8"])
+    load_config(None, ["mapping.refine.tau_low=0.7"])
     with pytest.raises(ConfigError, match="no frame would become a keyframe"):
         load_config(None, ["mapping.keyframe_every=0"])
     load_config(None, ["mapping.keyframe_every=0", "mapping.keyframe_rotation_deg=5"])
@@ -207,22 +207,23 @@ def test_mapper_checks_a_config_built_in_python():
     cfg = Config()
     cfg.graph.enabled = False
     bad = copy.deepcopy(cfg)
-    bad.mapping.tau_high = 2.0
-    with pytest.raises(ConfigError, match=r"mapping\.tau_high must be in \[0, 1\], got 2\.0"):
+    bad.mapping.refine.tau_high = 2.0
+    with pytest.raises(ConfigError, match=r"mapping\.refine\.tau_high must be in \[0, 1\], got 2\.0"):
         Mapper(bad, "cpu")
     bad = copy.deepcopy(cfg)
-    bad.mapping.knn_radius = 0.0
-    with pytest.raises(ConfigError, match=r"mapping\.knn_radius must be a finite number > 0, got 0\.0"):
+    bad.mapping.association.knn_radius = 0.0
+    match = r"mapping\.association\.knn_radius must be a finite number > 0, got 0\.0"
+    with pytest.raises(ConfigError, match=match):
         Mapper(bad, "cpu")
     Mapper(cfg, "cpu")
 
 
 def test_cli_refuses_an_out_of_range_override_before_any_work(tmp_path, capsys):
     out = tmp_path / "o"
-    code = main(["run", "--out", str(out), "--no-progress", "--set", "mapping.opt_iters=-3"])
+    code = main(["run", "--out", str(out), "--no-progress", "--set", "mapping.optimize.iters=-3"])
     assert code == 2
     err = capsys.readouterr().err
-    assert "mapping.opt_iters must be an integer >= 0" in err and "got -3" in err
+    assert "mapping.optimize.iters must be an integer >= 0" in err and "got -3" in err
     assert not out.exists()
 
 
@@ -304,3 +305,17 @@ def test_a_retired_key_in_an_older_runs_config_is_dropped_not_refused(tmp_path):
     assert not hasattr(cfg.graph.captioner, "backoff_s")
     with pytest.raises(ConfigError, match="unknown config key"):
         load_config(None, ["graph.captioner.no_such_key=1"])
+
+
+def test_the_retired_evidence_rules_of_an_older_run_load_with_a_notice(tmp_path, caplog):
+    # the repair rules that mapping.evidence.enabled replaced (issue 39): an older run's config.yaml
+    # holds them
+    old = tmp_path / "config.yaml"
+    old.write_text(
+        "mapping:\n  evidence_split: true\n  evidence_partition_apart: 0.25\n  evidence_veto: false\n"
+    )
+    with caplog.at_level("INFO", logger="ogscene3d.config"):
+        cfg = load_config(old)
+    assert cfg.mapping.evidence.enabled and not hasattr(cfg.mapping, "evidence_split")
+    notes = [r.getMessage() for r in caplog.records if "no longer used" in r.getMessage()]
+    assert len(notes) == 3 and all("mapping.evidence, one evidence model" in n for n in notes)

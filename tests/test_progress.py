@@ -96,7 +96,7 @@ def test_the_first_keyframe_gives_the_runs_estimate_and_on_a_cpu_what_to_change(
     # the largest scale in steps of 0.05 that fits 10 minutes (0.086 here), but not below 0.25
     assert "map on a GPU (--device cuda)" in text
     assert "--set data.scale=0.25 (16x fewer pixels: about 50 min)" in text
-    assert "--set mapping.opt_iters=3" in text
+    assert "--set mapping.optimize.iters=3" in text
 
 
 def test_a_short_or_gpu_run_is_only_told_its_estimate(caplog):

@@ -39,7 +39,7 @@ def test_a_file_that_exists_wins_over_a_shipped_name(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     Path("replica").write_text("mapping:\n  opt_iters: 7\n")
     assert resolve_config_path("replica") == Path("replica")
-    assert load_config("replica").mapping.opt_iters == 7
+    assert load_config("replica").mapping.optimize.iters == 7
 
 
 def test_an_unknown_name_or_a_missing_path_names_the_shipped_configs(tmp_path, monkeypatch):
@@ -97,7 +97,7 @@ def test_the_wheel_ships_the_configs_and_load_config_finds_them_by_name(tmp_path
         f"assert ogscene3d.__file__.startswith({str(site)!r}), ogscene3d.__file__\n"
         "files = s.shipped_configs()\n"
         f"assert all(str(p).startswith({str(site)!r}) for p in files.values()), files\n"
-        "print(sorted(files), load_config('replica').mapping.pixels_per_gaussian)\n"
+        "print(sorted(files), load_config('replica').mapping.init.pixels_per_gaussian)\n"
     )
     env = {**os.environ, "PYTHONPATH": str(site)}
     run_dir = tmp_path / "elsewhere"
@@ -106,6 +106,6 @@ def test_the_wheel_ships_the_configs_and_load_config_finds_them_by_name(tmp_path
         [sys.executable, "-c", probe], cwd=run_dir, env=env, capture_output=True, text=True, timeout=300
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    expected = load_config(ROOT / "configs" / "replica.yaml").mapping.pixels_per_gaussian
+    expected = load_config(ROOT / "configs" / "replica.yaml").mapping.init.pixels_per_gaussian
     assert proc.stdout.strip().endswith(str(expected)), proc.stdout
     assert all(c.removesuffix(".yaml") in proc.stdout for c in CONFIGS)

@@ -139,7 +139,7 @@ def test_frames_without_poses_leave_the_choice_to_the_mapper(tmp_path, caplog):
     for p in (root / "pose").iterdir():
         p.unlink()
     assert _chosen(root, caplog) == "auto"
-    cfg = load_config(None, ["graph.init_keyframes=1", "graph.min_gaussians=5", "mapping.opt_iters=0"])
+    cfg = load_config(None, ["graph.init_keyframes=1", "graph.min_gaussians=5", "mapping.optimize.iters=0"])
     m = Mapper(cfg, "cpu")
     turned = _turn("x", -20.0)  # the tracked world: pitched 20 degrees, as a first camera looking down
     depth = np.full((24, 32), 2.0, np.float32)
@@ -174,8 +174,9 @@ def test_a_scene_maps_with_the_right_vertical_without_flags(tmp_path, z_up_frame
     root = write_layout(layout, tmp_path / layout, z_up_frames)
     out = tmp_path / "run"
     extra = ["--set", f"data.intrinsics={tum_intrinsics(z_up_frames)}"] if layout == "tum" else []
-    budget = ["mapping.keyframe_every=2", "mapping.opt_iters=1", "mapping.ablation=local",
-              "mapping.knn_radius=0.03", "graph.init_keyframes=4", "graph.update_every=4"]  # fmt: skip
+    budget = ["mapping.keyframe_every=2", "mapping.optimize.iters=1", "mapping.ablation=local",
+              "mapping.association.knn_radius=0.03",
+              "graph.init_keyframes=4", "graph.update_every=4"]  # fmt: skip
     args = ["run", "--data", str(root), "--segments", str(root / "segments"), "--out", str(out), "--device",
             "cpu", "--no-progress", *[a for s in budget for a in ("--set", s)], *extra]  # fmt: skip
     with caplog.at_level(logging.INFO):
@@ -196,7 +197,7 @@ def test_a_scene_maps_with_the_right_vertical_without_flags(tmp_path, z_up_frame
 def test_a_tracked_run_on_a_format_without_poses_chooses_from_its_cameras(tmp_path, z_up_frames):
     """A synthetic scene mapped through the Python API (no open_frames): auto is chosen at the first graph
     update from the frames' cameras, z here."""
-    cfg = load_config(None, ["graph.init_keyframes=8", "mapping.opt_iters=0", "graph.min_gaussians=5"])
+    cfg = load_config(None, ["graph.init_keyframes=8", "mapping.optimize.iters=0", "graph.min_gaussians=5"])
     m = Mapper(cfg, "cpu")
     f = z_up_frames
     for i in range(8):

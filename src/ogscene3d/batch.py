@@ -135,7 +135,8 @@ def parse_scene_entry(entry: Any, base: Path, where: str) -> dict[str, Any]:
             out[key] = _abs(entry[key], base, f"{where}.{key}")
     sets = entry.get("set") or []
     if isinstance(sets, dict):
-        # a nested mapping reads naturally in YAML: {mapping: {opt_iters: 2}} -> mapping.opt_iters=2
+        # a nested mapping reads naturally in YAML: {mapping: {optimize: {iters: 2}}} ->
+        # mapping.optimize.iters=2
         sets = [f"{k}={json.dumps(v)}" for k, v in _flatten(sets).items()]
     if not isinstance(sets, list) or not all(isinstance(s, str) and "=" in s for s in sets):
         raise ConfigError(f"{where}.set: expected a list of key=value strings or a mapping, got {sets!r}")

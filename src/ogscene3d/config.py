@@ -376,41 +376,28 @@ class SegmentationConfig:
 
 
 @dataclass
-class MappingConfig:
-    ablation: Literal["naive", "local", "local+global", "full"] = setting(
-        "full",
-        "which stages run: naive | local (+ local 3D optimisation) | local+global (+ global refinement) "
-        "| full (+ long-term optimisation)",
-    )
-    keyframe_every: int = setting(
-        1, "every n-th frame is a keyframe", _int(0, note="0 = by camera motion only")
-    )
-    keyframe_translation: float = setting(
-        0.0,
-        "metres of camera motion since the last keyframe that make a keyframe",
-        _float(0.0, note="0 = unused"),
-    )
-    keyframe_rotation_deg: float = setting(
-        0.0,
-        "degrees of camera rotation since the last keyframe that make a keyframe",
-        _float(0.0, note="0 = unused"),
-    )
-    max_pose_step: float = setting(
-        0.5,
-        "pose-jump check (mapping/pose_jump.py): the most a camera may move between two consecutive "
-        "frames of the folder in metres, times data.stride and the selected frames since the last "
-        "accepted one; about twice the largest steps of the sample data (docs/results.md)",
-        _float(0.0, note="0 = no limit"),
-    )
-    max_pose_step_deg: float = setting(
-        30.0,
-        "pose-jump check: the most a camera may turn between consecutive frames, degrees",
-        _float(0.0, note="0 = no limit"),
-    )
-    on_pose_jump: Literal["warn", "skip", "error"] = setting(
-        "warn", "a pose jump: warn (map it anyway) | skip (leave the frame out) | error (stop, map saved)"
-    )
+class InitConfig:
+    """New Gaussians from a keyframe's unexplained pixels (mapping/init.py; Sec. III-B.2)."""
+
     pixels_per_gaussian: int = setting(4, "subsampling of back-projected pixels per segment", _int(1))
+    opacity: float = setting(
+        0.9, "opacity of newly added Gaussians", _float(0.0, 1.0, lo_open=True, hi_open=True)
+    )
+    dense_below: int = setting(
+        16,
+        "a segment with fewer grid probes than this gets a probe at every pixel (a book, a light switch: "
+        "a few Gaussians could not be told from what surrounds them in later views); the paper takes every "
+        "pixel",
+        _int(0, note="0 = off"),
+    )
+    alpha_thresh: float = setting(0.5, "rendered alpha below this: unexplained pixel -> new Gaussian", _UNIT)
+    depth_margin: float = setting(0.1, "metres; depth this far before the render -> new Gaussian", _NONNEG)
+
+
+@dataclass
+class AssociationConfig:
+    """Local 3D optimisation: KNN association of a keyframe's segments with the map, Eq. 5 (local.py)."""
+
     knn_k: int = setting(
         1,
         "neighbours per probe in the association (the paper gives no k). Each probe votes once, for its "
@@ -420,15 +407,15 @@ class MappingConfig:
         _int(1),
     )
     knn_radius: float = setting(0.05, "metres; a probe's neighbours lie within this distance", _POS)
-    novel_before_ambiguous: bool = setting(
-        True,
-        "case (iii) before case (i): a segment that hardly overlaps the labelled map (p < tau_p) is novel "
-        "whatever its few border matches give r; false = the paper's order (see mapping/local.py)",
-    )
     knn_radius_spacing: float = setting(
         0.0,
         "> 0: per-probe KNN radius max(knn_radius, this x probe grid spacing)",
         _float(0.0, note="0 = off"),
+    )
+    novel_before_ambiguous: bool = setting(
+        True,
+        "case (iii) before case (i): a segment that hardly overlaps the labelled map (p < tau_p) is novel "
+        "whatever its few border matches give r; false = the paper's order (see mapping/local.py)",
     )
     eq5_skip_edges: bool = setting(
         False,
@@ -441,23 +428,42 @@ class MappingConfig:
         0.25, "paper tau_valid: label ratio r(m) at or above which a segment is ambiguous", _UNIT
     )
     tau_p: float = setting(0.15, "paper tau_p: overlap p(m) below which a segment is a new object", _UNIT)
-    tau_high: float = setting(
-        0.7, "paper tau_high: confidence above which a Gaussian's label is reliable", _UNIT
+    fill_unlabeled: bool = setting(True, "unlabelled Gaussians under a labelled segment take its label")
+
+
+@dataclass
+class MergeConfig:
+    """Merging duplicate scene labels, beyond the paper (mapping/merge.py)."""
+
+    enabled: bool = setting(
+        True,
+        "an ambiguous segment that contains two labels' whole visible extent (>= contain each) with SAM "
+        "score >= min_score merges them (one object, two labels)",
     )
-    tau_low: float = setting(0.3, "paper tau_low: confidence below which a label is refined", _UNIT)
-    r_search: float = setting(
-        0.1, "paper r_search: metres searched for a reliable neighbour in refinement", _POS
+    contain: float = setting(0.8, "share of each label's visible extent the segment must contain", _UNIT)
+    min_score: float = setting(0.95, "SAM score a merging segment needs at least", _UNIT)
+    min_part: float = setting(
+        0.1,
+        "share of a merging segment's mapped Gaussians that each of the two labels must hold (less: a detail "
+        "the mask took in, not half of one object)",
+        _UNIT,
     )
-    tau_long: float = setting(
-        0.5, "paper tau_long: viewpoint-distinctiveness and overlap threshold of the long-term memory", _UNIT
+    novel: bool = setting(
+        True,
+        "duplicate merging also judges a confident would-be novel segment (p < tau_p): over two mapped "
+        "labels (r >= tau_valid) it may merge them (a surface cut in an earlier view, seen further); "
+        "holding the whole visible extent of its most matched label, it takes that label",
     )
-    refine_every: int = setting(6, "keyframes between global refinements", _int(0, note="0 = off"))
-    longterm_every: int = setting(6, "keyframes between long-term optimisations", _int(0, note="0 = off"))
-    longterm_views: int = setting(4, "memory views used per long-term optimisation", _int(1))
-    opt_iters: int = setting(
+
+
+@dataclass
+class OptimizeConfig:
+    """Geometry / appearance optimisation per keyframe and pruning (mapping/optimize.py)."""
+
+    iters: int = setting(
         10, "geometry / appearance optimisation steps per keyframe", _int(0, note="0 = no optimisation")
     )
-    opt_memory_frames: int = setting(2, "memory frames optimised together with each keyframe", _int(0))
+    memory_frames: int = setting(2, "memory frames optimised together with each keyframe", _int(0))
     lr_means: float = setting(
         0.0001,
         "metres per Adam step (the paper gives none; SplaTAM's value). Adam moves every visible centre by "
@@ -482,171 +488,152 @@ class MappingConfig:
         _float(0.0, 1.0, hi_open=True, note="1 would prune every Gaussian"),
     )
     prune_scale: float = setting(0.5, "metres; Gaussians larger are pruned", _float(0.0, note="0 = off"))
-    checkpoint_every: int = setting(0, "keyframes between checkpoints", _int(0, note="0 = only at the end"))
-    init_opacity: float = setting(
-        0.9, "opacity of newly added Gaussians", _float(0.0, 1.0, lo_open=True, hi_open=True)
+
+
+@dataclass
+class LongtermConfig:
+    """The long-term memory and its Eq. 16 update (mapping/longterm.py; Sec. III-C)."""
+
+    tau_long: float = setting(
+        0.5, "paper tau_long: viewpoint-distinctiveness and overlap threshold of the long-term memory", _UNIT
     )
-    init_dense_below: int = setting(
-        16,
-        "a segment with fewer grid probes than this gets a probe at every pixel (a book, a light switch: "
-        "a few Gaussians could not be told from what surrounds them in later views); the paper takes every "
-        "pixel",
-        _int(0, note="0 = off"),
-    )
-    init_alpha_thresh: float = setting(
-        0.5, "a pixel rendered with less alpha is unexplained -> new Gaussian", _UNIT
-    )
-    init_depth_margin: float = setting(
-        0.1, "metres; observed depth this far in front of the render -> new Gaussian", _NONNEG
-    )
-    refine_cluster_radius: float = setting(0.3, "metres; search radius of the cluster-level refinement", _POS)
-    refine_graph_k: int = setting(
-        8, "same-label neighbours linked per Gaussian when building clusters", _int(1)
-    )
+    every: int = setting(6, "keyframes between long-term optimisations", _int(0, note="0 = off"))
+    views: int = setting(4, "memory views used per long-term optimisation", _int(1))
     memory_max: int = setting(64, "long-term memory buffer capacity (frames)", _int(1))
     memory_point_step: int = setting(
         4, "pixel grid step of the memory point clouds (overlap criterion)", _int(1)
     )
-    longterm_pixel_step: int = setting(
-        2, "pixel grid step of the long-term pixel-to-Gaussian association", _int(1)
-    )
-    longterm_knn_k: int = setting(
+    pixel_step: int = setting(2, "pixel grid step of the long-term pixel-to-Gaussian association", _int(1))
+    knn_k: int = setting(
         5, "Gaussians associated with each back-projected memory pixel (within knn_radius)", _int(1)
     )
-    longterm_skip_edges: bool = setting(
-        True, "long-term: leave out pixels on segment / rendered-label boundaries"
-    )
-    longterm_same_class: bool = setting(
+    skip_edges: bool = setting(True, "long-term: leave out pixels on segment / rendered-label boundaries")
+    same_class: bool = setting(
         True,
         "beyond the paper (which takes a pixel's nearest Gaussians, whatever their label): a memory pixel is "
         "associated only with Gaussians of the label rendered there, the ones that can have produced it "
         "(near a boundary the nearest include the neighbouring object's). Measured effect: "
         "docs/deviations.md",
     )
-    fill_unlabeled: bool = setting(True, "unlabelled Gaussians under a labelled segment take its label")
-    refine_unlabeled: bool = setting(
-        False, "individual refinement also labels unlabelled Gaussians (confidence 0)"
+
+
+@dataclass
+class RefineConfig:
+    """Global 3D refinement, Algorithm 1 (mapping/refine.py; Sec. III-B.2)."""
+
+    tau_high: float = setting(
+        0.7, "paper tau_high: confidence above which a Gaussian's label is reliable", _UNIT
     )
-    merge_duplicates: bool = setting(
-        True,
-        "beyond the paper (mapping/merge.py): an ambiguous segment that contains two labels' whole visible "
-        "extent (>= merge_contain each) with SAM score >= merge_min_score merges them (one object, two "
-        "labels)",
+    tau_low: float = setting(0.3, "paper tau_low: confidence below which a label is refined", _UNIT)
+    r_search: float = setting(
+        0.1, "paper r_search: metres searched for a reliable neighbour in refinement", _POS
     )
-    merge_contain: float = setting(
-        0.8, "share of each label's visible extent the segment must contain", _UNIT
-    )
-    merge_min_score: float = setting(0.95, "SAM score a merging segment needs at least", _UNIT)
-    merge_min_part: float = setting(
-        0.1,
-        "share of a merging segment's mapped Gaussians that each of the two labels must hold (less: a detail "
-        "the mask took in, not half of one object)",
-        _UNIT,
-    )
-    merge_novel: bool = setting(
-        True,
-        "duplicate merging also judges a confident would-be novel segment (p < tau_p): over two mapped "
-        "labels (r >= tau_valid) it may merge them (a surface cut in an earlier view, seen further); "
-        "holding the whole visible extent of its most matched label, it takes that label",
-    )
-    # multi-view co-segmentation evidence (mapping/evidence.py), beyond the paper; evidence_split,
-    # evidence_wrong, evidence_partition, evidence_merge, evidence_protect and evidence_veto all false = the
-    # paper's long-term step and Algorithm 1 (with the extensions above). docs/consistency.md has each rule's
-    # measured effect.
-    evidence_split: bool = setting(
-        True,
-        "refinement splits parts that most views show apart from their label off as new labels; long-term "
-        "lowers their confidence",
-    )
-    evidence_wrong: bool = setting(
-        True,
-        "long-term lowers the confidence of Gaussians that most views showed inside another label's segment, "
-        "away from their own label's main segment; the refinement may relabel them though their label is "
-        "protected",
-    )
-    evidence_wrong_views: int = setting(
-        2,
-        "judged views a Gaussian needs before evidence_wrong decides (fewer than evidence_min_views: a label "
-        "that ran over is seen apart from its neighbour's segment from the first view that shows both)",
-        _int(1),
-    )
-    evidence_split_conf: float = setting(
-        1.0,
-        "confidence under which a part with split evidence is split (1 = any: the views decide; tau_low = "
-        "only once the long-term step has lowered it)",
-        _float(0.0, 1.0, lo_open=True),
-    )
-    evidence_partition: bool = setting(
-        True,
-        "long-term lowers, and refinement gives a new label to, each group of a label's spatial components "
-        "that the views keep in another segment than the label's largest group (a chair that a first view "
-        "merged with the floor)",
-    )
-    evidence_partition_apart: float = setting(
-        0.25,
-        "share of the common views under which a group of components is apart from its label's largest group",
-        _float(0.0, 1.0, lo_open=True),
-    )
-    evidence_partition_conf: float = setting(
-        0.3,
-        "mean confidence under which a group that evidence_partition finds is split off (tau_low's 0.3: once "
-        "the long-term step, which lowers such groups, has brought it low; 1 = any: the views decide)",
-        _float(0.0, 1.0, lo_open=True),
-    )
-    evidence_partition_min: int = setting(
-        2, "Gaussians a spatial component needs to be judged by evidence_partition", _int(1)
-    )
-    evidence_revisit: bool = setting(
-        True,
-        "the long-term step adds its memory views' evidence again, judged against the map as it is then",
-    )
-    evidence_merge: bool = setting(True, "refinement merges labels that nearly all views show in one segment")
-    evidence_protect: bool = setting(
-        True,
-        "Algorithm 1 leaves alone the labels that owned a segment in evidence_protect_views views, and "
-        "those not yet judged in evidence_min_views",
-    )
-    evidence_protect_views: int = setting(
-        1, "views in which a label must own (nearly fill) a segment to be protected", _int(1)
-    )
-    evidence_min_views: int = setting(
-        3, "views a Gaussian or a label pair needs before the evidence decides on it", _int(1)
-    )
-    evidence_quick_split: bool = setting(
-        True,
-        "a Gaussian judged in fewer than evidence_min_views views is split when all of them showed it apart "
-        "and there were two, or one was a segment scored evidence_confident_score or more",
-    )
-    evidence_quick_merge: bool = setting(
-        True,
-        "two labels judged together in fewer than evidence_min_views views are merged when every one of them "
-        "held both in one segment, each at least merge_min_part of it, and there were two such views, or one "
-        "was a segment scored evidence_confident_score or more",
-    )
-    evidence_confident_score: float = setting(
-        0.95, "SAM score of a segment whose one view is enough for a quick split", _UNIT
-    )
-    evidence_split_ratio: float = setting(
-        0.5,
-        "share of views showing a Gaussian as a separate part that marks it",
-        _float(0.0, 1.0, lo_open=True),
-    )
-    evidence_merge_ratio: float = setting(
-        0.9, "share of one-segment views that merges two labels", _float(0.0, 1.0, lo_open=True)
-    )
-    evidence_min_group: int = setting(
-        3, "Gaussians a separate part needs (per view, and to be split off)", _int(1)
-    )
-    evidence_veto: bool = setting(
-        False, "undo Algorithm 1 relabellings between labels that most views show apart"
-    )
-    evidence_apart_ratio: float = setting(
-        0.3, "labels seen in one segment in fewer than this share of their views are apart", _UNIT
-    )
+    every: int = setting(6, "keyframes between global refinements", _int(0, note="0 = off"))
+    cluster_radius: float = setting(0.3, "metres; search radius of the cluster-level refinement", _POS)
+    graph_k: int = setting(8, "same-label neighbours linked per Gaussian when building clusters", _int(1))
+    unlabeled: bool = setting(False, "individual refinement also labels unlabelled Gaussians (confidence 0)")
 
     def cross_check(self) -> str | None:
         if not self.tau_low <= self.tau_high:
-            return f"mapping.tau_low must be <= mapping.tau_high, got {self.tau_low!r} > {self.tau_high!r}"
+            return (
+                f"mapping.refine.tau_low must be <= mapping.refine.tau_high, got {self.tau_low!r} > "
+                f"{self.tau_high!r}"
+            )
+        return None
+
+
+@dataclass
+class EvidenceConfig:
+    """The views' co-segmentation evidence, beyond the paper (mapping/evidence.py, docs/consistency.md)."""
+
+    # enabled: false = the paper's long-term step and Algorithm 1 (with the extensions of the other
+    # sections). docs/consistency.md has the model and each threshold's measured effect.
+    enabled: bool = setting(
+        True,
+        "the views' co-segmentation evidence decides merges and splits of labels at the global refinement, "
+        "guards Algorithm 1 against relabelling across a clear separation, and lowers disputed Gaussians in "
+        "the long-term step; false = the paper's refinement and long-term step",
+    )
+    cell: float = setting(
+        0.05, "metres; the voxel size of the evidence's cells (a part's Gaussians in one voxel)", _POS
+    )
+    separation: float = setting(
+        0.5,
+        "two groups of parts merge only when the views separated them in at most this share of the views "
+        "that held them firmly together (and never, when no view held them firmly together)",
+        _NONNEG,
+    )
+    split_ratio: float = setting(
+        0.5,
+        "a group of a part's cells becomes a part of its own when this share of its views across the cut "
+        "put it apart from the rest of the part (a group at most a fifth of its part: when about two views "
+        "did, however many absorbed it)",
+        _float(0.0, 1.0, lo_open=True),
+    )
+    dispute_views: int = setting(
+        2, "judged views a Gaussian needs before the views can dispute its label", _int(1)
+    )
+
+
+@dataclass
+class MappingConfig:
+    ablation: Literal["naive", "local", "local+global", "full"] = setting(
+        "full",
+        "which stages run: naive | local (+ local 3D optimisation) | local+global (+ global refinement) "
+        "| full (+ long-term optimisation)",
+    )
+    keyframe_every: int = setting(
+        1, "every n-th frame is a keyframe", _int(0, note="0 = by camera motion only")
+    )
+    keyframe_translation: float = setting(
+        0.0, "metres of camera motion since the last keyframe that make one", _float(0.0, note="0 = unused")
+    )
+    keyframe_rotation_deg: float = setting(
+        0.0,
+        "degrees of camera rotation since the last keyframe that make a keyframe",
+        _float(0.0, note="0 = unused"),
+    )
+    max_pose_step: float = setting(
+        0.5,
+        "pose-jump check (mapping/pose_jump.py): the most a camera may move between two consecutive "
+        "frames of the folder in metres, times data.stride and the selected frames since the last "
+        "accepted one; about twice the largest steps of the sample data (docs/results.md)",
+        _float(0.0, note="0 = no limit"),
+    )
+    max_pose_step_deg: float = setting(
+        30.0,
+        "pose-jump check: the most a camera may turn between consecutive frames, degrees",
+        _float(0.0, note="0 = no limit"),
+    )
+    on_pose_jump: Literal["warn", "skip", "error"] = setting(
+        "warn", "a pose jump: warn (map it anyway) | skip (leave the frame out) | error (stop, map saved)"
+    )
+    checkpoint_every: int = setting(0, "keyframes between checkpoints", _int(0, note="0 = only at the end"))
+    init: InitConfig = section(
+        InitConfig, "new Gaussians from a keyframe's unexplained pixels (mapping/init.py; Sec. III-B.2)"
+    )
+    association: AssociationConfig = section(
+        AssociationConfig,
+        "local 3D optimisation: KNN association of a keyframe's segments with the map, Eq. 5 (local.py)",
+    )
+    merge: MergeConfig = section(
+        MergeConfig, "merging duplicate scene labels, beyond the paper (mapping/merge.py)"
+    )
+    optimize: OptimizeConfig = section(
+        OptimizeConfig, "geometry / appearance optimisation per keyframe and pruning (mapping/optimize.py)"
+    )
+    longterm: LongtermConfig = section(
+        LongtermConfig, "the long-term memory and its Eq. 16 update (mapping/longterm.py; Sec. III-C)"
+    )
+    refine: RefineConfig = section(
+        RefineConfig, "global 3D refinement, Algorithm 1 (mapping/refine.py; Sec. III-B.2)"
+    )
+    evidence: EvidenceConfig = section(
+        EvidenceConfig,
+        "the views' co-segmentation evidence, beyond the paper (mapping/evidence.py, docs/consistency.md)",
+    )
+
+    def cross_check(self) -> str | None:
         if self.keyframe_every == 0 and self.keyframe_translation == 0 and self.keyframe_rotation_deg == 0:
             return (
                 "mapping.keyframe_every is 0 and so are mapping.keyframe_translation and "
@@ -961,7 +948,7 @@ class Setting:
     """One leaf setting of :class:`Config`, as ``ogscene3d config`` prints it and :func:`check_config`
     checks it."""
 
-    key: str  # dotted, e.g. "mapping.tau_p"
+    key: str  # dotted, e.g. "mapping.association.tau_p"
     type: Any
     default: Any
     doc: str
@@ -1166,6 +1153,17 @@ def _coerce(value: Any, tp: Any, key: str) -> Any:
 RETIRED: dict[str, str] = {
     "graph.captioner.backoff_s": "the openai client's own retry backoff (it honours Retry-After)",
     "graph.relations.backoff_s": "the openai client's own retry backoff (it honours Retry-After)",
+    **{
+        f"mapping.{name}": "mapping.evidence, one evidence model (docs/consistency.md)"
+        for name in (
+            "evidence_split", "evidence_wrong", "evidence_wrong_views", "evidence_split_conf",
+            "evidence_partition", "evidence_partition_apart", "evidence_partition_conf",
+            "evidence_partition_min", "evidence_revisit", "evidence_merge", "evidence_protect",
+            "evidence_protect_views", "evidence_min_views", "evidence_quick_split", "evidence_quick_merge",
+            "evidence_confident_score", "evidence_merge_ratio", "evidence_min_group", "evidence_veto",
+            "evidence_apart_ratio",
+        )
+    },
 }
 
 
@@ -1173,10 +1171,86 @@ RETIRED: dict[str, str] = {
 # folders written before still load. Several old keys can move to one new key (each LLM component of the
 # graph had its own endpoint settings): set to different values, they conflict, unless the new key is given.
 _ENDPOINT_KEYS = ("base_url", "api_key_env", "timeout_s", "max_retries")
+# The flat mapping settings before they were grouped by the component that owns each (mapping.<old> ->
+# mapping.<section>.<new>); a run folder's config.yaml written before still loads, and --resume goes on.
+_MAPPING_SECTIONS: dict[str, dict[str, str]] = {
+    "init": {
+        "init_opacity": "opacity",
+        "init_dense_below": "dense_below",
+        "init_alpha_thresh": "alpha_thresh",
+        "init_depth_margin": "depth_margin",
+        "pixels_per_gaussian": "pixels_per_gaussian",
+    },
+    "association": {
+        "knn_k": "knn_k",
+        "knn_radius": "knn_radius",
+        "knn_radius_spacing": "knn_radius_spacing",
+        "novel_before_ambiguous": "novel_before_ambiguous",
+        "eq5_skip_edges": "eq5_skip_edges",
+        "tau_valid": "tau_valid",
+        "tau_p": "tau_p",
+        "fill_unlabeled": "fill_unlabeled",
+    },
+    "merge": {
+        "merge_duplicates": "enabled",
+        "merge_contain": "contain",
+        "merge_min_score": "min_score",
+        "merge_min_part": "min_part",
+        "merge_novel": "novel",
+    },
+    "optimize": {
+        "opt_iters": "iters",
+        "opt_memory_frames": "memory_frames",
+        "lr_means": "lr_means",
+        "lr_scales": "lr_scales",
+        "lr_quats": "lr_quats",
+        "lr_opacities": "lr_opacities",
+        "lr_colors": "lr_colors",
+        "lambda_c": "lambda_c",
+        "lambda_d": "lambda_d",
+        "ssim_lambda": "ssim_lambda",
+        "prune_opacity": "prune_opacity",
+        "prune_scale": "prune_scale",
+    },
+    "longterm": {
+        "longterm_every": "every",
+        "longterm_views": "views",
+        "longterm_pixel_step": "pixel_step",
+        "longterm_knn_k": "knn_k",
+        "longterm_skip_edges": "skip_edges",
+        "longterm_same_class": "same_class",
+        "tau_long": "tau_long",
+        "memory_max": "memory_max",
+        "memory_point_step": "memory_point_step",
+    },
+    "refine": {
+        "refine_every": "every",
+        "refine_cluster_radius": "cluster_radius",
+        "refine_graph_k": "graph_k",
+        "refine_unlabeled": "unlabeled",
+        "tau_high": "tau_high",
+        "tau_low": "tau_low",
+        "r_search": "r_search",
+    },
+    "evidence": {
+        "evidence": "enabled",
+        "evidence_cell": "cell",
+        "evidence_separation": "separation",
+        "evidence_split_ratio": "split_ratio",
+        "evidence_dispute_views": "dispute_views",
+    },
+}
 MOVED: dict[str, str] = {
-    f"graph.{part}.{key}": f"graph.endpoint.{key}"
-    for part in ("captioner", "relations", "rooms", "query")
-    for key in _ENDPOINT_KEYS
+    **{
+        f"graph.{part}.{key}": f"graph.endpoint.{key}"
+        for part in ("captioner", "relations", "rooms", "query")
+        for key in _ENDPOINT_KEYS
+    },
+    **{
+        f"mapping.{old}": f"mapping.{section}.{new}"
+        for section, names in _MAPPING_SECTIONS.items()
+        for old, new in names.items()
+    },
 }
 
 
@@ -1206,9 +1280,11 @@ def _move_keys(values: dict) -> dict:
     """``values`` (a config as nested dicts) with the keys of :data:`MOVED` at their new place."""
     found: dict[str, list[tuple[str, Any]]] = {}
     for old, new in MOVED.items():
-        values, value = _pop_key(values, old)
-        if value is not dataclasses.MISSING:
-            found.setdefault(new, []).append((old, value))
+        held, value = _pop_key(values, old)
+        if value is dataclasses.MISSING or isinstance(value, dict):
+            continue  # absent, or today's section of that name (mapping.evidence)
+        values = held
+        found.setdefault(new, []).append((old, value))
     if not found:
         return values
     defaults = {s.key: s.default for s in settings() if s.key in found}
@@ -1243,6 +1319,22 @@ def _move_keys(values: dict) -> dict:
     return values
 
 
+def _old_switches(values: dict) -> dict:
+    """``values`` with each moved switch that became a section's ``enabled`` (``mapping.evidence: false``)
+    written as that section (``mapping.evidence: {enabled: false}``), so that an override of the old key
+    merges with the section's other settings instead of replacing them (one notice per key moved)."""
+    for old, new in MOVED.items():
+        if new != f"{old}.enabled":
+            continue
+        held, value = _pop_key(values, old)
+        if value is not dataclasses.MISSING and not isinstance(value, dict):
+            values = _put_key(held, old, {"enabled": value})
+            logging.getLogger(__name__).info(
+                "config key %s moved to %s (read there; update the file)", old, new
+            )
+    return values
+
+
 def _build(cls: type, values: dict, prefix: str = "") -> Any:
     hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}
@@ -1271,7 +1363,8 @@ def _merge(base: dict, update: dict) -> dict:
 
 
 def parse_override(text: str) -> dict:
-    """``"mapping.tau_p=0.2"`` -> ``{"mapping": {"tau_p": 0.2}}`` (the value is parsed as YAML)."""
+    """``"mapping.refine.tau_low=0.2"`` -> ``{"mapping": {"refine": {"tau_low": 0.2}}}`` (the value is parsed
+    as YAML)."""
     if "=" not in text:
         raise ConfigError(f"override {text!r} is not of the form key=value")
     key, raw = text.split("=", 1)
@@ -1312,7 +1405,7 @@ def load_config(path: str | Path | None = None, overrides: list[str] | None = No
     Args:
         path: a YAML file, a bare name such as ``"replica"`` (the config shipped with the package), or None
             for all defaults.
-        overrides: ``key=value`` strings (the value is parsed as YAML), e.g. ``"mapping.tau_p=0.2"``.
+        overrides: ``key=value`` strings (the value is parsed as YAML), e.g. ``"mapping.refine.tau_low=0.2"``.
 
     Returns:
         The checked config.
@@ -1344,7 +1437,7 @@ def load_config(path: str | Path | None = None, overrides: list[str] | None = No
             raise ConfigError(f"config file {str(p)!r} must hold a mapping at the top level")
         values = loaded
     for ov in overrides or []:
-        values = _merge(values, parse_override(ov))
+        values = _merge(_old_switches(values), _old_switches(parse_override(ov)))
     cfg = config_from_dict(values)
     check_config(cfg)
     return cfg

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -12,6 +13,8 @@ from .camera import Camera
 # unit or format (a room in km or mm, or a bit-shifted encoding read as linear)
 PLAUSIBLE_MEDIAN_DEPTH = (0.05, 20.0)
 
+log = logging.getLogger(__name__)
+
 
 def implausible_median_depth(depth: np.ndarray) -> float | None:
     """The median of the valid (> 0) depths when it lies outside what an RGB-D camera sees, else None
@@ -21,6 +24,24 @@ def implausible_median_depth(depth: np.ndarray) -> float | None:
         return None
     median = float(np.median(valid))
     return None if PLAUSIBLE_MEDIAN_DEPTH[0] <= median <= PLAUSIBLE_MEDIAN_DEPTH[1] else median
+
+
+def warn_implausible_depth(frame: Frame) -> bool:
+    """Warn when ``frame``'s median depth is implausible for an RGB-D camera (a dataset's frame is left
+    alone: the dataset has warned already, naming the setting to fix). Returns whether the frame had depth
+    to judge (False: ask again with the next frame)."""
+    if not np.any(frame.depth > 0):
+        return False
+    median = None if frame.depth_scale_checked else implausible_median_depth(frame.depth)
+    if median is not None:
+        log.warning(
+            "frame %d (%s): median depth %.3g m is implausible for an RGB-D camera; Frame.depth "
+            "must be in metres (0 = invalid), or the map will be empty or wrong",
+            frame.index,
+            frame.name or "unnamed",
+            median,
+        )
+    return True
 
 
 def check_pose(pose: np.ndarray, what: str = "pose", tol: float = 1e-3) -> np.ndarray:

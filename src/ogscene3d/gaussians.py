@@ -25,7 +25,6 @@ from .device import resolve_device
 from .errors import DataError
 from .runs.gaussians_ply import PLY_PROPERTIES, SH_C0, read_gaussians_ply, write_gaussians_ply
 from .runs.map_npz import NPZ_VERSION, pop_npz_version, read_map_npz, write_map_npz
-from .runs.map_npz import corrupt_npz_message as corrupt_npz_message  # mapper.py reads it from here
 
 # Per-Gaussian fields: name -> (trailing shape, dtype).
 FIELDS: dict[str, tuple[tuple[int, ...], torch.dtype]] = {

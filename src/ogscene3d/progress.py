@@ -87,7 +87,7 @@ class RunTimeEstimate:
         frames: the frames the run will read.
         keyframe_every: ``mapping.keyframe_every`` (0: keyframes by camera motion, at most every frame).
         scale: ``data.scale`` now.
-        opt_iters: ``mapping.opt_iters`` now.
+        opt_iters: ``mapping.optimize.iters`` now.
     """
 
     def __init__(self, frames: int, keyframe_every: int, scale: float = 1.0, opt_iters: int = 10) -> None:
@@ -127,8 +127,9 @@ class RunTimeEstimate:
             out.append(f"--set data.scale={target:g} ({pixels})")
         if self.opt_iters > 3:
             out.append(
-                "a smaller budget per keyframe, as configs/synthetic.yaml has (--set mapping.opt_iters=3 "
-                "--set mapping.opt_memory_frames=1)"
+                "a smaller budget per keyframe, as configs/synthetic.yaml has "
+                "(--set mapping.optimize.iters=3 "
+                "--set mapping.optimize.memory_frames=1)"
             )
         if self.keyframe_every == 1:
             out.append("fewer keyframes (--set mapping.keyframe_every=5)")

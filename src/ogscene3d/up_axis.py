@@ -12,7 +12,7 @@
    poses, a live camera).
 
 The choice is logged once. An explicit ``graph.up_axis`` vector wins; the mapper warns when the cameras
-disagree with it (``mapping/mapper.py``).
+disagree with it (``mapping/graph_feed.py``).
 """
 
 from __future__ import annotations

@@ -13,8 +13,8 @@ def test_run_and_resume(tmp_path, capsys):
     scene = _replica_scene(tmp_path / "scene")
     out = tmp_path / "run"
     common = ["--data", str(scene), "--segments", str(scene / "segs"), "--out", str(out), "--device", "cpu",
-              "--no-progress", "--set", "mapping.opt_iters=1", "--set", "graph.enabled=false",
-              "--set", "mapping.knn_radius=0.1"]  # fmt: skip
+              "--no-progress", "--set", "mapping.optimize.iters=1", "--set", "graph.enabled=false",
+              "--set", "mapping.association.knn_radius=0.1"]  # fmt: skip
     assert main(["run", *common, "--max-frames", "2", "--ablation", "local+global"]) == 0
     for name in ("gaussians.ply", "map.npz", "graph.json", "timings.json", "config.yaml"):
         assert (out / name).is_file()
@@ -32,7 +32,8 @@ def test_a_new_run_over_an_earlier_map_warns_that_it_replaces_it(tmp_path, caplo
     scene = _replica_scene(tmp_path / "scene", frames=2)
     out = tmp_path / "run"
     common = ["--data", str(scene), "--segments", str(scene / "segs"), "--out", str(out), "--device", "cpu",
-              "--no-progress", "--set", "mapping.opt_iters=1", "--set", "graph.enabled=false"]  # fmt: skip
+              "--no-progress",
+              "--set", "mapping.optimize.iters=1", "--set", "graph.enabled=false"]  # fmt: skip
     assert main(["run", *common]) == 0
     assert "holds a map from an earlier run" not in caplog.text
     assert main(["run", *common]) == 0
@@ -61,8 +62,8 @@ def test_bad_frames_are_skipped_when_asked_and_resume_goes_on_after_them(tmp_pat
     garble_pixels(scene / "results" / "depth000001.png")
     out = tmp_path / "run"
     common = ["--data", str(scene), "--segments", str(scene / "segs"), "--out", str(out), "--device", "cpu",
-              "--no-progress", "--set", "mapping.opt_iters=1", "--set", "graph.enabled=false",
-              "--set", "mapping.knn_radius=0.1"]  # fmt: skip
+              "--no-progress", "--set", "mapping.optimize.iters=1", "--set", "graph.enabled=false",
+              "--set", "mapping.association.knn_radius=0.1"]  # fmt: skip
     assert main(["run", *common, "--max-frames", "3"]) == 2
     assert "depth000001.png" in capsys.readouterr().err
     skip = ["--set", "data.on_bad_frame=skip"]
@@ -96,11 +97,11 @@ def test_unusable_device_is_a_clean_error(tmp_path, capsys):
 def test_resume_goes_on_with_the_runs_own_data_and_settings(tmp_path, capsys):
     scene = _replica_scene(tmp_path / "scene", frames=3)
     out = tmp_path / "run"
-    assert main(["run", *_common(scene, out), "--max-frames", "2", "--set", "mapping.opt_iters=2"]) == 0
+    assert main(["run", *_common(scene, out), "--max-frames", "2", "--set", "mapping.optimize.iters=2"]) == 0
     import yaml
 
     saved = yaml.safe_load((out / "config.yaml").read_text())
-    assert saved["data"]["path"] == str(scene.resolve()) and saved["mapping"]["opt_iters"] == 2
+    assert saved["data"]["path"] == str(scene.resolve()) and saved["mapping"]["optimize"]["iters"] == 2
     capsys.readouterr()
     # no --data, no --config, no --set: the run's own config.yaml says what and how (never a synthetic scene)
     assert main(["run", "--out", str(out), "--resume", "--no-progress"]) == 0
@@ -188,7 +189,7 @@ def test_odometry_run_writes_its_trajectory_and_fails_when_nothing_tracks(tmp_pa
     out = tmp_path / "run"
     args = ["run", "--data", str(scene), "--out", str(out), "--device", "cpu", "--no-progress",
             "--poses", "odometry", "--max-frames", "3",
-            "--set", "mapping.opt_iters=1", "--set", "graph.enabled=false"]  # fmt: skip
+            "--set", "mapping.optimize.iters=1", "--set", "graph.enabled=false"]  # fmt: skip
     assert main(args) == 0
     traj = read_trajectory(out / "traj.txt")
     assert traj.shape == (3, 4, 4)
@@ -293,7 +294,7 @@ def test_resume_refuses_a_map_beside_a_later_runs_config(tmp_path, capsys):
     out = tmp_path / "run"
     assert main(["run", *_common(scene, out), "--max-frames", "2"]) == 0
     old_map, old_config = (out / "map.npz").read_bytes(), (out / "config.yaml").read_text()
-    _killed_run(["run", *_common(scene, out), "--set", "mapping.opt_iters=2"])
+    _killed_run(["run", *_common(scene, out), "--set", "mapping.optimize.iters=2"])
     assert (out / "map.npz").read_bytes() == old_map and (out / "config.yaml").read_text() != old_config
     capsys.readouterr()
     assert main(["run", "--out", str(out), "--resume", "--no-progress"]) == 2
@@ -314,10 +315,10 @@ def test_resume_of_a_map_beside_a_later_runs_config_takes_its_settings_by_config
     assert main(["run", *_common(scene, out), "--max-frames", "2"]) == 0
     old = tmp_path / "old.yaml"
     old.write_text((out / "config.yaml").read_text())
-    _killed_run(["run", *_common(scene, out), "--set", "mapping.opt_iters=2"])
+    _killed_run(["run", *_common(scene, out), "--set", "mapping.optimize.iters=2"])
     capsys.readouterr()
     assert main(["run", "--out", str(out), "--resume", "--no-progress", "--config", str(old),
-                 "--set", "mapping.opt_iters=2"]) == 2  # fmt: skip
+                 "--set", "mapping.optimize.iters=2"]) == 2  # fmt: skip
     assert "pass it with --config" in capsys.readouterr().err
     assert main(["run", "--out", str(out), "--resume", "--no-progress", "--config", str(old)]) == 0
     assert "read 1 frames: 1 mapped (3 keyframes in all)" in capsys.readouterr().out
@@ -340,7 +341,7 @@ def test_a_resume_with_other_settings_killed_early_can_be_resumed_again(tmp_path
     out = tmp_path / "run"
     assert main(["run", *_common(scene, out), "--max-frames", "2"]) == 0
     run_id = (out / "run_id").read_text()
-    _killed_run(["run", *_common(scene, out), "--resume", "--set", "mapping.opt_iters=2"])
+    _killed_run(["run", *_common(scene, out), "--resume", "--set", "mapping.optimize.iters=2"])
     assert (out / "run_id").read_text() == run_id
     capsys.readouterr()
     assert main(["run", "--out", str(out), "--resume", "--no-progress"]) == 0
@@ -411,7 +412,7 @@ def test_a_wrong_depth_scale_is_warned_about_once(tmp_path, caplog):
     from ogscene3d.mapping.mapper import Mapper
 
     scene = _replica_scene(tmp_path / "scene", frames=2)
-    cfg = load_config(None, ["graph.enabled=false", "mapping.opt_iters=1", "data.depth_scale=6.5535"])
+    cfg = load_config(None, ["graph.enabled=false", "mapping.optimize.iters=1", "data.depth_scale=6.5535"])
     mapper = Mapper(cfg, "cpu")
     with caplog.at_level("WARNING"):
         for frame in open_dataset(scene, config=cfg.data):  # the wall 2 km away
@@ -469,7 +470,9 @@ def test_a_save_outside_a_run_leaves_no_earlier_runs_id_to_vouch_for_its_config(
     scene = _replica_scene(tmp_path / "scene", frames=3)
     out = tmp_path / "run"
     assert main(["run", *_common(scene, out), "--max-frames", "2"]) == 0
-    cfg = load_config(None, ["graph.enabled=false", "mapping.opt_iters=2", "mapping.knn_radius=0.1"])
+    cfg = load_config(
+        None, ["graph.enabled=false", "mapping.optimize.iters=2", "mapping.association.knn_radius=0.1"]
+    )
     record_data(cfg, scene, scene / "segs")
     ds = open_dataset(config=cfg.data)
     mapper = Mapper(cfg, "cpu")
@@ -485,7 +488,7 @@ def test_a_save_outside_a_run_leaves_no_earlier_runs_id_to_vouch_for_its_config(
         mp.setattr(Mapper, "save_checkpoint", full)
         with pytest.raises(OSError):
             mapper.save(out)
-    assert "opt_iters: 2" in (out / "config.yaml").read_text() and not (out / "run_id").exists()
+    assert "iters: 2" in (out / "config.yaml").read_text() and not (out / "run_id").exists()
     capsys.readouterr()
     assert main(["run", "--out", str(out), "--resume", "--no-progress"]) == 2
     assert "was not written by the run whose" in capsys.readouterr().err

@@ -81,7 +81,9 @@ def test_low_confidence_depth_is_left_out(tmp_path, scene):
 
 def test_mapping_a_capture_gives_the_folders_map(tmp_path, scene):
     root, _, _ = scene
-    cfg = load_config(None, ["graph.enabled=false", "mapping.opt_iters=2", "mapping.ablation=local+global"])
+    cfg = load_config(
+        None, ["graph.enabled=false", "mapping.optimize.iters=2", "mapping.ablation=local+global"]
+    )
     maps = []
     # colour stored losslessly: this compares what the reader makes of poses, intrinsics and depth, not JPEG
     capture = _r3d(tmp_path, scene, lossless=True)

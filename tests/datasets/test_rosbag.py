@@ -61,7 +61,9 @@ def test_mapping_a_bag_gives_the_folders_map(tmp_path, scene):
     """One storage is enough: every storage reads back the very same frames (above)."""
     root, _, _ = scene
     path = _bag(tmp_path, scene, storage="ros1")
-    cfg = load_config(None, ["graph.enabled=false", "mapping.opt_iters=2", "mapping.ablation=local+global"])
+    cfg = load_config(
+        None, ["graph.enabled=false", "mapping.optimize.iters=2", "mapping.ablation=local+global"]
+    )
     maps = []
     for ds in (open_dataset(root), open_dataset(path, segments_dir=root / "segments")):
         m = Mapper(cfg, "cpu")
@@ -264,7 +266,7 @@ def test_track_and_run_accept_a_bag_path(tmp_path, scene):
     out = tmp_path / "run"
     code = main(
         ["run", "--data", str(path), "--out", str(out), "--segments", str(scene[0] / "segments"),
-         "--set", "graph.enabled=false", "--set", "mapping.opt_iters=1"]
+         "--set", "graph.enabled=false", "--set", "mapping.optimize.iters=1"]
     )  # fmt: skip
     assert code == 0 and (out / "gaussians.ply").is_file()
     assert dataclasses.asdict(load_config(out / "config.yaml").data)["path"] == str(path.resolve())

@@ -364,7 +364,7 @@ def test_run_then_2d_only_eval(tmp_path, monkeypatch):
     config = Path(__file__).resolve().parents[2] / "configs" / "replica_semantic_nerf.yaml"
     argv = ["run", "--config", str(config), "--data", str(scene), "--out", str(run)]
     argv += ["--device", "cpu", "--no-progress", "--set", "segmentation.backend=classical"]
-    argv += ["--set", "mapping.keyframe_every=1", "--set", "mapping.pixels_per_gaussian=4"]
+    argv += ["--set", "mapping.keyframe_every=1", "--set", "mapping.init.pixels_per_gaussian=4"]
     monkeypatch.setattr(cli, "COMMAND_MODULES", ["ogscene3d.commands.run", "ogscene3d.commands.eval"])
     assert cli.main(argv) == 0
     assert cli.main(["eval", str(run), "--views", "2", "--no-plots"]) == 0

@@ -359,8 +359,8 @@ def test_shared_labelfusion_sample_end_to_end(shared_data, tmp_path, monkeypatch
     run = tmp_path / "run"
     sets = [
         "data.stride=3",
-        "mapping.pixels_per_gaussian=64",
-        "mapping.opt_iters=0",
+        "mapping.init.pixels_per_gaussian=64",
+        "mapping.optimize.iters=0",
         "segmentation.backend=classical",
     ]
     argv = ["run", "--data", str(seq), "--out", str(run), "--device", "cpu", "--no-progress"]

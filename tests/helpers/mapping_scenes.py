@@ -40,7 +40,8 @@ def _frame(i: int, ids: tuple[int, int] = (1, 2), with_segments: bool = True) ->
 
 def _config(*overrides: str):
     return load_config(
-        None, ["graph.enabled=false", "mapping.opt_iters=2", "mapping.knn_radius=0.1", *overrides]
+        None,
+        ["graph.enabled=false", "mapping.optimize.iters=2", "mapping.association.knn_radius=0.1", *overrides],
     )
 
 
@@ -70,5 +71,6 @@ def _replica_scene(root, frames: int = 3):
 
 def _common(scene, out):
     return ["--out", str(out), "--device", "cpu", "--no-progress", "--data", str(scene),
-            "--segments", str(scene / "segs"), "--set", "mapping.opt_iters=1", "--set", "graph.enabled=false",
-            "--set", "mapping.knn_radius=0.1"]  # fmt: skip
+            "--segments", str(scene / "segs"), "--set", "mapping.optimize.iters=1",
+            "--set", "graph.enabled=false",
+            "--set", "mapping.association.knn_radius=0.1"]  # fmt: skip

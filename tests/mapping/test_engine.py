@@ -154,7 +154,8 @@ def test_live_mapping_saves_the_map_on_sigterm(tmp_path, capsys, monkeypatch, st
 
     process = stop_after_frame(1, terminate)
     args = ["--data", str(scene), "--segments", str(scene / "segs"), "--out", str(out), "--port", "0",
-            "--device", "cpu", "--set", "graph.enabled=false", "--set", "mapping.opt_iters=1"]  # fmt: skip
+            "--device", "cpu", "--set", "graph.enabled=false",
+            "--set", "mapping.optimize.iters=1"]  # fmt: skip
     assert live_main(args) == 130
     assert "the map so far is in" in capsys.readouterr().out
     for name in ("map.npz", "gaussians.ply", "config.yaml", "run_id"):
@@ -172,7 +173,7 @@ def test_a_stopped_batch_scene_keeps_its_map_and_stops_the_batch(tmp_path, stop_
     scene = _replica_scene(tmp_path / "scene", frames=4)
     stop_after_frame(1, lambda: signal.raise_signal(signal.SIGINT))
     spec = SceneSpec("a", data=str(scene), segments=str(scene / "segs"))
-    ov = ["graph.enabled=false", "mapping.opt_iters=1", "mapping.knn_radius=0.1"]
+    ov = ["graph.enabled=false", "mapping.optimize.iters=1", "mapping.association.knn_radius=0.1"]
     with pytest.raises(KeyboardInterrupt, match="stopped after 2 frames"):
         map_scene(spec, tmp_path / "out", overrides=ov, device="cpu")
     run = tmp_path / "out" / "a"
@@ -303,7 +304,9 @@ def test_timings_count_the_labels_of_the_final_map(tmp_path):
     from ogscene3d.mapping.source import record_data
 
     scene = _replica_scene(tmp_path / "scene", frames=2)
-    cfg = load_config(None, ["graph.enabled=false", "mapping.opt_iters=1", "mapping.knn_radius=0.1"])
+    cfg = load_config(
+        None, ["graph.enabled=false", "mapping.optimize.iters=1", "mapping.association.knn_radius=0.1"]
+    )
     record_data(cfg, scene, scene / "segs")
     mapper = Mapper(cfg, "cpu")
     for frame in open_dataset(config=cfg.data):
@@ -341,7 +344,7 @@ def test_observers_see_every_keyframe_and_the_end_and_one_that_fails_is_dropped(
             self.ended = True
 
     scene = _replica_scene(tmp_path / "scene", frames=4)
-    cfg = load_config(None, ["graph.enabled=false", "mapping.opt_iters=1", "mapping.keyframe_every=2"])
+    cfg = load_config(None, ["graph.enabled=false", "mapping.optimize.iters=1", "mapping.keyframe_every=2"])
     record_data(cfg, scene, scene / "segs")
     good, bad = Watcher(), Watcher(fail=True)
     engine = MappingEngine(Mapper(cfg, "cpu"), tmp_path / "run", scene, observers=[bad, good])
@@ -398,11 +401,11 @@ def test_run_says_which_config_to_use_for_small_images(tmp_path, caplog):
     # (docs/defaults.md): `run` names the config to use, and stays quiet with that config's budget
     scene = _replica_scene(tmp_path / "scene", frames=2)
     with caplog.at_level("WARNING"):
-        assert main(["run", *_common(scene, tmp_path / "a"), "--set", "mapping.opt_iters=10"]) == 0
+        assert main(["run", *_common(scene, tmp_path / "a"), "--set", "mapping.optimize.iters=10"]) == 0
     assert "use --config synthetic" in caplog.text
     caplog.clear()
     with caplog.at_level("WARNING"):
-        assert main(["run", *_common(scene, tmp_path / "b"), "--set", "mapping.opt_iters=3"]) == 0
+        assert main(["run", *_common(scene, tmp_path / "b"), "--set", "mapping.optimize.iters=3"]) == 0
     assert "use --config synthetic" not in caplog.text
 
 

@@ -1,6 +1,7 @@
 import pytest
 import torch
 
+from ogscene3d.config import InitConfig
 from ogscene3d.mapping.local import (
     CASE_AMBIGUOUS,
     CASE_MATCHED,
@@ -99,7 +100,7 @@ def test_new_object_matched_only_at_its_border_gets_a_label(device):
     border = torch.tensor([[0.01, 0.0, 0.0], [0.01, 0.1, 0.0]])
     probes = torch.cat([border, _patch(2.0)]).to(device)
     seg = torch.zeros(18, dtype=torch.long, device=device)
-    default = MappingConfig().knn_k
+    default = MappingConfig().association.knn_k
     out = {}
     for k in (default, 5):
         conf = torch.full((6,), 0.6, device=device)
@@ -128,7 +129,7 @@ def test_small_new_object_between_two_surfaces(device, novel_first):
     case (iii) first and gives the bin a new label; the paper's order leaves it unlabelled."""
     from ogscene3d.config import MappingConfig
 
-    assert MappingConfig().novel_before_ambiguous
+    assert MappingConfig().association.novel_before_ambiguous
     means = torch.tensor([[0.0, 0.0, 0.0], [0.05, 0.0, 0.0], [0.0, 1.0, 0.0]], device=device)
     labels = torch.tensor([3, 3, 4], dtype=torch.int32, device=device)
     border = torch.tensor([[0.0, 0.0, 0.005], [0.05, 0.0, 0.005], [0.0, 1.0, 0.005]])
@@ -335,7 +336,9 @@ def test_make_probes_negative_segment_ids_are_no_segment(device):
     ids[:, 4:] = 7
     K = np.array([[10.0, 0, w / 2], [0, 10.0, h / 2], [0, 0, 1]], dtype=np.float32)
     frame = Frame(0, np.zeros((h, w, 3), np.uint8), np.ones((h, w), np.float32), K, np.eye(4), segments=ids)
-    probes = make_probes(frame, ids, {5: 0.88, 7: 1.0}, torch.device(device), step=1)
+    probes = make_probes(
+        frame, ids, {5: 0.88, 7: 1.0}, torch.device(device), InitConfig(pixels_per_gaussian=1)
+    )
     assert probes.seg_ids.tolist() == [5, 7]
     col = (probes.pix % w).cpu()
     seg = probes.seg.cpu()
@@ -366,8 +369,8 @@ def test_make_probes_small_segments_get_every_pixel(device):
     K = np.array([[20.0, 0, w / 2], [0, 20.0, h / 2], [0, 0, 1]], dtype=np.float32)
     frame = Frame(0, np.zeros((h, w, 3), np.uint8), depth, K, np.eye(4), segments=ids)
     dev = torch.device(device)
-    sparse = make_probes(frame, ids, {}, dev, step=2)
-    dense = make_probes(frame, ids, {}, dev, step=2, dense_below=8)
+    sparse = make_probes(frame, ids, {}, dev, InitConfig(pixels_per_gaussian=4, dense_below=0))
+    dense = make_probes(frame, ids, {}, dev, InitConfig(pixels_per_gaussian=4, dense_below=8))
     seg_of = lambda p: p.seg_ids[p.seg.clamp(min=0)].cpu()  # noqa: E731
     assert int((seg_of(sparse) == 2).sum()) < 8
     small = seg_of(dense) == 2
@@ -382,4 +385,5 @@ def test_make_probes_small_segments_get_every_pixel(device):
     torch.testing.assert_close(
         dense.log_scales[off].cpu(), torch.full((int(off.sum()),), math.log(2.0 * 1 / 20.0))
     )
-    assert torch.equal(make_probes(frame, ids, {}, dev, step=2, dense_below=2).pix, sparse.pix)  # big enough
+    big_enough = make_probes(frame, ids, {}, dev, InitConfig(pixels_per_gaussian=4, dense_below=2))
+    assert torch.equal(big_enough.pix, sparse.pix)

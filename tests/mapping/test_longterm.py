@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 import torch
 
+from ogscene3d.config import LongtermConfig
 from ogscene3d.mapping.longterm import (
     MemoryBuffer,
     MemoryEntry,
@@ -9,6 +10,7 @@ from ogscene3d.mapping.longterm import (
     class_iou_map,
     eq16_update,
     frustum_ratio,
+    inner_pixels,
     label_edges,
     remap_segments,
 )
@@ -157,7 +159,8 @@ def test_longterm_skips_boundary_pixels(device, skip_edges):
     from ogscene3d.mapping.longterm import longterm_view_update
 
     gm, _ = _wall_map(device)
-    st = longterm_view_update(gm, _wall_entry(18), k=4, radius=0.08, pixel_step=1, skip_edges=skip_edges)
+    cfg = LongtermConfig(knn_k=4, pixel_step=1, skip_edges=skip_edges)
+    st = longterm_view_update(gm, _wall_entry(18), cfg, 0.08)
     assert st.updated > 0 and st.increased > 0
     if skip_edges:
         assert st.decreased == 0
@@ -175,9 +178,8 @@ def test_longterm_same_class_off_is_the_papers_rule(device):
     stats = {}
     for same_class in (True, False):
         gm, _ = _wall_map(device)
-        stats[same_class] = longterm_view_update(
-            gm, _wall_entry(18), k=4, radius=0.08, pixel_step=1, skip_edges=False, same_class=same_class
-        )
+        cfg = LongtermConfig(knn_k=4, pixel_step=1, skip_edges=False, same_class=same_class)
+        stats[same_class] = longterm_view_update(gm, _wall_entry(18), cfg, 0.08)
     assert stats[False].updated > stats[True].updated
     assert stats[False].decreased > stats[True].decreased > 0
 
@@ -190,7 +192,7 @@ def test_longterm_view_update_eq16(device):
 
     gm, labels = _wall_map(device)
     entry = _wall_entry(20)  # x = 0.33 at u = 20
-    st = longterm_view_update(gm, entry, k=4, radius=0.08, pixel_step=1, skip_edges=False)
+    st = longterm_view_update(gm, entry, LongtermConfig(knn_k=4, pixel_step=1, skip_edges=False), 0.08)
     assert st.updated > 0 and st.increased > 0 and st.decreased > 0
     conf = gm.confidences.cpu()
     x = gm.means[:, 0].cpu()
@@ -218,3 +220,13 @@ def test_associate_pixels_only_with_rendered_class(device):
         means, labels, pts, p, seg_label, k=2, radius=0.05, pixel_rendered=torch.tensor([3], device=device)
     )
     assert hit.cpu().tolist() == [0] and cons.cpu().tolist() == [True]
+
+
+def test_inner_pixels_are_off_segment_boundaries(device):
+    segments = np.zeros((4, 6), dtype=np.int32)
+    segments[:, 3:] = 5  # columns 2 and 3 touch the boundary
+    # flat v * 6 + u of (v, u) = (0,0) (0,2) (0,3) (0,5) (1,1) (3,4)
+    pix = torch.tensor([0, 2, 3, 5, 6 + 1, 18 + 4], device=device)
+    for dtype in (np.int32, np.uint16):  # segment PNGs load as uint16
+        inner = inner_pixels(segments.astype(dtype), pix)
+        assert inner.tolist() == [True, False, False, True, True, True]

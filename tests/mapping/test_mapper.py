@@ -51,7 +51,7 @@ def test_keyframe_rule():
 
 
 def test_save_and_resume(tmp_path, device):
-    cfg = _config("mapping.ablation=local+global", "mapping.refine_every=2")
+    cfg = _config("mapping.ablation=local+global", "mapping.refine.every=2")
     m = Mapper(cfg, device)
     for i in range(2):
         m.process(_frame(i))
@@ -168,7 +168,7 @@ def test_a_mistake_in_the_graph_settings_stops_the_mapper_before_any_frame(overr
 
 
 def test_full_ablation_runs_longterm_and_refinement(device):
-    cfg = _config("mapping.ablation=full", "mapping.refine_every=2", "mapping.longterm_every=2")
+    cfg = _config("mapping.ablation=full", "mapping.refine.every=2", "mapping.longterm.every=2")
     m = Mapper(cfg, device)
     for i, ids in enumerate([(1, 2), (3, 4), (5, 6), (7, 8)]):
         m.process(_frame(i, ids))
@@ -189,7 +189,8 @@ def test_full_ablation_runs_longterm_and_refinement(device):
 def test_scene_graph_is_fed(tmp_path, device):
     cfg = load_config(
         None,
-        ["mapping.opt_iters=1", "mapping.knn_radius=0.1", "graph.init_keyframes=2", "graph.update_every=1",
+        ["mapping.optimize.iters=1", "mapping.association.knn_radius=0.1", "graph.init_keyframes=2",
+         "graph.update_every=1",
          "graph.min_gaussians=5"],
     )  # fmt: skip
     m = Mapper(cfg, device)
@@ -224,7 +225,8 @@ def test_detector_class_names_become_node_tags(tmp_path):
     segmenter) name the scene labels they were given: the offline captions take them as tags."""
     cfg = load_config(
         None,
-        ["mapping.opt_iters=1", "mapping.knn_radius=0.1", "graph.init_keyframes=2", "graph.update_every=1",
+        ["mapping.optimize.iters=1", "mapping.association.knn_radius=0.1", "graph.init_keyframes=2",
+         "graph.update_every=1",
          "graph.min_gaussians=5"],
     )  # fmt: skip
     m = Mapper(cfg, "cpu")
@@ -284,7 +286,8 @@ def test_checkpoint_state_and_write_order(tmp_path, monkeypatch, caplog):
 def test_resume_keeps_the_scene_graph(tmp_path):
     cfg = load_config(
         None,
-        ["mapping.opt_iters=1", "mapping.knn_radius=0.1", "graph.init_keyframes=2", "graph.update_every=2",
+        ["mapping.optimize.iters=1", "mapping.association.knn_radius=0.1", "graph.init_keyframes=2",
+         "graph.update_every=2",
          "graph.min_gaussians=5", "graph.background=false"],
     )  # fmt: skip
     m = Mapper(cfg, "cpu")
@@ -310,7 +313,7 @@ def test_odometry_poses_replace_the_dataset_poses(tmp_path):
 
     # 60 frames spread the default trajectory (~5 m) at ~9 cm per frame; map the first 6
     scene = make_synthetic_scene(tmp_path / "scene", seed=0, frames=60, width=96, height=72, progress=False)
-    cfg = _config("tracking.poses=odometry", "mapping.opt_iters=1")
+    cfg = _config("tracking.poses=odometry", "mapping.optimize.iters=1")
     m = Mapper(cfg, "cpu")
     frames = list(open_dataset(scene, max_frames=6))
     gt = [f.pose.copy() for f in frames]
@@ -341,7 +344,7 @@ def test_resumed_odometry_goes_on_in_the_same_trajectory(tmp_path):
         frame.pose = None
         return frame
 
-    cfg = _config("tracking.poses=odometry", "mapping.opt_iters=1")
+    cfg = _config("tracking.poses=odometry", "mapping.optimize.iters=1")
     whole = Mapper(cfg, "cpu")
     for i in range(4):
         whole.process(posed_by_odometry(i))
@@ -367,17 +370,6 @@ def test_odometry_resumed_from_a_checkpoint_without_tracker_state_warns(tmp_path
     assert any("no tracker state" in r.message for r in caplog.records)
 
 
-def test_inner_probes_are_off_segment_boundaries(device):
-    m = Mapper(_config(), device)
-    segments = np.zeros((4, 6), dtype=np.int32)
-    segments[:, 3:] = 5  # columns 2 and 3 touch the boundary
-    # flat v * 6 + u of (v, u) = (0,0) (0,2) (0,3) (0,5) (1,1) (3,4)
-    pix = torch.tensor([0, 2, 3, 5, 6 + 1, 18 + 4], device=device)
-    for dtype in (np.int32, np.uint16):  # segment PNGs load as uint16
-        inner = m._inner_probes(segments.astype(dtype), pix)
-        assert inner.tolist() == [True, False, False, True, True, True]
-
-
 def _gap_frame(i: int) -> Frame:
     """``_frame``'s wall without depth within 35 cm of x = 0, so that its two objects lie apart in space (the
     test's r_search is 30 cm: Gaussians here are 17 cm apart); the first view's segment holds both (a first
@@ -389,11 +381,12 @@ def _gap_frame(i: int) -> Frame:
     return f
 
 
-@pytest.mark.parametrize("partition", [True, False])
-def test_the_partition_gives_two_objects_a_first_view_merged_labels_of_their_own(device, partition):
+@pytest.mark.parametrize("evidence", [True, False])
+def test_the_evidence_gives_two_objects_a_first_view_merged_labels_of_their_own(device, evidence):
     cfg = _config(
-        "mapping.ablation=full", "mapping.refine_every=2", "mapping.longterm_every=2", "mapping.r_search=0.3",
-        "mapping.evidence_split=false", f"mapping.evidence_partition={str(partition).lower()}",
+        "mapping.ablation=full", "mapping.refine.every=2", "mapping.longterm.every=2",
+        "mapping.refine.r_search=0.3",
+        f"mapping.evidence.enabled={str(evidence).lower()}",
     )  # fmt: skip
     m = Mapper(cfg, device)
     for i in range(6):
@@ -404,6 +397,6 @@ def test_the_partition_gives_two_objects_a_first_view_merged_labels_of_their_own
     left, right = labels[x < -0.35], labels[x > 0.35]
     assert left.numel() and right.numel()
     assert len(set(left.tolist())) == 1 and len(set(right.tolist())) == 1
-    assert (left[0] != right[0]) == partition
+    assert (left[0] != right[0]) == evidence
     counts = m.timings.as_dict()["counts"]
-    assert (counts.get("evidence_partitioned_labels", 0) >= 1) == partition
+    assert (counts.get("evidence_new_labels", 0) >= 1) == evidence

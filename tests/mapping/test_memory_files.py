@@ -11,7 +11,7 @@ import torch
 from ogscene3d.config import load_config
 from ogscene3d.errors import DataError
 from ogscene3d.gaussians import GaussianMap
-from ogscene3d.mapping import mapper as mapper_module
+from ogscene3d.mapping import checkpoint as checkpoint_module
 from ogscene3d.mapping.longterm import MemoryEntry
 from ogscene3d.mapping.mapper import Mapper
 from ogscene3d.mapping.memory_files import views_dir
@@ -22,7 +22,7 @@ K = np.array([[24.0, 0, W / 2], [0, 24.0, H / 2], [0, 0, 1]], dtype=np.float32)
 
 
 def _mapper(memory_max: int = 3) -> Mapper:
-    m = Mapper(load_config(None, ["graph.enabled=false", f"mapping.memory_max={memory_max}"]), "cpu")
+    m = Mapper(load_config(None, ["graph.enabled=false", f"mapping.longterm.memory_max={memory_max}"]), "cpu")
     m.map.append(
         torch.rand(50, 3), torch.rand(50, 3), torch.full((50,), -3.0), torch.zeros(50, dtype=torch.int32)
     )
@@ -171,7 +171,7 @@ def test_killed_after_map_npz_the_new_checkpoint_loads_and_the_next_save_cleans_
     def killed(checkpoint, keep):
         raise KeyboardInterrupt  # killed once the new map.npz is in place, before the evicted view goes
 
-    monkeypatch.setattr(mapper_module, "remove_unreferenced", killed)
+    monkeypatch.setattr(checkpoint_module, "remove_unreferenced", killed)
     with pytest.raises(KeyboardInterrupt):
         m.save_checkpoint(ckpt)
     monkeypatch.undo()
@@ -300,9 +300,9 @@ def _wall_frame(i: int):
 
 
 def test_a_resume_optimizes_with_the_same_recent_keyframes_as_an_uninterrupted_run(tmp_path):
-    """The keyframes the optimisation pairs with the next one (mapping.opt_memory_frames) are in the
+    """The keyframes the optimisation pairs with the next one (mapping.optimize.memory_frames) are in the
     checkpoint too, also those that never joined the memory: a resume maps exactly as if uninterrupted."""
-    settings = ["graph.enabled=false", "mapping.opt_iters=2", "mapping.opt_memory_frames=2"]
+    settings = ["graph.enabled=false", "mapping.optimize.iters=2", "mapping.optimize.memory_frames=2"]
     cfg = load_config(None, [*settings, "mapping.ablation=local"])
 
     def run(split: int | None) -> Mapper:
@@ -330,6 +330,6 @@ def test_a_resume_optimizes_with_the_same_recent_keyframes_as_an_uninterrupted_r
     assert [n.split("_")[1] for n in names] == ["000000", "000002", "000003"]
     remove_run_temps(tmp_path)
     assert sorted(_files(tmp_path)) == names
-    fewer = Mapper(load_config(None, [*settings, "mapping.opt_memory_frames=1"]), "cpu")
+    fewer = Mapper(load_config(None, [*settings, "mapping.optimize.memory_frames=1"]), "cpu")
     fewer.load_checkpoint(tmp_path / "map.npz")
     assert [e.keyframe for e in fewer.recent] == [3]

@@ -122,8 +122,8 @@ def _mapper(device, *overrides: str) -> Mapper:
         None,
         [
             "graph.enabled=false",
-            "mapping.opt_iters=0",
-            "mapping.knn_radius=0.1",
+            "mapping.optimize.iters=0",
+            "mapping.association.knn_radius=0.1",
             "mapping.ablation=local",
             *overrides,
         ],
@@ -135,7 +135,7 @@ def test_mapper_merges_the_labels_of_an_over_segmented_object(device):
     first = _halves()
     first[H // 2 :, : W // 2] = 3  # the left object comes in two pieces: two novel labels
     for merge in (True, False):
-        m = _mapper(device, f"mapping.merge_duplicates={str(merge).lower()}")
+        m = _mapper(device, f"mapping.merge.enabled={str(merge).lower()}")
         m.process(_frame(0, first))
         assert torch.unique(m.map.labels).numel() == 3
         m.process(_frame(1, _halves()))  # one confident segment now holds the left object whole
@@ -166,7 +166,7 @@ def test_low_scored_segments_do_not_merge(device):
     first[H // 2 :, : W // 2] = 3
     m = _mapper(device)
     m.process(_frame(0, first))
-    m.process(_frame(1, _halves(), {1: 0.9, 2: 0.97}))  # below mapping.merge_min_score (0.95)
+    m.process(_frame(1, _halves(), {1: 0.9, 2: 0.97}))  # below mapping.merge.min_score (0.95)
     assert "labels_merged" not in m.timings.as_dict()["counts"]
 
 
@@ -208,16 +208,16 @@ def _wall_view(i: int, seg: np.ndarray, z_cam: float) -> Frame:
 def _far_mapper(device, *overrides: str) -> Mapper:
     """``_mapper`` for the step-back views: no pose-jump check (6 m in one step), no scale pruning (the far
     view's Gaussians are large)."""
-    return _mapper(device, "mapping.max_pose_step=0", "mapping.prune_scale=0", *overrides)
+    return _mapper(device, "mapping.max_pose_step=0", "mapping.optimize.prune_scale=0", *overrides)
 
 
 def test_merge_novel_joins_a_cut_surface_seen_further(device):
     """Frame 0 sees a patch of the wall cut in two (labels A, B); frame 1, from 6 m further back, sees the
     whole wall as one confident segment of which the patch is a few percent (p < tau_p: novel). By default
-    the wall gets a third label; with ``mapping.merge_novel`` the segment shows A and B whole, each a large
+    the wall gets a third label; with ``mapping.merge.novel`` the segment shows A and B whole, each a large
     part of what is mapped in it, so they merge and the new wall takes the merged label."""
     for novel in (False, True):
-        m = _far_mapper(device, f"mapping.merge_novel={str(novel).lower()}", "mapping.merge_min_part=0.1")
+        m = _far_mapper(device, f"mapping.merge.novel={str(novel).lower()}", "mapping.merge.min_part=0.1")
         m.process(_wall_view(0, _halves(), 0.0))
         assert torch.unique(m.map.labels).numel() == 2
         m.process(_wall_view(1, np.ones((H, W), np.int32), -6.0))
@@ -233,12 +233,12 @@ def test_merge_novel_joins_a_cut_surface_seen_further(device):
 
 def test_merge_novel_extends_the_one_label_a_segment_holds_whole(device):
     """Frame 0 maps a patch of the wall as one label; from 6 m further back the patch is a few percent of
-    a confident segment (p < tau_p) whose matches all fall on that label: with ``mapping.merge_novel`` the
+    a confident segment (p < tau_p) whose matches all fall on that label: with ``mapping.merge.novel`` the
     segment takes it. Cut down the middle, neither half holds the patch whole (each about half of it), and
     both halves stay novel."""
     whole = np.ones((H, W), np.int32)
     for novel in (False, True):
-        m = _far_mapper(device, f"mapping.merge_novel={str(novel).lower()}")
+        m = _far_mapper(device, f"mapping.merge.novel={str(novel).lower()}")
         m.process(_wall_view(0, whole, 0.0))
         m.process(_wall_view(1, whole, -6.0))
         c = m.timings.as_dict()["counts"]
@@ -249,7 +249,7 @@ def test_merge_novel_extends_the_one_label_a_segment_holds_whole(device):
     m.process(_wall_view(1, _halves(), -6.0))
     assert m.timings.as_dict()["counts"].get("segments_extended", 0) == 0
     assert torch.unique(m.map.labels[m.map.labels >= 0]).numel() == 3
-    # a segment below mapping.merge_min_score does not take the label either
+    # a segment below mapping.merge.min_score does not take the label either
     m = _far_mapper(device)
     m.process(_wall_view(0, whole, 0.0))
     low = _wall_view(1, whole, -6.0)

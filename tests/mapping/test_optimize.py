@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from ogscene3d.config import MappingConfig
+from ogscene3d.config import OptimizeConfig
 from ogscene3d.gaussians import GaussianMap
 from ogscene3d.mapping.optimize import View, optimize_map
 
@@ -36,7 +36,7 @@ def test_optimize_map_lowers_the_loss(device):
     gm = _wall(device, 2.3)  # 30 cm behind the observed wall, wrong colours
     gm.append(torch.tensor([[0.0, 0.0, -5.0]], device=device), torch.zeros(1, 3), torch.full((1,), -3.0))
     behind = gm.means[-1].clone()
-    out = optimize_map(gm, _plane_views(device), MappingConfig(opt_iters=15, lr_means=0.01))
+    out = optimize_map(gm, _plane_views(device), OptimizeConfig(iters=15, lr_means=0.01))
     assert out["iters"] == 15 and out["loss_last"] < 0.9 * out["loss_first"]
     assert 0 < out["optimized"] < len(gm)  # only the Gaussians that project into a view take steps
     torch.testing.assert_close(gm.means[-1], behind)
@@ -49,13 +49,13 @@ def test_default_learning_rate_keeps_centres_on_the_surface():
 
     def drift(lr: float) -> float:
         gm = _wall("cpu", 2.0)
-        cfg = MappingConfig(opt_iters=3, lr_means=lr)
+        cfg = OptimizeConfig(iters=3, lr_means=lr)
         for _ in range(40):
             optimize_map(gm, views, cfg)
         return float((gm.means[:, 2] - 2.0).abs().quantile(0.9))  # metres
 
-    assert MappingConfig().lr_means <= 1e-4
-    default = drift(MappingConfig().lr_means)
+    assert OptimizeConfig().lr_means <= 1e-4
+    default = drift(OptimizeConfig().lr_means)
     assert default < 0.02
     assert drift(1e-3) > 4 * default  # 120 steps at 1e-3 leave 10% of the centres ~10 cm off the wall
 
@@ -65,4 +65,4 @@ def test_optimize_map_rejects_mixed_sizes():
     view = _plane_views("cpu", 1)[0]
     small = View(view.rgb[:10], view.depth[:10], view.viewmat, view.K)
     with pytest.raises(ValueError, match="same image size"):
-        optimize_map(gm, [view, small], MappingConfig(opt_iters=1))
+        optimize_map(gm, [view, small], OptimizeConfig(iters=1))

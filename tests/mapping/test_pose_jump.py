@@ -92,7 +92,8 @@ def _frame(i: int) -> Frame:
 def _mapper(action: str) -> Mapper:
     cfg = load_config(
         None,
-        ["graph.enabled=false", "mapping.opt_iters=0", "mapping.ablation=local", "mapping.knn_radius=0.1",
+        ["graph.enabled=false", "mapping.optimize.iters=0", "mapping.ablation=local",
+         "mapping.association.knn_radius=0.1",
          f"mapping.on_pose_jump={action}"],
     )  # fmt: skip
     return Mapper(cfg, "cpu")

@@ -80,22 +80,32 @@ def test_empty_map(device):
     assert stats.clusters == 0
 
 
-def test_protected_labels_keep_their_gaussians(device):
-    """Beyond the paper (mapping.evidence_protect): a protected label keeps its low-confidence Gaussians at
-    both levels, and still gives its label to others; the same map without protection loses it."""
+def test_no_relabel_across_a_clear_separation(device):
+    """Beyond the paper (mapping.evidence.enabled): a label the views separated from its neighbour's keeps its
+    low-confidence Gaussians at both levels, and still gives its label to others; a disputed (exposed)
+    Gaussian is not held back. The same map without the guard loses the small label."""
     big = _patch(0.0, n=6)  # label 3, confident
     small = _patch(0.3, n=2)  # label 5: a small object with a low SAM score, next to big
     stray = _patch(0.0, n=1, y0=0.3)  # label 7: one low Gaussian beside big
     means = torch.cat([big, small, stray]).to(device)
     base = torch.tensor([3] * 36 + [5] * 4 + [7], dtype=torch.int32, device=device)
     conf0 = torch.tensor([0.9] * 36 + [0.1, 0.2, 0.1, 0.2] + [0.1], device=device)
-    protected = torch.zeros(8, dtype=torch.bool, device=device)
-    protected[5] = True
+
+    def separated(a, b):
+        return ((a == 5) & (b == 3)) | ((a == 3) & (b == 5))
+
     labels, conf = base.clone(), conf0.clone()
-    stats = global_refinement(means, labels, conf, r_search=0.1, cluster_radius=0.3, protected=protected)
+    stats = global_refinement(means, labels, conf, r_search=0.1, cluster_radius=0.3, separated=separated)
     assert labels[36:40].tolist() == [5] * 4 and torch.equal(conf[36:40], conf0[36:40])
-    assert labels[40].item() == 3  # not protected: relabelled as before
+    assert labels[40].item() == 3  # not separated: relabelled as before
     assert stats.individual_gaussians + stats.cluster_gaussians == 1
+    exposed = torch.zeros(41, dtype=torch.bool, device=device)
+    exposed[36] = True
+    labels, conf = base.clone(), conf0.clone()
+    global_refinement(
+        means, labels, conf, r_search=0.1, cluster_radius=0.3, separated=separated, exposed=exposed
+    )
+    assert labels[36].item() == 3 and labels[37:40].tolist() == [5] * 3
     labels, conf = base.clone(), conf0.clone()
     global_refinement(means, labels, conf, r_search=0.1, cluster_radius=0.3)
     assert labels.tolist() == [3] * 41

@@ -9,7 +9,7 @@ import pytest
 from ogscene3d.config import load_config
 from ogscene3d.runs import RunFolder, read_config, read_run_id, recorded_data_path
 
-FAST = ["mapping.opt_iters=1", "graph.enabled=false"]
+FAST = ["mapping.optimize.iters=1", "graph.enabled=false"]
 
 
 @pytest.fixture(scope="module")

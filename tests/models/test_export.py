@@ -159,7 +159,7 @@ def test_sam_export_runs_through_sam_onnx(tmp_path):
     from segment_anything.utils.onnx import SamOnnxModel
 
     from ogscene3d.models.export import export_sam_model
-    from ogscene3d.segmentation.sam_onnx import SamOnnx
+    from ogscene3d.segmentation.sam_onnx import MaskFilters, SamOnnx
 
     torch.manual_seed(0)
     # segment-anything's own classes at its fixed interface sizes (1024 input, 256 x 64 x 64 embeddings),
@@ -177,8 +177,10 @@ def test_sam_export_runs_through_sam_onnx(tmp_path):
     entry = export_sam_model(sam, SamOnnxModel, out)
     update_manifest(out, "sam", {"kind": "sam-vit-b", **entry})
     s = load_config(None, manifest_overrides(out)).segmentation
-    seg = SamOnnx(s.sam_encoder, s.sam_decoder, points_per_side=4, points_per_batch=4, pred_iou_thresh=0.0,
-                  stability_score_thresh=0.0, min_region_area=0)  # fmt: skip
+    seg = SamOnnx(
+        s.sam_encoder, s.sam_decoder, points_per_side=4, points_per_batch=4,
+        filters=MaskFilters(pred_iou_thresh=0.0, stability_score_thresh=0.0, min_region_area=0),
+    )  # fmt: skip
     rgb = np.random.default_rng(0).integers(0, 256, (48, 64, 3), dtype=np.uint8)
     image = seg.embed(rgb)
     x, _ = seg.preprocess(rgb)  # the encoder's embeddings equal the torch model's on the same input

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from ogscene3d.cli import main
 from ogscene3d.errors import DataError
@@ -43,6 +44,10 @@ def test_a_run_folder_written_before_the_runs_package_resumes(old_run, capsys):
     assert counts["frames"] == 3 and counts["keyframes"] == 3
     assert read_run_id(run) == run_id  # a resume goes on with its map's id
     assert recorded_data_path(run) == scene.resolve()  # config.yaml now records where the frames are
+    # its flat mapping keys (before the sections) were read at their new place and are written there
+    saved = yaml.safe_load(folder.config.read_text())["mapping"]
+    assert saved["optimize"]["iters"] == 1 and saved["association"]["knn_radius"] == 0.1
+    assert "opt_iters" not in saved and "knn_radius" not in saved
     assert main(argv) == 0  # finished: nothing to do
     assert "nothing to do" in capsys.readouterr().out
 

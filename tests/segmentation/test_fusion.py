@@ -9,7 +9,7 @@ from onnx_models import make_detector, make_sam_decoder, make_sam_encoder
 from ogscene3d.segmentation.base import Segmentation
 from ogscene3d.segmentation.detector_onnx import DetectorOnnx
 from ogscene3d.segmentation.fusion import SamDetectorSegmenter, fuse_segmentations, overlap_ratios
-from ogscene3d.segmentation.sam_onnx import SamOnnx
+from ogscene3d.segmentation.sam_onnx import MaskFilters, SamOnnx
 
 
 def hand_made() -> tuple[Segmentation, Segmentation]:
@@ -120,7 +120,7 @@ def test_sam_plus_detector_end_to_end(tmp_path):
     scores = np.array([[0.9, 0.0], [0.0, 0.7], [0.1, 0.1]], np.float32)
     det = make_detector(tmp_path / "det.onnx", boxes, scores)
     seg = SamDetectorSegmenter(
-        SamOnnx(enc, dec, points_per_side=2, min_region_area=10),
+        SamOnnx(enc, dec, points_per_side=2, filters=MaskFilters(min_region_area=10)),
         DetectorOnnx(det, ["chair", "table"]),
         tau_m=0.7,
     )
@@ -147,7 +147,7 @@ def test_no_detections_gives_the_grid_segments(tmp_path):
     det = make_detector(
         tmp_path / "det.onnx", np.array([[0, 0, 50, 50]], np.float32), np.array([[0.1]], np.float32)
     )
-    sam = SamOnnx(enc, dec, points_per_side=2, min_region_area=10)
+    sam = SamOnnx(enc, dec, points_per_side=2, filters=MaskFilters(min_region_area=10))
     res = SamDetectorSegmenter(sam, DetectorOnnx(det, ["cup"])).segment(np.zeros((96, 128, 3), np.uint8))
     assert len(res.detections) == 0 and not res.md.ids.any()
     np.testing.assert_array_equal(res.mf.ids, res.ms.ids)

@@ -9,7 +9,7 @@ from onnx_models import make_sam_decoder, make_sam_encoder
 
 from ogscene3d.errors import ConfigError, ModelError
 from ogscene3d.segmentation.masks import MaskRecord, mask_nms, nms, paint_masks, remove_small_regions
-from ogscene3d.segmentation.sam_onnx import SamOnnx, build_point_grid, stability_score
+from ogscene3d.segmentation.sam_onnx import MaskFilters, SamOnnx, build_point_grid, stability_score
 
 H, W = 96, 128  # longest side 128 -> x8 to the 1024 model frame (exact in float)
 
@@ -60,7 +60,7 @@ def test_point_grid_is_cell_centres():
 
 def test_grid_masks_match_closed_form(models):
     # outputs: 0 = single-mask token (must be ignored), 1 fails pred IoU, 3 fails stability -> discs r=16
-    sam = SamOnnx(models["enc"], models["dec"], points_per_side=2, min_region_area=10)
+    sam = SamOnnx(models["enc"], models["dec"], points_per_side=2, filters=MaskFilters(min_region_area=10))
     seg = sam(np.full((H, W, 3), 90, np.uint8))
     assert_segments_are(seg, expected_discs(16.0), 0.95)
     sm = seg.score_map()
@@ -69,11 +69,19 @@ def test_grid_masks_match_closed_form(models):
 
 def test_fixed_batch_and_chunking_give_the_same_answer(models):
     rgb = np.zeros((H, W, 3), np.uint8)
-    ref = SamOnnx(models["enc"], models["dec"], points_per_side=3, min_region_area=10)(rgb)
-    b1 = SamOnnx(models["enc"], models["dec_b1"], points_per_side=3, min_region_area=10)(rgb)
-    odd = SamOnnx(models["enc"], models["dec"], points_per_side=3, points_per_batch=4, min_region_area=10)(
+    ref = SamOnnx(models["enc"], models["dec"], points_per_side=3, filters=MaskFilters(min_region_area=10))(
         rgb
     )
+    b1 = SamOnnx(models["enc"], models["dec_b1"], points_per_side=3, filters=MaskFilters(min_region_area=10))(
+        rgb
+    )
+    odd = SamOnnx(
+        models["enc"],
+        models["dec"],
+        points_per_side=3,
+        points_per_batch=4,
+        filters=MaskFilters(min_region_area=10),
+    )(rgb)
     for other in (b1, odd):
         np.testing.assert_array_equal(other.ids, ref.ids)
         assert other.scores == ref.scores
@@ -84,19 +92,29 @@ def test_thresholds_select_outputs(models):
     rgb = np.zeros((H, W, 3), np.uint8)
     # a lower stability threshold admits the r=20 output (IoU 0.97, stability ~0.51), which wins the pixels
     sam = SamOnnx(
-        models["enc"], models["dec"], points_per_side=2, stability_score_thresh=0.4, min_region_area=10
+        models["enc"],
+        models["dec"],
+        points_per_side=2,
+        filters=MaskFilters(stability_score_thresh=0.4, min_region_area=10),
     )
     assert_segments_are(sam(rgb), expected_discs(20.0), 0.97)
     # a higher IoU threshold leaves only the unstable output -> nothing
-    sam = SamOnnx(models["enc"], models["dec"], points_per_side=2, pred_iou_thresh=0.96, min_region_area=10)
+    sam = SamOnnx(
+        models["enc"],
+        models["dec"],
+        points_per_side=2,
+        filters=MaskFilters(pred_iou_thresh=0.96, min_region_area=10),
+    )
     assert not sam(rgb).ids.any()
     # regions smaller than min_region_area are removed (a r=16 disc has ~812 pixels)
-    sam = SamOnnx(models["enc"], models["dec"], points_per_side=2, min_region_area=900)
+    sam = SamOnnx(models["enc"], models["dec"], points_per_side=2, filters=MaskFilters(min_region_area=900))
     assert not sam(rgb).ids.any()
 
 
 def test_single_output_decoder(models):
-    sam = SamOnnx(models["enc"], models["dec_single"], points_per_side=2, min_region_area=10)
+    sam = SamOnnx(
+        models["enc"], models["dec_single"], points_per_side=2, filters=MaskFilters(min_region_area=10)
+    )
     assert_segments_are(sam(np.zeros((H, W, 3), np.uint8)), expected_discs(16.0), 0.95)
 
 
@@ -104,7 +122,9 @@ def test_decoder_with_baked_aspect_ratio(models):
     # segment-anything 1.0's export freezes the crop of its masks output at the dummy orig_im_size's aspect
     # ratio (fixed in segment-anything PR #58, after the PyPI release; samexporter's inference works around
     # it the same way): masks come from low_res_masks, postprocessed here, so a 3:4 frame still fits
-    sam = SamOnnx(models["enc"], models["dec_baked"], points_per_side=2, min_region_area=10)
+    sam = SamOnnx(
+        models["enc"], models["dec_baked"], points_per_side=2, filters=MaskFilters(min_region_area=10)
+    )
     assert_segments_are(sam(np.full((H, W, 3), 90, np.uint8)), expected_discs(16.0), 0.95)
     image = sam.embed(np.zeros((H, W, 3), np.uint8))
     recs = sam.segment_boxes(image, np.array([[20, 10, 60, 40]]), ["chair"])
@@ -115,12 +135,14 @@ def test_decoder_with_baked_aspect_ratio(models):
 
 
 def test_decoder_without_low_res_output_uses_masks(models):
-    sam = SamOnnx(models["enc"], models["dec_no_low_res"], points_per_side=2, min_region_area=10)
+    sam = SamOnnx(
+        models["enc"], models["dec_no_low_res"], points_per_side=2, filters=MaskFilters(min_region_area=10)
+    )
     assert_segments_are(sam(np.full((H, W, 3), 90, np.uint8)), expected_discs(16.0), 0.95)
 
 
 def test_box_prompts_give_box_masks_with_names(models):
-    sam = SamOnnx(models["enc"], models["dec"], min_region_area=10)
+    sam = SamOnnx(models["enc"], models["dec"], filters=MaskFilters(min_region_area=10))
     image = sam.embed(np.zeros((H, W, 3), np.uint8))
     recs = sam.segment_boxes(image, np.array([[20, 10, 60, 40], [70, 50, 120, 90]]), ["chair", "table"])
     assert [r.name for r in recs] == ["chair", "table"]
@@ -136,7 +158,7 @@ def test_non_finite_predicted_ious_are_dropped(models, caplog):
     d = models["dir"]
     rgb = np.zeros((H, W, 3), np.uint8)
     nan_box = make_sam_decoder(d / "dec_nan_box.onnx", box_iou=float("nan"))
-    sam = SamOnnx(models["enc"], nan_box, min_region_area=10)
+    sam = SamOnnx(models["enc"], nan_box, filters=MaskFilters(min_region_area=10))
     image = sam.embed(rgb)
     with caplog.at_level("WARNING"):
         assert sam.segment_boxes(image, np.array([[20, 10, 60, 40]]), ["chair"]) == []
@@ -144,13 +166,18 @@ def test_non_finite_predicted_ious_are_dropped(models, caplog):
     # grid prompts: the inf output (r=10) and the NaN one (r=16) fail the predicted-IoU filter, so the
     # r=20 output (IoU 0.97) is left, with a stability threshold that admits it
     bad_pts = make_sam_decoder(d / "dec_inf_pts.onnx", ious=(0.99, float("inf"), float("nan"), 0.97))
-    sam = SamOnnx(models["enc"], bad_pts, points_per_side=2, stability_score_thresh=0.4, min_region_area=10)
+    sam = SamOnnx(
+        models["enc"],
+        bad_pts,
+        points_per_side=2,
+        filters=MaskFilters(stability_score_thresh=0.4, min_region_area=10),
+    )
     assert_segments_are(sam(rgb), expected_discs(20.0), 0.97)
     # a single-output-per-token decoder without the 4-token layout picks the best finite output
     two = make_sam_decoder(
         d / "dec_two.onnx", radii=(16.0, 20.0), slopes=(10.0, 10.0), ious=(0.9, 0.9), box_iou=float("nan")
     )
-    sam = SamOnnx(models["enc"], two, min_region_area=10)
+    sam = SamOnnx(models["enc"], two, filters=MaskFilters(min_region_area=10))
     assert sam.segment_boxes(sam.embed(rgb), np.array([[20, 10, 60, 40]]), ["chair"]) == []
 
 
@@ -170,7 +197,7 @@ def test_encoder_preprocessing_nchw(models):
 
 @pytest.mark.parametrize("key", ["enc_hwc", "enc_nhwc_sym"])
 def test_encoder_preprocessing_hwc_variants(models, key):
-    sam = SamOnnx(models[key], models["dec"], points_per_side=2, min_region_area=10)
+    sam = SamOnnx(models[key], models["dec"], points_per_side=2, filters=MaskFilters(min_region_area=10))
     rgb = np.full((H, W, 3), [200, 100, 50], np.uint8)
     x, resized = sam.preprocess(rgb)
     assert resized == (768, 1024)

@@ -106,7 +106,7 @@ def test_synthetic_scene_segments_carry_detector_names_and_the_graph_finds_them(
     assert named and named <= classes - {"floor", "wall", "ceiling"}  # the scene's object classes only
     out = tmp_path / "run"
     args = ["run", "--data", str(scene), "--out", str(out), "--device", "cpu", "--no-progress",
-            "--set", "mapping.opt_iters=1", "--set", "mapping.knn_radius=0.06"]  # fmt: skip
+            "--set", "mapping.optimize.iters=1", "--set", "mapping.association.knn_radius=0.06"]  # fmt: skip
     assert main(args) == 0
     nodes = json.loads((out / "graph.json").read_text())["nodes"]
     tags = {n["tag"] for n in nodes if n["caption_source"] == "detector"}

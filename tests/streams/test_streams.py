@@ -280,7 +280,7 @@ def test_live_maps_a_realsense_recording_and_saves_the_map(tmp_path, scene):
     rec = _recording(tmp_path, scene)
     out = tmp_path / "run"
     argv = ["--source", f"realsense:{rec}", "--out", str(out), "--exit-when-done", "--port", "0",
-            "--device", "cpu", "--set", "graph.enabled=false", "--set", "mapping.opt_iters=1",
+            "--device", "cpu", "--set", "graph.enabled=false", "--set", "mapping.optimize.iters=1",
             "--set", "segmentation.backend=none"]  # fmt: skip
     assert main(argv) == 0
     assert (out / "gaussians.ply").is_file() and (out / "traj.txt").is_file()
@@ -336,7 +336,7 @@ def test_sigterm_stops_a_live_camera_and_saves_the_map(tmp_path, scene, monkeypa
     threading.Thread(target=terminate_after_two_frames, daemon=True).start()
     out = tmp_path / "run"
     argv = ["--source", "realsense", "--out", str(out), "--port", "0", "--device", "cpu",
-            "--set", "graph.enabled=false", "--set", "mapping.opt_iters=1",
+            "--set", "graph.enabled=false", "--set", "mapping.optimize.iters=1",
             "--set", "segmentation.backend=none"]  # fmt: skip
     assert main(argv) == 0
     assert camera.delivered >= 2 and (out / "gaussians.ply").is_file() and (out / "map.npz").is_file()

@@ -35,7 +35,7 @@ def scene(tmp_path_factory):
 
 
 SMALL = [
-    "--set", "mapping.keyframe_every=2", "--set", "mapping.opt_iters=1",
+    "--set", "mapping.keyframe_every=2", "--set", "mapping.optimize.iters=1",
     "--set", "graph.init_keyframes=1", "--set", "graph.update_every=1", "--set", "graph.min_gaussians=5",
 ]  # fmt: skip
 

@@ -75,7 +75,7 @@ def add_parser(subparsers: Any) -> None:
         out={"type": Path, "help": "batch output folder (one run directory per scene)"},
         config="YAML config for every scene (e.g. configs/replica.yaml)",
     )
-    add_override_argument(p, "mapping.opt_iters=5")
+    add_override_argument(p, "mapping.optimize.iters=5")
     _add_executor_args(p)
     g = p.add_argument_group("evaluation (with --eval)")
     g.add_argument("--eval", action="store_true", help="evaluate each run right after mapping (same task)")

@@ -28,7 +28,7 @@ def add_parser(subparsers: Any) -> None:
     )
     p.add_argument("--format", choices=["yaml", "table"], default="yaml", help="output form (default yaml)")
     add_shared_arguments(p, "--config", config="YAML config whose values to show instead of the defaults")
-    add_override_argument(p, "mapping.tau_p=0.2")
+    add_override_argument(p, "mapping.association.tau_p=0.2")
 
 
 def allowed_text(s: Setting) -> str:

@@ -75,7 +75,7 @@ def _add_session_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="where --synthetic writes its scene (default: OUT/scene, else outputs/live-synthetic)",
     )
-    add_override_argument(p, "mapping.opt_iters=5")
+    add_override_argument(p, "mapping.optimize.iters=5")
 
 
 def _add_viewer_arguments(p: argparse.ArgumentParser) -> None:

@@ -44,7 +44,7 @@ def add_shared_arguments(parser: Any, *flags: str, **changes: str | dict[str, An
         parser.add_argument(flag, **kwargs)
 
 
-def add_override_argument(parser: argparse.ArgumentParser, example: str = "mapping.opt_iters=5") -> None:
+def add_override_argument(parser: argparse.ArgumentParser, example: str = "mapping.optimize.iters=5") -> None:
     """Add the ``--set KEY=VALUE`` option (repeatable; ``args.overrides``, parsed by ``load_config``).
 
     Args:

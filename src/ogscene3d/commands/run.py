@@ -121,7 +121,7 @@ def run_observers(args: argparse.Namespace, cfg, data, frames: int | None) -> It
     m = cfg.mapping
     observers: list = []
     if frames is not None:
-        observers.append(RunTimeEstimate(frames, m.keyframe_every, cfg.data.scale, m.opt_iters))
+        observers.append(RunTimeEstimate(frames, m.keyframe_every, cfg.data.scale, m.optimize.iters))
     rerun = None
     if getattr(args, "rerun", None) or getattr(args, "rerun_save", None):
         from ..viewer.rerun_log import rerun_logger
@@ -135,8 +135,8 @@ def run_observers(args: argparse.Namespace, cfg, data, frames: int | None) -> It
             rerun.close()
 
 
-# The most a Gaussian centre may drift per keyframe (mapping.lr_means x mapping.opt_iters) before small
-# images' maps suffer: configs/synthetic.yaml's budget; docs/defaults.md has the measurements.
+# The most a Gaussian centre may drift per keyframe (mapping.optimize.lr_means x mapping.optimize.iters)
+# before small images' maps suffer: configs/synthetic.yaml's budget; docs/defaults.md has the measurements.
 SMALL_IMAGE_WIDTH = 320
 SMALL_IMAGE_DRIFT = 3e-4
 
@@ -147,14 +147,14 @@ def _warn_small_images(cfg, ds) -> None:
     import numpy as np
 
     width = 2.0 * float(np.asarray(ds.K)[0, 2])  # the principal point is near the image centre
-    drift = cfg.mapping.lr_means * cfg.mapping.opt_iters
+    drift = cfg.mapping.optimize.lr_means * cfg.mapping.optimize.iters
     if width <= SMALL_IMAGE_WIDTH and drift > SMALL_IMAGE_DRIFT * 1.001:
         log.warning(
-            "images about %d px wide with mapping.opt_iters=%d and mapping.lr_means=%g: slow, and the "
-            "Gaussians drift off the surfaces; for images up to %d px wide use --config synthetic (see "
-            "docs/defaults.md)",
+            "images about %d px wide with mapping.optimize.iters=%d and mapping.optimize.lr_means=%g: slow, "
+            "and the Gaussians drift off the surfaces; for images up to %d px wide use --config synthetic "
+            "(see docs/defaults.md)",
             round(width),
-            cfg.mapping.opt_iters,
-            cfg.mapping.lr_means,
+            cfg.mapping.optimize.iters,
+            cfg.mapping.optimize.lr_means,
             SMALL_IMAGE_WIDTH,
         )

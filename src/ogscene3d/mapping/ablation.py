@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from ..config import Config
+from ..eval.run_eval import evaluate_run
 from .mapper import ABLATIONS, Mapper
 from .session import mapping_session
 
@@ -65,8 +66,6 @@ def run_ablation(
     Scene labels are named by majority overlap with the GT instances (an oracle naming that is the same
     for every ablation, so differences come from the mapping alone).
     """
-    from ..eval.run_eval import evaluate_run
-
     results: dict[str, dict] = {}
     for abl in ablations:
         if abl not in ABLATIONS:

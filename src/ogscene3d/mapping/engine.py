@@ -23,6 +23,7 @@ from typing import Any
 
 from ..config import Config
 from ..errors import DataError, OGSceneError
+from ..progress import progress as progress_bar
 from ..runs import EXPORTS, RunFolder, SaveError, StopRequest, resumed_run_id, start_run_dir
 from .pose_jump import PoseJumpError
 from .source import check_same_source, dataset_source, matching_pixel_centers, remove_run_temps
@@ -185,8 +186,6 @@ class MappingEngine:
         """Map ``frames`` (positions ``start`` on), then finish and save the run; see the class doc."""
         mapper = self.mapper
         seen0, counts0 = mapper.frames_seen, _counts(mapper)
-        from ..progress import progress as progress_bar
-
         t0 = time.perf_counter()
         self._status("mapping")
         self._given, self._last_index = 0, None

@@ -1,110 +1,111 @@
-"""Multi-view co-segmentation evidence (beyond the paper; the ``mapping.evidence_*`` switches, each rule's
-measured effect in docs/consistency.md).
+"""One multi-view evidence model for the map's labels (beyond the paper; ``mapping.evidence``,
+docs/consistency.md).
 
-The paper fixes a Gaussian's label at first sight: a later view's segment that matches the map takes the
-label the map already has (case ii), so when the first view merged a vase with the cabinet it stands on, or
-absorbed a light switch into the wall, every later, cleaner view of the vase or the switch only confirms the
-wrong label, and the long-term step's consistency test (the majority rendered label inside each stored
-segment, Eq. 16) agrees with it too. What the later views do show is that the label's region falls into two
-segments, and that one part of it is always in a segment of its own. This module collects that evidence at
-every keyframe, as view-consensus mask clustering does offline (MaskClustering, CVPR 2024), and decides
-incrementally:
+The paper fixes a Gaussian's label at first sight, and its two repairs judge confidence, not co-segmentation:
+a later, clean view of a vase that the first view merged with its cabinet matches the cabinet's Gaussians and
+only confirms the cabinet's label. SAM's segments tell more, view after view: which parts of the map one
+segment holds together, and which it clearly keeps apart. This module accumulates exactly that, over every
+judged view, at three grains, and the refinement and the long-term step decide from it.
 
-* **observe** (every keyframe, on the map as it stands before the keyframe's association; and, with
-  ``evidence_revisit``, the long-term step's memory views again, against the map as it is then: Gaussians
-  made after a view was a keyframe had no word from it, and the ones the view made itself get none from it):
-  the labelled Gaussians are projected into the frame (visible where the observed depth agrees,
-  ``merge.visible_pixels``); those on the boundary of a segment whose interior holds most of it are left out
-  (``spill_pixels``: a small segment, a book or a switch a few pixels across, is nearly all boundary and is
-  kept whole). For each label L, its visible Gaussians are counted per segment; the segment with the most of
-  them is L's *main* segment in this view. A Gaussian in the main segment gets a "together" view; one in
-  another segment that is itself mostly L (at least half of its visible Gaussians, and ``min_group`` of
-  them) gets a "split" view: the view shows it as a separate part of L. One in another segment that is
-  mostly *other* labels gets a "wrong" view: L ran over into a neighbouring object (a first view that merged
-  a cabinet with the floor gave the cabinet's label to the floor around it, and later views put that floor
-  in the floor's segment). Per label, the views where it was judged count, and those where it *owned* its
-  main segment (held ``OWN`` of the segment's visible Gaussians). Per label pair, the views where both
-  labels lie mostly (``CONTAIN``) in one segment count, those where it is the same segment count as
-  "together", and of those the ones where each label is ``min_part`` of the segment's visible Gaussians
-  ("firm"), and where that segment is confident ("sure").
-* **lower_confidences** (with the long-term step, ``evidence_split``, ``evidence_wrong``): a Gaussian judged
-  in at least ``min_views`` views, shown apart (or in another label's segment) in at least ``split_ratio``
-  of them, loses that ratio of its confidence (Eq. 16's decrease with P_2D-3D = the ratio and P_conf = 0):
-  its stored views disagree with its label. Algorithm 1 then re-decides the wrong-label ones even in a
-  protected label, giving them another label than their own (``refine.global_refinement``'s ``exposed``).
-* **quick splits** (``evidence_quick_split``): a Gaussian judged in fewer than ``min_views`` views is
-  decided when every one of them showed it apart and there were two, or one of them was a segment SAM
-  scored at least ``evidence_confident_score``. A book first seen in the last keyframes has no third view;
-  one clean, confident view of it on its own says more than a random cut, which SAM scores low.
-* **partition** (with the global refinement, first, ``evidence_partition``): every judged Gaussian remembers
-  the segment each of its latest ``SLOTS`` views put it in. A label's spatial components (Alg. 1's clusters,
-  each of at least ``partition_min`` Gaussians) are compared view by view through the segment most of their
-  Gaussians were in: components that at least ``LINKED`` of their common views put in one segment form a
-  group, and a group that fewer than ``partition_apart`` of its common views with the label's largest group
-  put in one segment becomes a new label once the group's mean confidence is under ``partition_below``
-  (``mapping.evidence_partition_conf``, ``tau_low`` by default): the long-term step lowers the group's
-  Gaussians by the share of the views that put it apart (``lower_partitioned``, Eq. 16's decrease), and the
-  refinement re-decides what is low. A first view that merged a chair, a cabinet and a sofa with the
-  floor, or three books with each other, left one label over parts that no later view joins again; the
-  Gaussian-level split votes below cannot undo it when each part is its label's main segment in some views.
-  Components are separated in space, so a surface that SAM cuts at random places stays whole: its pieces
-  are one component, and separate patches of it are in one segment in most views.
-* **split_and_merge** (with the global refinement, before Alg. 1): labels that at least ``merge_ratio`` of
-  at least ``min_views`` views show in one segment are merged (``evidence_merge``); with
-  ``evidence_quick_merge`` also a pair judged in fewer views when every one held both in one segment, firm,
-  and two did or one was sure (a sofa that its first view cut in pieces; a cup inside the table's segment is
-  no firm part of it). Gaussians with split evidence and a confidence under ``split_below``
-  (``mapping.evidence_split_conf``: 1 by default, the views decide; ``tau_low`` waits for the long-term
-  step's decrease, except for quick decisions, which may have no long-term step left) are split off their
-  label, each spatially connected group of at least ``min_group`` of them (same label, r_search) becoming a
-  new label at confidence 0.5 (``evidence_split``). Algorithm 1 then re-decides what is left low.
-* **protected_labels** (for Alg. 1, ``evidence_protect``): labels that owned a segment in a view since they
-  were made, and labels not yet judged in ``min_views`` views, keep their Gaussians through Alg. 1. Without
-  it a small object whose confidence is low (its low SAM score at birth, Eq. 5 decreases in the views that
-  absorbed it) took the label of the wall or the table around it, its only high-confidence neighbour.
-* **veto** (after Alg. 1, ``evidence_veto``, off): a relabelling by Alg. 1 from label a to label b is undone
-  when at least ``min_views`` views held both labels mostly in one segment each and fewer than
-  ``apart_ratio`` of them in the same one.
+**Units.** Every Gaussian belongs to a *cell*: the Gaussians one *part* has in one voxel of
+``mapping.evidence.cell`` metres. A *part* is what one segment made: the new Gaussians of a novel (or
+ambiguous, or unsegmented) segment start a part; those of a segment that local association matched with a
+label join the part most of its matched Gaussians belong to. Labels are groups of parts. Parts never merge
+(a merge of labels is a grouping, so it can be undone); a part is split when its cells are clearly
+separated (below). Ids are per-Gaussian auxiliary values (``ev_cell``) plus small tables per cell
+(``cell_part``, its voxel); nothing is saved: a resumed run starts one part per label.
 
-A SAM that cuts a wall or a chair at random places puts a given Gaussian in a minority piece only in a few
-views, far below ``split_ratio``, and a fragment of a surface does not come back as a segment of its own; a
-support merge that SAM makes in a quarter of the views leaves the pair apart (merging needs ``merge_ratio``,
-0.9, of the views). Evidence is not saved in checkpoints: a resumed run collects it anew.
+**Observe** (every keyframe, once its new Gaussians are in the map: the view that made a part is its first
+judge). Gaussian centres are projected into the view (visible where the observed depth agrees; the boundary
+pixels of a big segment are left out, ``spill_pixels``). Weights are the segments' rescaled SAM scores (the
+c_sam of Eq. 5): a view's vote counts its segments' confidence.
+
+* *cells*: a cell lies in the segment most of its visible Gaussians are in. Two neighbouring cells of one
+  part (one among the other's ``NEIGHBOURS`` nearest visible cells of the part, within ``refine.r_search``)
+  are *together* in a view that puts them in one segment, *apart* in one that puts them in two; summed per
+  cell pair over all views (``PairTable``), with the number of views.
+* *parts*: a part is judged in a view where at least ``MIN_VISIBLE`` of its Gaussians are visible and
+  ``CONTAIN`` of those lie in one segment. Two judged parts in one segment are *held together*: firmly when
+  each holds ``mapping.merge.min_part`` of the segment's visible Gaussians (the two halves of a sofa), weakly
+  otherwise (a cup inside the table's segment: SAM absorbs small objects into their support in most frames,
+  which says little). Two judged parts in two segments are *clearly separated* where each is the main part
+  of its segment (``MAJOR``): one segment holds one and at most 1 - ``CONTAIN`` of the other, and it is about
+  that part, not a piece of a surface that SAM cut at a random place. A part can be shown apart where
+  ``MAJOR`` of it lies in one segment (SAM cuts a large surface at random places, so it is rarely ``CONTAIN``
+  in one segment), and held together only where it is judged. A part *owns* a view's segment when it holds
+  ``OWN`` of it.
+* *Gaussians*: a labelled Gaussian in a segment other than its label's main one (the segment holding most of
+  the label) that is mostly other labels is *disputed* in that view (the label ran over into a neighbour);
+  one in its label's main segment is *confirmed*. An unlabelled Gaussian votes for the label holding most of
+  its segment (a Misra-Gries counter: one candidate per Gaussian).
+
+**Decide** (``decide``, at the global refinement, before Algorithm 1):
+
+1. *split parts*: a part's cells are linked where views held them together more often than apart
+   (judged in ``LINK_VIEWS`` views at least);
+   a linked group other than the part's largest that views put apart from the rest of the part in at least
+   ``mapping.evidence.split_ratio`` of their cross views becomes a part of its own (a fridge that the first
+   view merged with the floor, books that it merged with each other). A SAM cut at random places separates a
+   pair of cells in a few of its views only. A group at most 1/``SMALL`` of its part (a light switch in the
+   wall's part) splits on about two views apart however many absorbed it, and a view that shows one of two
+   cells in a segment at most 1/``SMALL`` of the other's counts ``SMALL_APART`` views against their link:
+   SAM merges small objects into their support in most frames, so the few that show them apart are the
+   evidence. Where the part's largest group leaves, it takes the part's history with other parts along.
+2. *group parts into labels*, from scratch every time, greedily by firm support: two groups merge when the
+   views held them together (firmly at least once, or weakly with no separation ever) and separated them in
+   at most ``mapping.evidence.separation`` (0.5) of their firm views. A small object that SAM absorbs into
+   its support in most views, but showed apart once, stays apart; a surface that its first view cut in two
+   joins once later views hold it whole; a merge made earlier, by the association or a previous decision,
+   is undone when the views grow to separate the parts.
+3. *relabel*: each group keeps the label most of its Gaussians carry (the largest group first), or takes a
+   new one; a part's Gaussians that carry its former label move with it. Unlabelled Gaussians of a group take
+   its label; a group of unlabelled parts only gets a label when one of them owned a segment.
+4. *fill*: an unlabelled Gaussian that is still unlabelled takes the label its segments voted for.
+
+**Algorithm 1 and Eq. 16 decide from it**: the refinement may not relabel a cluster or a Gaussian across a
+clear separation (``separated``: two labels whose parts the views separated more than they held firmly
+together), unless the Gaussian is disputed; a disputed Gaussian takes another label than its own. The
+long-term step lowers disputed Gaussians' confidence by their share of disputing views (Eq. 16's decrease
+with P_2D-3D = that share, P_conf = 0), so that Algorithm 1 re-decides them.
+
+The pair tables grow with the scene's surface, not with the stream: a view adds counts to the pairs it sees.
 """
 
 from __future__ import annotations
 
+import heapq
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 
+from ..config import EvidenceConfig
 from .local import group_top2
 from .longterm import label_edges
-from .merge import merge_labels, visible_pixels
-from .neighbors import knn_components
-from .refine import connected_clusters
+from .merge import visible_pixels
+from .neighbors import knn
+from .timings import Counters
 
-UNSTAMPED = 3.0e38  # evidence_born of a Gaussian no view has judged yet
-SLOTS = 4  # the latest judged views whose segment each Gaussian remembers (8 measured the same)
-LINKED = 0.5  # two components of a label are one object when this share of their common views joins them
-OWN = 0.8  # a label owns a view's segment when it holds this share of the segment's visible Gaussians
-CONTAIN = 0.8  # a label lies "in one segment" of a view when this share of its visible Gaussians does
-
-
-@dataclass
-class EvidenceStats:
-    views: int = 0
-    judged: int = 0
-    split_votes: int = 0
-    lowered: int = 0
-    split_labels: int = 0
-    split_gaussians: int = 0
-    merged_labels: int = 0
-    partitioned_labels: int = 0
-
-    def as_dict(self) -> dict[str, int]:
-        return dict(self.__dict__)
+CONTAIN = 0.8  # a part is judged in a view when this share of its visible Gaussians lies in one segment
+OWN = 0.8  # a part owns a segment when it holds this share of the segment's visible Gaussians
+# two parts are separated by a view only where each holds this share of its own segment
+MAJOR = 0.5
+MIN_VISIBLE = 3  # visible Gaussians a part needs to be judged
+# a segment's Gaussians apart in space start parts of their own from this many on
+MIN_PART = 8
+CELL_MIN = 1  # visible Gaussians (in its segment) a cell needs to be judged
+NEIGHBOURS = 8  # a cell's neighbours in a view: its nearest visible cells (within ``radius``)
+COHERE = 2.0  # apart segments hold at most this many times the group
+SPLIT_MIN = 3  # Gaussians a group of cells needs to be split off
+SPLIT_VIEWS = 1.5  # weighted views apart a split needs (about two)
+SMALL = 5.0  # a group at most 1/SMALL of its part splits on its apart views alone
+SMALL_APART = 3.0  # weight of a cell pair's apart view where one segment is at most 1/SMALL of the other
+ANCHOR = 8  # a part's oldest visible cells whose segment anchors its cells' votes in a view
+LINK_RATIO = 3.0  # together at least this many times apart: linked
+LINK_VIEWS = 2  # views that must judge two cells of a part before they count as linked
+DISPUTE = 0.5  # a Gaussian is disputed when this share of its judged views disputed its label
+_VOX = 2048  # voxel coordinates are packed in 12 bits each (+-2048 cells)
+_PART_SHIFT = 36
 
 
 def spill_pixels(seg: torch.Tensor) -> torch.Tensor:
@@ -120,121 +121,223 @@ def spill_pixels(seg: torch.Tensor) -> torch.Tensor:
     return edge & big[flat].reshape(seg.shape)
 
 
-def _start_afresh(gm, rows: torch.Tensor) -> None:
-    """Clear the label-level votes of Gaussians ``rows`` that moved to a new label: its views start afresh
-    (the segments they remember stay: they say where the Gaussians were, whatever their label)."""
-    for name in ("evidence_views", "evidence_split", "evidence_sure", "evidence_wrong"):
-        gm.aux(name)[rows] = 0.0
+class PairTable:
+    """Sparse statistics between pairs of ids (unordered): sorted int64 keys ``a << 31 | b`` (a < b) and
+    ``cols`` float values per pair, summed over ``add`` calls. New pairs wait in a small sorted table that
+    joins the main one when it reaches a quarter of its size, so that a view's update costs what the view
+    sees, not a sort of everything stored."""
+
+    def __init__(self, cols: int, device: torch.device) -> None:
+        self._keys = [torch.zeros(0, dtype=torch.int64, device=device) for _ in range(2)]  # main, pending
+        self._vals = [torch.zeros((0, cols), device=device) for _ in range(2)]
+
+    def __len__(self) -> int:
+        return int(self._keys[0].numel() + self._keys[1].numel())
+
+    @property
+    def keys(self) -> torch.Tensor:
+        self._flush()
+        return self._keys[0]
+
+    @property
+    def vals(self) -> torch.Tensor:
+        self._flush()
+        return self._vals[0]
+
+    @staticmethod
+    def key(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+        lo, hi = torch.minimum(a, b).long(), torch.maximum(a, b).long()
+        return (lo << 31) | hi
+
+    def pairs(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(a [E], b [E]) of every stored pair, a < b (in the order of ``vals``)."""
+        k = self.keys
+        return k >> 31, k & ((1 << 31) - 1)
+
+    def _flush(self) -> None:
+        if self._keys[1].numel():
+            keys = torch.cat(self._keys)
+            order = torch.argsort(keys)
+            self._keys = [keys[order], self._keys[1][:0]]
+            self._vals = [torch.cat(self._vals)[order], self._vals[1][:0]]
+
+    def add(self, a: torch.Tensor, b: torch.Tensor, vals: torch.Tensor) -> None:
+        """Add ``vals`` [M, cols] to the pairs (a[i], b[i]) (a != b; repeated pairs sum)."""
+        if a.numel() == 0:
+            return
+        k, inv = torch.unique(self.key(a, b), return_inverse=True)
+        v = torch.zeros((k.numel(), vals.shape[1]), device=vals.device).index_add_(0, inv, vals)
+        for level in (0, 1):
+            keys = self._keys[level]
+            if keys.numel() and k.numel():
+                at = torch.searchsorted(keys, k).clamp(max=keys.numel() - 1)
+                found = keys[at] == k
+                self._vals[level].index_add_(0, at[found], v[found])
+                k, v = k[~found], v[~found]
+        if k.numel():
+            keys = torch.cat([self._keys[1], k])
+            order = torch.argsort(keys)
+            self._keys[1], self._vals[1] = keys[order], torch.cat([self._vals[1], v])[order]
+        if self._keys[1].numel() > max(1024, self._keys[0].numel() // 4):
+            self._flush()
+
+    def get(self, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+        """[M, cols] the values of pairs (a[i], b[i]) (zeros for pairs never added)."""
+        keys, vals = self.keys, self.vals
+        out = torch.zeros((a.numel(), vals.shape[1]), device=vals.device)
+        if keys.numel() == 0 or a.numel() == 0:
+            return out
+        k = self.key(a, b)
+        at = torch.searchsorted(keys, k).clamp(max=keys.numel() - 1)
+        found = keys[at] == k
+        out[found] = vals[at[found]]
+        return out
 
 
-def remember_segments(gm, rows: torch.Tensor, segs: torch.Tensor, view: int) -> None:
-    """Record that judgement ``view`` (a stamp, unique per judgement) put the Gaussians ``rows`` [R] in the
-    segments ``segs`` [R]. Each Gaussian keeps its latest ``SLOTS`` views, round robin, in the auxiliary
-    values ``evidence_seen{k}`` (the stamp) and ``evidence_seg{k}`` (the segment id), -1 where empty."""
-    if rows.numel() == 0:
-        return
-    count = gm.aux("evidence_remembered")
-    slot = (count[rows] % SLOTS).long()
-    for k in range(SLOTS):
-        at = slot == k
-        gm.aux(f"evidence_seen{k}", -1.0)[rows[at]] = float(view)
-        gm.aux(f"evidence_seg{k}", -1.0)[rows[at]] = segs[at].float()
-    count[rows] += 1
+def _components(n: int, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Connected components of the graph on n vertices with edges (a[i], b[i]): a component id per vertex."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    if n == 0:
+        return torch.zeros(0, dtype=torch.long, device=a.device)
+    an, bn = a.cpu().numpy(), b.cpu().numpy()
+    adj = coo_matrix((np.ones(an.size), (an, bn)), shape=(n, n))
+    return torch.as_tensor(connected_components(adj, directed=False)[1], dtype=torch.long, device=a.device)
 
 
-def component_segments(
-    gm, rows: torch.Tensor, comp: torch.Tensor
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Per (component, remembered view) seen: the segment most of the component's Gaussians were in, for the
-    Gaussians ``rows`` [R] in components ``comp`` [R]. Returns (component [E], view [E] compact 0..V-1,
-    segment [E]); ties go to the smaller segment id."""
-    cs, vs, ss = [], [], []
-    for k in range(SLOTS):
-        view = gm.aux(f"evidence_seen{k}", -1.0)[rows]
-        seg = gm.aux(f"evidence_seg{k}", -1.0)[rows]
-        ok = view >= 0
-        cs.append(comp[ok])
-        vs.append(view[ok].long())
-        ss.append(seg[ok].long())
-    c, v, sg = torch.cat(cs), torch.cat(vs), torch.cat(ss)
-    if c.numel() == 0:
-        return c, v, sg
-    _, vi = torch.unique(v, return_inverse=True)
-    nv = int(vi.max()) + 1
-    keys, at = torch.unique(c * nv + vi, return_inverse=True)
-    top, _, _, _ = group_top2(at, sg, keys.numel())
-    return keys // nv, keys % nv, top
+def _majority(keys: torch.Tensor, values: torch.Tensor, n: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per key 0..n-1: the most frequent value among ``values[keys == k]`` (-2 where none; values >= -1) and
+    its count."""
+    top, cnt, _, _ = group_top2(keys, values + 1, n)
+    return torch.where(cnt > 0, top - 1, torch.full_like(top, -2)), cnt
 
 
-def _apart_groups(
-    comp: torch.Tensor, view: torch.Tensor, seg: torch.Tensor, size: torch.Tensor, apart: float
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """Per component of one label: its group's index, or -1 for the components that stay with the label, and
-    the share of the group's common views with the label's largest group that put them apart (0 where it
-    stays). ``comp``, ``view``, ``seg`` [E]: the segment of component ``comp`` (0..C-1) in ``view``, at most
-    one entry per component and view; ``size`` [C] the components' Gaussians. Common and joint views are
-    counted as products of one-hot tables ([C,V] views, [C,P] view-segment pairs): a [C,C,V] table grows with
-    the stream's length."""
-    n, dev = size.numel(), size.device
-    _, vi = torch.unique(view, return_inverse=True)
-    seen = torch.zeros((n, int(vi.max()) + 1 if vi.numel() else 0), device=dev)
-    seen[comp, vi] = 1.0
-    _, pi = torch.unique(vi * (int(seg.max()) + 1 if seg.numel() else 1) + seg, return_inverse=True)
-    pair = torch.zeros((n, int(pi.max()) + 1 if pi.numel() else 0), device=dev)
-    pair[comp, pi] = 1.0
-    common = seen @ seen.T
-    together = pair @ pair.T
-    linked = (common > 0) & (together >= LINKED * common)
-    nodes = torch.arange(n, device=dev)
-    grp = knn_components(
-        torch.where(linked, nodes[None, :], torch.full_like(linked, -1, dtype=torch.long))
-    ).long()
-    mass = torch.zeros(n, device=dev).index_add_(0, grp, size.float())
-    main = grp == int(torch.argmax(mass))
-    out = torch.full_like(grp, -1)
-    share = torch.zeros(n, device=dev)
-    for g in torch.unique(grp[~main]).tolist():
-        mem = grp == g
-        c = float(common[mem][:, main].sum())
-        t = float(together[mem][:, main].sum())
-        if c > 0 and t < apart * c:
-            out[mem] = g
-            share[mem] = 1.0 - t / c
-    return out, share
+def _n_labels(gm) -> int:
+    """Label ids of ``gm`` lie below this (its next label, or above its largest label)."""
+    lab = gm.labels
+    return max(int(gm.next_label), int(lab.max()) + 1 if lab.numel() else 0, 1)
 
 
-class SegmentEvidence:
-    """Per-Gaussian split evidence (auxiliary values of the GaussianMap) and per-label-pair co-segmentation
-    counts, collected view by view."""
+@dataclass
+class EvidenceStats(Counters):
+    views: int = 0
+    parts: int = 0
+    cells: int = 0
+    part_splits: int = 0
+    relabelled_parts: int = 0
+    relabelled_gaussians: int = 0
+    new_labels: int = 0
+    filled: int = 0
+    lowered: int = 0
 
-    # per label pair: views where both lay mostly in one segment each; of those, in the same one; of those,
-    # with each label a real part of the segment (``min_part``); of those, in a confident segment
-    _PAIRS = ("pair_views", "pair_together", "pair_firm", "pair_sure")
 
-    def __init__(self, device: torch.device) -> None:
+class EvidenceModel:
+    """Co-segmentation evidence between cells, parts and labels (see the module docstring)."""
+
+    # part pair columns: views that held both firmly together, weakly together, clearly apart
+    FIRM, WEAK, APART = 0, 1, 2
+
+    def __init__(
+        self, device: torch.device, cfg: EvidenceConfig | None = None, *, radius: float = 0.1,
+        min_part: float = 0.1,
+    ) -> None:
+        """``cfg``: the ``mapping.evidence`` section (its defaults when None); ``radius``: the refinement's
+        ``r_search`` (a cell's neighbours); ``min_part``: ``mapping.merge.min_part`` (a real part of a
+        segment)."""
+        cfg = cfg if cfg is not None else EvidenceConfig()
         self.device = device
-        for name in self._PAIRS:
-            setattr(self, name, torch.zeros((0, 0), device=device))
-        self.label_seen = torch.zeros(0, device=device)
-        self.label_owned = torch.zeros(0, device=device)
-        self.clock = 0  # judgements so far: the stamps of observe
-        self._judged: dict[int, int] = {}  # view (keyframe index) -> the stamp of its last judgement
+        self.cell = float(cfg.cell)
+        self.radius = float(radius)
+        self.separation = float(cfg.separation)
+        self.split_ratio = float(cfg.split_ratio)
+        self.min_part = float(min_part)
+        self.min_views = int(cfg.dispute_views)
+        self.cell_part = torch.zeros(0, dtype=torch.long, device=device)
+        self.cell_vox = torch.zeros((0, 3), dtype=torch.long, device=device)
+        # per cell: views in / apart from its part's anchor segment, and the part's Gaussians in the segments
+        # of the apart views (summed, weighted)
+        self.cell_main = torch.zeros((0, 3), device=device)
+        self._cell_keys = torch.zeros(0, dtype=torch.int64, device=device)  # sorted (part, voxel) keys
+        self._cell_ids = torch.zeros(0, dtype=torch.long, device=device)
+        self.next_part = 0
+        self.part_owned = torch.zeros(0, device=device)  # views in which the part owned its segment
+        self.part_apart = torch.zeros(0, device=device)  # views that separated the part from another
+        self.part_touched = torch.zeros(0, dtype=torch.bool, device=device)  # judged since the last decide
+        self.cell_pairs = PairTable(3, device)  # together, apart (weighted), views
+        self._judged: dict[int, tuple[int, int]] = {}  # view -> (cells, parts) when it was last judged
+        self.part_pairs = PairTable(3, device)  # FIRM, WEAK, APART
         self.stats = EvidenceStats()
 
-    def _grow(self, n: int) -> None:
-        old = self.pair_views.shape[0]
-        if n <= old:
-            return
-        size = max(n, 2 * old, 64)
-        for name in self._PAIRS:
-            t = torch.zeros((size, size), device=self.device)
-            t[:old, :old] = getattr(self, name)
-            setattr(self, name, t)
-        for name in ("label_seen", "label_owned"):
-            t = torch.zeros(size, device=self.device)
-            t[:old] = getattr(self, name)
-            setattr(self, name, t)
+    # ------------------------------------------------------------------ ids
+    def new_parts(self, count: int) -> torch.Tensor:
+        start = self.next_part
+        self.next_part += int(count)
+        for name in ("part_owned", "part_apart", "part_touched"):
+            t = getattr(self, name)
+            grown = torch.zeros(self.next_part, dtype=t.dtype, device=self.device)
+            grown[: t.numel()] = t
+            setattr(self, name, grown)
+        self.stats.parts = self.next_part
+        return torch.arange(start, self.next_part, device=self.device)
 
+    def _voxels(self, means: torch.Tensor) -> torch.Tensor:
+        return torch.floor(means / self.cell).long().clamp(-_VOX + 1, _VOX - 1)
+
+    def _cell_key(self, part: torch.Tensor, vox: torch.Tensor) -> torch.Tensor:
+        v = vox + _VOX
+        return (part.long() << _PART_SHIFT) | (v[:, 0] << 24) | (v[:, 1] << 12) | v[:, 2]
+
+    def _reindex_cells(self) -> None:
+        keys = self._cell_key(self.cell_part, self.cell_vox)
+        order = torch.argsort(keys)
+        self._cell_keys, self._cell_ids = keys[order], order
+
+    def assign(self, gm, rows: torch.Tensor, parts: torch.Tensor) -> None:
+        """Put the Gaussians ``rows`` [R] of ``gm`` into the cells of parts ``parts`` [R] (their voxel from
+        their centre), creating cells where the part has none in that voxel."""
+        if rows.numel() == 0:
+            return
+        vox = self._voxels(gm.means[rows])
+        keys = self._cell_key(parts, vox)
+        cell = torch.full_like(keys, -1)
+        if self._cell_keys.numel():
+            at = torch.searchsorted(self._cell_keys, keys).clamp(max=self._cell_keys.numel() - 1)
+            found = self._cell_keys[at] == keys
+            cell[found] = self._cell_ids[at[found]]
+        miss = cell < 0
+        if bool(miss.any()):
+            uk, inv = torch.unique(keys[miss], return_inverse=True)
+            first = torch.zeros(uk.numel(), dtype=torch.long, device=keys.device)
+            first.scatter_(0, inv, torch.nonzero(miss).squeeze(1))
+            n0 = self.cell_part.numel()
+            ids = torch.arange(n0, n0 + uk.numel(), device=keys.device)
+            cell[miss] = ids[inv]
+            self.cell_part = torch.cat([self.cell_part, parts.long()[first]])
+            self.cell_vox = torch.cat([self.cell_vox, vox[first]])
+            self.cell_main = torch.cat([self.cell_main, torch.zeros((uk.numel(), 3), device=keys.device)])
+            self._reindex_cells()
+            self.stats.cells = int(self.cell_part.numel())
+        gm.aux("ev_cell", -1.0)[rows] = cell.float()
+
+    def ensure_cells(self, gm) -> None:
+        """Cells for Gaussians that have none (a map resumed from a checkpoint, or made before the evidence
+        was collected): one part per label, and per keyframe of origin for unlabelled ones."""
+        cell = gm.aux("ev_cell", -1.0)
+        rows = torch.nonzero(cell < 0).squeeze(1)
+        if rows.numel() == 0:
+            return
+        lab = gm.labels[rows].long()
+        key = torch.where(lab >= 0, lab, -1 - gm.origin_kf[rows].long())
+        uk, inv = torch.unique(key, return_inverse=True)
+        self.assign(gm, rows, self.new_parts(int(uk.numel()))[inv])
+
+    def parts_of(self, gm) -> torch.Tensor:
+        """[N] the part of every Gaussian (-1 for none)."""
+        cell = gm.aux("ev_cell", -1.0).long()
+        return torch.where(cell >= 0, self.cell_part[cell.clamp(min=0)], torch.full_like(cell, -1))
+
+    # ------------------------------------------------------------------ observe
     def observe(
         self,
         gm,
@@ -243,377 +346,602 @@ class SegmentEvidence:
         K: np.ndarray,
         depth: np.ndarray,
         *,
+        weights: dict[int, float] | None = None,
         margin: float = 0.1,
-        min_group: int = 3,
         view: int | None = None,
         revisit: bool = False,
-        scores: dict[int, float] | None = None,
-        confident: float = 0.95,
-        min_part: float = 0.1,
     ) -> None:
-        """Add one view's evidence (see the module docstring). ``gm``: the GaussianMap; ``segments`` [H,W]
-        int ids (0 = none); ``pose`` c2w, ``K``, ``depth`` the view's (metres); ``view`` its key (the
-        keyframe index), under which its judgement is remembered; ``scores`` the segments' SAM scores, a
-        split vote from a segment scored at least ``confident`` also counting as a confident one; two labels
-        in one segment count as *firm* together when each holds ``min_part`` of its visible Gaussians.
-
-        A view judged again (``revisit``, the long-term step's memory views) gives votes only to the
-        Gaussians first stamped after its last judgement (made since), and leaves the per-label and per-pair
-        counts alone, so that no view counts twice for any Gaussian or label however often it is revisited."""
-        if segments is None:
+        """Add one view's evidence (see the module docstring). ``segments`` [H,W] ids (0 = none); ``pose``
+        c2w, ``K``, ``depth`` the view's (metres); ``weights`` each segment's weight (its rescaled SAM
+        score; 1 where missing); ``view``: the keyframe index
+        of this view, whose own new Gaussians cast no Gaussian-level vote (their label came from these
+        segments). A view judged again (``revisit``: the long-term step's memory views) votes only where it
+        has not yet: for the cells and parts made since it was last judged, and the Gaussians made after it,
+        so that no view counts twice for anything however often it is revisited."""
+        if segments is None or len(gm) == 0:
             return
-        since = self._judged.get(view, 0) if revisit else None
-        dev = gm.device
-        self.clock += 1
+        self.ensure_cells(gm)
+        since = self._judged.get(view, (0, 0)) if revisit else (0, 0)
         if view is not None:
-            # the Gaussians a keyframe makes get the next stamp (they did not exist when it was judged): its
-            # own segments made them, so a revisit must not count them as a second opinion
-            self._judged[view] = self.clock if revisit else self.clock + 1
-        if len(gm) == 0:
-            return
-        born = gm.aux("evidence_born", UNSTAMPED)
-        born[born == UNSTAMPED] = float(self.clock)  # the Gaussians this view is the first to see
-        pick = torch.nonzero(gm.labels >= 0).squeeze(1)
-        if pick.numel() == 0:
-            return
+            self._judged[view] = (int(self.cell_part.numel()), self.next_part)
+        if revisit and since == self._judged[view]:
+            return  # nothing made since
+        dev = gm.device
         seg = torch.as_tensor(np.ascontiguousarray(segments), device=dev).long()
         pix = visible_pixels(
-            gm.means[pick],
+            gm.means,
             torch.as_tensor(pose, dtype=torch.float32, device=dev),
             torch.as_tensor(K, dtype=torch.float32, device=dev),
             torch.as_tensor(np.ascontiguousarray(depth), dtype=torch.float32, device=dev),
             margin,
         )
-        vis = pix >= 0
-        g, p = pick[vis], pix[vis]
-        s = seg.reshape(-1)[p]
-        ok = (s > 0) & ~spill_pixels(seg).reshape(-1)[p]
-        g, s = g[ok], s[ok]
+        g = torch.nonzero(pix >= 0).squeeze(1)
+        s = seg.reshape(-1)[pix[g]]
+        inside = s > 0
+        g, s, px = g[inside], s[inside], pix[g][inside]
         if g.numel() == 0:
             return
         self.stats.views += 1
-        lab = gm.labels[g].long()
-        S = int(s.max()) + 1
-        key = lab * S + s
-        uniq, inv, cnt = torch.unique(key, return_inverse=True, return_counts=True)
-        ul, us = uniq // S, uniq % S
-        # the main segment of each label: its entry with the most Gaussians (ties: the smaller segment id)
-        order = torch.argsort(-cnt, stable=True)
-        order = order[torch.argsort(ul[order], stable=True)]
-        first = torch.ones_like(order, dtype=torch.bool)
-        first[1:] = ul[order][1:] != ul[order][:-1]
-        is_main = torch.zeros_like(first)
-        is_main[order[first]] = True
-        n_seg = torch.zeros(S, device=dev).index_add_(0, us, cnt.float())
-        n_lab = torch.zeros(int(ul.max()) + 1, device=dev).index_add_(0, ul, cnt.float())
-        main_big = torch.zeros(int(ul.max()) + 1, dtype=torch.bool, device=dev)
-        main_big[ul[is_main]] = cnt[is_main] >= min_group
-        part = ~is_main & (cnt >= min_group) & main_big[ul]
-        split = part & (cnt.float() >= 0.5 * n_seg[us])
-        # a part of the label inside another label's segment, away from the label's own: the label ran over
-        # into a neighbouring object (a cabinet's label that took in the floor around it)
-        wrong = part & ~split
-        together = is_main & main_big[ul]
-        judged = (split | together)[inv]
-        fresh = torch.ones_like(judged) if since is None else born[g] > float(since)
-        remember_segments(gm, g[fresh], s[fresh], self.clock)
-        judged &= fresh
-        views, votes = gm.aux("evidence_views"), gm.aux("evidence_split")
-        views.index_add_(0, g[judged], torch.ones(int(judged.sum()), device=dev))
-        sv = split[inv] & fresh
-        votes.index_add_(0, g[sv], torch.ones(int(sv.sum()), device=dev))
-        wv = wrong[inv] & fresh
-        gm.aux("evidence_wrong").index_add_(0, g[wv], torch.ones(int(wv.sum()), device=dev))
-        is_sure = torch.zeros(S, dtype=torch.bool, device=dev)
-        if scores:
-            sure_ids = [int(i) for i, v in scores.items() if 0 < int(i) < S and float(v) >= confident]
-            is_sure[torch.tensor(sure_ids, dtype=torch.long, device=dev)] = True
-            sure = sv & is_sure[s]
-            gm.aux("evidence_sure").index_add_(0, g[sure], torch.ones(int(sure.sum()), device=dev))
-        self.stats.judged += int(judged.sum())
-        self.stats.split_votes += int(sv.sum())
-
-        if revisit:
+        S = int(seg.max()) + 1
+        w = torch.ones(S, device=dev)
+        for i, v in (weights or {}).items():
+            if 0 < int(i) < S:
+                w[int(i)] = float(v)
+        cell = gm.aux("ev_cell", -1.0)[g].long()
+        # cells: every visible Gaussian (a Gaussian at an edge, in its object's segment in most views, links
+        # with its object's cells; an even split links nothing)
+        self._observe_cells(cell, gm.labels[g].long(), s, w, since[0])
+        # parts and Gaussians: a big segment's boundary pixels are left out (spills across an edge)
+        ok = ~spill_pixels(seg).reshape(-1)[px]
+        g, s, cell = g[ok], s[ok], cell[ok]
+        if g.numel() == 0:
             return
-        # ownership: a label whose main segment holds little else in this view is an object SAM found
-        self._grow(int(gm.next_label))
-        ml, mc, ms = ul[is_main], cnt[is_main], us[is_main]
-        big = mc >= min_group
-        self.label_seen.index_add_(0, ml[big], torch.ones(int(big.sum()), device=dev))
-        pure = big & (mc.float() >= OWN * n_seg[ms])
-        self.label_owned.index_add_(0, ml[pure], torch.ones(int(pure.sum()), device=dev))
+        n_seg = torch.bincount(s, minlength=S).float()
+        self._observe_parts(self.cell_part[cell], gm.labels[g].long(), s, n_seg, w, since[1])
+        self._observe_gaussians(gm, g, s, S, view, revisit)
 
-        # label pairs: the labels that lie mostly in one segment, and which segment that is
-        share = cnt[is_main].float() / n_lab[ul[is_main]]
-        contained = share >= CONTAIN
-        labs, mains = ul[is_main][contained], us[is_main][contained]
-        if labs.numel() < 2:
-            return
-        part = (mc[contained].float() >= min_part * n_seg[mains]).float()
-        ii, jj = labs[:, None].expand(-1, labs.numel()), labs[None, :].expand(labs.numel(), -1)
-        same = (mains[:, None] == mains[None, :]).float()
-        firm = same * part[:, None] * part[None, :]
-        sure = firm * is_sure[mains].float()[:, None]
-        at = (ii.reshape(-1), jj.reshape(-1))
-        self.pair_views.index_put_(at, torch.ones(ii.numel(), device=dev), True)
-        self.pair_together.index_put_(at, same.reshape(-1), True)
-        self.pair_firm.index_put_(at, firm.reshape(-1), True)
-        self.pair_sure.index_put_(at, sure.reshape(-1), True)
-
-    def protected_labels(self, n_labels: int, min_views: int, min_owned: int = 1) -> torch.Tensor:
-        """[n_labels] bool: the labels Algorithm 1 leaves alone (``mapping.evidence_protect``): those that
-        owned a segment (held nearly all of it, ``OWN``) in at least ``min_owned`` views since they were made,
-        objects that SAM found on their own again, and those judged in fewer than ``min_views`` views, which
-        the evidence cannot tell yet from a fragment (a small object's label starts at its low SAM score and
-        is all low confidence). One view is enough: a light switch that SAM absorbs into the wall in most
-        views still owns its segment in some, and a fragment of a surface (a spurious or cut segment) does not
-        come back as a segment of its own."""
-        out = torch.ones(n_labels, dtype=torch.bool, device=self.device)
-        m = min(n_labels, self.label_owned.numel())
-        out[:m] = (self.label_owned[:m] >= min_owned) | (self.label_seen[:m] < min_views)
-        return out
-
-    def split_ratio(self, gm, min_views: int, quick: bool = False) -> torch.Tensor:
-        """[N] the share of a Gaussian's judged views that showed it as a separate part of its label (0 with
-        fewer than ``min_views`` judged views). With ``quick``, fewer views decide when every one of them
-        showed it apart and there were two, or one of them was a confident segment (ratio 1)."""
-        views, votes = gm.aux("evidence_views"), gm.aux("evidence_split")
-        decided = views >= min_views
-        if quick:
-            sure = gm.aux("evidence_sure")
-            decided |= (votes >= views) & ((views >= 2) | (sure >= 1))
-        return torch.where(decided, votes / views.clamp(min=1), torch.zeros_like(views))
-
-    def wrong_ratio(self, gm, min_views: int) -> torch.Tensor:
-        """[N] the share of a Gaussian's judged views that showed it inside another label's segment, away from
-        its own label's main segment (0 while it has been judged in fewer than ``min_views`` views)."""
-        wrong, views = gm.aux("evidence_wrong"), gm.aux("evidence_views")
-        seen = views + wrong
-        return torch.where(seen >= min_views, wrong / seen.clamp(min=1), torch.zeros_like(seen))
-
-    def lower_confidences(
+    def _observe_cells(
         self,
-        gm,
-        *,
-        min_views: int = 3,
-        split_ratio: float = 0.5,
-        quick: bool = False,
-        split: bool = True,
-        wrong: bool = False,
-        wrong_views: int = 3,
-    ) -> int:
-        """Eq. 16's decrease for Gaussians with split evidence (``split``) or wrong-label evidence
-        (``wrong``, decided after ``wrong_views`` judged views), by the larger of the two ratios (in place);
-        returns how many."""
-        zero = torch.zeros_like(gm.confidences)
-        r = torch.maximum(
-            self.split_ratio(gm, min_views, quick) if split else zero,
-            self.wrong_ratio(gm, wrong_views) if wrong else zero,
-        )
-        low = (r >= split_ratio) & (gm.labels >= 0)
+        cell: torch.Tensor,
+        lab: torch.Tensor,
+        s: torch.Tensor,
+        w: torch.Tensor,
+        since: int = 0,
+    ) -> None:
+        n_cell = torch.bincount(cell, minlength=int(self.cell_part.numel()))
+        top, cnt = _majority(cell, s, int(self.cell_part.numel()))
+        c = torch.nonzero((cnt >= CELL_MIN) & (2 * cnt > n_cell)).squeeze(1)  # a strict majority
+        if c.numel() == 0:
+            return
+        # each judged cell: in its part's anchor segment of this view, or in another segment that the part
+        # holds most of (the part falls into two segments here: two objects, or a random cut); in a segment of
+        # other parts it says nothing here (the Gaussians' disputes judge that: a label that ran over into its
+        # neighbour). The anchor is the segment of most of the part's oldest visible cells (``ANCHOR``): the
+        # largest share of a part that spans two objects is now one of them, now the other, as the view
+        # moves; its oldest cells are where it began
+        part_of = self.cell_part[cell]
+        P, S = self.next_part, int(w.numel())
+        pc, sc = self.cell_part[c], top[c]
+        order = torch.argsort(pc * (int(c.max()) + 1) + c)  # by part, then by age (cell id)
+        po = pc[order]
+        start = torch.ones_like(po, dtype=torch.bool)
+        start[1:] = po[1:] != po[:-1]
+        first = torch.cummax(torch.where(start, torch.arange(po.numel(), device=c.device), 0), 0).values
+        oldest = order[torch.arange(po.numel(), device=c.device) - first < ANCHOR]
+        anchor, _ = _majority(pc[oldest], sc[oldest], P)
+        n_part = torch.bincount(part_of, minlength=P)
+        # a segment is the part's when the part's label holds most of it (the label's other parts share it)
+        plab, _ = _majority(part_of, lab, P)
+        L = int(lab.max()) + 2 if lab.numel() else 1
+        held_l = torch.bincount((lab + 1) * S + s, minlength=L * S)  # [label + 1, segment] visible Gaussians
+        held_p = torch.bincount(part_of * S + s, minlength=P * S)
+        n_seg = torch.bincount(s, minlength=S)
+
+        def held(parts: torch.Tensor, segs: torch.Tensor) -> torch.Tensor:
+            pl = plab[parts]
+            return torch.where(pl >= 0, held_l[(pl + 1).clamp(min=0) * S + segs], held_p[parts * S + segs])
+
+        own = held(pc, sc) >= MAJOR * n_seg[sc]
+        ok = n_part[pc] >= MIN_VISIBLE
+        inside = sc == anchor[pc]
+        wc = w[sc] * ok
+        wa = wc
+        fresh = c >= since
+        away = wa * (~inside & own)
+        # and, for the apart votes, how much of the part that segment held: an object the part took in is
+        # all of its segment; a random cut is a large piece of the part
+        votes = torch.stack([wc * inside, away, away * held_p[pc * S + sc].float()], 1)
+        self.cell_main.index_add_(0, c[fresh], votes[fresh])
+        if c.numel() < 2:
+            return
+        centre = (self.cell_vox[c].float() + 0.5) * self.cell
+        part = self.cell_part[c]  # a part's cells only: the splits judge a part's own cells
+        nbr, _ = knn(centre, centre, NEIGHBOURS + 1, max(self.radius, self.cell), part, part, "same")
+        i = torch.arange(c.numel(), device=c.device)[:, None].expand_as(nbr)
+        keep = (nbr >= 0) & (nbr != i)
+        a, b = c[i[keep]], c[nbr[keep]]
+        key = torch.unique(PairTable.key(a, b))  # a pair found from both sides counts once
+        a, b = key >> 31, key & ((1 << 31) - 1)
+        if since:
+            a, b = a[b >= since], b[b >= since]  # b > a: one of them made since
+        sa, sb = top[a], top[b]
+        same = sa == sb
+        pa = self.cell_part[a]
+        # apart where both segments are mostly the part's (see above)
+        apart = ~same & (held(pa, sa) >= MAJOR * n_seg[sa]) & (held(pa, sb) >= MAJOR * n_seg[sb])
+        wt = torch.minimum(w[sa], w[sb])
+        # a view that shows one of the two in a segment at most 1/SMALL of the other's (a light switch's own
+        # segment beside the wall's) outweighs LINK_RATIO views that hold them in one: SAM absorbs small
+        # objects into their support in most frames (the yardstick's separation rule)
+        lo, hi = torch.minimum(n_seg[sa], n_seg[sb]), torch.maximum(n_seg[sa], n_seg[sb])
+        wx = wt * torch.where(SMALL * lo <= hi, SMALL_APART, 1.0)
+        self.cell_pairs.add(a, b, torch.stack([wt * same, wx * apart, torch.ones_like(wt)], 1))
+
+    def _observe_parts(
+        self,
+        part: torch.Tensor,
+        lab: torch.Tensor,
+        s: torch.Tensor,
+        n_seg: torch.Tensor,
+        w: torch.Tensor,
+        since: int = 0,
+    ) -> None:
+        """Part pairs of one view (``part``, ``lab``, ``s`` per visible Gaussian). A part's share of a segment
+        is its label's (the parts of one object share the segment that shows it): each of two parts in one
+        segment is a real part of it when its label holds ``min_part`` of it, and a view separates two parts
+        in two segments where each one's label is the main one of its segment (``MAJOR``)."""
+        P, S = self.next_part, int(n_seg.numel())
+        n_part = torch.bincount(part, minlength=P)
+        top, cnt = _majority(part, s, P)
+        judged = (n_part >= MIN_VISIBLE) & (cnt >= CONTAIN * n_part)
+        # a part whose main segment holds most of it (not all: SAM cuts a wall at random places) can still be
+        # shown apart from another part; only a judged one can be shown with one
+        loose = (n_part >= MIN_VISIBLE) & (cnt >= MAJOR * n_part)
+        p = torch.nonzero(loose).squeeze(1)
+        if p.numel() == 0:
+            return
+        self.part_touched[p[(p >= since) & judged[p]]] = True
+        sp = top[p]
+        # each judged part's label (the one most of its visible Gaussians carry) and that label's share of the
+        # part's segment; an unlabelled part counts alone
+        plab, _ = _majority(part, lab, P)
+        lp = plab[p]
+        L = int(lab.max()) + 2 if lab.numel() else 1
+        held = torch.bincount((lab + 1) * S + s, minlength=L * S).float()
+        share = torch.where(lp >= 0, held[(lp + 1) * S + sp], cnt[p].float()) / n_seg[sp]
+        self.part_owned[p[(share >= OWN) & (p >= since) & judged[p]]] += 1
+        if p.numel() < 2:
+            return
+        i, j = torch.triu_indices(p.numel(), p.numel(), 1, device=p.device)
+        if since:  # (p is sorted: j > i) one of them made since
+            keep = p[j] >= since
+            i, j = i[keep], j[keep]
+        si, sj = sp[i], sp[j]
+        both = judged[p[i]] & judged[p[j]]
+        same = (si == sj) & both
+        big = share >= self.min_part
+        firm = same & big[i] & big[j]
+        # apart: each part's label the main one in its segment. A SAM cut through a wall puts a small piece of
+        # it in a segment of its own now and then, but that segment is mostly the rest of the wall; an object
+        # that SAM shows on its own is most of its segment
+        major = share >= MAJOR
+        apart = (si != sj) & major[i] & major[j]
+        wt = torch.where(same, w[si], torch.minimum(w[si], w[sj]))
+        vals = torch.stack([wt * firm, wt * (same & ~firm), wt * apart], 1)
+        self.part_apart.index_add_(0, p[i], wt * apart).index_add_(0, p[j], wt * apart)
+        self.part_pairs.add(p[i], p[j], vals)
+
+    def _observe_gaussians(
+        self, gm, g: torch.Tensor, s: torch.Tensor, S: int, view: int | None, revisit: bool
+    ) -> None:
+        lab = gm.labels[g].long()
+        labelled = lab >= 0
+        L = _n_labels(gm)
+        # each label's main segment, and each segment's majority label (over its visible labelled Gaussians)
+        main, _ = _majority(lab[labelled], s[labelled], max(L, 1))
+        seg_lab, seg_cnt = _majority(s[labelled], lab[labelled], S)
+        n_lab = torch.bincount(s[labelled], minlength=S)
+        seg_lab = torch.where(2 * seg_cnt > n_lab, seg_lab, torch.full_like(seg_lab, -1))
+        vote = seg_lab[s]
+        if view is not None:  # the Gaussians the view made itself (or, revisited, those it judged) cast none
+            old = (gm.origin_kf[g] > view) if revisit else (gm.origin_kf[g] != view)
+            g, s, lab, labelled, vote = g[old], s[old], lab[old], labelled[old], vote[old]
+        own = labelled & (main[lab.clamp(min=0)] == s)
+        disputed = labelled & ~own & (vote != lab)
+        gm.aux("ev_own").index_add_(0, g[own], torch.ones(int(own.sum()), device=g.device))
+        gm.aux("ev_disputed").index_add_(0, g[disputed], torch.ones(int(disputed.sum()), device=g.device))
+        # unlabelled Gaussians: one candidate label each (Misra-Gries), for the fill
+        u = ~labelled & (vote >= 0)
+        gu, v = g[u], vote[u].float()
+        cand, n = gm.aux("ev_cand", -1.0), gm.aux("ev_cand_n")
+        c, k = cand[gu], n[gu]
+        agree = c == v
+        take = ~agree & (k <= 0)
+        cand[gu] = torch.where(take, v, c)
+        n[gu] = torch.where(agree | take, k + 1, k - 1)
+
+    # ------------------------------------------------------------------ Gaussian level
+    def disputed_ratio(self, gm) -> torch.Tensor:
+        """[N] the share of a Gaussian's judged views that disputed its label (0 with fewer than
+        ``min_views`` judged views)."""
+        d, o = gm.aux("ev_disputed"), gm.aux("ev_own")
+        seen = d + o
+        return torch.where(seen >= self.min_views, d / seen.clamp(min=1), torch.zeros_like(seen))
+
+    def disputed(self, gm) -> torch.Tensor:
+        """[N] bool: labelled Gaussians whose views disputed their label (``DISPUTE`` of at least
+        ``min_views``)."""
+        return (self.disputed_ratio(gm) >= DISPUTE) & (gm.labels >= 0)
+
+    def lower_disputed(self, gm) -> int:
+        """Eq. 16's decrease for disputed Gaussians, by their share of disputing views (in place). Returns
+        how many."""
+        r = self.disputed_ratio(gm)
+        low = self.disputed(gm)
         conf = gm.confidences
         conf[low] = (conf[low] - r[low] * conf[low]).clamp(0.0, 1.0)
         n = int(low.sum())
         self.stats.lowered += n
         return n
 
-    def split_and_merge(
-        self,
-        gm,
-        *,
-        split: bool = True,
-        merge: bool = True,
-        min_views: int = 3,
-        split_ratio: float = 0.5,
-        merge_ratio: float = 0.9,
-        quick: bool = False,
-        quick_merge: bool = False,
-        split_below: float = 1.0,
-        r_search: float = 0.1,
-        graph_k: int = 8,
-        min_group: int = 3,
-        partition: bool = False,
-        partition_apart: float = 0.25,
-        partition_min: int = 2,
-        partition_below: float = 1.0,
-    ) -> dict[str, int]:
-        """Partition labels into the objects their views show (``partition``), merge labels that most views
-        show in one segment, then split low-confidence parts with split evidence off their labels (in place
-        on ``gm.labels`` / ``gm.confidences``). Returns counts."""
-        out = {"partitioned_labels": 0, "merged_labels": 0, "split_labels": 0, "split_gaussians": 0}
-        if partition:
-            out["partitioned_labels"] = self.partition(
-                gm, r_search, graph_k, partition_min, partition_apart, partition_below
-            )
-        if merge and self.pair_views.numel():
-            v, t = self.pair_views, self.pair_together
-            hit = (v >= min_views) & (t >= merge_ratio * v)
-            if quick_merge:  # too few views for the ratio: unanimous, and firm in two or sure in one
-                hit |= (v >= 1) & (v < min_views) & (t >= v) & ((self.pair_firm >= 2) | (self.pair_sure >= 1))
-            hit.fill_diagonal_(False)
-            pairs = torch.nonzero(torch.triu(hit, diagonal=1))
-            present = torch.zeros(v.shape[0], dtype=torch.bool, device=v.device)
-            lab = gm.labels[gm.labels >= 0].long()
-            present[lab[lab < v.shape[0]]] = True
-            pairs = pairs[present[pairs[:, 0]] & present[pairs[:, 1]]]
-            mapping = merge_labels(gm.labels, pairs)
-            if mapping:
-                gone = torch.tensor(list(mapping), dtype=torch.long, device=v.device)
-                for m in (getattr(self, name) for name in self._PAIRS):
-                    m[gone] = 0
-                    m[:, gone] = 0
-                out["merged_labels"] = len(mapping)
-        if split:
-            r = self.split_ratio(gm, min_views, quick)
-            # a quick decision (fewer than min_views views: first seen in the last keyframes) does not wait
-            # for the long-term decrease, which may not come before the stream ends
-            few = gm.aux("evidence_views") < min_views
-            low = (r >= split_ratio) & ((gm.confidences < split_below) | few) & (gm.labels >= 0)
-            cand = torch.nonzero(low).squeeze(1)
-            if cand.numel() >= min_group:
-                comp = connected_clusters(gm.means[cand], gm.labels[cand], r_search, graph_k)
-                size = torch.bincount(comp[comp >= 0])
-                big = torch.nonzero(size >= min_group).squeeze(1)
-                if big.numel():
-                    lut = torch.full((size.numel(),), -1, dtype=torch.int64, device=gm.device)
-                    lut[big] = gm.new_labels(int(big.numel())).long()
-                    new = lut[comp.clamp(min=0)]
-                    take = (comp >= 0) & (new >= 0)
-                    rows = cand[take]
-                    gm.labels[rows] = new[take].to(gm.labels.dtype)
-                    gm.confidences[rows] = 0.5
-                    _start_afresh(gm, rows)
-                    out["split_labels"] = int(big.numel())
-                    out["split_gaussians"] = int(rows.numel())
-        self.stats.partitioned_labels += out["partitioned_labels"]
-        self.stats.merged_labels += out["merged_labels"]
-        self.stats.split_labels += out["split_labels"]
-        self.stats.split_gaussians += out["split_gaussians"]
+    # ------------------------------------------------------------------ decide
+    def decide(self, gm) -> dict[str, int]:
+        """Split parts, group parts into labels, relabel and fill (in place on ``gm.labels`` /
+        ``gm.confidences``; see the module docstring). Returns counts."""
+        out = {"part_splits": 0, "relabelled_parts": 0, "relabelled_gaussians": 0, "new_labels": 0,
+               "filled": 0}  # fmt: skip
+        if len(gm) == 0:
+            return out
+        self.ensure_cells(gm)
+        out["part_splits"] = self._split_parts(gm)
+        parts = self.parts_of(gm)
+        has = parts >= 0
+        # each part's former label: the one most of its Gaussians carry (-1: mostly unlabelled)
+        old, _ = _majority(parts[has], gm.labels[has].long(), max(self.next_part, 1))
+        mass = torch.bincount(parts[has], minlength=self.next_part)
+        group = self._group_parts(old, mass)
+        out.update(self._relabel(gm, parts, old, group))
+        out["filled"] = self._fill(gm)
+        self.part_touched.zero_()
+        for k, v in out.items():
+            setattr(self.stats, k, getattr(self.stats, k) + v)
         return out
 
-    def _partition_plan(
-        self, gm, r_search: float, graph_k: int, min_size: int, apart: float
-    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
-        """The groups that ``partition`` would give labels of their own: per labelled Gaussian (the rows
-        [R] returned first), its group (-1 for none; ids unique over the map) and the share of the views that
-        put its group apart from its label's largest group. None when nothing is apart."""
-        dev = gm.device
-        rows = torch.nonzero(gm.labels >= 0).squeeze(1)
-        if rows.numel() < 2 * min_size:
-            return None
-        comp = connected_clusters(gm.means[rows], gm.labels[rows], r_search, graph_k)
-        n_comp = int(comp.max()) + 1
-        size = torch.bincount(comp, minlength=n_comp)
-        owner = torch.zeros(n_comp, dtype=torch.long, device=dev)
-        owner[comp] = gm.labels[rows].long()
-        big = size >= min_size
-        several = torch.bincount(owner[big], minlength=int(gm.next_label)) >= 2
-        cand = big & several[owner]
-        if not bool(cand.any()):
-            return None
-        pick = cand[comp]
-        ec, ev, es = component_segments(gm, rows[pick], comp[pick])
-        if ec.numel() == 0:
-            return None
-        group = torch.full((n_comp,), -1, dtype=torch.long, device=dev)
-        share = torch.zeros(n_comp, device=dev)
-        index = torch.full((n_comp,), -1, dtype=torch.long, device=dev)
-        # the candidate components and their entries, sorted by label: one slice of each per label
-        cs_all = torch.nonzero(cand).squeeze(1)
-        cs_all = cs_all[torch.argsort(owner[cs_all], stable=True)]
-        labs, n_cs = torch.unique_consecutive(owner[cs_all], return_counts=True)
-        order = torch.argsort(owner[ec], stable=True)
-        ec, ev, es = ec[order], ev[order], es[order]
-        e_labs, n_e = torch.unique_consecutive(owner[ec], return_counts=True)
-        e_at = dict(zip(e_labs.tolist(), zip(torch.cumsum(n_e, 0).sub(n_e).tolist(), n_e.tolist())))
-        start = 0
-        for lab, n in zip(labs.tolist(), n_cs.tolist()):
-            cs = cs_all[start : start + n]
-            start += n
-            if n < 2 or lab not in e_at:
+    def _split_parts(self, gm) -> int:
+        """Step 1: cells of a touched part that the views keep apart from the rest of it become parts."""
+        if len(self.cell_pairs) == 0:
+            return 0
+        a, b = self.cell_pairs.pairs()
+        pa, pb = self.cell_part[a], self.cell_part[b]
+        inside = (pa == pb) & self.part_touched[pa]
+        if not bool(inside.any()):
+            return 0
+        a, b = a[inside], b[inside]
+        t, x, nv = (self.cell_pairs.vals[inside, i] for i in range(3))
+        n_cells = int(self.cell_part.numel())
+        # linked: together at least twice as often as apart, in two views at least: a cell that only its first
+        # view judged (hidden or at a segment's edge since), or one on the edge between two objects that
+        # views give now to one, now to the other, links nothing: it would bridge the cut
+        linked = (t >= LINK_RATIO * x) & (t > 0) & (nv >= LINK_VIEWS)
+        comp = _components(n_cells, a[linked], b[linked])  # singletons for every other cell
+        # Gaussians per cell and per component: the part's largest component keeps it
+        cell = gm.aux("ev_cell", -1.0).long()
+        mass = torch.bincount(cell[cell >= 0], minlength=n_cells).float()
+        comp_mass = torch.zeros(n_cells, device=self.device).index_add_(0, comp, mass)
+        comp_part = torch.full((n_cells,), -1, dtype=torch.long, device=self.device)
+        comp_part[comp] = self.cell_part
+        best = torch.full((self.next_part,), -1.0, device=self.device)
+        best.scatter_reduce_(0, comp_part[comp_mass > 0], comp_mass[comp_mass > 0], reduce="amax")
+        is_main = (comp_mass >= best[comp_part.clamp(min=0)]) & (comp_part >= 0)
+        # a component's cells' views in and apart from their part's anchor segment, per judged cell
+        judged = self.cell_main[:, :2].sum(1) > 0
+        votes = torch.zeros((n_cells, 3), device=self.device).index_add_(0, comp, self.cell_main)
+        n_judged = torch.zeros(n_cells, device=self.device).index_add_(0, comp, judged.float())
+        together, apart = votes[:, 0] / n_judged.clamp(min=1), votes[:, 1] / n_judged.clamp(min=1)
+        # the segments that put it apart held about the component itself, not a larger piece of its part:
+        # SAM cuts a floor at random places, each time another piece; an object is its segment every time
+        size = votes[:, 2] / votes[:, 1].clamp(min=1e-9)
+        coherent = size <= COHERE * comp_mass
+        # a component that is small beside the rest of its part (a light switch in the wall's part, a cup in
+        # the table's) splits on the views that showed it apart, however many absorbed it: SAM merges small
+        # objects into their support in most frames, so those frames say little (the yardstick's rule)
+        part_mass = torch.zeros(self.next_part, device=self.device)
+        part_mass.index_add_(0, comp_part[comp_mass > 0], comp_mass[comp_mass > 0])
+        small = SMALL * comp_mass <= part_mass[comp_part.clamp(min=0)]
+        go = (
+            (comp_mass >= SPLIT_MIN) & (apart >= SPLIT_VIEWS) & coherent
+            & ((apart >= self.split_ratio * (apart + together)) | small)
+        )  # fmt: skip
+        # a part keeps the components that stay; if none would, its largest
+        stays = torch.zeros(self.next_part, dtype=torch.bool, device=self.device)
+        live = (comp_mass > 0) & (comp_part >= 0)
+        live &= self.part_touched[comp_part.clamp(min=0)]
+        stays[comp_part[live & ~go]] = True
+        go &= live & (stays[comp_part.clamp(min=0)] | ~is_main)
+        t_cross, x_cross = together, apart
+        # the part's largest component may tie with another: one of them stays (the smaller id)
+        go_ids = torch.nonzero(go).squeeze(1)
+        if go_ids.numel() == 0:
+            return 0
+        old = comp_part[go_ids]
+        new = self.new_parts(int(go_ids.numel()))
+        lut = torch.full((n_cells,), -1, dtype=torch.long, device=self.device)
+        lut[go_ids] = new
+        moved = lut[comp]
+        sel = moved >= 0
+        self.cell_part[sel] = moved[sel]
+        self.cell_main[sel] = 0.0  # their part's main segment is another now
+        self._reindex_cells()
+        self._inherit(old[is_main[go_ids]], new[is_main[go_ids]])
+        # the new part starts its history with what the cells said about it and its former part (the views
+        # that held them in one segment held two real parts of it)
+        self.part_pairs.add(new, old, torch.stack([t_cross[go_ids], torch.zeros_like(t_cross[go_ids]),
+                                                   x_cross[go_ids]], 1))  # fmt: skip
+        self.part_touched[new] = True
+        return int(go_ids.numel())
+
+    def _inherit(self, old: torch.Tensor, new: torch.Tensor) -> None:
+        """A part's largest component that leaves it (only smaller pieces stayed, with the anchor) is most of
+        what the views judged: the new part takes over the old part's statistics with every other part."""
+        if old.numel() == 0 or len(self.part_pairs) == 0:
+            return
+        lut = torch.full((self.next_part,), -1, dtype=torch.long, device=self.device)
+        lut[old] = new
+        a, b = self.part_pairs.pairs()
+        vals = self.part_pairs.vals
+        la, lb = lut[a], lut[b]
+        for keep, x, y in ((la >= 0, la, b), (lb >= 0, a, lb)):
+            keep &= (x != y) & ((la < 0) | (lb < 0))
+            if bool(keep.any()):
+                self.part_pairs.add(x[keep], y[keep], vals[keep].clone())
+        self.part_owned[new] = self.part_owned[old]
+        self.part_apart[new] = self.part_apart[old]
+
+    def _group_parts(self, part_label: torch.Tensor, part_mass: torch.Tensor) -> torch.Tensor:
+        """Step 2: a group id per part. Each label's parts start as one group; a part that the views separate
+        from the rest of its label leaves it (the smallest such part first, then the rest is judged again);
+        then groups merge greedily, the most firmly held first, with the merge test on their summed
+        statistics. A part no view judged stays with its label."""
+        n = self.next_part
+        dev = self.device
+        if n == 0:
+            return torch.zeros(0, dtype=torch.long, device=dev)
+        lab = part_label.clone()
+        lab[part_mass <= 0] = -1
+        # each label's largest part roots its group
+        L = int(lab.max()) + 1 if bool((lab >= 0).any()) else 0
+        big = torch.full((max(L, 1),), -1.0, device=dev)
+        has = lab >= 0
+        big.scatter_reduce_(0, lab[has], part_mass[has].float(), reduce="amax")
+        ids = torch.arange(n, device=dev)
+        is_big = has & (part_mass.float() >= big[lab.clamp(min=0)])
+        first = torch.full((max(L, 1),), n, dtype=torch.long, device=dev)
+        first.scatter_reduce_(0, lab[is_big], ids[is_big], reduce="amin")
+        root = torch.where(has, first[lab.clamp(min=0)], ids)
+        if len(self.part_pairs) == 0:
+            return root
+        a, b = self.part_pairs.pairs()
+        vals = self.part_pairs.vals
+        # 1. parts that leave their label: each part's statistics with the rest of its label
+        inner = (lab[a] == lab[b]) & (lab[a] >= 0)
+        rest = torch.zeros((n, 3), device=dev)
+        rest.index_add_(0, a[inner], vals[inner]).index_add_(0, b[inner], vals[inner])
+        sep = (rest[:, 2] > 0) & (rest[:, 2] > self.separation * rest[:, 0])
+        for label in torch.unique(lab[sep]).tolist():
+            root = self._detach(label, lab, part_mass, a, b, vals, root)
+        return self._merge_groups(root, a, b, vals)
+
+    def _merge_groups(
+        self, root: torch.Tensor, a: torch.Tensor, b: torch.Tensor, vals: torch.Tensor
+    ) -> torch.Tensor:
+        """Step 2's merges: the groups' (``root`` per part) summed statistics over the part pairs (a, b,
+        ``vals``), merged greedily, the most firmly held first, in Python (a few hundred groups); returns
+        each part's group."""
+        n = self.next_part
+        dev = self.device
+        ra, rb = root[a], root[b]
+        cross = ra != rb
+        keys, inv = torch.unique(PairTable.key(ra[cross], rb[cross]), return_inverse=True)
+        gv = torch.zeros((keys.numel(), 3), device=dev).index_add_(0, inv, vals[cross])
+        ga, gb = (keys >> 31).tolist(), (keys & ((1 << 31) - 1)).tolist()
+        own_t = torch.zeros(n, dtype=torch.bool, device=dev)
+        own_t[root[self.part_apart[:n] > 0]] = True  # a group that some view showed apart from anything
+        owned = own_t.tolist()
+        group_adj: dict[int, dict[int, np.ndarray]] = {}
+        heap = []
+        for i, j, v in zip(ga, gb, gv.cpu().numpy().astype(np.float64)):
+            group_adj.setdefault(i, {})[j] = v
+            group_adj.setdefault(j, {})[i] = v
+            if self._mergeable(v, owned[i] and owned[j]):
+                heap.append((-self._score(v), i, j))
+        heapq.heapify(heap)
+        parent: dict[int, int] = {}
+
+        def find(x: int) -> int:
+            while parent.get(x, x) != x:
+                parent[x] = parent.get(parent[x], parent[x])
+                x = parent[x]
+            return x
+
+        while heap:
+            neg, i, j = heapq.heappop(heap)
+            ri, rj = find(i), find(j)
+            if ri == rj:
                 continue
-            e0, ne = e_at[lab]
-            lc = ec[e0 : e0 + ne]
-            index[cs] = torch.arange(n, device=dev)
-            grp, sh = _apart_groups(index[lc], ev[e0 : e0 + ne], es[e0 : e0 + ne], size[cs], apart)
-            index[cs] = -1
-            apart_here = grp >= 0
-            group[cs[apart_here]] = cs[grp[apart_here]]  # the group's smallest component: unique on the map
-            share[cs] = sh
-        if not bool((group >= 0).any()):
-            return None
-        return rows, group[comp], share[comp]
+            v = group_adj.get(ri, {}).get(rj)
+            if v is None or not self._mergeable(v, owned[ri] and owned[rj]):
+                continue
+            sc = self._score(v)
+            if sc < -neg - 1e-9:  # stale: the groups changed since it was pushed
+                heapq.heappush(heap, (-sc, ri, rj))
+                continue
+            if len(group_adj.get(ri, {})) < len(group_adj.get(rj, {})):
+                ri, rj = rj, ri
+            parent[rj] = ri
+            owned[ri] = owned[ri] or owned[rj]
+            dri = group_adj.setdefault(ri, {})
+            for k, vk in group_adj.pop(rj, {}).items():
+                if k == ri:
+                    continue
+                dk = group_adj[k]
+                del dk[rj]
+                acc = dri[k] + vk if k in dri else vk
+                dri[k] = acc
+                dk[ri] = acc
+                if self._mergeable(acc, owned[ri] and owned[k]):
+                    heapq.heappush(heap, (-self._score(acc), ri, k))
+            dri.pop(rj, None)
+        if not parent:
+            return root
+        top = torch.tensor([find(x) for x in range(n)], dtype=torch.long, device=dev)
+        return top[root]
 
-    def lower_partitioned(
-        self, gm, r_search: float, graph_k: int = 8, min_size: int = 2, apart: float = 0.25
-    ) -> int:
-        """Eq. 16's decrease for the Gaussians of the groups ``partition`` would split off, by the share of
-        the views that put them apart (in place; P_2D-3D = that share, P_conf = 0). Returns how many."""
-        plan = self._partition_plan(gm, r_search, graph_k, min_size, apart)
-        if plan is None:
-            return 0
-        rows, group, share = plan
-        at = rows[group >= 0]
-        conf = gm.confidences
-        conf[at] = (conf[at] - share[group >= 0] * conf[at]).clamp(0.0, 1.0)
-        return int(at.numel())
-
-    def partition(
+    def _detach(
         self,
-        gm,
-        r_search: float,
-        graph_k: int = 8,
-        min_size: int = 2,
-        apart: float = 0.25,
-        below: float = 1.0,
-    ) -> int:
-        """Give each group of a label's spatial components that the remembered views put apart from the
-        label's largest group a new label (see the module docstring), when its Gaussians' mean confidence is
-        under ``below`` (1: the views decide; ``tau_low``: only what ``lower_partitioned`` brought low). In
-        place, the moved Gaussians' confidence capped at 0.5 and their split evidence cleared, as a split's.
-        Returns how many new labels."""
-        plan = self._partition_plan(gm, r_search, graph_k, min_size, apart)
-        if plan is None:
-            return 0
-        rows, group, _ = plan
-        ids, inv = torch.unique(group, return_inverse=True)
-        mean = torch.zeros(ids.numel(), device=gm.device).index_add_(0, inv, gm.confidences[rows])
-        mean /= torch.bincount(inv, minlength=ids.numel()).float()
-        take = (ids >= 0) & (mean < below)
-        made = int(take.sum())
-        if made == 0:
-            return 0
-        lut = torch.full((ids.numel(),), -1, dtype=torch.long, device=gm.device)
-        lut[take] = gm.new_labels(made).long()
-        new = lut[inv]
-        at = rows[new >= 0]
-        gm.labels[at] = new[new >= 0].to(gm.labels.dtype)
-        gm.confidences[at] = gm.confidences[at].clamp(max=0.5)
-        _start_afresh(gm, at)
-        return made
+        label: int,
+        lab: torch.Tensor,
+        mass: torch.Tensor,
+        a: torch.Tensor,
+        b: torch.Tensor,
+        vals: torch.Tensor,
+        root: torch.Tensor,
+    ) -> torch.Tensor:
+        """The parts of ``label`` that the views separate from the rest of it, one by one (the smallest
+        first, then the rest judged again), each its own group in ``root`` (returned)."""
+        ms = torch.nonzero(lab == label).squeeze(1)
+        m = int(ms.numel())
+        pos = torch.full((int(lab.numel()),), -1, dtype=torch.long, device=lab.device)
+        pos[ms] = torch.arange(m, device=lab.device)
+        inner = (pos[a] >= 0) & (pos[b] >= 0)
+        mat = torch.zeros((m, m, 3), device=lab.device)
+        mat[pos[a[inner]], pos[b[inner]]] = vals[inner]
+        mat = mat + mat.transpose(0, 1)
+        stay = torch.ones(m, dtype=torch.bool, device=lab.device)
+        size = mass[ms].float()
+        while int(stay.sum()) > 1:
+            rest = (mat * stay[None, :, None]).sum(1)
+            out = stay & (rest[:, 2] > 0) & (rest[:, 2] > self.separation * rest[:, 0])
+            if not bool(out.any()):
+                break
+            x = int(torch.argmin(torch.where(out, size, torch.full_like(size, float("inf")))))
+            stay[x] = False
+            root[ms[x]] = ms[x]
+        keep = ms[stay]
+        root[keep] = keep[int(torch.argmax(size[stay]))]
+        return root
 
-    def veto(
-        self,
-        gm,
-        labels_before: torch.Tensor,
-        conf_before: torch.Tensor,
-        *,
-        min_views: int = 3,
-        apart_ratio: float = 0.3,
-    ) -> int:
-        """Undo relabellings (``labels_before`` -> ``gm.labels``) between labels that the views show apart
-        (in place, confidences restored from ``conf_before``). Returns how many Gaussians were restored."""
-        n = self.pair_views.shape[0]
-        changed = (gm.labels != labels_before) & (labels_before >= 0) & (gm.labels >= 0)
-        rows = torch.nonzero(changed).squeeze(1)
-        if rows.numel() == 0 or n == 0:
+    def _separated(self, v: np.ndarray) -> bool:
+        """Whether summed pair statistics v (firm, weak, apart) show a clear separation."""
+        return float(v[2]) > 0 and float(v[2]) > self.separation * float(v[0])
+
+    def _mergeable(self, v: np.ndarray, owners: bool = False) -> bool:
+        """The merge test on summed statistics v (firm, weak, apart) of two groups; ``owners``: a view showed
+        each group apart from something (objects SAM found on their own), which weak togetherness does not
+        merge: it merges a fragment into what holds it."""
+        firm, weak, apart = float(v[0]), float(v[1]), float(v[2])
+        if firm > 0:
+            return apart <= self.separation * firm
+        return apart == 0 and weak > 0 and not owners
+
+    @staticmethod
+    def _score(v: np.ndarray) -> float:
+        return float(v[0]) + 1e-3 * float(v[1])
+
+    def _relabel(self, gm, parts: torch.Tensor, old: torch.Tensor, group: torch.Tensor) -> dict[str, int]:
+        """Step 3: label ids for the groups, and the Gaussians of parts whose group's label changed."""
+        out = {"relabelled_parts": 0, "relabelled_gaussians": 0, "new_labels": 0}
+        has = parts >= 0
+        if not bool(has.any()):
+            return out
+        P = self.next_part
+        lab = gm.labels.long()
+        present = old > -2
+        # label votes per group (labelled Gaussians only), mass per group
+        g = group[parts[has]]
+        lg = lab[has]
+        mass = torch.bincount(g, minlength=P)
+        L = _n_labels(gm)
+        keys, cnt = torch.unique(g[lg >= 0] * L + lg[lg >= 0], return_counts=True)
+        kg, kl = (keys // L).tolist(), (keys % L).tolist()
+        votes: dict[int, list[tuple[int, int]]] = {}
+        for gg, ll, cc in zip(kg, kl, cnt.tolist()):
+            votes.setdefault(gg, []).append((cc, ll))
+        owned = torch.zeros(P, device=self.device).index_add_(0, group, self.part_owned)
+        groups = torch.unique(group[present]).tolist()
+        groups.sort(key=lambda x: -int(mass[x]))
+        taken: set[int] = set()
+        label_of = torch.full((P,), -1, dtype=torch.long, device=self.device)
+        fresh: list[int] = []
+        for gg in groups:
+            choice = -1
+            for _, ll in sorted(votes.get(gg, []), reverse=True):
+                if ll not in taken:
+                    choice = ll
+                    break
+            if choice < 0 and (votes.get(gg) or owned[gg] >= 1):
+                fresh.append(gg)
+                continue
+            if choice >= 0:
+                taken.add(choice)
+                label_of[gg] = choice
+        if fresh:
+            ids = gm.new_labels(len(fresh)).long()
+            label_of[torch.tensor(fresh, dtype=torch.long, device=self.device)] = ids
+            out["new_labels"] = len(fresh)
+        new = label_of[group]
+        change = present & (new != old) & ((new >= 0) | (old >= 0))
+        # a part whose group has no label keeps its Gaussians' labels
+        change &= new >= 0
+        if not bool(change.any()):
+            return out
+        pg = torch.where(has, parts, torch.zeros_like(parts))
+        move = has & change[pg] & (lab == old[pg])
+        gm.labels[move] = new[pg][move].to(gm.labels.dtype)
+        gm.confidences[move & (lab < 0)] = 0.5  # filled: as Algorithm 1's individual level does
+        # the moved Gaussians' Gaussian-level votes start afresh under their new label
+        for name in ("ev_own", "ev_disputed"):
+            gm.aux(name)[move] = 0.0
+        out["relabelled_parts"] = int(change.sum())
+        out["relabelled_gaussians"] = int(move.sum())
+        return out
+
+    def _fill(self, gm) -> int:
+        """Step 4: unlabelled Gaussians take the label their segments voted for, where it still exists."""
+        cand, n = gm.aux("ev_cand", -1.0), gm.aux("ev_cand_n")
+        rows = torch.nonzero((gm.labels < 0) & (cand >= 0) & (n >= 1)).squeeze(1)
+        if rows.numel() == 0:
             return 0
-        a, b = labels_before[rows].long(), gm.labels[rows].long()
-        ok = (a < n) & (b < n)
-        rows, a, b = rows[ok], a[ok], b[ok]
-        v, t = self.pair_views[a, b], self.pair_together[a, b]
-        apart = (v >= min_views) & (t < apart_ratio * v)
-        back = rows[apart]
-        gm.labels[back] = labels_before[back]
-        gm.confidences[back] = conf_before[back]
-        return int(back.numel())
+        c = cand[rows].long()
+        alive = torch.zeros(max(_n_labels(gm), int(c.max()) + 1), dtype=torch.bool, device=gm.device)
+        alive[gm.labels[gm.labels >= 0].long()] = True
+        ok = alive[c]
+        rows, c = rows[ok], c[ok]
+        gm.labels[rows] = c.to(gm.labels.dtype)
+        gm.confidences[rows] = 0.5
+        cand[rows] = -1.0
+        n[rows] = 0.0
+        return int(rows.numel())
+
+    # ------------------------------------------------------------------ Algorithm 1's guard
+    def separation_test(self, gm):
+        """A function ``separated(a, b) -> [M] bool`` for label tensors a, b [M]: whether the views clearly
+        separated the parts of label a from those of label b more than they held them firmly together (the
+        labels of parts as the map holds them now)."""
+        dev = gm.device
+        parts = self.parts_of(gm)
+        has = (parts >= 0) & (gm.labels >= 0)
+        label_of, _ = _majority(parts[has], gm.labels[has].long(), max(self.next_part, 1))
+        table = PairTable(3, dev)
+        if len(self.part_pairs):
+            pa, pb = self.part_pairs.pairs()
+            la, lb = label_of[pa], label_of[pb]
+            ok = (la >= 0) & (lb >= 0) & (la != lb)
+            table.add(la[ok], lb[ok], self.part_pairs.vals[ok])
+        sep = self.separation
+
+        def separated(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+            v = table.get(a.long(), b.long())
+            firm, apart = v[:, 0], v[:, 2]
+            return (apart > 0) & (apart > sep * firm) & (a != b)
+
+        return separated

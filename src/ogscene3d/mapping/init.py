@@ -2,7 +2,7 @@
 
 Valid-depth pixels on a regular grid of step ``step`` (so about one probe per ``step**2`` pixels) are
 back-projected to world points; a segment with fewer than ``dense_below`` grid probes
-(``mapping.init_dense_below``: a book, a light switch) gets one at every pixel instead. Every probe of a
+(``mapping.init.dense_below``: a book, a light switch) gets one at every pixel instead. Every probe of a
 segment takes part in the segment's KNN association; only the probes whose pixel the current map does not
 already explain (rendered alpha below ``alpha_thresh``, or observed depth in front of the rendered depth by
 more than ``depth_margin``) become new Gaussians. Scale: isotropic, the footprint of one grid cell at that
@@ -20,12 +20,16 @@ none) counts as scored 1, i.e. confidence 1. Pixels outside every segment get co
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 
+from ..config import InitConfig
 from ..frame import Frame
+from ..gaussians import GaussianMap
+from ..rendering import rasterization
 from .local import rescale_sam_scores
 
 
@@ -60,25 +64,20 @@ def make_probes(
     segments: np.ndarray | None,
     scores: dict[int, float],
     device: torch.device,
+    cfg: InitConfig,
     *,
-    step: int = 2,
     score_range: tuple[float, float] = (0.88, 1.0),
     conf_range: tuple[float, float] = (0.5, 1.0),
-    rendered_alpha: torch.Tensor | None = None,
-    rendered_depth: torch.Tensor | None = None,
-    alpha_thresh: float = 0.5,
-    depth_margin: float = 0.1,
-    min_depth: float = 0.0,
-    max_depth: float = 0.0,
-    dense_below: int = 0,
+    rendered: tuple[torch.Tensor, torch.Tensor] | None = None,
+    depth_range: tuple[float, float] = (0.0, 0.0),
 ) -> Probes:
-    """Back-project the grid pixels of ``frame`` (must have a pose). ``segments`` int [H,W] (0 or negative =
-    none) or None; ``rendered_alpha``/``rendered_depth`` [H,W] from rendering the map at the frame's pose
-    (None when the map is empty: every probe is new)."""
+    """Back-project the grid pixels of ``frame`` (must have a pose), the grid and thresholds from ``cfg``
+    (the ``mapping.init`` section). ``segments`` int [H,W] (0 or negative = none) or None; ``rendered``:
+    (alpha, expected depth) [H,W] of the map at the frame's pose (None when the map is empty: every probe is
+    new); ``depth_range``: ``data.min_depth``, ``data.max_depth`` (0: no limit)."""
     if frame.pose is None:
         raise ValueError(f"frame {frame.index}: no pose; mapping needs camera-to-world poses")
-    w = frame.width
-    step = max(1, int(step))
+    step, (min_depth, max_depth) = max(1, round(math.sqrt(cfg.pixels_per_gaussian))), depth_range
     o = step // 2
     # only the grid pixels are uploaded (1/step^2 of the image): the back-projection runs on the device,
     # in float64 as numpy did, so the probes match the host computation to the last float32 bit
@@ -91,7 +90,7 @@ def make_probes(
     gv, gu = torch.nonzero(ok, as_tuple=True)
     vv, uu = gv * step + o, gu * step + o
     z32 = depth[gv, gu]
-    extra = _dense_pixels(frame, segments, step, dense_below, min_depth, max_depth) if step > 1 else None
+    extra = _dense_pixels(frame, segments, step, cfg.dense_below, min_depth, max_depth) if step > 1 else None
     cell = torch.full((len(z32),), float(step), dtype=torch.float64, device=device)
     if extra is not None:  # small segments: every pixel (their grid probes are already in)
         ev, eu = (up(a) for a in extra)
@@ -110,8 +109,7 @@ def make_probes(
     colors = up(frame.rgb[grid])[gv, gu].float() / 255.0
     if extra is not None:
         colors = torch.cat([colors, up(frame.rgb[extra]).float() / 255.0])
-    pix = vv * w + uu
-
+    pix = vv * frame.width + uu
     if segments is not None:
         sid = up(np.asarray(segments)[grid].astype(np.int64))[gv, gu]
         if extra is not None:
@@ -121,17 +119,11 @@ def make_probes(
         seg_ids = torch.zeros(0, dtype=torch.int64, device=device)
         seg = torch.full((len(z),), -1, dtype=torch.int64, device=device)
         raw = np.zeros(0, dtype=np.float32)
-
     seg_conf = rescale_sam_scores(torch.as_tensor(raw, device=device), score_range, conf_range)
     conf = torch.where(
         seg >= 0, seg_conf[seg.clamp(min=0)] if len(seg_ids) else 0.0, torch.zeros_like(seg).float()
     )
-    if rendered_alpha is None:
-        new = torch.ones(len(z), dtype=torch.bool, device=device)
-    else:
-        a = rendered_alpha.reshape(-1).to(device)[pix]
-        d = rendered_depth.reshape(-1).to(device)[pix]
-        new = (a < alpha_thresh) | (z32 < d - depth_margin)
+    new = _unexplained(pix, z32, rendered, cfg.alpha_thresh, cfg.depth_margin)
     return Probes(
         means=pw.float(),
         colors=colors,
@@ -143,6 +135,19 @@ def make_probes(
         seg_ids=seg_ids,
         seg_conf=seg_conf,
     )
+
+
+def _unexplained(
+    pix: torch.Tensor, z: torch.Tensor, rendered: tuple | None, alpha_thresh: float, depth_margin: float
+) -> torch.Tensor:
+    """[P] bool: the probes (flat pixel ``pix``, observed depth ``z``) that the rendered map (alpha,
+    expected depth) does not explain: alpha below ``alpha_thresh``, or observed depth ``depth_margin`` in
+    front of the render (all of them when the map is empty: ``rendered`` None)."""
+    if rendered is None:
+        return torch.ones(len(z), dtype=torch.bool, device=z.device)
+    a = rendered[0].reshape(-1).to(z.device)[pix]
+    d = rendered[1].reshape(-1).to(z.device)[pix]
+    return (a < alpha_thresh) | (z < d - depth_margin)
 
 
 def _dense_pixels(
@@ -185,3 +190,16 @@ def _probe_segments(
         ids, seg_ids, inv = ids[1:], seg_ids[1:], inv - 1
     raw = np.array([float(scores.get(int(i), 1.0)) for i in ids], dtype=np.float32)
     return inv.reshape(-1), seg_ids, raw
+
+
+def render_coverage(gm: GaussianMap, frame: Frame) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """The map rendered at the frame's pose: (alpha [H,W], expected depth [H,W]), the pixels it explains
+    (None: an empty map)."""
+    if len(gm) == 0:
+        return None
+    viewmat = torch.as_tensor(np.linalg.inv(frame.pose), dtype=torch.float32, device=gm.device)[None]
+    K = torch.as_tensor(frame.K, dtype=torch.float32, device=gm.device)[None]
+    gaussians = (gm.means, gm.quats, gm.scales, gm.opacities, gm.colors[:, :1])
+    with torch.no_grad():
+        depth, alpha, _ = rasterization(*gaussians, viewmat, K, frame.width, frame.height, render_mode="ED")
+    return alpha[0, ..., 0], depth[0, ..., 0]

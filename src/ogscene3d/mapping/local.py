@@ -25,9 +25,10 @@ the paper's order leaves the object unlabelled at every view, so it is never map
 merges two mapped objects, which case (i) is meant for, has most of its probes matched (p >= tau_p) and stays
 ambiguous. Only new Gaussians take a segment's label, so a novel segment that also covers some mapped
 surface relabels nothing there. Over 10 synthetic seeds (60 frames) this raised full by 1.4 mIoU points
-and local by 1.2; ``mapping.novel_before_ambiguous: false`` restores the paper's order.
+and local by 1.2; ``mapping.association.novel_before_ambiguous: false`` restores the paper's order.
 
-The paper gives no k; the default is 1 (``mapping.knn_k``). A segment that first shows a large new object
+The paper gives no k; the default is 1 (``mapping.association.knn_k``).
+A segment that first shows a large new object
 (a door in a wall) matches the map only along its border, and with k=5 each border probe also drew votes
 from the wall, the table in front and the chair beside it: r(m) went over tau_valid on a handful of
 matches, the segment was left unlabelled at every view, and the door was never mapped as an object. With
@@ -39,7 +40,7 @@ nearest match of a probe of a case-(ii) segment get the Eq. 5 update, each from 
 conf' = conf + c_sam * p(m) * (1 - conf) when its label equals the segment's label, else
 conf' = conf - c_sam * p(m) * conf. Matches of case-(i) and case-(iii) segments update nothing.
 ``probe_updates`` can restrict the updates to some probes: the mapper passes the probes off their
-segment's boundary when ``mapping.eq5_skip_edges`` is set (see config.py for the trade-off).
+segment's boundary when ``mapping.association.eq5_skip_edges`` is set (see config.py for the trade-off).
 
 The update is its own step (``update_confidences``) because the mapper's duplicate-label merge
 (``merge.py``) runs between the association and Eq. 5: it turns some case-(i) segments into case (ii),
@@ -47,9 +48,9 @@ and they must be updated like any other case-(ii) segment, in the same single pa
 once, from its nearest case-(ii) probe, whichever segment that probe belongs to). ``associate_segments``
 runs both steps unless told not to (``eq5=False``).
 
-``fill_unlabeled`` (``mapping.fill_unlabeled``, on by default) is beyond the paper, whose unlabelled
-Gaussians (case i, or pixels outside every segment) stay unlabelled for good: only new Gaussians take a
-segment's label there, and the association, Eq. 5, Eq. 16 and the refinement all skip them. Here an
+``fill_unlabeled`` (``mapping.association.fill_unlabeled``, on by default) is beyond the paper, whose
+unlabelled Gaussians (case i, or pixels outside every segment) stay unlabelled for good: only new Gaussians
+take a segment's label there, and the association, Eq. 5, Eq. 16 and the refinement all skip them. Here an
 unlabelled scene Gaussian under a probe of a labelled segment takes that label and the probe's confidence,
 as the new Gaussian it stands in for would have (``init.py`` adds no Gaussian where the map already explains
 the pixel). On the synthetic demo (configs/synthetic.yaml, seed 0) turning it off gave 3D mIoU 65.97 /
@@ -62,10 +63,16 @@ no ambiguity test and no confidence updates.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import torch
 
 from .neighbors import knn
+
+if TYPE_CHECKING:
+    from ..config import AssociationConfig
+    from ..gaussians import GaussianMap
+    from .init import Probes
 
 CASE_AMBIGUOUS = 0
 CASE_MATCHED = 1
@@ -338,3 +345,50 @@ def update_confidences(
         updated = pj
     assoc.updated = updated
     return updated
+
+
+def associate_probes(
+    gm: GaussianMap, probes: Probes, sel: torch.Tensor, cfg: AssociationConfig, naive: bool
+) -> Association:
+    """:func:`associate_segments` of a keyframe's probes that lie in a segment (``sel``) with the map
+    ``gm``, its settings from ``cfg``; Eq. 5 left to :func:`update_confidences` (duplicate merging may turn
+    ambiguous segments into matched ones first)."""
+    return associate_segments(
+        probes.means[sel],
+        probes.seg[sel],
+        probes.conf[sel],
+        int(probes.seg_ids.numel()),
+        gm.means,
+        gm.labels,
+        gm.confidences,
+        gm.new_labels,
+        k=cfg.knn_k,
+        radius=cfg.knn_radius,
+        tau_valid=cfg.tau_valid,
+        tau_p=cfg.tau_p,
+        naive=naive,
+        novel_before_ambiguous=cfg.novel_before_ambiguous,
+        # a probe's log-scale is log(grid spacing at its depth): see init.make_probes
+        probe_radius=(
+            torch.exp(probes.log_scales[sel]) * cfg.knn_radius_spacing if cfg.knn_radius_spacing > 0 else None
+        ),
+        eq5=False,
+    )
+
+
+def fill_from_probes(
+    gm: GaussianMap, probes: Probes, sel: torch.Tensor, res: Association, radius: float, naive: bool
+) -> int:
+    """:func:`fill_unlabeled` of ``gm`` from the keyframe's probes in segments (``sel``) and their segments'
+    labels in ``res``; naive: every confidence is 1."""
+    pconf = probes.conf[sel]
+    return fill_unlabeled(
+        probes.means[sel],
+        probes.seg[sel],
+        torch.ones_like(pconf) if naive else pconf,
+        res.seg_labels,
+        gm.means,
+        gm.labels,
+        gm.confidences,
+        radius,
+    )

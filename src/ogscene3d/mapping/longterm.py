@@ -18,8 +18,8 @@ inconsistent over the run from 573 to 186 (wrongly labelled ones: 97 to 37), and
 long-term step's paired effect on mIoU from -0.07 to +0.08 points.
 Eq. 16: conf += P_2D-3D * P_conf * (1 - conf) if consistent, else conf -= P_2D-3D * (1 - P_conf) * conf.
 Labels are never changed here; only labeled Gaussians with at least one associated pixel are updated.
-Schedule (``mapper.py``): every ``mapping.longterm_every`` = 6 keyframes (Sec. IV-A.4), over
-``mapping.longterm_views`` memory views taken round-robin (the paper's N_view views; it gives no count), one
+Schedule (``mapper.py``): every ``mapping.longterm.every`` = 6 keyframes (Sec. IV-A.4), over
+``mapping.longterm.views`` memory views taken round-robin (the paper's N_view views; it gives no count), one
 view after the other, each with P_conf rendered from the confidences as the previous view left them.
 """
 
@@ -30,9 +30,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from ..config import LongtermConfig
+from ..rendering import rendering_contribution
 from .init import grid_mask
 from .local import group_top2
 from .neighbors import any_within, knn
+from .timings import Counters
 
 # a memory candidate needs this many back-projected points (on the memory_point_step grid): a view with
 # (almost) no valid depth can judge no Gaussian, and would evict one that can
@@ -198,6 +201,13 @@ def label_edges(ids: torch.Tensor) -> torch.Tensor:
     return edge
 
 
+def inner_pixels(segments: np.ndarray, pix: torch.Tensor) -> torch.Tensor:
+    """[P] bool: whether each flat pixel index ``pix`` (on ``pix``'s device) of the id map ``segments``
+    [H,W] lies off every segment boundary (such probes may make Eq. 5 updates)."""
+    ids = torch.from_numpy(np.ascontiguousarray(segments, dtype=np.int64)).to(pix.device)
+    return ~label_edges(ids).reshape(-1)[pix]
+
+
 def eq16_update(
     conf: torch.Tensor, p2d3d: torch.Tensor, pconf: torch.Tensor, consistent: torch.Tensor
 ) -> torch.Tensor:
@@ -241,33 +251,22 @@ def associate_pixels(
 
 
 @dataclass
-class LongTermStats:
+class LongTermStats(Counters):
     views: int = 0
     updated: int = 0
     increased: int = 0
     decreased: int = 0
     mean_iou: float = 0.0
 
-    def as_dict(self) -> dict:
-        return dict(self.__dict__)
 
-
-def longterm_view_update(
-    gm,
-    entry: MemoryEntry,
-    *,
-    k: int = 5,
-    radius: float = 0.05,
-    pixel_step: int = 2,
-    skip_edges: bool = True,
-    same_class: bool = True,
-) -> LongTermStats:
-    """One memory view's Eq. 16 update of ``gm.confidences`` (in place). ``gm`` is a GaussianMap.
-    ``skip_edges``: leave out pixels on a boundary of the stored segments or of the rendered labels.
-    ``same_class``: a pixel reaches only Gaussians of its rendered label (see ``associate_pixels``); False
-    is the paper's rule, its nearest Gaussians whatever their label."""
-    from ..rendering import rendering_contribution
-
+def longterm_view_update(gm, entry: MemoryEntry, cfg: LongtermConfig, radius: float) -> LongTermStats:
+    """One memory view's Eq. 16 update of ``gm.confidences`` (in place). ``gm`` is a GaussianMap, ``cfg``
+    the ``mapping.longterm`` section: each pixel of its ``pixel_step`` grid is associated with its ``knn_k``
+    nearest Gaussians within ``radius`` (the association's ``knn_radius``). ``skip_edges``: leave out pixels
+    on a boundary of the stored segments or of the rendered labels. ``same_class``: a pixel reaches only
+    Gaussians of its rendered label (see ``associate_pixels``); False is the paper's rule, its nearest
+    Gaussians whatever their label."""
+    k, pixel_step, skip_edges, same_class = cfg.knn_k, cfg.pixel_step, cfg.skip_edges, cfg.same_class
     stats = LongTermStats(views=1)
     if len(gm) == 0 or entry.segments is None:
         return stats

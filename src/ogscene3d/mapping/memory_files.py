@@ -5,7 +5,7 @@ A checkpoint ``RUN/map.npz`` keeps its memory views in ``RUN/map_memory/view_<ke
 it needs, relative to its own directory, with each file's size and CRC-32 (docs/formats.md). A view
 never changes once in the memory, so a checkpoint writes only the views the previous one did not have,
 instead of every view again (hundreds of MB with 64 views at 1200x680). The optimisation's recent keyframes
-(``mapping.opt_memory_frames``) that are not in the memory are kept the same way, listed apart
+(``mapping.optimize.memory_frames``) that are not in the memory are kept the same way, listed apart
 (``recent_*``): without them a resume would pair its first keyframes with other views than an uninterrupted
 run does (and draw other random numbers from then on).
 

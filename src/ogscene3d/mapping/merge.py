@@ -1,4 +1,4 @@
-"""Merging duplicate scene labels (an extension beyond the paper, ``mapping.merge_duplicates``).
+"""Merging duplicate scene labels (an extension beyond the paper, ``mapping.merge.enabled``).
 
 The paper's local association leaves a segment unlabeled when its KNN matches are split between two
 scene labels (case i, r(m) >= tau_valid). Two situations produce that: the segment covers two objects
@@ -17,10 +17,10 @@ segment that spills over onto a neighbouring object fails the containment test f
 two small objects that SAM fused are usually scored low, and the score gate keeps them apart. A small
 object that the mask took in (a far chair absorbed into the wall behind it, a plant into the floor) lies
 whole inside it too, at a high score when it is a small part of the mask; each label must therefore hold at
-least ``min_part`` (``mapping.merge_min_part``, 0.1) of the mapped Gaussians inside the segment, as both
+least ``min_part`` (``mapping.merge.min_part``, 0.1) of the mapped Gaussians inside the segment, as both
 halves of one object do.
 
-With ``mapping.merge_novel`` the test also judges a would-be novel segment (p < tau_p, case iii tested
+With ``mapping.merge.novel`` the test also judges a would-be novel segment (p < tau_p, case iii tested
 first) whose few matches fall on two labels (r >= tau_valid): a wall or floor that the first view cut in
 two, seen again further back, where the mapped part is a few percent of the segment. Without it each such
 view started a third label on the surface. A confident novel segment that holds the whole visible extent
@@ -33,7 +33,18 @@ Gaussians, and independent of the confidences that weight a semantic render.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+import numpy as np
 import torch
+
+from .local import CASE_AMBIGUOUS, CASE_MATCHED, CASE_NOVEL, coherence
+
+if TYPE_CHECKING:
+    from ..config import MappingConfig
+    from ..frame import Frame
+    from ..gaussians import GaussianMap
+    from .timings import Timings
 
 
 def visible_pixels(
@@ -175,3 +186,93 @@ def relabel(labels: torch.Tensor, mapping: dict[int, int]) -> torch.Tensor:
     rows, cols = torch.nonzero(labels.reshape(-1)[:, None] == src[None, :], as_tuple=True)
     out.view(-1)[rows] = dst[cols]
     return out
+
+
+def merge_duplicate_segments(
+    gm: GaussianMap,
+    frame: Frame,
+    segments: np.ndarray,
+    scores: dict[int, float],
+    probes,
+    res,
+    cfg: MappingConfig,
+    timings: Timings,
+) -> None:
+    """Merge the scene labels of ``gm`` that one confident ambiguous segment of the keyframe shows to be one
+    object; the segment then takes the merged label (case ii), and the keyframe's segment labels in ``res``
+    (``local.associate_segments``'s result) follow. With ``merge_novel`` a would-be novel segment is judged
+    too: over two labels it may merge them, and when it holds its most matched label whole it takes that
+    label. Runs before Eq. 5, so that the merged segments' matches get their confidence update too."""
+    device = gm.device
+    seg_ids = probes.seg_ids
+    score = torch.tensor(
+        [scores.get(int(i), 1.0) for i in seg_ids.tolist()], dtype=torch.float32, device=device
+    )
+    confident = score >= cfg.merge.min_score
+    novel = (res.seg_case == CASE_NOVEL) & confident & bool(cfg.merge.novel)
+    # ambiguous segments, and novel ones whose few matches fall on two labels, may merge those; a novel
+    # one may hold its most matched label whole
+    amb = torch.nonzero(
+        (res.seg_case == CASE_AMBIGUOUS) & confident | novel & (res.r >= cfg.association.tau_valid)
+    ).squeeze(1)
+    ext = torch.nonzero(novel & (res.top_label >= 0)).squeeze(1)
+    if amb.numel() == 0 and ext.numel() == 0:
+        return
+    with timings.section("merge"):
+        items, item_labels = _visible_items(gm, frame, segments, seg_ids, cfg.init.depth_margin)
+        if ext.numel():
+            # it shows more of that object (a small one seen closer, whose few probes missed its
+            # Gaussians): the segment takes its label instead of a new one
+            held = label_containment(items, item_labels, ext, res.top_label[ext])
+            grow = ext[held >= cfg.merge.contain]
+            res.seg_labels[grow] = res.top_label[grow].to(torch.int32)
+            res.seg_case[grow] = CASE_MATCHED
+            timings.add("segments_extended", int(grow.numel()))
+        pairs = duplicate_label_pairs(
+            items, item_labels, amb, res.top_label, res.second_label, cfg.merge.contain, cfg.merge.min_part
+        )
+        mapping = merge_labels(gm.labels, pairs)
+        if mapping:
+            merged = _follow_merge(res, amb, mapping)
+            timings.add("labels_merged", len(mapping))
+            timings.add("segments_merged", int(merged.numel()))
+
+
+def _visible_items(
+    gm: GaussianMap, frame: Frame, segments: np.ndarray, seg_ids: torch.Tensor, margin: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """(segment index, label) of every labelled Gaussian visible in the keyframe (-1: on no segment)."""
+    device = gm.device
+    ids = torch.as_tensor(np.asarray(segments), dtype=torch.int64, device=device)
+    top = max(int(ids.max()), int(seg_ids.max())) + 1
+    lut = torch.full((top,), -1, dtype=torch.int64, device=device)
+    lut[seg_ids] = torch.arange(seg_ids.numel(), device=device)
+    seg_index = lut[ids.clamp(min=0)].masked_fill(ids <= 0, -1).reshape(-1)
+    pick = torch.nonzero(gm.labels >= 0).squeeze(1)  # all: min_part counts the segment's labels
+    pix = visible_pixels(
+        gm.means[pick],
+        torch.as_tensor(frame.pose, dtype=torch.float32, device=device),
+        torch.as_tensor(frame.K, dtype=torch.float32, device=device),
+        torch.as_tensor(frame.depth, dtype=torch.float32, device=device),
+        margin,
+    )
+    vis = pix >= 0
+    return seg_index[pix[vis]], gm.labels[pick[vis]]
+
+
+def _follow_merge(res, amb: torch.Tensor, mapping: dict[int, int]) -> torch.Tensor:
+    """The keyframe's association result after the merge ``mapping``: its labels renamed, the ambiguous
+    segments ``amb`` whose two labels merged made matched (returned), and p(m) of the matched segments
+    counted again."""
+    res.top_label = relabel(res.top_label, mapping)
+    res.second_label = relabel(res.second_label, mapping)
+    res.seg_labels = relabel(res.seg_labels, mapping)
+    merged = amb[res.top_label[amb] == res.second_label[amb]]
+    res.seg_labels[merged] = res.top_label[merged].to(torch.int32)
+    res.seg_case[merged] = CASE_MATCHED
+    # p(m) as Eq. 5 must see it now: the probes on either merged label agree with l*_m (a merged
+    # segment's p counted only one of the two; a matched one's may have had probes on a dropped label)
+    res.match_labels = relabel(res.match_labels, mapping)
+    p = coherence(res.match_labels, res.probe_seg, res.top_label, int(res.seg_case.numel()))
+    res.p = torch.where(res.seg_case == CASE_MATCHED, p, res.p)
+    return merged

@@ -18,7 +18,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ..config import MappingConfig
+from ..config import OptimizeConfig
+from ..rendering import rasterization
 
 
 @dataclass
@@ -84,12 +85,10 @@ def mapping_loss(
     return lambda_c * lc + lambda_d * ld
 
 
-def optimize_map(gm, views: list[View], cfg: MappingConfig, iters: int | None = None) -> dict[str, float]:
-    """Run ``iters`` (default ``cfg.opt_iters``) Adam steps on ``gm`` (a GaussianMap) over ``views``
+def optimize_map(gm, views: list[View], cfg: OptimizeConfig, iters: int | None = None) -> dict[str, float]:
+    """Run ``iters`` (default ``cfg.iters``) Adam steps on ``gm`` (a GaussianMap) over ``views``
     (all of one image size). Writes the optimised parameters back into the map. Returns first/last loss."""
-    from ..rendering import rasterization
-
-    iters = cfg.opt_iters if iters is None else int(iters)
+    iters = cfg.iters if iters is None else int(iters)
     out = {"iters": 0, "loss_first": float("nan"), "loss_last": float("nan"), "optimized": 0}
     if iters <= 0 or len(gm) == 0 or not views:
         return out
@@ -161,3 +160,19 @@ def optimize_map(gm, views: list[View], cfg: MappingConfig, iters: int | None = 
             gm.field(k)[sel] = p.detach()
     out["optimized"] = int(sel.numel())
     return out
+
+
+def training_views(
+    frame, pool: list, count: int, rng: np.random.Generator, device: torch.device
+) -> list[View]:
+    """The keyframe ``frame``'s view and up to ``count`` views drawn by ``rng`` from ``pool`` (memory
+    entries; those of another image size are left out), in pool order."""
+    views = [View.from_arrays(frame.rgb, frame.depth, frame.pose, frame.K, device)]
+    pool = [e for e in pool if e.depth.shape == frame.depth.shape]
+    if pool and count > 0:
+        pick = rng.choice(len(pool), size=min(count, len(pool)), replace=False)
+        views += [
+            View.from_arrays(pool[i].rgb, pool[i].depth, pool[i].pose, pool[i].K, device)
+            for i in sorted(pick)
+        ]
+    return views

@@ -22,6 +22,7 @@ would have to move at 15 m/s or turn at 900 deg/s to reach them.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +30,9 @@ import numpy as np
 from ..config import choices
 from ..errors import ConfigError, DataError
 from .keyframes import pose_delta
+from .timings import Timings
+
+log = logging.getLogger(__name__)
 
 ACTIONS = choices("mapping.on_pose_jump")
 
@@ -93,6 +97,30 @@ class PoseJumpCheck:
         if (lt > 0 and t > lt) or (lr > 0 and r > lr):
             return PoseJump(int(index), name, self.last_index, t, r, lt, lr, steps)
         return None
+
+    def leave_out(self, index: int, pose: np.ndarray, name: str, timings: Timings) -> bool:
+        """Judge a frame the mapper is given (``index``, c2w ``pose``, ``name``) by :attr:`action`: True,
+        leave it out (``skip``); else it becomes the reference (``warn``, or no jump). Jumps are counted in
+        ``timings``.
+
+        Raises:
+            PoseJumpError: a jump under ``on_pose_jump: error``.
+        """
+        jump = self.check(index, pose, name)
+        if jump is not None:
+            if self.action == "error":
+                raise PoseJumpError(
+                    f"{jump.describe()}; fix the pose, or set mapping.on_pose_jump to skip (leave the frame "
+                    "out) or warn (map it anyway)"
+                )
+            timings.add("pose_jumps")
+            if self.action == "skip":
+                log.warning("%s: frame left out (mapping.on_pose_jump: skip)", jump.describe())
+                timings.add("frames_skipped_pose_jump")
+                return True
+            log.warning("%s: mapped anyway (mapping.on_pose_jump: warn)", jump.describe())
+        self.accept(index, pose)
+        return False
 
     def accept(self, index: int, pose: np.ndarray) -> None:
         self.last_pose = np.array(pose, dtype=np.float64)

@@ -16,20 +16,20 @@ undefined s_new (argmax over an empty L_k), while the text records only the Gaus
 refined", which we follow, so its low-confidence members may still be refined individually.
 
 Individual level: every remaining labelled Gaussian with conf < tau_low (unlabeled ones too, whose
-confidence is 0, with ``include_unlabeled`` / ``mapping.refine_unlabeled``, off by default: the paper's
+confidence is 0, with ``include_unlabeled`` / ``mapping.refine.unlabeled``, off by default: the paper's
 unlabelled Gaussians do not exist at confidence 0) takes the label of the nearest Gaussian with
 conf > tau_high within r_search and conf := 0.5.
 
-Beyond the paper (``mapping.evidence_protect``, on by default): the mapper passes the labels that the views
-show to be objects (``evidence.SegmentEvidence.protected_labels``), whose Gaussians keep their label at both
-levels. Under SAM-like segments a small object's confidence is low from its birth (a low SAM score) and falls
-in the views that absorb it into its support, so Algorithm 1 gave it the table's or the wall's label. The
-Gaussians that the views put in another label's segment (``mapping.evidence_wrong``: ``exposed``) are not
-kept, and take the label of their nearest confident Gaussian of *another* label at the individual level:
-their own label is what the views contradict, and the nearest confident neighbour of a wide run-over part
-is often one of its own label's Gaussians.
+Beyond the paper (``mapping.evidence.enabled``, on by default): Algorithm 1 decides from the views' evidence
+(``evidence.EvidenceModel``). A cluster or a Gaussian does not take a label from which the views clearly
+separated its own (``separated``): under SAM-like segments a small object's confidence is low from its birth
+(a low SAM score) and falls in the views that absorb it into its support, and Algorithm 1 gave it the
+table's or the wall's label although a view had shown it apart. Gaussians that the views put in another
+label's segment (``exposed``, disputed) are not held back, and take the label of their nearest confident
+Gaussian of *another* label at the individual level: their own label is what the views contradict, and the
+nearest confident neighbour of a wide run-over part is often one of its own label's Gaussians.
 
-Schedule (``mapper.py``): every ``mapping.refine_every`` = 6 keyframes, right after the long-term update,
+Schedule (``mapper.py``): every ``mapping.refine.every`` = 6 keyframes, right after the long-term update,
 as Sec. IV-A.4 states ("performed every 6 keyframes"); Sec. III-B.3's "intervals determined by cumulative
 camera motion" is read as that, keyframes being selected by camera motion where ``keyframe_translation`` /
 ``keyframe_rotation_deg`` are set. Both operate on the whole map.
@@ -37,12 +37,14 @@ camera motion" is read as that, keyframes being selected by camera motion where 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
 
 from .local import group_top2
 from .neighbors import knn, knn_components, knn_int32
+from .timings import Counters
 
 
 def connected_clusters(
@@ -68,28 +70,13 @@ def connected_clusters(
     return out
 
 
-def _of_labels(labels: torch.Tensor, protected: torch.Tensor | None) -> torch.Tensor:
-    """[N] bool: Gaussians whose label is marked in ``protected`` [L] (none when it is None; labels beyond
-    L are not marked)."""
-    out = torch.zeros(labels.shape[0], dtype=torch.bool, device=labels.device)
-    if protected is None or protected.numel() == 0:
-        return out
-    lab = labels.long()
-    ok = (lab >= 0) & (lab < protected.numel())
-    out[ok] = protected.to(labels.device)[lab[ok]]
-    return out
-
-
 @dataclass
-class RefineStats:
+class RefineStats(Counters):
     clusters: int = 0
     low_clusters: int = 0
     relabeled_clusters: int = 0
     cluster_gaussians: int = 0
     individual_gaussians: int = 0
-
-    def as_dict(self) -> dict[str, int]:
-        return dict(self.__dict__)
 
 
 def global_refinement(
@@ -103,70 +90,98 @@ def global_refinement(
     cluster_radius: float = 0.3,
     graph_k: int = 8,
     include_unlabeled: bool = False,
-    protected: torch.Tensor | None = None,
+    separated: Callable[[torch.Tensor, torch.Tensor], torch.Tensor] | None = None,
     exposed: torch.Tensor | None = None,
 ) -> RefineStats:
     """Algorithm 1 on the map's tensors; ``labels`` [N] int32 and ``conf`` [N] are modified in place.
     ``include_unlabeled``: whether unlabeled Gaussians (label -1, confidence 0) take part in the individual
-    refinement. ``protected`` [L] bool per label (beyond the paper, ``mapping.evidence_protect``): the
-    Gaussians of a protected label keep it at both levels, though they may still give their label to others
-    (``evidence.SegmentEvidence.protected_labels`` says which labels the views show to be objects);
-    ``exposed`` [N] bool: Gaussians that the protection does not cover (the views put them in another
-    label's segment: ``mapping.evidence_wrong``)."""
+    refinement. ``separated(a, b)`` (beyond the paper, ``mapping.evidence``): [M] bool for label tensors
+    a, b [M], whether the views clearly separated label a from label b; no cluster or Gaussian of label a
+    takes label b then (``evidence.EvidenceModel.separation_test``). ``exposed`` [N] bool: Gaussians that
+    the guard does not cover (the views disputed their label), which take another label than their own."""
     stats = RefineStats()
     n = means.shape[0]
     if n == 0:
         return stats
     dev = means.device
-    processed = torch.zeros(n, dtype=torch.bool, device=dev)
-    kept = _of_labels(labels, protected)
-    if exposed is not None:
-        kept &= ~exposed.to(dev)
+    free = exposed.to(dev) if exposed is not None else torch.zeros(n, dtype=torch.bool, device=dev)
 
-    # ---- cluster level
+    processed = _cluster_level(
+        means, labels, conf, stats, tau_low, tau_high, r_search, cluster_radius, graph_k, separated
+    )
+    cand = ~processed & (conf < tau_low)
+    if not include_unlabeled:
+        cand &= labels >= 0
+    stats.individual_gaussians = _individual_level(
+        means, labels, conf, cand, free, tau_high, r_search, separated
+    )
+    return stats
+
+
+def _cluster_level(
+    means, labels, conf, stats: RefineStats, tau_low, tau_high, r_search, cluster_radius, graph_k, separated
+) -> torch.Tensor:
+    """Algorithm 1's cluster level (in place): a low-confidence cluster takes the label most of its members'
+    nearest confident Gaussians of other clusters carry, not across a clear separation. -> [N] bool, the
+    Gaussians relabelled here."""
+    n = means.shape[0]
+    dev = means.device
+    processed = torch.zeros(n, dtype=torch.bool, device=dev)
     cluster = connected_clusters(means, labels, r_search, graph_k)
     num_c = int(cluster.max()) + 1 if n else 0
     stats.clusters = num_c
-    if num_c:
-        inc = cluster >= 0
-        csize = torch.bincount(cluster[inc], minlength=num_c).float()
-        cmean = torch.bincount(cluster[inc], weights=conf[inc].float(), minlength=num_c) / csize.clamp(min=1)
-        low = cmean < tau_low
-        stats.low_clusters = int(low.sum())
-        high = torch.nonzero((conf > tau_high) & (labels >= 0)).squeeze(1)
-        if stats.low_clusters and high.numel():
-            q = torch.nonzero(inc & low[cluster.clamp(min=0)]).squeeze(1)
-            idx, _ = knn(means[high], means[q], 1, cluster_radius, cluster[high], cluster[q], "different")
-            found = idx[:, 0] >= 0
-            qc = cluster[q][found]
-            nl = labels[high[idx[found, 0]]]
-            s_new, cnt, _, _ = group_top2(qc, nl, num_c)
-            # a cluster is one label's, so a protected label's clusters are kept whole
-            relabel = low & (cnt > 0)
-            relabel[cluster[kept]] = False
-            members = inc & relabel[cluster.clamp(min=0)]
-            labels[members] = s_new[cluster[members]].to(labels.dtype)
-            processed |= members
-            stats.relabeled_clusters = int(relabel.sum())
-            stats.cluster_gaussians = int(members.sum())
-
-    # ---- individual level (uses the labels after the cluster level)
+    if not num_c:
+        return processed
+    inc = cluster >= 0
+    csize = torch.bincount(cluster[inc], minlength=num_c).float()
+    cmean = torch.bincount(cluster[inc], weights=conf[inc].float(), minlength=num_c) / csize.clamp(min=1)
+    low = cmean < tau_low
+    stats.low_clusters = int(low.sum())
     high = torch.nonzero((conf > tau_high) & (labels >= 0)).squeeze(1)
-    cand = ~processed & (conf < tau_low) & ~kept
-    if not include_unlabeled:
-        cand &= labels >= 0
-    if high.numel():
-        wrong = exposed.to(dev) & cand if exposed is not None else torch.zeros_like(cand)
-        for sel, other in ((cand & ~wrong, False), (wrong, True)):
-            q = torch.nonzero(sel).squeeze(1)
-            if q.numel() == 0:
-                continue
-            # an exposed Gaussian's own label is what the views contradict: it takes another one
-            grp = (labels[high], labels[q], "different") if other else ()
-            idx, _ = knn(means[high], means[q], 1, r_search, *grp, two_pass=True)
-            found = idx[:, 0] >= 0
-            tgt = q[found]
-            labels[tgt] = labels[high[idx[found, 0]]]
-            conf[tgt] = 0.5
-            stats.individual_gaussians += int(tgt.numel())
-    return stats
+    if not stats.low_clusters or not high.numel():
+        return processed
+    q = torch.nonzero(inc & low[cluster.clamp(min=0)]).squeeze(1)
+    idx, _ = knn(means[high], means[q], 1, cluster_radius, cluster[high], cluster[q], "different")
+    found = idx[:, 0] >= 0
+    qc = cluster[q][found]
+    nl = labels[high[idx[found, 0]]]
+    s_new, cnt, _, _ = group_top2(qc, nl, num_c)
+    relabel = low & (cnt > 0)
+    if separated is not None:  # not across a clear separation (a cluster is one label's)
+        own = torch.full((num_c,), -1, dtype=torch.int64, device=dev)
+        own[cluster[inc]] = labels[inc].long()
+        c = torch.nonzero(relabel).squeeze(1)
+        relabel[c[separated(own[c], s_new[c])]] = False
+    members = inc & relabel[cluster.clamp(min=0)]
+    labels[members] = s_new[cluster[members]].to(labels.dtype)
+    processed |= members
+    stats.relabeled_clusters = int(relabel.sum())
+    stats.cluster_gaussians = int(members.sum())
+    return processed
+
+
+def _individual_level(means, labels, conf, cand, free, tau_high, r_search, separated) -> int:
+    """Algorithm 1's individual level (in place, on the labels after the cluster level): each candidate
+    takes its nearest confident Gaussian's label (a disputed one, in ``free``, another label than its own).
+    -> the number relabelled."""
+    high = torch.nonzero((conf > tau_high) & (labels >= 0)).squeeze(1)
+    if not high.numel():
+        return 0
+    done = 0
+    wrong = free & cand
+    for sel, other in ((cand & ~wrong, False), (wrong, True)):
+        q = torch.nonzero(sel).squeeze(1)
+        if q.numel() == 0:
+            continue
+        # an exposed Gaussian's own label is what the views contradict: it takes another one
+        grp = (labels[high], labels[q], "different") if other else ()
+        idx, _ = knn(means[high], means[q], 1, r_search, *grp, two_pass=True)
+        found = idx[:, 0] >= 0
+        tgt, src = q[found], high[idx[found, 0]]
+        if separated is not None and not other:
+            ok = ~separated(labels[tgt].long(), labels[src].long())
+            tgt, src = tgt[ok], src[ok]
+        labels[tgt] = labels[src]
+        conf[tgt] = 0.5
+        done += int(tgt.numel())
+    return done

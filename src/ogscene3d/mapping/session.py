@@ -18,8 +18,10 @@ from pathlib import Path
 from typing import Any
 
 from ..config import Config
+from ..datasets import configured_scene, open_dataset
 from ..errors import DataError
 from ..runs import RunFolder, run_directory
+from ..up_axis import choose_up_axis
 from .engine import MappingEngine, RunSummary
 from .mapper import Mapper
 from .source import record_data
@@ -60,9 +62,6 @@ def open_frames(
     """The dataset of a run (its path, and ``segments`` when given, recorded in ``cfg``: the run's
     ``config.yaml`` then tells ``eval`` the ground truth and ``--resume`` the frames); ``graph.up_axis``
     auto is chosen for it, where its format or poses tell (:func:`~ogscene3d.up_axis.choose_up_axis`)."""
-    from ..datasets import open_dataset
-    from ..up_axis import choose_up_axis
-
     record_data(cfg, data, segments)
     ds = open_dataset(max_frames=max_frames, config=cfg.data)
     if len(ds) == 0:
@@ -73,8 +72,6 @@ def open_frames(
 
 def synthetic_scene(cfg: Config, folder: str | Path, progress: bool = False) -> Path:
     """The synthetic scene of ``cfg.synthetic``, generated in ``folder`` (or the one already there)."""
-    from ..datasets import configured_scene
-
     s = cfg.synthetic
     log.info(
         "no --data: generating the synthetic scene (seed %d, %d frames, %dx%d) in %s",

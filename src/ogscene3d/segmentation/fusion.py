@@ -147,7 +147,7 @@ class SamDetectorSegmenter:
         rgb = check_rgb(rgb)
         image = self.sam.embed(rgb)
         shape = image.orig_size
-        area = self.sam.min_region_area
+        area = self.sam.filters.min_region_area
         ms = paint_masks(self.sam.generate(image), shape, area)
         dets = self.detector(rgb)
         md = paint_masks(self.sam.segment_boxes(image, dets.boxes, list(dets.names)), shape, area)

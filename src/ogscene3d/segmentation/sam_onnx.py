@@ -38,7 +38,7 @@ are dropped.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import cv2
@@ -126,17 +126,31 @@ class SamImage:
         )
 
 
-#: SamOnnx's prompt grid and mask filters: the segmentation settings of the same names
-_GRID_AND_FILTERS = (
-    "points_per_side",
-    "points_per_batch",
-    "pred_iou_thresh",
-    "stability_score_thresh",
-    "stability_score_offset",
-    "box_nms_thresh",
-    "min_region_area",
-    "mask_threshold",
-)
+@dataclass(frozen=True)
+class MaskFilters:
+    """Which of SAM's masks an automatic pass keeps (SAM's automatic mask generator's settings of the same
+    names; the ``segmentation`` config section holds them).
+
+    Args:
+        pred_iou_thresh: a mask's predicted IoU must exceed this.
+        stability_score_thresh: its stability score (IoU of the mask at two thresholds) must reach this.
+        stability_score_offset: the offset of those two thresholds around ``mask_threshold``.
+        box_nms_thresh: box IoU above which the lower-scored of two masks is dropped.
+        min_region_area: pixels; smaller holes and islands are removed, smaller masks dropped.
+        mask_threshold: the logit at which a pixel is in the mask.
+    """
+
+    pred_iou_thresh: float = 0.88
+    stability_score_thresh: float = 0.92
+    stability_score_offset: float = 1.0
+    box_nms_thresh: float = 0.7
+    min_region_area: int = 100
+    mask_threshold: float = 0.0
+
+    @classmethod
+    def from_section(cls, config: SegmentationConfig) -> MaskFilters:
+        """The filters that a ``segmentation`` config section sets (its settings of the same names)."""
+        return cls(**section_values(config, [f.name for f in fields(cls)]))
 
 
 class SamOnnx:
@@ -154,12 +168,7 @@ class SamOnnx:
         *,
         points_per_side: int = 32,
         points_per_batch: int = 16,
-        pred_iou_thresh: float = 0.88,
-        stability_score_thresh: float = 0.92,
-        stability_score_offset: float = 1.0,
-        box_nms_thresh: float = 0.7,
-        min_region_area: int = 100,
-        mask_threshold: float = 0.0,
+        filters: MaskFilters | None = None,
         input_size: int = 1024,
         provider: str = "auto",
     ) -> None:
@@ -167,12 +176,7 @@ class SamOnnx:
             raise ValueError("points_per_side and points_per_batch must be >= 1")
         self.points_per_side = int(points_per_side)
         self.points_per_batch = int(points_per_batch)
-        self.pred_iou_thresh = float(pred_iou_thresh)
-        self.stability_score_thresh = float(stability_score_thresh)
-        self.stability_score_offset = float(stability_score_offset)
-        self.box_nms_thresh = float(box_nms_thresh)
-        self.min_region_area = int(min_region_area)
-        self.mask_threshold = float(mask_threshold)
+        self.filters = filters if filters is not None else MaskFilters()
         self.encoder = OnnxModel(encoder, "SAM image encoder", provider)
         self.decoder = OnnxModel(decoder, "SAM mask decoder", provider)
         self._inspect_encoder(int(input_size))
@@ -207,7 +211,9 @@ class SamOnnx:
         return cls(
             config.sam_encoder,
             config.sam_decoder,
-            **section_values(config, _GRID_AND_FILTERS),
+            points_per_side=config.points_per_side,
+            points_per_batch=config.points_per_batch,
+            filters=MaskFilters.from_section(config),
             input_size=config.sam_input_size,
             provider=config.execution_provider,
         )
@@ -425,23 +431,23 @@ class SamOnnx:
             sub = ious[:, chans]
             # a NaN or inf predicted IoU is a failed prediction, never a confident one (inf would win
             # every pixel when painting): such masks are dropped like those below the threshold
-            bi, ci = np.nonzero(np.isfinite(sub) & (sub > self.pred_iou_thresh))
+            bi, ci = np.nonzero(np.isfinite(sub) & (sub > self.filters.pred_iou_thresh))
             if bi.size == 0:
                 continue
             sel = logits[bi, chans[ci]]  # copies only the masks that passed: [K, H, W]
             if self._low_res:  # upscaled only for the masks that passed
                 sel = self.postprocess_masks(image, sel)
             sel_iou = sub[bi, ci]
-            stab = stability_score(sel, self.mask_threshold, self.stability_score_offset)
-            ok = stab >= self.stability_score_thresh
+            stab = stability_score(sel, self.filters.mask_threshold, self.filters.stability_score_offset)
+            ok = stab >= self.filters.stability_score_thresh
             if not ok.any():
                 continue
-            kept.extend(masks_to_records(sel[ok] > self.mask_threshold, sel_iou[ok], stab[ok]))
+            kept.extend(masks_to_records(sel[ok] > self.filters.mask_threshold, sel_iou[ok], stab[ok]))
         # NMS first (it removes most masks, so the clean-up runs on few), clean-up, NMS again on the
         # cleaned boxes; segment-anything's second NMS prefers unchanged masks, ours the predicted IoU
-        kept = mask_nms(kept, self.box_nms_thresh)
-        cleaned = [remove_small_regions(r, self.min_region_area)[0] for r in kept]
-        return mask_nms([r for r in cleaned if r is not None], self.box_nms_thresh)
+        kept = mask_nms(kept, self.filters.box_nms_thresh)
+        cleaned = [remove_small_regions(r, self.filters.min_region_area)[0] for r in kept]
+        return mask_nms([r for r in cleaned if r is not None], self.filters.box_nms_thresh)
 
     # ------------------------------------------------------------------ box prompts (M_d)
     def segment_boxes(
@@ -484,12 +490,12 @@ class SamOnnx:
                 return []
         if self._low_res:
             sel_logits = self.postprocess_masks(image, sel_logits)
-        stab = stability_score(sel_logits, self.mask_threshold, self.stability_score_offset)
-        recs = masks_to_records(sel_logits > self.mask_threshold, sel_ious, stab, names)
-        cleaned = [remove_small_regions(r, self.min_region_area)[0] for r in recs]
+        stab = stability_score(sel_logits, self.filters.mask_threshold, self.filters.stability_score_offset)
+        recs = masks_to_records(sel_logits > self.filters.mask_threshold, sel_ious, stab, names)
+        cleaned = [remove_small_regions(r, self.filters.min_region_area)[0] for r in recs]
         return [r for r in cleaned if r is not None]
 
     def __call__(self, rgb: np.ndarray, depth: np.ndarray | None = None) -> Segmentation:
         """M_s for one frame: SAM's automatic masks painted into an int32 id map (depth is unused)."""
         image = self.embed(rgb)
-        return paint_masks(self.generate(image), image.orig_size, self.min_region_area)
+        return paint_masks(self.generate(image), image.orig_size, self.filters.min_region_area)
