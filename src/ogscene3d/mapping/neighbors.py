@@ -11,6 +11,8 @@ from __future__ import annotations
 import torch
 
 from ..device import warp_stream
+from ..kernels.components import launch_components
+from ..kernels.knn import launch_count_within, launch_knn
 
 _GRID_DIM = 128
 _grids: dict[str, object] = {}
@@ -145,7 +147,6 @@ def _launch(grid, wp_points, queries: torch.Tensor, pg, qg, mode: int, radius: f
     """One knn kernel launch on a built grid: (idx [Q, k] int32, dist [Q, k]); the kernel fills both."""
     import warp as wp
 
-    from ogscene3d.kernels.knn import launch_knn
 
     q = queries.shape[0]
     idx = torch.empty((q, k), dtype=torch.int32, device=queries.device)
@@ -171,7 +172,6 @@ def knn_components(nbr: torch.Tensor) -> torch.Tensor:
     (-1 = no edge; edges are undirected): per vertex, the smallest vertex of its component (int32 [V])."""
     import warp as wp
 
-    from ogscene3d.kernels.components import launch_components
 
     nbr = nbr.to(torch.int32).contiguous()
     parent = torch.arange(nbr.shape[0], dtype=torch.int32, device=nbr.device)
@@ -189,7 +189,6 @@ def count_within(
     ``stop_at`` (use 1 for a pure any-within test)."""
     import warp as wp
 
-    from ogscene3d.kernels.knn import launch_count_within
 
     if not radius > 0:
         raise ValueError(f"count_within: radius must be > 0, got {radius}")
