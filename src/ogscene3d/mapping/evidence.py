@@ -445,9 +445,8 @@ class EvidenceModel:
         ok = n_part[pc] >= MIN_VISIBLE
         inside = sc == anchor[pc]
         wc = w[sc] * ok
-        wa = wc
         fresh = c >= since
-        away = wa * (~inside & own)
+        away = wc * (~inside & own)
         # and, for the apart votes, how much of the part that segment held: an object the part took in is
         # all of its segment; a random cut is a large piece of the part
         votes = torch.stack([wc * inside, away, away * held_p[pc * S + sc].float()], 1)
@@ -471,8 +470,8 @@ class EvidenceModel:
         apart = ~same & (held(pa, sa) >= MAJOR * n_seg[sa]) & (held(pa, sb) >= MAJOR * n_seg[sb])
         wt = torch.minimum(w[sa], w[sb])
         # a view that shows one of the two in a segment at most 1/SMALL of the other's (a light switch's own
-        # segment beside the wall's) outweighs LINK_RATIO views that hold them in one: SAM absorbs small
-        # objects into their support in most frames (the yardstick's separation rule)
+        # segment beside the wall's) counts SMALL_APART views apart: SAM absorbs small objects into their
+        # support in most frames (the yardstick's separation rule)
         lo, hi = torch.minimum(n_seg[sa], n_seg[sb]), torch.maximum(n_seg[sa], n_seg[sb])
         wx = wt * torch.where(SMALL * lo <= hi, SMALL_APART, 1.0)
         self.cell_pairs.add(a, b, torch.stack([wt * same, wx * apart, torch.ones_like(wt)], 1))
@@ -619,9 +618,9 @@ class EvidenceModel:
         a, b = a[inside], b[inside]
         t, x, nv = (self.cell_pairs.vals[inside, i] for i in range(3))
         n_cells = int(self.cell_part.numel())
-        # linked: together at least twice as often as apart, in two views at least: a cell that only its first
-        # view judged (hidden or at a segment's edge since), or one on the edge between two objects that
-        # views give now to one, now to the other, links nothing: it would bridge the cut
+        # linked: together at least LINK_RATIO times as often as apart, in LINK_VIEWS views at least: a cell
+        # that only its first view judged (hidden or at a segment's edge since), or one on the edge between
+        # two objects that views give now to one, now to the other, links nothing: it would bridge the cut
         linked = (t >= LINK_RATIO * x) & (t > 0) & (nv >= LINK_VIEWS)
         comp = _components(n_cells, a[linked], b[linked])  # singletons for every other cell
         # Gaussians per cell and per component: the part's largest component keeps it
@@ -658,7 +657,6 @@ class EvidenceModel:
         live &= self.part_touched[comp_part.clamp(min=0)]
         stays[comp_part[live & ~go]] = True
         go &= live & (stays[comp_part.clamp(min=0)] | ~is_main)
-        t_cross, x_cross = together, apart
         # the part's largest component may tie with another: one of them stays (the smaller id)
         go_ids = torch.nonzero(go).squeeze(1)
         if go_ids.numel() == 0:
@@ -675,8 +673,8 @@ class EvidenceModel:
         self._inherit(old[is_main[go_ids]], new[is_main[go_ids]])
         # the new part starts its history with what the cells said about it and its former part (the views
         # that held them in one segment held two real parts of it)
-        self.part_pairs.add(new, old, torch.stack([t_cross[go_ids], torch.zeros_like(t_cross[go_ids]),
-                                                   x_cross[go_ids]], 1))  # fmt: skip
+        self.part_pairs.add(new, old, torch.stack([together[go_ids], torch.zeros_like(together[go_ids]),
+                                                   apart[go_ids]], 1))  # fmt: skip
         self.part_touched[new] = True
         return int(go_ids.numel())
 
