@@ -8,7 +8,8 @@ import torch
 
 from ogscene3d.config import EvidenceConfig
 from ogscene3d.gaussians import GaussianMap
-from ogscene3d.mapping.evidence import EvidenceModel, PairTable, spill_pixels
+from ogscene3d.mapping.evidence import EvidenceModel, PairTable, _rows_near, spill_pixels
+from ogscene3d.mapping.neighbors import knn
 from ogscene3d.mapping.refine import global_refinement
 
 W, H = 64, 48
@@ -291,3 +292,27 @@ def test_a_revisited_view_votes_only_for_what_was_made_since(device):
     before = ev.part_pairs.vals.clone()
     ev.observe(gm, vase_view(), POSE, K, DEPTH, view=0, revisit=True)  # and only once
     assert torch.equal(ev.part_pairs.vals, before)
+
+
+def test_a_revisit_searches_only_the_rows_near_a_fresh_cell_and_finds_the_same_pairs(device):
+    """The rows a revisited view searches (``_rows_near``) give exactly the pairs with a fresh cell that
+    searching every row gives; dense cells, so that an old cell's nearest hold a fresh cell that does not
+    hold it among its own nearest (the fresh rows alone miss such pairs)."""
+    g = torch.Generator().manual_seed(0)
+    centre = (torch.randint(0, 20, (600, 3), generator=g).float() * 0.02).to(device)
+    part = torch.randint(0, 2, (600,), generator=g).to(device)
+    fresh = torch.zeros(600, dtype=torch.bool, device=device)
+    fresh[560:] = True  # cells made since: the highest ids
+
+    def pairs(rows):
+        nbr, _ = knn(centre, centre[rows], 9, 0.1, part, part[rows], "same")
+        i = rows[:, None].expand_as(nbr)
+        keep = (nbr >= 0) & (nbr != i)
+        key = torch.unique(PairTable.key(i[keep], nbr[keep]))
+        return key[(key & ((1 << 31) - 1)) >= 560].tolist()
+
+    rows = _rows_near(centre, part, fresh, 0.1)
+    assert 40 < rows.numel() < 600
+    every = pairs(torch.arange(600, device=device))
+    assert pairs(rows) == every
+    assert len(pairs(torch.nonzero(fresh).squeeze(1))) < len(every)

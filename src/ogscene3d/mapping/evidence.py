@@ -206,6 +206,16 @@ def _components(n: int, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return torch.as_tensor(connected_components(adj, directed=False)[1], dtype=torch.long, device=a.device)
 
 
+def _rows_near(centre: torch.Tensor, part: torch.Tensor, fresh: torch.Tensor, radius: float) -> torch.Tensor:
+    """Indices of the cells (``centre`` [C,3], ``part`` [C]) whose neighbour lists (same part, within
+    ``radius``) can hold a ``fresh`` one: the fresh cells and those within ``radius`` of a fresh cell of their
+    part. A revisited view keeps only the pairs with a fresh cell, and a row's neighbours do not depend on
+    which other rows are searched, so these rows give exactly those pairs."""
+    f = torch.nonzero(fresh).squeeze(1)
+    near, _ = knn(centre[f], centre, 1, radius, part[f], part, "same")
+    return torch.nonzero(fresh | (near[:, 0] >= 0)).squeeze(1)
+
+
 def _majority(keys: torch.Tensor, values: torch.Tensor, n: int) -> tuple[torch.Tensor, torch.Tensor]:
     """Per key 0..n-1: the most frequent value among ``values[keys == k]`` (-2 where none; values >= -1) and
     its count."""
@@ -408,6 +418,8 @@ class EvidenceModel:
         w: torch.Tensor,
         since: int = 0,
     ) -> None:
+        if since and not bool((cell >= since).any()):
+            return  # a revisit votes for the cells made since only, and sees none of them
         n_cell = torch.bincount(cell, minlength=int(self.cell_part.numel()))
         top, cnt = _majority(cell, s, int(self.cell_part.numel()))
         c = torch.nonzero((cnt >= CELL_MIN) & (2 * cnt > n_cell)).squeeze(1)  # a strict majority
@@ -455,8 +467,14 @@ class EvidenceModel:
             return
         centre = (self.cell_vox[c].float() + 0.5) * self.cell
         part = self.cell_part[c]  # a part's cells only: the splits judge a part's own cells
-        nbr, _ = knn(centre, centre, NEIGHBOURS + 1, max(self.radius, self.cell), part, part, "same")
-        i = torch.arange(c.numel(), device=c.device)[:, None].expand_as(nbr)
+        r = max(self.radius, self.cell)
+        if since:  # a revisit: only the rows that can hold a pair with a cell made since
+            rows = _rows_near(centre, part, c >= since, r)
+            nbr, _ = knn(centre, centre[rows], NEIGHBOURS + 1, r, part, part[rows], "same")
+        else:
+            rows = torch.arange(c.numel(), device=c.device)
+            nbr, _ = knn(centre, centre, NEIGHBOURS + 1, r, part, part, "same")
+        i = rows[:, None].expand_as(nbr)
         keep = (nbr >= 0) & (nbr != i)
         a, b = c[i[keep]], c[nbr[keep]]
         key = torch.unique(PairTable.key(a, b))  # a pair found from both sides counts once
