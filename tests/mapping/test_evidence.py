@@ -106,6 +106,26 @@ def test_a_part_that_the_first_view_merged_is_split_by_later_views(device):
     assert ev.decide(gm)["part_splits"] == 0  # decided: nothing left to split
 
 
+def test_an_object_linked_in_pieces_is_split_whole(device):
+    """The vase of the test above, its cells linked by no pair (each pair judged in one view only: a sparse
+    sampling, as a vase at 160x120 gets). Each cell alone holds far less than the segments that put it apart,
+    as a piece of a random cut would; neighbouring cells that the views put apart from the anchor, and held
+    together more often than apart, are judged as one: the vase splits off whole."""
+    gm, vase = plane_map(device)
+    ev = with_parts(gm, [])
+    ev.observe(gm, WHOLE, POSE, K, DEPTH)
+    for _ in range(3):
+        ev.observe(gm, vase_view(), POSE, K, DEPTH)
+    a, b = ev.cell_pairs.pairs()
+    cells = torch.unique(gm.aux("ev_cell").long()[vase])
+    inner = torch.isin(a, cells) & torch.isin(b, cells)
+    assert bool(inner.any())
+    ev.cell_pairs.vals[inner, 2] = 1.0  # one view each: no link
+    out = ev.decide(gm)
+    assert out["part_splits"] == 1 and out["new_labels"] == 1
+    assert float((gm.labels[vase] == 1).float().mean()) > 0.7
+
+
 def test_random_cuts_do_not_split_a_part(device):
     """A SAM cut that moves from view to view separates a pair of neighbouring cells in few of its views."""
     gm, _ = plane_map(device)
@@ -185,6 +205,41 @@ def test_weakly_held_parts_merge_when_never_separated(device):
             ev.observe(gm, WHOLE, POSE, K, DEPTH)
         ev.decide(gm)
         assert torch.all(gm.labels[vase] == (2 if separated else 0))
+
+
+def test_a_piece_of_the_wall_labelled_apart_is_separated_from_the_nightstand_beside_it(device):
+    """A piece of the wall (label 2, its own part: an earlier segment made it) beside a nightstand (label 1):
+    two views hold both in one segment over them and the wall between (each a real part of it); three views
+    show the nightstand in its own segment and the piece inside the wall's segment, where the piece's label
+    is a minor part. The piece lies whole in the wall's segment and the nightstand is the main part of its
+    own: those views separate them, so they are not merged."""
+    gm, stand = plane_map(device)
+    u = np.floor(K[0, 0] * gm.means[:, 0].cpu().numpy() / 2.0 + K[0, 2])
+    v = np.floor(K[1, 1] * gm.means[:, 1].cpu().numpy() / 2.0 + K[1, 2])
+    piece = torch.from_numpy((u >= 20) & (u < 28) & (v >= 16) & (v < 25)).to(gm.device)
+    gm.labels[stand] = 1
+    gm.labels[piece] = 2
+    ev = with_parts(gm, [stand, piece])
+    both = np.ones((H, W), np.int32)
+    both[16:25, 20:45] = 2
+    for _ in range(2):
+        ev.observe(gm, both, POSE, K, DEPTH)
+    for _ in range(3):
+        ev.observe(gm, vase_view(), POSE, K, DEPTH)
+    ev.decide(gm)
+    assert torch.all(gm.labels[stand] == 1)
+    assert not bool((gm.labels[piece] == 1).any())
+
+
+def test_two_objects_seen_on_their_own_merge_on_two_firm_views_not_one(device):
+    """Groups that views showed apart from something (objects SAM found on their own) need about two firm
+    views (``MERGE_FIRM``) to merge: one view that merged a nightstand with the wall behind it is SAM's
+    error. A fragment that no view showed apart merges on one."""
+    ev = EvidenceModel(torch.device(device))
+    one, two = np.array([0.71, 1.1, 0.0]), np.array([1.6, 0.0, 0.5])
+    assert not ev._mergeable(one, owners=True) and ev._mergeable(two, owners=True)
+    assert ev._mergeable(one, owners=False)
+    assert not ev._mergeable(np.array([1.6, 0.0, 0.9]), owners=True)  # separated in more than half
 
 
 def test_unlabelled_gaussians_take_the_label_of_their_segments(device):

@@ -30,7 +30,9 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
   otherwise (a cup inside the table's segment: SAM absorbs small objects into their support in most frames,
   which says little). Two judged parts in two segments are *clearly separated* where each is the main part
   of its segment (``MAJOR``): one segment holds one and at most 1 - ``CONTAIN`` of the other, and it is about
-  that part, not a piece of a surface that SAM cut at a random place. A part can be shown apart where
+  that part, not a piece of a surface that SAM cut at a random place; or where one is the main part of its
+  segment and the other lies whole (``CONTAIN``) in another (a nightstand's own segment beside the wall's,
+  in which a piece of the wall labelled apart is a minor part). A part can be shown apart where
   ``MAJOR`` of it lies in one segment (SAM cuts a large surface at random places, so it is rarely ``CONTAIN``
   in one segment), and held together only where it is judged. A part *owns* a view's segment when it holds
   ``OWN`` of it.
@@ -50,13 +52,17 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
    wall's part) splits on about two views apart however many absorbed it, and a view that shows one of two
    cells in a segment at most 1/``SMALL`` of the other's counts ``SMALL_APART`` views against their link:
    SAM merges small objects into their support in most frames, so the few that show them apart are the
-   evidence. Where the part's largest group leaves, it takes the part's history with other parts along.
+   evidence. Neighbouring groups that the views put apart from the anchor (``split_ratio`` of their views),
+   and held together more often than apart, are judged as one: an object that its first view merged with its
+   support is often linked in pieces only. Where the part's largest group leaves, it takes the part's
+   history with other parts along.
 2. *group parts into labels*, from scratch every time, greedily by firm support: two groups merge when the
-   views held them together (firmly at least once, or weakly with no separation ever) and separated them in
-   at most ``mapping.evidence.separation`` (0.5) of their firm views. A small object that SAM absorbs into
-   its support in most views, but showed apart once, stays apart; a surface that its first view cut in two
-   joins once later views hold it whole; a merge made earlier, by the association or a previous decision,
-   is undone when the views grow to separate the parts.
+   views held them together (firmly, or weakly with no separation ever) and separated them in at most
+   ``mapping.evidence.separation`` (0.5) of their firm views. Two groups that views showed apart from
+   something (objects SAM found on their own) need ``MERGE_FIRM`` (about two) firm views and do not merge on
+   weak ones. A small object that SAM absorbs into its support in most views, but showed apart once, stays
+   apart; a surface that its first view cut in two joins once later views hold it whole; a merge made
+   earlier, by the association or a previous decision, is undone when the views grow to separate the parts.
 3. *relabel*: each group keeps the label most of its Gaussians carry (the largest group first), or takes a
    new one; a part's Gaussians that carry its former label move with it. Unlabelled Gaussians of a group take
    its label; a group of unlabelled parts only gets a label when one of them owned a segment.
@@ -102,6 +108,9 @@ SMALL = 5.0  # a group at most 1/SMALL of its part splits on its apart views alo
 SMALL_APART = 3.0  # weight of a cell pair's apart view where one segment is at most 1/SMALL of the other
 ANCHOR = 8  # a part's oldest visible cells whose segment anchors its cells' votes in a view
 LINK_RATIO = 3.0  # together at least this many times apart: linked
+# two groups that views showed apart from something (objects SAM found on their own) merge on about two
+# firm views: one view that merged a nightstand with a piece of the wall behind it is SAM's error
+MERGE_FIRM = 1.5
 LINK_VIEWS = 2  # views that must judge two cells of a part before they count as linked
 DISPUTE = 0.5  # a Gaussian is disputed when this share of its judged views disputed its label
 _VOX = 2048  # voxel coordinates are packed in 12 bits each (+-2048 cells)
@@ -542,7 +551,13 @@ class EvidenceModel:
         # it in a segment of its own now and then, but that segment is mostly the rest of the wall; an object
         # that SAM shows on its own is most of its segment
         major = share >= MAJOR
-        apart = (si != sj) & major[i] & major[j]
+        # or where one is the main part of its segment and the other lies whole in another segment (the
+        # yardstick's rule): a nightstand's own segment beside the wall's, which holds a piece of the wall
+        # that the map labelled apart from the rest of the wall (a minor part of that segment), separates the
+        # two. Both must be judged, so that a random cut through a part, which leaves it in two segments,
+        # says nothing
+        whole = judged[p[i]] & judged[p[j]]
+        apart = (si != sj) & ((major[i] & major[j]) | (whole & (major[i] | major[j])))
         wt = torch.where(same, w[si], torch.minimum(w[si], w[sj]))
         vals = torch.stack([wt * firm, wt * (same & ~firm), wt * apart], 1)
         self.part_apart.index_add_(0, p[i], wt * apart).index_add_(0, p[j], wt * apart)
@@ -641,24 +656,29 @@ class EvidenceModel:
         # two objects that views give now to one, now to the other, links nothing: it would bridge the cut
         linked = (t >= LINK_RATIO * x) & (t > 0) & (nv >= LINK_VIEWS)
         comp = _components(n_cells, a[linked], b[linked])  # singletons for every other cell
-        # Gaussians per cell and per component: the part's largest component keeps it
         cell = gm.aux("ev_cell", -1.0).long()
         mass = torch.bincount(cell[cell >= 0], minlength=n_cells).float()
-        comp_mass = torch.zeros(n_cells, device=self.device).index_add_(0, comp, mass)
+        st = self._component_votes(comp, mass)
+        # an object that its first view merged with its support is often linked in pieces only (each cell
+        # judged by few views, at a sparse sampling): neighbouring pieces that the views put apart from the
+        # part's anchor, and that the views hold together more often than apart, are one candidate, judged
+        # whole (a fragment alone holds less than the segments that separate it, and would look like a cut)
+        ap = st["apart"]
+        cand = (ap >= SPLIT_VIEWS) & (ap >= self.split_ratio * (ap + st["together"]))
+        grow = cand[comp[a]] & cand[comp[b]] & (comp[a] != comp[b]) & (t > x)
+        if bool(grow.any()):
+            keep = linked | grow
+            comp = _components(n_cells, a[keep], b[keep])
+            st = self._component_votes(comp, mass)
+        comp_mass, together, apart = st["mass"], st["together"], st["apart"]
         comp_part = torch.full((n_cells,), -1, dtype=torch.long, device=self.device)
         comp_part[comp] = self.cell_part
         best = torch.full((self.next_part,), -1.0, device=self.device)
         best.scatter_reduce_(0, comp_part[comp_mass > 0], comp_mass[comp_mass > 0], reduce="amax")
         is_main = (comp_mass >= best[comp_part.clamp(min=0)]) & (comp_part >= 0)
-        # a component's cells' views in and apart from their part's anchor segment, per judged cell
-        judged = self.cell_main[:, :2].sum(1) > 0
-        votes = torch.zeros((n_cells, 3), device=self.device).index_add_(0, comp, self.cell_main)
-        n_judged = torch.zeros(n_cells, device=self.device).index_add_(0, comp, judged.float())
-        together, apart = votes[:, 0] / n_judged.clamp(min=1), votes[:, 1] / n_judged.clamp(min=1)
         # the segments that put it apart held about the component itself, not a larger piece of its part:
         # SAM cuts a floor at random places, each time another piece; an object is its segment every time
-        size = votes[:, 2] / votes[:, 1].clamp(min=1e-9)
-        coherent = size <= COHERE * comp_mass
+        coherent = st["size"] <= COHERE * comp_mass
         # a component that is small beside the rest of its part (a light switch in the wall's part, a cup in
         # the table's) splits on the views that showed it apart, however many absorbed it: SAM merges small
         # objects into their support in most frames, so those frames say little (the yardstick's rule)
@@ -695,6 +715,21 @@ class EvidenceModel:
                                                    apart[go_ids]], 1))  # fmt: skip
         self.part_touched[new] = True
         return int(go_ids.numel())
+
+    def _component_votes(self, comp: torch.Tensor, mass: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Per component of cells (``comp`` per cell; ``mass`` Gaussians per cell): its Gaussians, its cells'
+        views in (``together``) and apart from (``apart``) their part's anchor segment per judged cell, and
+        how much of the part the segments that put it apart held on average (``size``)."""
+        n_cells = int(comp.numel())
+        judged = self.cell_main[:, :2].sum(1) > 0
+        votes = torch.zeros((n_cells, 3), device=self.device).index_add_(0, comp, self.cell_main)
+        n_judged = torch.zeros(n_cells, device=self.device).index_add_(0, comp, judged.float()).clamp(min=1)
+        return {
+            "mass": torch.zeros(n_cells, device=self.device).index_add_(0, comp, mass),
+            "together": votes[:, 0] / n_judged,
+            "apart": votes[:, 1] / n_judged,
+            "size": votes[:, 2] / votes[:, 1].clamp(min=1e-9),
+        }
 
     def _inherit(self, old: torch.Tensor, new: torch.Tensor) -> None:
         """A part's largest component that leaves it (only smaller pieces stayed, with the anchor) is most of
@@ -852,10 +887,10 @@ class EvidenceModel:
 
     def _mergeable(self, v: np.ndarray, owners: bool = False) -> bool:
         """The merge test on summed statistics v (firm, weak, apart) of two groups; ``owners``: a view showed
-        each group apart from something (objects SAM found on their own), which weak togetherness does not
-        merge: it merges a fragment into what holds it."""
+        each group apart from something (objects SAM found on their own), which merge on ``MERGE_FIRM`` firm
+        views and not on weak togetherness (that merges a fragment into what holds it)."""
         firm, weak, apart = float(v[0]), float(v[1]), float(v[2])
-        if firm > 0:
+        if firm >= MERGE_FIRM or (firm > 0 and not owners):
             return apart <= self.separation * firm
         return apart == 0 and weak > 0 and not owners
 
