@@ -108,10 +108,10 @@ SMALL = 5.0  # a group at most 1/SMALL of its part splits on its apart views alo
 SMALL_APART = 3.0  # weight of a cell pair's apart view where one segment is at most 1/SMALL of the other
 ANCHOR = 8  # a part's oldest visible cells whose segment anchors its cells' votes in a view
 LINK_RATIO = 3.0  # together at least this many times apart: linked
+LINK_VIEWS = 2  # views that must judge two cells of a part before they count as linked
 # two groups that views showed apart from something (objects SAM found on their own) merge on about two
 # firm views: one view that merged a nightstand with a piece of the wall behind it is SAM's error
 MERGE_FIRM = 1.5
-LINK_VIEWS = 2  # views that must judge two cells of a part before they count as linked
 DISPUTE = 0.5  # a Gaussian is disputed when this share of its judged views disputed its label
 _VOX = 2048  # voxel coordinates are packed in 12 bits each (+-2048 cells)
 _PART_SHIFT = 36
