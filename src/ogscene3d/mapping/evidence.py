@@ -477,12 +477,9 @@ class EvidenceModel:
         centre = (self.cell_vox[c].float() + 0.5) * self.cell
         part = self.cell_part[c]  # a part's cells only: the splits judge a part's own cells
         r = max(self.radius, self.cell)
-        if since:  # a revisit: only the rows that can hold a pair with a cell made since
-            rows = _rows_near(centre, part, c >= since, r)
-            nbr, _ = knn(centre, centre[rows], NEIGHBOURS + 1, r, part, part[rows], "same")
-        else:
-            rows = torch.arange(c.numel(), device=c.device)
-            nbr, _ = knn(centre, centre, NEIGHBOURS + 1, r, part, part, "same")
+        # a revisit searches only the rows that can hold a pair with a cell made since
+        rows = _rows_near(centre, part, c >= since, r) if since else torch.arange(c.numel(), device=c.device)
+        nbr, _ = knn(centre, centre[rows], NEIGHBOURS + 1, r, part, part[rows], "same")
         i = rows[:, None].expand_as(nbr)
         keep = (nbr >= 0) & (nbr != i)
         a, b = c[i[keep]], c[nbr[keep]]
@@ -659,12 +656,17 @@ class EvidenceModel:
         cell = gm.aux("ev_cell", -1.0).long()
         mass = torch.bincount(cell[cell >= 0], minlength=n_cells).float()
         st = self._component_votes(comp, mass)
+
+        def clearly_apart(st: dict[str, torch.Tensor]) -> torch.Tensor:
+            # put apart from the anchor in about two views, and in ``split_ratio`` of the component's views
+            ap = st["apart"]
+            return (ap >= SPLIT_VIEWS) & (ap >= self.split_ratio * (ap + st["together"]))
+
         # an object that its first view merged with its support is often linked in pieces only (each cell
         # judged by few views, at a sparse sampling): neighbouring pieces that the views put apart from the
         # part's anchor, and that the views hold together more often than apart, are one candidate, judged
         # whole (a fragment alone holds less than the segments that separate it, and would look like a cut)
-        ap = st["apart"]
-        cand = (ap >= SPLIT_VIEWS) & (ap >= self.split_ratio * (ap + st["together"]))
+        cand = clearly_apart(st)
         grow = cand[comp[a]] & cand[comp[b]] & (comp[a] != comp[b]) & (t > x)
         if bool(grow.any()):
             keep = linked | grow
@@ -685,10 +687,7 @@ class EvidenceModel:
         part_mass = torch.zeros(self.next_part, device=self.device)
         part_mass.index_add_(0, comp_part[comp_mass > 0], comp_mass[comp_mass > 0])
         small = SMALL * comp_mass <= part_mass[comp_part.clamp(min=0)]
-        go = (
-            (comp_mass >= SPLIT_MIN) & (apart >= SPLIT_VIEWS) & coherent
-            & ((apart >= self.split_ratio * (apart + together)) | small)
-        )  # fmt: skip
+        go = (comp_mass >= SPLIT_MIN) & coherent & (clearly_apart(st) | (small & (apart >= SPLIT_VIEWS)))
         # a part keeps the components that stay; if none would, its largest
         stays = torch.zeros(self.next_part, dtype=torch.bool, device=self.device)
         live = (comp_mass > 0) & (comp_part >= 0)
