@@ -8,7 +8,14 @@ import torch
 
 from ogscene3d.config import EvidenceConfig
 from ogscene3d.gaussians import GaussianMap
-from ogscene3d.mapping.evidence import EvidenceModel, PairTable, _rows_near, spill_pixels
+from ogscene3d.mapping.evidence import (
+    EvidenceModel,
+    PairTable,
+    _agglomerate,
+    _components,
+    _rows_near,
+    spill_pixels,
+)
 from ogscene3d.mapping.neighbors import knn
 from ogscene3d.mapping.refine import global_refinement
 
@@ -371,3 +378,40 @@ def test_a_revisit_searches_only_the_rows_near_a_fresh_cell_and_finds_the_same_p
     every = pairs(torch.arange(600, device=device))
     assert pairs(rows) == every
     assert len(pairs(torch.nonzero(fresh).squeeze(1))) < len(every)
+
+
+def test_a_few_links_across_a_boundary_do_not_chain_two_objects(device):
+    """The vase of the first test, one of its cells held together with a cabinet cell beside it in five views
+    (as views that merged a book with the one beside it would). Summed over the whole boundary, the views keep
+    the vase apart: it still splits off (chaining cells through their linked pairs would join it to the
+    cabinet)."""
+    gm, vase = plane_map(device)
+    ev = with_parts(gm, [])
+    ev.observe(gm, WHOLE, POSE, K, DEPTH)
+    for _ in range(3):
+        ev.observe(gm, vase_view(), POSE, K, DEPTH)
+    a, b = ev.cell_pairs.pairs()
+    cells = torch.unique(gm.aux("ev_cell").long()[vase])
+    cross = torch.isin(a, cells) ^ torch.isin(b, cells)
+    assert int(cross.sum()) > 4
+    bridge = torch.nonzero(cross).squeeze(1)[0]
+    ev.cell_pairs.vals[bridge] = torch.tensor([5.0, 0.0, 5.0], device=ev.cell_pairs.vals.device)
+    out = ev.decide(gm)
+    assert out["part_splits"] == 1 and out["new_labels"] == 1
+    assert float((gm.labels[vase] == 1).float().mean()) > 0.7
+
+
+def test_cells_group_by_their_summed_statistics(device):
+    """Two rows of four cells, each row held together in every view; across the rows one pair held together
+    in three views, three pairs put apart in two each. Average linkage keeps the rows apart; the linked pair
+    alone would join them."""
+    a = torch.tensor([0, 1, 2, 4, 5, 6, 3, 2, 3, 1], device=device)
+    b = torch.tensor([1, 2, 3, 5, 6, 7, 4, 5, 5, 4], device=device)
+    t = torch.tensor([4.0] * 6 + [3.0, 0.0, 0.0, 0.0], device=device)
+    x = torch.tensor([0.0] * 7 + [2.0, 2.0, 2.0], device=device)
+    nv = t + x
+    groups = _agglomerate(8, a, b, t, x, nv).cpu()
+    assert len(set(groups[:4].tolist())) == 1 and len(set(groups[4:].tolist())) == 1
+    assert groups[0] != groups[4]
+    linked = (t >= 3 * x) & (t > 0)
+    assert len(set(_components(8, a[linked], b[linked]).tolist())) == 1  # what single linkage does

@@ -43,8 +43,9 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
 
 **Decide** (``decide``, at the global refinement, before Algorithm 1):
 
-1. *split parts*: a part's cells are linked where views held them together more often than apart
-   (judged in ``LINK_VIEWS`` views at least);
+1. *split parts*: a part's cells are grouped by average linkage: neighbouring groups merge where the views
+   held them together ``LINK_RATIO`` times as often as apart, summed over all their cell pairs (judged in
+   ``LINK_VIEWS`` views at least), mutually best pairs first;
    a linked group other than the part's largest that views put apart from the rest of the part in at least
    ``mapping.evidence.split_ratio`` of their cross views becomes a part of its own (a fridge that the first
    view merged with the floor, books that it merged with each other). A SAM cut at random places separates a
@@ -107,8 +108,8 @@ SPLIT_VIEWS = 1.5  # weighted views apart a split needs (about two)
 SMALL = 5.0  # a group at most 1/SMALL of its part splits on its apart views alone
 SMALL_APART = 3.0  # weight of a cell pair's apart view where one segment is at most 1/SMALL of the other
 ANCHOR = 8  # a part's oldest visible cells whose segment anchors its cells' votes in a view
-LINK_RATIO = 3.0  # together at least this many times apart: linked
-LINK_VIEWS = 2  # views that must judge two cells of a part before they count as linked
+LINK_RATIO = 2.0  # two groups of a part's cells are linked when held together this many times as apart
+LINK_VIEWS = 2  # views that must have judged pairs of two groups' cells before the groups count as linked
 # two groups that views showed apart from something (objects SAM found on their own) merge on about two
 # firm views: one view that merged a nightstand with a piece of the wall behind it is SAM's error
 MERGE_FIRM = 1.5
@@ -213,6 +214,45 @@ def _components(n: int, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     an, bn = a.cpu().numpy(), b.cpu().numpy()
     adj = coo_matrix((np.ones(an.size), (an, bn)), shape=(n, n))
     return torch.as_tensor(connected_components(adj, directed=False)[1], dtype=torch.long, device=a.device)
+
+
+def _agglomerate(n: int, a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, x: torch.Tensor,
+                 nv: torch.Tensor) -> torch.Tensor:
+    """Average-linkage groups of n cells from their pair statistics (a[i], b[i]: together t, apart x, in nv
+    views): a group id per cell. Neighbouring groups merge while their summed statistics link them
+    (together at least ``LINK_RATIO`` times apart, in ``LINK_VIEWS`` views), mutually best pairs first, by
+    their margin t - ``LINK_RATIO`` x. Single linkage (components of linked cell pairs) lets a few pairs
+    that the views mostly held in one segment chain two books on a shelf through their boundary; summed over
+    the whole boundary, the views that kept them apart count."""
+    comp = torch.arange(n, device=a.device)
+    if n == 0 or a.numel() == 0:
+        return comp
+    # the graph of groups, contracted after every round: its pairs carry the summed statistics, so a round
+    # costs what is left to merge, not the cells (a floor absorbs its cells a few per round)
+    m = n
+    vals = torch.stack([t, x, nv], 1)
+    while True:
+        cross = a != b
+        lo, hi = torch.minimum(a[cross], b[cross]), torch.maximum(a[cross], b[cross])
+        if lo.numel() == 0:
+            return comp
+        keys, inv = torch.unique(lo * m + hi, return_inverse=True)
+        vals = torch.zeros((keys.numel(), 3), device=a.device).index_add_(0, inv, vals[cross])
+        a, b = keys // m, keys % m
+        T, X, NV = vals.unbind(1)
+        ok = (T >= LINK_RATIO * X) & (T > 0) & (NV >= LINK_VIEWS)
+        if not bool(ok.any()):
+            return comp
+        score = torch.where(ok, T - LINK_RATIO * X, torch.full_like(T, -float("inf")))
+        # each group's best partner; mutual bests merge (the best pair overall always does)
+        best = torch.full((m,), -float("inf"), device=a.device)
+        best.scatter_reduce_(0, torch.cat([a, b]), torch.cat([score, score]), reduce="amax")
+        pick = ok & (score >= best[a]) & (score >= best[b])
+        # ties can give a group two mutual partners: merge through components of the chosen pairs (ids in
+        # the order of each group's first cell, as the components of the cells would number them)
+        lut = _components(m, a[pick], b[pick])
+        comp, a, b = lut[comp], lut[a], lut[b]
+        m = int(lut.max()) + 1
 
 
 def _rows_near(centre: torch.Tensor, part: torch.Tensor, fresh: torch.Tensor, radius: float) -> torch.Tensor:
@@ -648,11 +688,9 @@ class EvidenceModel:
         a, b = a[inside], b[inside]
         t, x, nv = (self.cell_pairs.vals[inside, i] for i in range(3))
         n_cells = int(self.cell_part.numel())
-        # linked: together at least LINK_RATIO times as often as apart, in LINK_VIEWS views at least: a cell
-        # that only its first view judged (hidden or at a segment's edge since), or one on the edge between
-        # two objects that views give now to one, now to the other, links nothing: it would bridge the cut
-        linked = (t >= LINK_RATIO * x) & (t > 0) & (nv >= LINK_VIEWS)
-        comp = _components(n_cells, a[linked], b[linked])  # singletons for every other cell
+        # groups of cells linked by their summed statistics: a cell on the edge between two objects, that
+        # views give now to one, now to the other, cannot bridge the cut, nor can a few merged pairs
+        comp = _agglomerate(n_cells, a, b, t, x, nv)
         cell = gm.aux("ev_cell", -1.0).long()
         mass = torch.bincount(cell[cell >= 0], minlength=n_cells).float()
         st = self._component_votes(comp, mass)
@@ -669,8 +707,7 @@ class EvidenceModel:
         cand = clearly_apart(st)
         grow = cand[comp[a]] & cand[comp[b]] & (comp[a] != comp[b]) & (t > x)
         if bool(grow.any()):
-            keep = linked | grow
-            comp = _components(n_cells, a[keep], b[keep])
+            comp = _components(n_cells, comp[a[grow]], comp[b[grow]])[comp]
             st = self._component_votes(comp, mass)
         comp_mass, together, apart = st["mass"], st["together"], st["apart"]
         comp_part = torch.full((n_cells,), -1, dtype=torch.long, device=self.device)
