@@ -113,11 +113,12 @@ def test_a_part_that_the_first_view_merged_is_split_by_later_views(device):
     assert ev.decide(gm)["part_splits"] == 0  # decided: nothing left to split
 
 
-def test_an_object_linked_in_pieces_is_split_whole(device):
-    """The vase of the test above, its cells linked by no pair (each pair judged in one view only: a sparse
-    sampling, as a vase at 160x120 gets). Each cell alone holds far less than the segments that put it apart,
-    as a piece of a random cut would; neighbouring cells that the views put apart from the anchor, and held
-    together more often than apart, are judged as one: the vase splits off whole."""
+def vase_seen_apart(
+    device: str,
+) -> tuple[GaussianMap, torch.Tensor, EvidenceModel, torch.Tensor, torch.Tensor]:
+    """The scene of the test above before its decision: one part over the cabinet front and the vase, one view
+    that held them in one segment and three that segment the vase apart. Returns the map, the vase's mask,
+    the model, and per cell pair whether its first / second cell is one of the vase's."""
     gm, vase = plane_map(device)
     ev = with_parts(gm, [])
     ev.observe(gm, WHOLE, POSE, K, DEPTH)
@@ -125,7 +126,16 @@ def test_an_object_linked_in_pieces_is_split_whole(device):
         ev.observe(gm, vase_view(), POSE, K, DEPTH)
     a, b = ev.cell_pairs.pairs()
     cells = torch.unique(gm.aux("ev_cell").long()[vase])
-    inner = torch.isin(a, cells) & torch.isin(b, cells)
+    return gm, vase, ev, torch.isin(a, cells), torch.isin(b, cells)
+
+
+def test_an_object_linked_in_pieces_is_split_whole(device):
+    """The vase of the test above, its cells linked by no pair (each pair judged in one view only: a sparse
+    sampling, as a vase at 160x120 gets). Each cell alone holds far less than the segments that put it apart,
+    as a piece of a random cut would; neighbouring cells that the views put apart from the anchor, and held
+    together more often than apart, are judged as one: the vase splits off whole."""
+    gm, vase, ev, in_a, in_b = vase_seen_apart(device)
+    inner = in_a & in_b
     assert bool(inner.any())
     ev.cell_pairs.vals[inner, 2] = 1.0  # one view each: no link
     out = ev.decide(gm)
@@ -385,14 +395,8 @@ def test_a_few_links_across_a_boundary_do_not_chain_two_objects(device):
     (as views that merged a book with the one beside it would). Summed over the whole boundary, the views keep
     the vase apart: it still splits off (chaining cells through their linked pairs would join it to the
     cabinet)."""
-    gm, vase = plane_map(device)
-    ev = with_parts(gm, [])
-    ev.observe(gm, WHOLE, POSE, K, DEPTH)
-    for _ in range(3):
-        ev.observe(gm, vase_view(), POSE, K, DEPTH)
-    a, b = ev.cell_pairs.pairs()
-    cells = torch.unique(gm.aux("ev_cell").long()[vase])
-    cross = torch.isin(a, cells) ^ torch.isin(b, cells)
+    gm, vase, ev, in_a, in_b = vase_seen_apart(device)
+    cross = in_a ^ in_b
     assert int(cross.sum()) > 4
     bridge = torch.nonzero(cross).squeeze(1)[0]
     ev.cell_pairs.vals[bridge] = torch.tensor([5.0, 0.0, 5.0], device=ev.cell_pairs.vals.device)
