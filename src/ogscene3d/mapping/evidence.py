@@ -159,10 +159,21 @@ class PairTable:
         lo, hi = torch.minimum(a, b).long(), torch.maximum(a, b).long()
         return (lo << 31) | hi
 
+    @staticmethod
+    def unkey(k: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The pairs (a, b), a < b, of keys made by ``key``."""
+        return k >> 31, k & ((1 << 31) - 1)
+
+    @staticmethod
+    def summed(a: torch.Tensor, b: torch.Tensor, vals: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The distinct unordered pairs of (a[i], b[i]) as sorted keys, and ``vals`` [M, cols] summed per
+        pair."""
+        k, inv = torch.unique(PairTable.key(a, b), return_inverse=True)
+        return k, torch.zeros((k.numel(), vals.shape[1]), device=vals.device).index_add_(0, inv, vals)
+
     def pairs(self) -> tuple[torch.Tensor, torch.Tensor]:
         """(a [E], b [E]) of every stored pair, a < b (in the order of ``vals``)."""
-        k = self.keys
-        return k >> 31, k & ((1 << 31) - 1)
+        return self.unkey(self.keys)
 
     def _flush(self) -> None:
         if self._keys[1].numel():
@@ -175,8 +186,7 @@ class PairTable:
         """Add ``vals`` [M, cols] to the pairs (a[i], b[i]) (a != b; repeated pairs sum)."""
         if a.numel() == 0:
             return
-        k, inv = torch.unique(self.key(a, b), return_inverse=True)
-        v = torch.zeros((k.numel(), vals.shape[1]), device=vals.device).index_add_(0, inv, vals)
+        k, v = self.summed(a, b, vals)
         for level in (0, 1):
             keys = self._keys[level]
             if keys.numel() and k.numel():
@@ -233,12 +243,10 @@ def _agglomerate(n: int, a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, x: t
     vals = torch.stack([t, x, nv], 1)
     while True:
         cross = a != b
-        lo, hi = torch.minimum(a[cross], b[cross]), torch.maximum(a[cross], b[cross])
-        if lo.numel() == 0:
+        if not bool(cross.any()):
             return comp
-        keys, inv = torch.unique(lo * m + hi, return_inverse=True)
-        vals = torch.zeros((keys.numel(), 3), device=a.device).index_add_(0, inv, vals[cross])
-        a, b = keys // m, keys % m
+        keys, vals = PairTable.summed(a[cross], b[cross], vals[cross])
+        a, b = PairTable.unkey(keys)
         T, X, NV = vals.unbind(1)
         ok = (T >= LINK_RATIO * X) & (T > 0) & (NV >= LINK_VIEWS)
         if not bool(ok.any()):
@@ -523,8 +531,7 @@ class EvidenceModel:
         i = rows[:, None].expand_as(nbr)
         keep = (nbr >= 0) & (nbr != i)
         a, b = c[i[keep]], c[nbr[keep]]
-        key = torch.unique(PairTable.key(a, b))  # a pair found from both sides counts once
-        a, b = key >> 31, key & ((1 << 31) - 1)
+        a, b = PairTable.unkey(torch.unique(PairTable.key(a, b)))  # a pair found from both sides counts once
         if since:
             a, b = a[b >= since], b[b >= since]  # b > a: one of them made since
         sa, sb = top[a], top[b]
@@ -828,9 +835,8 @@ class EvidenceModel:
         dev = self.device
         ra, rb = root[a], root[b]
         cross = ra != rb
-        keys, inv = torch.unique(PairTable.key(ra[cross], rb[cross]), return_inverse=True)
-        gv = torch.zeros((keys.numel(), 3), device=dev).index_add_(0, inv, vals[cross])
-        ga, gb = (keys >> 31).tolist(), (keys & ((1 << 31) - 1)).tolist()
+        keys, gv = PairTable.summed(ra[cross], rb[cross], vals[cross])
+        ga, gb = (x.tolist() for x in PairTable.unkey(keys))
         own_t = torch.zeros(n, dtype=torch.bool, device=dev)
         own_t[root[self.part_apart[:n] > 0]] = True  # a group that some view showed apart from anything
         owned = own_t.tolist()
