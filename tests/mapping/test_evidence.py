@@ -419,3 +419,44 @@ def test_cells_group_by_their_summed_statistics(device):
     assert groups[0] != groups[4]
     linked = (t >= 3 * x) & (t > 0)
     assert len(set(_components(8, a[linked], b[linked]).tolist())) == 1  # what single linkage does
+
+
+def floor_piece_leaves(device: str, chair_below: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """A first view that held a chair (its oldest cells, x < ``chair_below``) and the floor piece beside it
+    (x < 0.1) in one segment, apart from the rest of the floor (label 1), so one part; three views that
+    segment chair, piece and floor apart (the piece leaves the part); then two views that hold the piece with
+    the floor. Returns the final labels of the piece, the chair and the floor."""
+    gm, _ = plane_map(device)
+    x = gm.means[:, 0]
+    u = torch.floor(K[0, 0] * x / 2.0 + K[0, 2]).long()
+    chair, floor = x < chair_below, x >= 0.1
+    piece = ~chair & ~floor
+    gm.labels[floor] = 1
+    gm.next_label = 2
+    ev = with_parts(gm, [chair | piece])
+    at_piece, at_floor = int(u[piece].min()), int(u[floor].min())
+    first, three, two = (np.ones((H, W), np.int32) for _ in range(3))
+    first[:, at_floor:] = 2
+    three[:, at_piece:at_floor] = 2
+    three[:, at_floor:] = 3
+    two[:, at_piece:] = 2
+    ev.observe(gm, first, POSE, K, DEPTH)
+    for _ in range(3):
+        ev.observe(gm, three, POSE, K, DEPTH)
+    assert ev.decide(gm)["part_splits"] == 1
+    for _ in range(2):
+        ev.observe(gm, two, POSE, K, DEPTH)
+    ev.decide(gm)
+    return gm.labels[piece], gm.labels[chair], gm.labels[floor]
+
+
+def test_a_leaving_piece_takes_its_part_history_only_when_it_is_most_of_the_part(device):
+    """The views separated the chair's part from the floor. The floor piece that leaves that part (the part's
+    largest group, but 55 % of it) did not earn that history: it joins the floor on the two views that hold it
+    with the floor. A piece that is ``INHERIT`` (two thirds) of its part is what the views judged, and keeps
+    the part's separation from the floor."""
+    piece, chair, floor = floor_piece_leaves(device, chair_below=-0.5)
+    assert torch.all(piece == 1) and torch.all(floor == 1)
+    assert not bool((chair == 1).any())
+    piece, chair, floor = floor_piece_leaves(device, chair_below=-0.72)
+    assert not bool((piece == 1).any()) and torch.all(floor == 1)

@@ -55,8 +55,8 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
    SAM merges small objects into their support in most frames, so the few that show them apart are the
    evidence. Neighbouring groups that the views put apart from the anchor (``split_ratio`` of their views),
    and held together more often than apart, are judged as one: an object that its first view merged with its
-   support is often linked in pieces only. Where the part's largest group leaves, it takes the part's
-   history with other parts along.
+   support is often linked in pieces only. Where the part's largest group leaves and holds ``INHERIT`` (two
+   thirds) of the part, it takes the part's history with other parts along.
 2. *group parts into labels*, from scratch every time, greedily by firm support: two groups merge when the
    views held them together (firmly, or weakly with no separation ever) and separated them in at most
    ``mapping.evidence.separation`` (0.5) of their firm views. Two groups that views showed apart from
@@ -110,6 +110,7 @@ SMALL_APART = 3.0  # weight of a cell pair's apart view where one segment is at 
 ANCHOR = 8  # a part's oldest visible cells whose segment anchors its cells' votes in a view
 LINK_RATIO = 2.0  # two groups of a part's cells are linked when held together this many times as apart
 LINK_VIEWS = 2  # views that must have judged pairs of two groups' cells before the groups count as linked
+INHERIT = 2 / 3  # the share of its part a leaving largest group needs to take the part's history along
 # two groups that views showed apart from something (objects SAM found on their own) merge on about two
 # firm views: one view that merged a nightstand with a piece of the wall behind it is SAM's error
 MERGE_FIRM = 1.5
@@ -751,7 +752,11 @@ class EvidenceModel:
         self.cell_part[sel] = moved[sel]
         self.cell_main[sel] = 0.0  # their part's main segment is another now
         self._reindex_cells()
-        self._inherit(old[is_main[go_ids]], new[is_main[go_ids]])
+        # only a piece that is most of its part is what the views judged as the part: where a part that its
+        # first view made over a chair and a floor piece loses the piece, the views that separated the part
+        # from the rest of the floor were about the chair as much, and would keep the piece off the floor
+        heir = is_main[go_ids] & (comp_mass[go_ids] >= INHERIT * part_mass[old])
+        self._inherit(old[heir], new[heir])
         # the new part starts its history with what the cells said about it and its former part (the views
         # that held them in one segment held two real parts of it)
         self.part_pairs.add(new, old, torch.stack([together[go_ids], torch.zeros_like(together[go_ids]),
@@ -775,8 +780,9 @@ class EvidenceModel:
         }
 
     def _inherit(self, old: torch.Tensor, new: torch.Tensor) -> None:
-        """A part's largest component that leaves it (only smaller pieces stayed, with the anchor) is most of
-        what the views judged: the new part takes over the old part's statistics with every other part."""
+        """A part's largest component that leaves it (only smaller pieces stayed, with the anchor) and holds
+        ``INHERIT`` of it is most of what the views judged: the new part takes over the old part's statistics
+        with every other part."""
         if old.numel() == 0 or len(self.part_pairs) == 0:
             return
         lut = torch.full((self.next_part,), -1, dtype=torch.long, device=self.device)
