@@ -460,3 +460,36 @@ def test_a_leaving_piece_takes_its_part_history_only_when_it_is_most_of_the_part
     assert not bool((chair == 1).any())
     piece, chair, floor = floor_piece_leaves(device, chair_below=-0.72)
     assert not bool((piece == 1).any()) and torch.all(floor == 1)
+
+
+def cup_seen_apart(device: str, held_per_view: float) -> tuple[dict[str, int], torch.Tensor, torch.Tensor]:
+    """A cup of 4 Gaussians in its table's part: views that hold it in the table's segment, and two that show
+    it in a segment of its own, which held ``held_per_view`` of the part's Gaussians each (the cup's and
+    the table's just behind it, within the depth margin, in a segment of a few pixels). Returns the decision's
+    counts, the cup's labels and the table's."""
+    gm, _ = plane_map(device)
+    ev = with_parts(gm, [])
+    u = torch.floor(K[0, 0] * gm.means[:, 0] / 2.0 + K[0, 2])
+    v = torch.floor(K[1, 1] * gm.means[:, 1] / 2.0 + K[1, 2])
+    cup = (u >= 30) & (u < 33) & (v >= 20) & (v < 22)
+    apart = np.ones((H, W), np.int32)
+    apart[20:22, 30:33] = 2
+    ev.observe(gm, WHOLE, POSE, K, DEPTH)
+    for _ in range(2):
+        ev.observe(gm, apart, POSE, K, DEPTH)
+        ev.observe(gm, WHOLE, POSE, K, DEPTH)
+    cells = torch.unique(gm.aux("ev_cell").long()[cup])
+    assert int(cup.sum()) == 4 and torch.all(ev.cell_main[cells, 1] == 2)  # two views apart
+    ev.cell_main[cells, 2] = ev.cell_main[cells, 1] * held_per_view
+    return ev.decide(gm), gm.labels[cup], gm.labels[~cup]
+
+
+def test_a_tiny_object_splits_though_its_segment_takes_in_its_support_behind_it(device):
+    """A segment of a few pixels holds the support's Gaussians just behind the object as well as the object's
+    own: a cup of 4 Gaussians whose segments held 12 Gaussians of the part is still its segment (``COHERE``
+    counts a group of fewer than ``TINY`` Gaussians as ``TINY``). A group whose segments held 40 of the part
+    is a piece of a larger cut and stays."""
+    out, cup, table = cup_seen_apart(device, 12.0)
+    assert out["part_splits"] == 1 and torch.all(cup == 1) and torch.all(table == 0)
+    out, cup, _ = cup_seen_apart(device, 40.0)
+    assert out["part_splits"] == 0 and torch.all(cup == 0)

@@ -103,6 +103,7 @@ MIN_PART = 8
 CELL_MIN = 1  # visible Gaussians (in its segment) a cell needs to be judged
 NEIGHBOURS = 8  # a cell's neighbours in a view: its nearest visible cells (within ``radius``)
 COHERE = 2.0  # apart segments hold at most this many times the group
+TINY = 8  # a group of fewer Gaussians counts as this many for COHERE
 SPLIT_MIN = 3  # Gaussians a group of cells needs to be split off
 SPLIT_VIEWS = 1.5  # weighted views apart a split needs (about two)
 SMALL = 5.0  # a group at most 1/SMALL of its part splits on its apart views alone
@@ -725,7 +726,7 @@ class EvidenceModel:
         is_main = (comp_mass >= best[comp_part.clamp(min=0)]) & (comp_part >= 0)
         # the segments that put it apart held about the component itself, not a larger piece of its part:
         # SAM cuts a floor at random places, each time another piece; an object is its segment every time
-        coherent = st["size"] <= COHERE * comp_mass
+        coherent = st["size"] <= COHERE * torch.clamp(comp_mass, min=TINY)
         # a component that is small beside the rest of its part (a light switch in the wall's part, a cup in
         # the table's) splits on the views that showed it apart, however many absorbed it: SAM merges small
         # objects into their support in most frames, so those frames say little (the yardstick's rule)
