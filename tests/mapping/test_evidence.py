@@ -493,3 +493,42 @@ def test_a_tiny_object_splits_though_its_segment_takes_in_its_support_behind_it(
     assert out["part_splits"] == 1 and torch.all(cup == 1) and torch.all(table == 0)
     out, cup, _ = cup_seen_apart(device, 40.0)
     assert out["part_splits"] == 0 and torch.all(cup == 0)
+
+
+def pixel_mask(gm: GaussianMap, us: range, vs: range) -> torch.Tensor:
+    """The Gaussians of ``plane_map`` seen in pixel columns ``us`` and rows ``vs``."""
+    u = torch.floor(K[0, 0] * gm.means[:, 0] / 2.0 + K[0, 2])
+    v = torch.floor(K[1, 1] * gm.means[:, 1] / 2.0 + K[1, 2])
+    return (u >= us.start) & (u < us.stop) & (v >= vs.start) & (v < vs.stop)
+
+
+def test_a_book_of_one_gaussian_splits_off_its_shelf_but_a_cut_through_a_bottle_does_not(device):
+    """A book of one Gaussian in the shelf's part, shown in a segment of its own in two views of five,
+    splits off: a group small beside its part splits on its views apart, whatever its size. One Gaussian of
+    a bottle of 9 (a part of its own) that two views of five cut off is not small beside its part: a group
+    counts as ``TINY`` Gaussians, so it needs ``split_ratio`` of its views apart, as a piece of a random cut
+    does."""
+    gm, _ = plane_map(device)
+    ev = with_parts(gm, [])
+    book = pixel_mask(gm, range(30, 31), range(20, 21))
+    apart = np.ones((H, W), np.int32)
+    apart[20, 30] = 2
+    ev.observe(gm, WHOLE, POSE, K, DEPTH)
+    for _ in range(2):
+        ev.observe(gm, apart, POSE, K, DEPTH)
+        ev.observe(gm, WHOLE, POSE, K, DEPTH)
+    assert int(book.sum()) == 1 and ev.decide(gm)["part_splits"] == 1
+    assert int(gm.labels[book]) == 1 and torch.all(gm.labels[~book] == 0)
+
+    gm, _ = plane_map(device)
+    bottle = pixel_mask(gm, range(30, 34), range(20, 24))
+    gm.labels[bottle] = 1
+    gm.next_label = 2
+    ev = with_parts(gm, [bottle])
+    own = np.ones((H, W), np.int32)
+    own[20:24, 30:34] = 2
+    cut = own.copy()
+    cut[20, 30] = 3
+    for seg in (own, own, own, cut, cut):
+        ev.observe(gm, seg, POSE, K, DEPTH)
+    assert ev.decide(gm)["part_splits"] == 0 and torch.all(gm.labels[bottle] == 1)

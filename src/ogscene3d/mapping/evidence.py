@@ -48,9 +48,12 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
    ``LINK_VIEWS`` views at least), mutually best pairs first;
    a linked group other than the part's largest that views put apart from the rest of the part in at least
    ``mapping.evidence.split_ratio`` of their cross views becomes a part of its own (a fridge that the first
-   view merged with the floor, books that it merged with each other). A SAM cut at random places separates a
-   pair of cells in a few of its views only. A group at most 1/``SMALL`` of its part (a light switch in the
-   wall's part) splits on about two views apart however many absorbed it, and a view that shows one of two
+   view merged with the floor, books that it merged with each other), where the segments that put it apart
+   held at most ``COHERE`` times the group: a SAM cut at random places separates a pair of cells in a few of
+   its views only, each time in another, larger piece. A group at most 1/``SMALL`` of its part (a light
+   switch in the wall's part) splits on about two views apart however many absorbed it; a group of fewer
+   than ``TINY`` Gaussians counts as ``TINY`` in both tests (a segment of a few pixels takes in the support
+   just behind its object; one Gaussian is not small beside a bottle of nine). A view that shows one of two
    cells in a segment at most 1/``SMALL`` of the other's counts ``SMALL_APART`` views against their link:
    SAM merges small objects into their support in most frames, so the few that show them apart are the
    evidence. Neighbouring groups that the views put apart from the anchor (``split_ratio`` of their views),
@@ -103,8 +106,7 @@ MIN_PART = 8
 CELL_MIN = 1  # visible Gaussians (in its segment) a cell needs to be judged
 NEIGHBOURS = 8  # a cell's neighbours in a view: its nearest visible cells (within ``radius``)
 COHERE = 2.0  # apart segments hold at most this many times the group
-TINY = 8  # a group of fewer Gaussians counts as this many for COHERE
-SPLIT_MIN = 3  # Gaussians a group of cells needs to be split off
+TINY = 8  # a group of fewer Gaussians counts as this many for COHERE and SMALL
 SPLIT_VIEWS = 1.5  # weighted views apart a split needs (about two)
 SMALL = 5.0  # a group at most 1/SMALL of its part splits on its apart views alone
 SMALL_APART = 3.0  # weight of a cell pair's apart view where one segment is at most 1/SMALL of the other
@@ -725,15 +727,18 @@ class EvidenceModel:
         best.scatter_reduce_(0, comp_part[comp_mass > 0], comp_mass[comp_mass > 0], reduce="amax")
         is_main = (comp_mass >= best[comp_part.clamp(min=0)]) & (comp_part >= 0)
         # the segments that put it apart held about the component itself, not a larger piece of its part:
-        # SAM cuts a floor at random places, each time another piece; an object is its segment every time
+        # SAM cuts a floor at random places, each time another piece; an object is its segment every time.
+        # A component of a few Gaussians counts as TINY: its segment of a few pixels also holds the support's
+        # Gaussians just behind the object (within the depth margin)
         coherent = st["size"] <= COHERE * torch.clamp(comp_mass, min=TINY)
         # a component that is small beside the rest of its part (a light switch in the wall's part, a cup in
         # the table's) splits on the views that showed it apart, however many absorbed it: SAM merges small
-        # objects into their support in most frames, so those frames say little (the yardstick's rule)
+        # objects into their support in most frames, so those frames say little (the yardstick's rule). It
+        # counts as TINY at least: one Gaussian that a few views cut off a bottle of nine is a cut, not a cup
         part_mass = torch.zeros(self.next_part, device=self.device)
         part_mass.index_add_(0, comp_part[comp_mass > 0], comp_mass[comp_mass > 0])
-        small = SMALL * comp_mass <= part_mass[comp_part.clamp(min=0)]
-        go = (comp_mass >= SPLIT_MIN) & coherent & (clearly_apart(st) | (small & (apart >= SPLIT_VIEWS)))
+        small = SMALL * torch.clamp(comp_mass, min=TINY) <= part_mass[comp_part.clamp(min=0)]
+        go = coherent & (clearly_apart(st) | (small & (apart >= SPLIT_VIEWS)))
         # a part keeps the components that stay; if none would, its largest
         stays = torch.zeros(self.next_part, dtype=torch.bool, device=self.device)
         live = (comp_mass > 0) & (comp_part >= 0)
