@@ -726,18 +726,19 @@ class EvidenceModel:
         best = torch.full((self.next_part,), -1.0, device=self.device)
         best.scatter_reduce_(0, comp_part[comp_mass > 0], comp_mass[comp_mass > 0], reduce="amax")
         is_main = (comp_mass >= best[comp_part.clamp(min=0)]) & (comp_part >= 0)
+        # a component of a few Gaussians counts as TINY in the two tests below: its segment of a few pixels
+        # also holds the support's Gaussians just behind the object (within the depth margin), and one
+        # Gaussian that a few views cut off a bottle of nine is a cut, not a cup
+        counted = comp_mass.clamp(min=TINY)
         # the segments that put it apart held about the component itself, not a larger piece of its part:
-        # SAM cuts a floor at random places, each time another piece; an object is its segment every time.
-        # A component of a few Gaussians counts as TINY: its segment of a few pixels also holds the support's
-        # Gaussians just behind the object (within the depth margin)
-        coherent = st["size"] <= COHERE * torch.clamp(comp_mass, min=TINY)
+        # SAM cuts a floor at random places, each time another piece; an object is its segment every time
+        coherent = st["size"] <= COHERE * counted
         # a component that is small beside the rest of its part (a light switch in the wall's part, a cup in
         # the table's) splits on the views that showed it apart, however many absorbed it: SAM merges small
-        # objects into their support in most frames, so those frames say little (the yardstick's rule). It
-        # counts as TINY at least: one Gaussian that a few views cut off a bottle of nine is a cut, not a cup
+        # objects into their support in most frames, so those frames say little (the yardstick's rule)
         part_mass = torch.zeros(self.next_part, device=self.device)
         part_mass.index_add_(0, comp_part[comp_mass > 0], comp_mass[comp_mass > 0])
-        small = SMALL * torch.clamp(comp_mass, min=TINY) <= part_mass[comp_part.clamp(min=0)]
+        small = SMALL * counted <= part_mass[comp_part.clamp(min=0)]
         go = coherent & (clearly_apart(st) | (small & (apart >= SPLIT_VIEWS)))
         # a part keeps the components that stay; if none would, its largest
         stays = torch.zeros(self.next_part, dtype=torch.bool, device=self.device)
