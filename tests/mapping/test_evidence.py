@@ -37,10 +37,20 @@ def plane_map(device: str) -> tuple[GaussianMap, torch.Tensor]:
         torch.from_numpy(pts), torch.full((n, 3), 0.5), torch.full((n,), -3.0),
         labels=torch.zeros(n, dtype=torch.int32), confidences=torch.full((n,), 0.9),
     )  # fmt: skip
-    u = np.floor(K[0, 0] * pts[:, 0] / 2.0 + K[0, 2])
-    v = np.floor(K[1, 1] * pts[:, 1] / 2.0 + K[1, 2])
-    vase = (u >= 37) & (u < 45) & (v >= 16) & (v < 25)  # the pixels of segment 2 below
-    return gm, torch.from_numpy(vase).to(gm.device)
+    return gm, pixel_mask(gm, range(37, 45), range(16, 25))  # the pixels of segment 2 below
+
+
+def pixel_uv(gm: GaussianMap) -> tuple[torch.Tensor, torch.Tensor]:
+    """The pixel column and row [N] (int64) that each Gaussian of ``plane_map`` (depth 2) projects to."""
+    u = torch.floor(K[0, 0] * gm.means[:, 0] / 2.0 + K[0, 2])
+    v = torch.floor(K[1, 1] * gm.means[:, 1] / 2.0 + K[1, 2])
+    return u.long(), v.long()
+
+
+def pixel_mask(gm: GaussianMap, us: range, vs: range) -> torch.Tensor:
+    """The Gaussians of ``plane_map`` seen in pixel columns ``us`` and rows ``vs``."""
+    u, v = pixel_uv(gm)
+    return (u >= us.start) & (u < us.stop) & (v >= vs.start) & (v < vs.stop)
 
 
 def with_parts(gm: GaussianMap, masks: list[torch.Tensor]) -> EvidenceModel:
@@ -231,9 +241,7 @@ def test_a_piece_of_the_wall_labelled_apart_is_separated_from_the_nightstand_bes
     is a minor part. The piece lies whole in the wall's segment and the nightstand is the main part of its
     own: those views separate them, so they are not merged."""
     gm, stand = plane_map(device)
-    u = np.floor(K[0, 0] * gm.means[:, 0].cpu().numpy() / 2.0 + K[0, 2])
-    v = np.floor(K[1, 1] * gm.means[:, 1].cpu().numpy() / 2.0 + K[1, 2])
-    piece = torch.from_numpy((u >= 20) & (u < 28) & (v >= 16) & (v < 25)).to(gm.device)
+    piece = pixel_mask(gm, range(20, 28), range(16, 25))
     gm.labels[stand] = 1
     gm.labels[piece] = 2
     ev = with_parts(gm, [stand, piece])
@@ -428,7 +436,7 @@ def floor_piece_leaves(device: str, chair_below: float) -> tuple[torch.Tensor, t
     the floor. Returns the final labels of the piece, the chair and the floor."""
     gm, _ = plane_map(device)
     x = gm.means[:, 0]
-    u = torch.floor(K[0, 0] * x / 2.0 + K[0, 2]).long()
+    u, _ = pixel_uv(gm)
     chair, floor = x < chair_below, x >= 0.1
     piece = ~chair & ~floor
     gm.labels[floor] = 1
@@ -469,9 +477,7 @@ def cup_seen_apart(device: str, held_per_view: float) -> tuple[dict[str, int], t
     counts, the cup's labels and the table's."""
     gm, _ = plane_map(device)
     ev = with_parts(gm, [])
-    u = torch.floor(K[0, 0] * gm.means[:, 0] / 2.0 + K[0, 2])
-    v = torch.floor(K[1, 1] * gm.means[:, 1] / 2.0 + K[1, 2])
-    cup = (u >= 30) & (u < 33) & (v >= 20) & (v < 22)
+    cup = pixel_mask(gm, range(30, 33), range(20, 22))
     apart = np.ones((H, W), np.int32)
     apart[20:22, 30:33] = 2
     ev.observe(gm, WHOLE, POSE, K, DEPTH)
@@ -493,13 +499,6 @@ def test_a_tiny_object_splits_though_its_segment_takes_in_its_support_behind_it(
     assert out["part_splits"] == 1 and torch.all(cup == 1) and torch.all(table == 0)
     out, cup, _ = cup_seen_apart(device, 40.0)
     assert out["part_splits"] == 0 and torch.all(cup == 0)
-
-
-def pixel_mask(gm: GaussianMap, us: range, vs: range) -> torch.Tensor:
-    """The Gaussians of ``plane_map`` seen in pixel columns ``us`` and rows ``vs``."""
-    u = torch.floor(K[0, 0] * gm.means[:, 0] / 2.0 + K[0, 2])
-    v = torch.floor(K[1, 1] * gm.means[:, 1] / 2.0 + K[1, 2])
-    return (u >= us.start) & (u < us.stop) & (v >= vs.start) & (v < vs.stop)
 
 
 def test_a_book_of_one_gaussian_splits_off_its_shelf_but_a_cut_through_a_bottle_does_not(device):
