@@ -531,3 +531,36 @@ def test_a_book_of_one_gaussian_splits_off_its_shelf_but_a_cut_through_a_bottle_
     for seg in (own, own, own, cut, cut):
         ev.observe(gm, seg, POSE, K, DEPTH)
     assert ev.decide(gm)["part_splits"] == 0 and torch.all(gm.labels[bottle] == 1)
+
+
+def test_a_gaussian_that_algorithm_1_moved_is_judged_afresh_under_its_new_label(device, monkeypatch):
+    """The strip of the test above, in a mapper's refinement (the model's own decisions left out, which
+    would regroup the strip's part: Algorithm 1 moves it to label 0). Its votes were cast about label 1
+    (disputed: in the left half's segment); the same views confirm it as label 0's (the left half's segment
+    is label 0's main one). Its votes start afresh, so a view later it is not disputed, and the next
+    refinement leaves it where it is. Kept, they disputed label 0 as well, and every refinement moved the
+    strip to the other label."""
+    from ogscene3d.config import Config
+    from ogscene3d.mapping.mapper import Mapper
+
+    cfg = Config()
+    cfg.mapping.refine.r_search = 0.12
+    m = Mapper(cfg, device)
+    gm, _ = plane_map(device)
+    x = gm.means[:, 0]
+    strip = (x < 0) & (x >= -0.12)
+    gm.labels[(x >= 0) | strip] = 1
+    m.map = gm
+    ev = m.evidence.model = with_parts(gm, [x < -0.12, strip])
+    ev.min_views = 3
+    monkeypatch.setattr(ev, "decide", lambda gm: {})
+    for _ in range(3):
+        ev.observe(gm, halves(), POSE, K, DEPTH)
+    ev.lower_disputed(gm)
+    m._refine()
+    assert torch.all(gm.labels[strip] == 0) and torch.all(gm.labels[x >= 0] == 1)
+    ev.observe(gm, halves(), POSE, K, DEPTH)
+    assert not bool(ev.disputed(gm)[strip].any())
+    ev.lower_disputed(gm)
+    m._refine()
+    assert torch.all(gm.labels[strip] == 0) and torch.all(gm.labels[x >= 0] == 1)

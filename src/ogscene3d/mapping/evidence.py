@@ -76,7 +76,8 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
 clear separation (``separated``: two labels whose parts the views separated more than they held firmly
 together), unless the Gaussian is disputed; a disputed Gaussian takes another label than its own. The
 long-term step lowers disputed Gaussians' confidence by their share of disputing views (Eq. 16's decrease
-with P_2D-3D = that share, P_conf = 0), so that Algorithm 1 re-decides them.
+with P_2D-3D = that share, P_conf = 0), so that Algorithm 1 re-decides them. A Gaussian whose label changed
+(step 3, or Algorithm 1: ``EvidenceFeed.after_refine``) is judged afresh under its new label.
 
 The pair tables grow with the scene's surface, not with the stream: a view adds counts to the pairs it sees.
 """
@@ -653,6 +654,14 @@ class EvidenceModel:
         ``min_views``)."""
         return (self.disputed_ratio(gm) >= DISPUTE) & (gm.labels >= 0)
 
+    def restart_votes(self, gm, rows: torch.Tensor) -> None:
+        """The Gaussian-level votes of ``rows`` ([N] bool: Gaussians whose label just changed) start afresh:
+        they were cast about the former label. Kept, they would dispute the new one as well (a Gaussian at a
+        bottle's foot that the views disputed as the bottle's, in the table's segment, would count as
+        disputed as the table's too, and each refinement would move it to the other label)."""
+        for name in ("ev_own", "ev_disputed"):
+            gm.aux(name)[rows] = 0.0
+
     def lower_disputed(self, gm) -> int:
         """Eq. 16's decrease for disputed Gaussians, by their share of disputing views (in place). Returns
         how many."""
@@ -1004,9 +1013,7 @@ class EvidenceModel:
         move = has & change[pg] & (lab == old[pg])
         gm.labels[move] = new[pg][move].to(gm.labels.dtype)
         gm.confidences[move & (lab < 0)] = 0.5  # filled: as Algorithm 1's individual level does
-        # the moved Gaussians' Gaussian-level votes start afresh under their new label
-        for name in ("ev_own", "ev_disputed"):
-            gm.aux(name)[move] = 0.0
+        self.restart_votes(gm, move)
         out["relabelled_parts"] = int(change.sum())
         out["relabelled_gaussians"] = int(move.sum())
         return out

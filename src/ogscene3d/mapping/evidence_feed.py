@@ -125,3 +125,11 @@ class EvidenceFeed:
             for k, v in self.model.decide(gm).items():
                 self.timings.add(f"evidence_{k}", v)
             return self.model.separation_test(gm), self.model.disputed(gm)
+
+    def after_refine(self, gm: GaussianMap, before: torch.Tensor) -> None:
+        """The Gaussians whose label Algorithm 1 changed (``before``: the labels it started from) are judged
+        afresh under their new label."""
+        if not self.enabled:
+            return
+        with self.timings.section("evidence"):
+            self.model.restart_votes(gm, gm.labels != before)

@@ -430,6 +430,7 @@ class Mapper(MapperFiles):
         (merges and splits first, then Algorithm 1 guarded by the same views); counts to the timings."""
         cfg = self.cfg
         separated, exposed = self.evidence.before_refine(self.map)
+        before = self.map.labels.clone()
         with self.timings.section("refine"):
             st = global_refinement(
                 self.map.means,
@@ -444,6 +445,7 @@ class Mapper(MapperFiles):
                 separated=separated,
                 exposed=exposed,
             )
+        self.evidence.after_refine(self.map, before)
         for k, v in st.as_dict().items():
             self.timings.add(f"refine_{k}", v)
 
