@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ogscene3d.config import EvidenceConfig
+from ogscene3d.config import Config, EvidenceConfig
 from ogscene3d.gaussians import GaussianMap
 from ogscene3d.mapping.evidence import (
     EvidenceModel,
@@ -16,6 +16,7 @@ from ogscene3d.mapping.evidence import (
     _rows_near,
     spill_pixels,
 )
+from ogscene3d.mapping.mapper import Mapper
 from ogscene3d.mapping.neighbors import knn
 from ogscene3d.mapping.refine import global_refinement
 
@@ -540,9 +541,6 @@ def test_a_gaussian_that_algorithm_1_moved_is_judged_afresh_under_its_new_label(
     is label 0's main one). Its votes start afresh, so a view later it is not disputed, and the next
     refinement leaves it where it is. Kept, they disputed label 0 as well, and every refinement moved the
     strip to the other label."""
-    from ogscene3d.config import Config
-    from ogscene3d.mapping.mapper import Mapper
-
     cfg = Config()
     cfg.mapping.refine.r_search = 0.12
     m = Mapper(cfg, device)
