@@ -102,8 +102,9 @@ OWN = 0.8  # a part owns a segment when it holds this share of the segment's vis
 # two parts are separated by a view only where each holds this share of its own segment
 MAJOR = 0.5
 MIN_VISIBLE = 3  # visible Gaussians a part needs to be judged
-# a segment's Gaussians apart in space start parts of their own from this many on
-MIN_PART = 8
+# a segment's Gaussians apart in space start parts of their own from this many on (a book of 4 Gaussians
+# beside the shelf that SAM merged it with: the views can only split off what is a part or a cell group)
+MIN_PART = 4
 CELL_MIN = 1  # visible Gaussians (in its segment) a cell needs to be judged
 NEIGHBOURS = 8  # a cell's neighbours in a view: its nearest visible cells (within ``radius``)
 COHERE = 2.0  # apart segments hold at most this many times the group
