@@ -298,6 +298,17 @@ def test_unlabelled_gaussians_take_the_label_of_their_segments(device):
     assert torch.all(gm.labels == 0)
 
 
+def run_over_strip(gm: GaussianMap) -> tuple[EvidenceModel, torch.Tensor, torch.Tensor]:
+    """Label 1 on the right half of ``plane_map`` and on a strip of the left half, the strip a part of its
+    own; an evidence model that disputes after 3 views. Returns it, the strip and the right half."""
+    x = gm.means[:, 0]
+    strip = (x < 0) & (x >= -0.12)
+    gm.labels[(x >= 0) | strip] = 1
+    ev = with_parts(gm, [x < -0.12, strip])
+    ev.min_views = 3
+    return ev, strip, x >= 0
+
+
 def test_a_label_run_over_into_a_neighbour_is_disputed_lowered_and_relabelled(device):
     """Label 1 holds the right half of the plane and a strip of the left half (a cabinet's label that took
     in the floor in front of it); the strip's Gaussians were made in another keyframe (their own part, of
@@ -305,12 +316,7 @@ def test_a_label_run_over_into_a_neighbour_is_disputed_lowered_and_relabelled(de
     away from label 1's main segment. The long-term decrease brings it low, and Algorithm 1 gives it
     another label than its own, although label 1 and label 0 are separated."""
     gm, _ = plane_map(device)
-    x = gm.means[:, 0]
-    gm.labels[x >= 0] = 1
-    strip = (x < 0) & (x >= -0.12)
-    gm.labels[strip] = 1
-    ev = with_parts(gm, [x < -0.12, strip])
-    ev.min_views = 3
+    ev, strip, right = run_over_strip(gm)
     for k in range(3):
         ev.observe(gm, halves(), POSE, K, DEPTH)
         if k == 1:
@@ -322,7 +328,7 @@ def test_a_label_run_over_into_a_neighbour_is_disputed_lowered_and_relabelled(de
     global_refinement(gm.means, gm.labels, gm.confidences, tau_low=0.3, tau_high=0.7, r_search=0.12,
                       separated=ev.separation_test(gm), exposed=inner)  # fmt: skip
     assert torch.all(gm.labels[inner] == 0)
-    assert torch.all(gm.labels[x >= 0] == 1)
+    assert torch.all(gm.labels[right] == 1)
 
 
 def test_a_resumed_map_gets_one_part_per_label(device):
@@ -537,33 +543,30 @@ def test_a_book_of_one_gaussian_splits_off_its_shelf_but_a_cut_through_a_bottle_
 
 
 def test_a_gaussian_that_algorithm_1_moved_is_judged_afresh_under_its_new_label(device, monkeypatch):
-    """The strip of the test above, in a mapper's refinement (the model's own decisions left out, which
-    would regroup the strip's part: Algorithm 1 moves it to label 0). Its votes were cast about label 1
-    (disputed: in the left half's segment); the same views confirm it as label 0's (the left half's segment
-    is label 0's main one). Its votes start afresh, so a view later it is not disputed, and the next
-    refinement leaves it where it is. Kept, they disputed label 0 as well, and every refinement moved the
-    strip to the other label."""
+    """The run-over strip of ``test_a_label_run_over_into_a_neighbour_is_disputed_lowered_and_relabelled``,
+    in a mapper's refinement (the model's own decisions left out, which would regroup the strip's part:
+    Algorithm 1 moves it to label 0). Its votes were cast about label 1 (disputed: in the left half's
+    segment); the same views confirm it as label 0's (the left half's segment is label 0's main one). Its
+    votes start afresh, so a view later it is not disputed, and the next refinement leaves it where it is.
+    Kept, they disputed label 0 as well, and every refinement moved the strip to the other label."""
     cfg = Config()
     cfg.mapping.refine.r_search = 0.12
     m = Mapper(cfg, device)
     gm, _ = plane_map(device)
-    x = gm.means[:, 0]
-    strip = (x < 0) & (x >= -0.12)
-    gm.labels[(x >= 0) | strip] = 1
     m.map = gm
-    ev = m.evidence.model = with_parts(gm, [x < -0.12, strip])
-    ev.min_views = 3
+    ev, strip, right = run_over_strip(gm)
+    m.evidence.model = ev
     monkeypatch.setattr(ev, "decide", lambda gm: {})
     for _ in range(3):
         ev.observe(gm, halves(), POSE, K, DEPTH)
     ev.lower_disputed(gm)
     m._refine()
-    assert torch.all(gm.labels[strip] == 0) and torch.all(gm.labels[x >= 0] == 1)
+    assert torch.all(gm.labels[strip] == 0) and torch.all(gm.labels[right] == 1)
     ev.observe(gm, halves(), POSE, K, DEPTH)
     assert not bool(ev.disputed(gm)[strip].any())
     ev.lower_disputed(gm)
     m._refine()
-    assert torch.all(gm.labels[strip] == 0) and torch.all(gm.labels[x >= 0] == 1)
+    assert torch.all(gm.labels[strip] == 0) and torch.all(gm.labels[right] == 1)
 
 
 def test_a_small_object_apart_in_its_segment_starts_a_part_of_its_own(device):
