@@ -30,6 +30,7 @@ class EvidenceFeed:
         self.model = EvidenceModel(
             device, cfg.evidence, radius=cfg.refine.r_search, min_part=cfg.merge.min_part
         )
+        self._labels_before_alg1: torch.Tensor | None = None  # set by before_refine, read by after_refine
 
     def new_parts(self, gm: GaussianMap, probes, sel: torch.Tensor, res) -> torch.Tensor:
         """Per probe: the evidence part its new Gaussian joins. A segment matched with a label (case ii)
@@ -124,12 +125,14 @@ class EvidenceFeed:
         with self.timings.section("evidence"):
             for k, v in self.model.decide(gm).items():
                 self.timings.add(f"evidence_{k}", v)
+            self._labels_before_alg1 = gm.labels.clone()  # what Algorithm 1 starts from
             return self.model.separation_test(gm), self.model.disputed(gm)
 
-    def after_refine(self, gm: GaussianMap, before: torch.Tensor) -> None:
-        """The Gaussians whose label Algorithm 1 changed (``before``: the labels it started from) are judged
-        afresh under their new label."""
-        if not self.enabled:
+    def after_refine(self, gm: GaussianMap) -> None:
+        """The Gaussians whose label Algorithm 1 changed (since ``before_refine``) are judged afresh under
+        their new label."""
+        before, self._labels_before_alg1 = self._labels_before_alg1, None
+        if not self.enabled or before is None:
             return
         with self.timings.section("evidence"):
             self.model.restart_votes(gm, gm.labels != before)

@@ -430,7 +430,6 @@ class Mapper(MapperFiles):
         (merges and splits first, then Algorithm 1 guarded by the same views); counts to the timings."""
         cfg = self.cfg
         separated, exposed = self.evidence.before_refine(self.map)
-        before = self.map.labels.clone()
         with self.timings.section("refine"):
             st = global_refinement(
                 self.map.means,
@@ -445,7 +444,7 @@ class Mapper(MapperFiles):
                 separated=separated,
                 exposed=exposed,
             )
-        self.evidence.after_refine(self.map, before)
+        self.evidence.after_refine(self.map)
         for k, v in st.as_dict().items():
             self.timings.add(f"refine_{k}", v)
 
