@@ -159,6 +159,12 @@ def test_strong_yardstick_leaves_out_a_mask_over_two_objects():
     assert len(set(lab[fridge])) == 1 and set(lab[fridge]).isdisjoint(lab[floor])
 
 
+def test_strong_yardstick_distinct_is_numpy_unique():
+    rng = np.random.default_rng(0)
+    for x in (rng.integers(0, 50, 1000), np.zeros(0, np.int64), np.array([7])):
+        assert np.array_equal(yardstick._distinct(x), np.unique(x))
+
+
 def test_strong_yardstick_views_from_frames():
     """Two frames of a flat wall 2 m away, left and right halves segmented apart in the first and as one in
     the second: one set of voxels, three masks with their scores."""
