@@ -49,8 +49,11 @@ def test_no_regular_package_at_the_repository_root():
 
 
 def _shadowed(folder: Path, names: list[str]) -> dict[str, list[str]]:
-    """The names among ``names`` that resolve inside the repository when ``folder`` is first on sys.path
-    (in a fresh interpreter started there), with where they resolve."""
+    """The names among ``names`` that resolve to the folder's own module or folder of that name when
+    ``folder`` is first on sys.path (in a fresh interpreter started there), with where they resolve. (Not
+    to anything under the repository: a virtual environment made inside the checkout, ``.venv/``, holds
+    the installed distribution there.)"""
+    own = _import_names(folder)
     probe = (
         "import importlib.util, json, sys\n"
         f"sys.path.insert(0, {str(folder)!r})\n"
@@ -67,7 +70,7 @@ def _shadowed(folder: Path, names: list[str]) -> dict[str, list[str]]:
     return {
         name: places
         for name, places in json.loads(done.stdout).items()
-        if any(p and Path(p).resolve().is_relative_to(ROOT) for p in places)
+        if any(p and Path(p).resolve().is_relative_to(own[name].resolve()) for p in places)
     }
 
 
