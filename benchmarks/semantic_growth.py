@@ -10,7 +10,10 @@ window holds the same number of each).
 
 Stages: ``local`` (its time includes ``merge``, shown apart but not added twice), ``evidence``,
 ``longterm``, ``refine``; "semantic" is their sum. CPU time (the process's, every thread) is the headline:
-on a shared machine it moves less than wall time; wall time is printed beside it.
+on a shared machine it moves less than wall time; wall time is printed beside it. Where the run noted the
+Gaussians each keyframe's view sees (``per_keyframe_counts``' ``visible_gaussians``, by the evidence stage),
+their mean over each window is printed too, and the semantic stages' cost per thousand of them: a cost that
+follows what a view sees keeps that ratio near 1 however the views grow.
 
     python benchmarks/semantic_growth.py RUN_DIR [RUN_DIR ...]          # runs mapped already (full row)
     python benchmarks/semantic_growth.py --seeds 0-2 --device cpu --set mapping.optimize.iters=1 --out growth
@@ -31,6 +34,8 @@ from _common import positive_int, run_main  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 STAGES = ("local", "merge", "evidence", "longterm", "refine")
+VISIBLE = "visible_gaussians"
+PER_VISIBLE = ("visible", "per_1k_visible")
 SUMMED = ("local", "evidence", "longterm", "refine")  # merge runs inside local
 TARGET = 2.0
 
@@ -47,6 +52,10 @@ def window_cost(timings: dict, frame: int, window: int, kind: str = "per_keyfram
         return None
     out = {s: float(np.mean(series.get(s, [0.0] * len(frames))[end - window : end])) for s in STAGES}
     out["semantic"] = sum(out[s] for s in SUMMED)
+    seen = timings.get("per_keyframe_counts", {}).get(VISIBLE)
+    if seen:
+        out["visible"] = float(np.mean(seen[end - window : end]))
+        out["per_1k_visible"] = 1000 * out["semantic"] / out["visible"] if out["visible"] > 0 else None
     out["keyframes"] = (int(frames[end - window]), int(frames[end - 1]))
     return out
 
@@ -59,6 +68,7 @@ def growth(timings: dict, early: int, late: int, window: int) -> dict:
         if a is None or b is None:
             raise SystemExit(f"the run has no {window} keyframes up to frame {late} (or {early})")
         ratio = {s: (b[s] / a[s] if a[s] > 0 else None) for s in (*STAGES, "semantic")}
+        ratio.update({s: b[s] / a[s] for s in PER_VISIBLE if a.get(s) and b.get(s) is not None})
         out[name] = {"early": a, "late": b, "ratio": ratio}
     return out
 
@@ -70,6 +80,9 @@ def _row(label: str, g: dict) -> list[str]:
         r = cpu["ratio"][s]
         cells.append(f"{cpu['early'][s]:.1f} -> {cpu['late'][s]:.1f} ({r:.2f}x)" if r else "-")
     cells.append(f"{wall['ratio']['semantic']:.2f}x" if wall["ratio"]["semantic"] else "-")
+    for s, fmt in zip(PER_VISIBLE, (".0f", ".1f")):
+        r = cpu["ratio"].get(s)
+        cells.append(f"{cpu['early'][s]:{fmt}} -> {cpu['late'][s]:{fmt}} ({r:.2f}x)" if r else "-")
     return cells
 
 
@@ -110,7 +123,8 @@ def main(argv: list[str] | None = None) -> int:
     if not runs:
         ap.error("give run directories or --seeds")
     results = {}
-    table = [["run", *(f"{s} ms/kf" for s in STAGES), "semantic ms/kf", "semantic wall"]]
+    table = [["run", *(f"{s} ms/kf" for s in STAGES), "semantic ms/kf", "semantic wall", "visible Gaussians",
+              "semantic ms per 1k visible"]]  # fmt: skip
     for run in runs:
         path = run / "timings.json"
         if not path.is_file():
@@ -125,6 +139,11 @@ def main(argv: list[str] | None = None) -> int:
           f"up to frame {args.late} (ratio); target <= {TARGET}x")  # fmt: skip
     print(_table(table))
     print(f"semantic ratio: mean {np.mean(ratios):.2f}x, max {np.max(ratios):.2f}x over {len(ratios)} run(s)")
+    per = [g["cpu"]["ratio"].get("per_1k_visible") for g in results.values()]
+    per = [r for r in per if r is not None]
+    if per:
+        print(f"semantic ms per 1k visible Gaussians: mean {np.mean(per):.2f}x, max {np.max(per):.2f}x over "
+              f"{len(per)} run(s)")  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
     doc = {"early": args.early, "late": args.late, "window": args.window, "target": TARGET, "runs": results}
     (args.out / "semantic_growth.json").write_text(json.dumps(doc, indent=2) + "\n")

@@ -583,3 +583,14 @@ def test_a_small_object_apart_in_its_segment_starts_a_part_of_its_own(device):
     s, b, k = comp[:40], comp[40:45], comp[45:]
     assert torch.all(s == s[0]) and torch.all(b == b[0]) and torch.all(k == s[0])
     assert int(b[0]) != int(s[0])
+
+
+def test_observe_counts_the_gaussians_the_view_sees(device):
+    """``observe`` returns how many Gaussians the view sees (centres in the image at the observed depth):
+    the whole plane in front of the camera, none where the depth says the surface is a metre nearer."""
+    gm, vase = plane_map(device)
+    u, v = pixel_uv(gm)
+    inside = int(((u >= 0) & (u < W) & (v >= 0) & (v < H)).sum())
+    ev = with_parts(gm, [vase])
+    assert ev.observe(gm, vase_view(), POSE, K, DEPTH) == inside > 0
+    assert ev.observe(gm, vase_view(), POSE, K, np.full((H, W), 1.0, np.float32)) == 0

@@ -423,22 +423,23 @@ class EvidenceModel:
         margin: float = 0.1,
         view: int | None = None,
         revisit: bool = False,
-    ) -> None:
-        """Add one view's evidence (see the module docstring). ``segments`` [H,W] ids (0 = none); ``pose``
-        c2w, ``K``, ``depth`` the view's (metres); ``weights`` each segment's weight (its rescaled SAM
-        score; 1 where missing); ``view``: the keyframe index
-        of this view, whose own new Gaussians cast no Gaussian-level vote (their label came from these
-        segments). A view judged again (``revisit``: the long-term step's memory views) votes only where it
-        has not yet: for the cells and parts made since it was last judged, and the Gaussians made after it,
-        so that no view counts twice for anything however often it is revisited."""
+    ) -> int:
+        """Add one view's evidence (see the module docstring); returns how many of the map's Gaussians the
+        view sees (centres in the image, at the observed depth within ``margin``). ``segments`` [H,W] ids
+        (0 = none); ``pose`` c2w, ``K``, ``depth`` the view's (metres); ``weights`` each segment's weight (its
+        rescaled SAM score; 1 where missing); ``view``: the keyframe index of this view, whose own new
+        Gaussians cast no Gaussian-level vote (their label came from these segments). A view judged again
+        (``revisit``: the long-term step's memory views) votes only where it has not yet: for the cells and
+        parts made since it was last judged, and the Gaussians made after it, so that no view counts twice
+        for anything however often it is revisited."""
         if segments is None or len(gm) == 0:
-            return
+            return 0
         self.ensure_cells(gm)
         since = self._judged.get(view, (0, 0)) if revisit else (0, 0)
         if view is not None:
             self._judged[view] = (int(self.cell_part.numel()), self.next_part)
         if revisit and since == self._judged[view]:
-            return  # nothing made since
+            return 0  # nothing made since (not counted: a revisit)
         dev = gm.device
         seg = torch.as_tensor(np.ascontiguousarray(segments), device=dev).long()
         pix = visible_pixels(
@@ -449,11 +450,12 @@ class EvidenceModel:
             margin,
         )
         g = torch.nonzero(pix >= 0).squeeze(1)
+        n_visible = int(g.numel())
         s = seg.reshape(-1)[pix[g]]
         inside = s > 0
         g, s, px = g[inside], s[inside], pix[g][inside]
         if g.numel() == 0:
-            return
+            return n_visible
         self.stats.views += 1
         S = int(seg.max()) + 1
         w = torch.ones(S, device=dev)
@@ -468,10 +470,11 @@ class EvidenceModel:
         ok = ~spill_pixels(seg).reshape(-1)[px]
         g, s, cell = g[ok], s[ok], cell[ok]
         if g.numel() == 0:
-            return
+            return n_visible
         n_seg = torch.bincount(s, minlength=S).float()
         self._observe_parts(self.cell_part[cell], gm.labels[g].long(), s, n_seg, w, since[1])
         self._observe_gaussians(gm, g, s, S, view, revisit)
+        return n_visible
 
     def _observe_cells(
         self,

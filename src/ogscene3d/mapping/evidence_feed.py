@@ -101,10 +101,12 @@ class EvidenceFeed:
             )
             weights = dict(zip(ids, w.tolist()))
         with self.timings.section("evidence"):
-            self.model.observe(
+            seen = self.model.observe(
                 gm, segments, source.pose, source.K, source.depth, weights=weights,
                 margin=self.margin, view=view, revisit=revisit,
             )  # fmt: skip
+        if not revisit:  # what the keyframe sees, for benchmarks/semantic_growth.py
+            self.timings.note("visible_gaussians", seen)
 
     def before_longterm(self, gm: GaussianMap, views: list) -> None:
         """Before Eq. 16 (whose P_conf renders the lowered ones): the disputed Gaussians lowered, then the

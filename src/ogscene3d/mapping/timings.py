@@ -31,7 +31,7 @@ class Timings:
 
     def begin_keyframe(self, frame_index: int) -> None:
         """The sections from here to :meth:`end_keyframe` make a new row of ``per_keyframe``."""
-        self._keyframe = {"frame": int(frame_index), "wall": {}, "cpu": {}}
+        self._keyframe = {"frame": int(frame_index), "wall": {}, "cpu": {}, "counts": {}}
         self.per_keyframe.append(self._keyframe)
 
     def end_keyframe(self) -> None:
@@ -59,6 +59,12 @@ class Timings:
     def add(self, name: str, value: float = 1) -> None:
         self.counts[name] = self.counts.get(name, 0) + value
 
+    def note(self, name: str, value: float) -> None:
+        """A quantity of the current keyframe (the Gaussians its view sees), beside its times: written as
+        ``per_keyframe_counts``, so that a module's cost can be read against what the keyframe saw."""
+        if self._keyframe is not None:
+            self._keyframe["counts"][name] = value
+
     def state(self) -> dict:
         return {
             "seconds": self.seconds,
@@ -72,7 +78,8 @@ class Timings:
         self.calls = {str(k): int(v) for k, v in state.get("calls", {}).items()}
         self.counts = {str(k): v for k, v in state.get("counts", {}).items()}
         self.per_keyframe = [
-            {"frame": int(row["frame"]), "wall": dict(row["wall"]), "cpu": dict(row["cpu"])}
+            {"frame": int(row["frame"]), "wall": dict(row["wall"]), "cpu": dict(row["cpu"]),
+             "counts": dict(row.get("counts", {}))}  # (a checkpoint written before they were kept)
             for row in state.get("per_keyframe", [])
         ]
         self._keyframe = None
@@ -89,6 +96,11 @@ class Timings:
             "per_keyframe_frame": [row["frame"] for row in self.per_keyframe],
             "per_keyframe_ms": self._series("wall"),
             "per_keyframe_cpu_ms": self._series("cpu"),
+            # per quantity noted (``note``), its value in each keyframe (0: not noted there)
+            "per_keyframe_counts": {
+                n: [row["counts"].get(n, 0) for row in self.per_keyframe]
+                for n in sorted({n for row in self.per_keyframe for n in row["counts"]})
+            },
         }
 
     def _series(self, kind: str) -> dict[str, list[float]]:
