@@ -97,15 +97,16 @@ class Timings:
             "per_keyframe_ms": self._series("wall"),
             "per_keyframe_cpu_ms": self._series("cpu"),
             # per quantity noted (``note``), its value in each keyframe (0: not noted there)
-            "per_keyframe_counts": {
-                n: [row["counts"].get(n, 0) for row in self.per_keyframe]
-                for n in sorted({n for row in self.per_keyframe for n in row["counts"]})
-            },
+            "per_keyframe_counts": self._columns("counts", 0),
         }
 
-    def _series(self, kind: str) -> dict[str, list[float]]:
+    def _columns(self, kind: str, missing: float) -> dict[str, list[float]]:
+        """Per name in the keyframes' ``kind`` dicts, its value in each keyframe (``missing``: absent)."""
         names = sorted({n for row in self.per_keyframe for n in row[kind]})
-        return {n: [round(1000 * row[kind].get(n, 0.0), 3) for row in self.per_keyframe] for n in names}
+        return {n: [row[kind].get(n, missing) for row in self.per_keyframe] for n in names}
+
+    def _series(self, kind: str) -> dict[str, list[float]]:
+        return {n: [round(1000 * v, 3) for v in vals] for n, vals in self._columns(kind, 0.0).items()}
 
     def table(self) -> str:
         """A per-module timing table (text)."""
