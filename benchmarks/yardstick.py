@@ -73,8 +73,8 @@ PRIOR = 1.0  # rule (c): a cluster's share at a voxel is its votes over (the vie
 
 
 def _distinct(x: np.ndarray) -> np.ndarray:
-    """``np.unique(x)`` of an int array, by a sort: numpy 2's hash-based plain unique takes about 40 times
-    as long on the tens of millions of (pair, frame) keys of a long scan."""
+    """``np.unique(x)`` of an int array, by a sort: numpy 2's hash-based plain unique is many times slower
+    on the tens of millions of (pair, frame) keys of a long scan (docs/consistency.md has the timing)."""
     x = np.sort(x)
     return x[np.r_[True, x[1:] != x[:-1]]] if x.size else x
 
