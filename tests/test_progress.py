@@ -99,6 +99,16 @@ def test_the_first_keyframe_gives_the_runs_estimate_and_on_a_cpu_what_to_change(
     assert "--set mapping.optimize.iters=3" in text
 
 
+def test_a_scale_just_below_one_names_its_fraction_of_fewer_pixels(caplog):
+    from ogscene3d.progress import RunTimeEstimate
+
+    est = RunTimeEstimate(frames=20, keyframe_every=1, scale=1.0, opt_iters=10)
+    with caplog.at_level(logging.INFO, logger="ogscene3d.progress"):
+        est.keyframe(_Mapper("cpu"), _Frame(), 34.9)  # 11.6 min: 0.9 of the scale brings it under 10
+    text = caplog.records[0].getMessage()
+    assert "--set data.scale=0.9 (1.2x fewer pixels: about 9 min)" in text
+
+
 def test_a_short_or_gpu_run_is_only_told_its_estimate(caplog):
     from ogscene3d.progress import RunTimeEstimate
 

@@ -123,7 +123,9 @@ class RunTimeEstimate:
         target = max(0.25, math.floor(20 * self.scale * math.sqrt(LONG_RUN_S / total)) / 20)
         if target < self.scale:
             factor = (target / self.scale) ** 2
-            pixels = f"{round(1 / factor)}x fewer pixels: about {duration(total * factor)}"
+            fewer = 1 / factor  # one decimal below 10x: a scale of 0.9 is 1.2x fewer pixels
+            times = f"{fewer:.1f}" if fewer < 10 else f"{fewer:.0f}"
+            pixels = f"{times}x fewer pixels: about {duration(total * factor)}"
             out.append(f"--set data.scale={target:g} ({pixels})")
         if self.opt_iters > 3:
             out.append(
