@@ -81,18 +81,22 @@ class _Frame:
     width, height = 1200, 680
 
 
-def test_the_first_keyframe_gives_the_runs_estimate_and_on_a_cpu_what_to_change(caplog):
+def test_the_second_keyframe_gives_the_runs_estimate_and_on_a_cpu_what_to_change(caplog):
     from ogscene3d.progress import RunTimeEstimate
 
     est = RunTimeEstimate(frames=2000, keyframe_every=5, scale=1.0, opt_iters=10)
     with caplog.at_level(logging.INFO, logger="ogscene3d.progress"):
+        # the first keyframe (kernels compiling, no earlier keyframe to optimise with) says nothing yet
+        est.keyframe(_Mapper("cpu"), _Frame(), 20.0)
+        assert est.said is None and not caplog.records
         est.keyframe(_Mapper("cpu"), _Frame(), 120.0)
-        est.keyframe(_Mapper("cpu"), _Frame(), 1.0)  # said once, from the first keyframe
+        est.keyframe(_Mapper("cpu"), _Frame(), 1.0)  # said once, from the first two keyframes
     (record,) = caplog.records
     assert record.levelno == logging.WARNING
     text = record.getMessage()
-    assert "the first keyframe took 120.0 s on cpu at 1200x680" in text
-    assert "the run's 400 keyframes will take about 13 h 20 min" in text
+    assert "the first keyframes took 20.0 s and 120.0 s on cpu at 1200x680" in text
+    # 20 s + 399 x 120 s
+    assert "the run's 400 keyframes will take about 13 h 18 min" in text
     # the largest scale in steps of 0.05 that fits 10 minutes (0.086 here), but not below 0.25
     assert "map on a GPU (--device cuda)" in text
     assert "--set data.scale=0.25 (16x fewer pixels: about 50 min)" in text
@@ -104,7 +108,8 @@ def test_a_scale_just_below_one_names_its_fraction_of_fewer_pixels(caplog):
 
     est = RunTimeEstimate(frames=20, keyframe_every=1, scale=1.0, opt_iters=10)
     with caplog.at_level(logging.INFO, logger="ogscene3d.progress"):
-        est.keyframe(_Mapper("cpu"), _Frame(), 34.9)  # 11.6 min: 0.9 of the scale brings it under 10
+        est.keyframe(_Mapper("cpu"), _Frame(), 30.0)
+        est.keyframe(_Mapper("cpu"), _Frame(), 35.0)  # 30 s + 19 x 35 s, 11.6 min: 0.9 brings it under 10
     text = caplog.records[0].getMessage()
     assert "--set data.scale=0.9 (1.2x fewer pixels: about 9 min)" in text
 
@@ -113,10 +118,23 @@ def test_a_short_or_gpu_run_is_only_told_its_estimate(caplog):
     from ogscene3d.progress import RunTimeEstimate
 
     with caplog.at_level(logging.INFO, logger="ogscene3d.progress"):
-        RunTimeEstimate(frames=60, keyframe_every=2).keyframe(_Mapper("cpu"), _Frame(), 2.9)
-        RunTimeEstimate(frames=2000, keyframe_every=0).keyframe(_Mapper("cuda:0"), _Frame(), 2.0)
-    cpu, gpu = (r.getMessage() for r in caplog.records)
+        cpu = RunTimeEstimate(frames=60, keyframe_every=2)
+        gpu = RunTimeEstimate(frames=2000, keyframe_every=0)
+        for seconds in (4.0, 2.9):
+            cpu.keyframe(_Mapper("cpu"), _Frame(), seconds)
+        for seconds in (30.0, 2.0):  # the first keyframe's kernel compilation is not the run's rate
+            gpu.keyframe(_Mapper("cuda:0"), _Frame(), seconds)
+    assert [r.getMessage() for r in caplog.records] == [cpu.said, gpu.said]
     assert all(r.levelno == logging.INFO for r in caplog.records)
-    assert cpu.endswith("the run's 30 keyframes will take about 87 s") and "to go faster" not in cpu
-    assert "up to 2000 keyframes (by camera motion) will take about 67 min" in gpu
-    assert "to go faster" not in gpu
+    assert cpu.said.endswith("the run's 30 keyframes will take about 88 s") and "to go faster" not in cpu.said
+    assert "up to 2000 keyframes (by camera motion) will take about 67 min" in gpu.said
+    assert "to go faster" not in gpu.said
+
+
+def test_a_run_of_one_keyframe_is_told_nothing(caplog):
+    from ogscene3d.progress import RunTimeEstimate
+
+    est = RunTimeEstimate(frames=3, keyframe_every=5)
+    with caplog.at_level(logging.INFO, logger="ogscene3d.progress"):
+        est.keyframe(_Mapper("cpu"), _Frame(), 3.0)
+    assert est.said is None and not caplog.records
