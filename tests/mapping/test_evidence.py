@@ -594,3 +594,62 @@ def test_observe_counts_the_gaussians_the_view_sees(device):
     ev = with_parts(gm, [vase])
     assert ev.observe(gm, vase_view(), POSE, K, DEPTH) == inside > 0
     assert ev.observe(gm, vase_view(), POSE, K, np.full((H, W), 1.0, np.float32)) == 0
+
+
+def test_an_object_the_support_took_in_leaves_it_for_the_label_its_own_views_gave_it(device):
+    """A picture on a wall: the wall's part (label 0) took in the picture's Gaussians where the first view
+    merged the two; a later view, showing the picture on its own, made it Gaussians of its own (label 1, two
+    for each of the wall's there). Later views show the picture on its own: the wall's Gaussians there lie
+    inside a segment that is mostly label 1's, off its edge pixels, which puts their cells apart from their
+    part's anchor; they split off and join the picture's label. Without the rule the cells say nothing in a
+    segment that is not the wall's, and they stay in the wall's part and label."""
+    gm, vase = plane_map(device)
+    pts = gm.means[vase]
+    n = 2 * len(pts)
+    dup = torch.cat([pts, pts]) + torch.tensor([0.0, 0.0, 0.002], device=gm.device)
+    gm.append(
+        dup, torch.full((n, 3), 0.5), torch.full((n,), -3.0),
+        labels=torch.ones(n, dtype=torch.int32), confidences=torch.full((n,), 0.9),
+    )  # fmt: skip
+    picture = torch.zeros(len(gm), dtype=torch.bool, device=gm.device)
+    picture[-n:] = True
+    taken = torch.cat([vase, torch.zeros(n, dtype=torch.bool, device=gm.device)])
+    # cells of 15 cm, 3.75 pixels here (5 cm at 160x120): most of a cell at the picture's border lies off
+    # the segment's edge pixels
+    ev = EvidenceModel(gm.device, EvidenceConfig(cell=0.15))
+    ev.new_parts(2)
+    ev.assign(gm, torch.arange(len(gm), device=gm.device), (~picture).long())
+    for _ in range(2):
+        for _ in range(2):
+            ev.observe(gm, vase_view(), POSE, K, DEPTH)
+        ev.decide(gm)
+    moved = gm.labels[taken]
+    assert set(moved.tolist()) <= {0, 1} and int((moved == 1).sum()) >= 2 * moved.numel() // 3
+    # the wall away from the picture (beyond the cells that straddle its border) stays
+    near = pixel_mask(gm, range(33, 49), range(12, 29))
+    assert torch.all(gm.labels[picture] == 1) and torch.all(gm.labels[~(near | picture)] == 0)
+
+
+def test_a_cell_inside_another_labels_segment_votes_apart_but_not_one_on_its_edge(device):
+    """The wall's cells (5 cm, one Gaussian each) at a picture whose segment is mostly label 1's: those off
+    the segment's edge pixels are apart from the wall's anchor in this view; those on its edge pixels (where
+    a wall Gaussian spills across the picture's outline) say nothing."""
+    gm, vase = plane_map(device)
+    pts = gm.means[vase]
+    n = 2 * len(pts)
+    gm.append(
+        torch.cat([pts, pts]), torch.full((n, 3), 0.5), torch.full((n,), -3.0),
+        labels=torch.ones(n, dtype=torch.int32), confidences=torch.full((n,), 0.9),
+    )  # fmt: skip
+    picture = torch.zeros(len(gm), dtype=torch.bool, device=gm.device)
+    picture[-n:] = True
+    ev = with_parts(gm, [picture])
+    ev.observe(gm, vase_view(), POSE, K, DEPTH)
+    cell = gm.aux("ev_cell", -1.0).long()
+    inner = pixel_mask(gm, range(38, 44), range(17, 24)) & ~picture
+    edge = pixel_mask(gm, range(37, 45), range(16, 25)) & ~picture & ~inner
+    away = ev.cell_main[:, 1]
+    assert bool(inner.any()) and torch.all(away[cell[inner]] > 0)
+    assert bool(edge.any()) and torch.all(away[cell[edge]] == 0)
+    rest = ~(inner | edge | picture)
+    assert torch.all(away[cell[rest]] == 0)

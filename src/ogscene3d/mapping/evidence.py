@@ -463,11 +463,12 @@ class EvidenceModel:
             if 0 < int(i) < S:
                 w[int(i)] = float(v)
         cell = gm.aux("ev_cell", -1.0)[g].long()
+        # a big segment's boundary pixels (spills across an edge)
+        ok = ~spill_pixels(seg).reshape(-1)[px]
         # cells: every visible Gaussian (a Gaussian at an edge, in its object's segment in most views, links
         # with its object's cells; an even split links nothing)
-        self._observe_cells(cell, gm.labels[g].long(), s, w, since[0])
-        # parts and Gaussians: a big segment's boundary pixels are left out (spills across an edge)
-        ok = ~spill_pixels(seg).reshape(-1)[px]
+        self._observe_cells(cell, gm.labels[g].long(), s, w, since[0], ok)
+        # parts and Gaussians: the boundary pixels are left out
         g, s, cell = g[ok], s[ok], cell[ok]
         if g.numel() == 0:
             return n_visible
@@ -483,6 +484,7 @@ class EvidenceModel:
         s: torch.Tensor,
         w: torch.Tensor,
         since: int = 0,
+        inner: torch.Tensor | None = None,
     ) -> None:
         if since and not bool((cell >= since).any()):
             return  # a revisit votes for the cells made since only, and sees none of them
@@ -492,11 +494,12 @@ class EvidenceModel:
         if c.numel() == 0:
             return
         # each judged cell: in its part's anchor segment of this view, or in another segment that the part
-        # holds most of (the part falls into two segments here: two objects, or a random cut); in a segment of
-        # other parts it says nothing here (the Gaussians' disputes judge that: a label that ran over into its
-        # neighbour). The anchor is the segment of most of the part's oldest visible cells (``ANCHOR``): the
-        # largest share of a part that spans two objects is now one of them, now the other, as the view
-        # moves; its oldest cells are where it began
+        # holds most of (the part falls into two segments here: two objects, or a random cut), or inside a
+        # segment of other labels (below; ``inner``: the visible Gaussians off the segments' boundary pixels).
+        # At the edge of one it says nothing here (the Gaussians' disputes judge that: a label that ran over
+        # into its neighbour). The anchor is the segment of most of the part's oldest visible cells
+        # (``ANCHOR``): the largest share of a part that spans two objects is now one of them, now the other,
+        # as the view moves; its oldest cells are where it began
         part_of = self.cell_part[cell]
         P, S = self.next_part, int(w.numel())
         pc, sc = self.cell_part[c], top[c]
@@ -524,7 +527,15 @@ class EvidenceModel:
         inside = sc == anchor[pc]
         wc = w[sc] * ok
         fresh = c >= since
-        away = wc * (~inside & own)
+        # or in another label's segment with most of its visible Gaussians off the segments' edges (not a
+        # spill across an edge): a picture that the wall's part took in where its first view merged the two,
+        # shown in the segment of the label that the picture's own views gave it. SAM merges it with the wall
+        # again in most views; these are the views that show where it belongs
+        interior = torch.zeros_like(own)
+        if inner is not None:
+            n_in = torch.bincount(cell[inner], minlength=n_cell.numel())
+            interior = 2 * n_in[c] > n_cell[c]
+        away = wc * (~inside & (own | interior))
         # and, for the apart votes, how much of the part that segment held: an object the part took in is
         # all of its segment; a random cut is a large piece of the part
         votes = torch.stack([wc * inside, away, away * held_p[pc * S + sc].float()], 1)
