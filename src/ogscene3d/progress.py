@@ -83,7 +83,7 @@ class RunTimeEstimate:
     earlier keyframes to optimise with, which every later one has (``mapping.optimize.memory_frames``). On a
     CPU, when the run would take longer than :data:`LONG_RUN_S`, it warns and names what would make it
     faster: a GPU, ``data.scale`` (the time scales about with the pixels), a smaller budget per keyframe
-    (``configs/synthetic.yaml``'s). A run of one keyframe is told after it.
+    (``configs/synthetic.yaml``'s). A run of one keyframe is told nothing: it is over by then.
 
     Args:
         frames: the frames the run will read.
