@@ -483,8 +483,8 @@ class EvidenceModel:
         lab: torch.Tensor,
         s: torch.Tensor,
         w: torch.Tensor,
-        since: int = 0,
-        inner: torch.Tensor | None = None,
+        since: int,
+        inner: torch.Tensor,
     ) -> None:
         if since and not bool((cell >= since).any()):
             return  # a revisit votes for the cells made since only, and sees none of them
@@ -531,11 +531,8 @@ class EvidenceModel:
         # spill across an edge): a picture that the wall's part took in where its first view merged the two,
         # shown in the segment of the label that the picture's own views gave it. SAM merges it with the wall
         # again in most views; these are the views that show where it belongs
-        interior = torch.zeros_like(own)
-        if inner is not None:
-            n_in = torch.bincount(cell[inner], minlength=n_cell.numel())
-            interior = 2 * n_in[c] > n_cell[c]
-        away = wc * (~inside & (own | interior))
+        n_in = torch.bincount(cell[inner], minlength=n_cell.numel())
+        away = wc * (~inside & (own | (2 * n_in[c] > n_cell[c])))
         # and, for the apart votes, how much of the part that segment held: an object the part took in is
         # all of its segment; a random cut is a large piece of the part
         votes = torch.stack([wc * inside, away, away * held_p[pc * S + sc].float()], 1)
