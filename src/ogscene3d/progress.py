@@ -98,23 +98,24 @@ class RunTimeEstimate:
         self.scale = float(scale)
         self.opt_iters = int(opt_iters)
         self.said: str | None = None  # the line logged (tests and callers read it)
-        self._seconds: list[float] = []  # the first keyframes' times
+        self._first: float | None = None  # the first keyframe's time
 
     def keyframe(self, mapper, frame, seconds: float) -> None:
         if self.said is not None:
             return
         every = self.keyframe_every
         keyframes = math.ceil(self.frames / every) if every > 0 else self.frames
-        self._seconds.append(float(seconds))
-        if len(self._seconds) < 2:
+        if self._first is None:
+            self._first = float(seconds)
             return
-        first, second = self._seconds[:2]
-        total = first + second * (keyframes - 1)
-        took = f"the first keyframes took {first:.1f} s and {second:.1f} s"
+        total = self._first + seconds * (keyframes - 1)
         device = str(getattr(mapper, "device", "cpu"))
         size = f"{frame.width}x{frame.height}" if hasattr(frame, "width") else "these images"
         count = f"{keyframes} keyframes" if every > 0 else f"up to {keyframes} keyframes (by camera motion)"
-        self.said = f"{took} on {device} at {size}: the run's {count} will take about {duration(total)}"
+        self.said = (
+            f"the first keyframes took {self._first:.1f} s and {seconds:.1f} s on {device} at {size}: "
+            f"the run's {count} will take about {duration(total)}"
+        )
         if device.startswith("cpu") and total > LONG_RUN_S:
             self.said += "; to go faster: " + "; ".join(self._remedies(total))
             log.warning("%s", self.said)
