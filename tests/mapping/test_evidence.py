@@ -14,6 +14,7 @@ from ogscene3d.mapping.evidence import (
     _agglomerate,
     _components,
     _rows_near,
+    near_segment,
     spill_pixels,
 )
 from ogscene3d.mapping.evidence_feed import EvidenceFeed
@@ -329,6 +330,39 @@ def test_a_label_run_over_into_a_neighbour_is_disputed_lowered_and_relabelled(de
                       separated=ev.separation_test(gm), exposed=inner)  # fmt: skip
     assert torch.all(gm.labels[inner] == 0)
     assert torch.all(gm.labels[right] == 1)
+
+
+def test_near_segment_looks_one_ring_of_pixels_around(device):
+    seg = torch.zeros((4, 5), dtype=torch.int64, device=device)
+    seg[1, 1] = 7
+    px = torch.tensor([0, 2, 12, 3, 19], device=device)  # (0,0), (0,2), (2,2), (0,3), (3,4)
+    ids = torch.tensor([7, 7, 7, 7, 0], device=device)
+    assert near_segment(seg, px, ids, 1).cpu().tolist() == [True, True, True, False, True]
+    assert near_segment(seg, px, ids, 2).cpu().tolist() == [True, True, True, True, True]
+
+
+def test_a_gaussian_along_its_labels_edge_is_not_disputed_but_one_further_in_is(device):
+    """Two books side by side, each a segment a few pixels wide (kept whole: nearly all boundary). Label 1
+    (the left book) also holds the Gaussians seen in the first pixel column of the right book's segment, along
+    the contact line, and a few two columns further in. Every view disputes the ones further in (the label
+    ran over into the neighbour); where a centre lands along the contact line says little: not disputed."""
+    gm, _ = plane_map(device)
+    seg = np.ones((H, W), np.int32)
+    seg[10:20, 20:23] = 2
+    seg[10:20, 23:28] = 3
+    u, v = pixel_uv(gm)
+    rows = (v >= 10) & (v < 20)
+    gm.labels[rows & (u >= 23) & (u < 28)] = 2
+    edge, inside = rows & (u == 23), rows & (v < 15) & (u == 25)
+    gm.labels[rows & (u >= 20) & (u < 23) | edge | inside] = 1
+    assert int(edge.sum()) >= 5 and int(inside.sum()) >= 3
+    ev = with_parts(gm, [gm.labels == 1, gm.labels == 2])
+    for _ in range(3):
+        ev.observe(gm, seg, POSE, K, DEPTH)
+    disputed = ev.disputed(gm)
+    assert not bool(disputed[edge].any())
+    assert bool(disputed[inside].all())
+    assert int(disputed.sum()) == int(inside.sum())
 
 
 def test_a_resumed_map_gets_one_part_per_label(device):

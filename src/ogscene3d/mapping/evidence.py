@@ -37,7 +37,8 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
   in one segment), and held together only where it is judged. A part *owns* a view's segment when it holds
   ``OWN`` of it.
 * *Gaussians*: a labelled Gaussian in a segment other than its label's main one (the segment holding most of
-  the label) that is mostly other labels is *disputed* in that view (the label ran over into a neighbour);
+  the label) that is mostly other labels, and more than ``EDGE`` pixels from the main one, is *disputed* in
+  that view (the label ran over into a neighbour);
   one in its label's main segment is *confirmed*. An unlabelled Gaussian votes for the label holding most of
   its segment (a Misra-Gries counter: one candidate per Gaussian).
 
@@ -120,6 +121,9 @@ INHERIT = 2 / 3  # the share of its part a leaving largest group needs to take t
 # firm views: one view that merged a nightstand with a piece of the wall behind it is SAM's error
 MERGE_FIRM = 1.5
 DISPUTE = 0.5  # a Gaussian is disputed when this share of its judged views disputed its label
+# a Gaussian within this many pixels of its label's main segment is not disputed by the view: along a contact
+# line (a book beside a book, a bottle's foot on the table) the side its centre projects to says little
+EDGE = 1
 _VOX = 2048  # voxel coordinates are packed in 12 bits each (+-2048 cells)
 _PART_SHIFT = 36
 
@@ -135,6 +139,18 @@ def spill_pixels(seg: torch.Tensor) -> torch.Tensor:
     inner = torch.bincount(flat[~edge.reshape(-1)], minlength=area.numel())
     big = 2 * inner >= area
     return edge & big[flat].reshape(seg.shape)
+
+
+def near_segment(seg: torch.Tensor, px: torch.Tensor, ids: torch.Tensor, radius: int) -> torch.Tensor:
+    """[M] bool: whether the segment ``ids[i]`` of ``seg`` [H,W] holds a pixel within ``radius`` (in x and
+    in y) of the flat pixel index ``px[i]``."""
+    H, W = seg.shape
+    y, x = px // W, px % W
+    near = torch.zeros(px.shape, dtype=torch.bool, device=px.device)
+    for dy in range(-radius, radius + 1):
+        for dx in range(-radius, radius + 1):
+            near |= seg[(y + dy).clamp(0, H - 1), (x + dx).clamp(0, W - 1)] == ids
+    return near
 
 
 class PairTable:
@@ -474,7 +490,7 @@ class EvidenceModel:
             return n_visible
         n_seg = torch.bincount(s, minlength=S).float()
         self._observe_parts(self.cell_part[cell], gm.labels[g].long(), s, n_seg, w, since[1])
-        self._observe_gaussians(gm, g, s, S, view, revisit)
+        self._observe_gaussians(gm, g, s, px[ok], seg, view, revisit)
         return n_visible
 
     def _observe_cells(
@@ -625,8 +641,16 @@ class EvidenceModel:
         self.part_pairs.add(p[i], p[j], vals)
 
     def _observe_gaussians(
-        self, gm, g: torch.Tensor, s: torch.Tensor, S: int, view: int | None, revisit: bool
+        self,
+        gm,
+        g: torch.Tensor,
+        s: torch.Tensor,
+        px: torch.Tensor,
+        seg: torch.Tensor,
+        view: int | None,
+        revisit: bool,
     ) -> None:
+        S = int(seg.max()) + 1
         lab = gm.labels[g].long()
         labelled = lab >= 0
         L = _n_labels(gm)
@@ -638,9 +662,11 @@ class EvidenceModel:
         vote = seg_lab[s]
         if view is not None:  # the Gaussians the view made itself (or, revisited, those it judged) cast none
             old = (gm.origin_kf[g] > view) if revisit else (gm.origin_kf[g] != view)
-            g, s, lab, labelled, vote = g[old], s[old], lab[old], labelled[old], vote[old]
+            g, s, px, lab, labelled, vote = g[old], s[old], px[old], lab[old], labelled[old], vote[old]
         own = labelled & (main[lab.clamp(min=0)] == s)
         disputed = labelled & ~own & (vote != lab)
+        d = torch.nonzero(disputed).squeeze(1)
+        disputed[d[near_segment(seg, px[d], main[lab[d]], EDGE)]] = False
         gm.aux("ev_own").index_add_(0, g[own], torch.ones(int(own.sum()), device=g.device))
         gm.aux("ev_disputed").index_add_(0, g[disputed], torch.ones(int(disputed.sum()), device=g.device))
         # unlabelled Gaussians: one candidate label each (Misra-Gries), for the fill
