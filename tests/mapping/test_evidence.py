@@ -365,6 +365,27 @@ def test_a_gaussian_along_its_labels_edge_is_not_disputed_but_one_further_in_is(
     assert int(disputed.sum()) == int(inside.sum())
 
 
+def test_a_group_whose_label_a_larger_one_kept_takes_a_new_label_not_another_objects(device):
+    """Two pieces of a wall (label 1) that the views put in two groups, and a cabinet (label 2) beside them,
+    smaller than either, one of whose Gaussians the smaller wall piece holds. The larger piece keeps label 1;
+    the smaller one takes a new label, not the cabinet's, which the cabinet keeps."""
+    gm, _ = plane_map(device)
+    cols = (range(8, 26), range(27, 40), range(42, 48))
+    big, small, cabinet = (pixel_mask(gm, us, range(10, 20)) for us in cols)
+    one, two = gm.new_labels(2).tolist()
+    gm.labels[big | small] = one
+    gm.labels[cabinet] = two
+    gm.labels[torch.nonzero(small).squeeze(1)[0]] = two
+    ev = with_parts(gm, [big, small, cabinet])
+    parts = ev.parts_of(gm)
+    assert int(big.sum()) > int(small.sum()) > int(cabinet.sum())
+    old = torch.tensor([one, one, two, 0], device=gm.device)
+    out = ev._relabel(gm, parts, old, torch.arange(4, device=gm.device))
+    assert torch.all(gm.labels[big] == one) and torch.all(gm.labels[cabinet] == two)
+    moved = gm.labels[small & (gm.labels != two)]
+    assert out["new_labels"] == 1 and int(moved[0]) > two and torch.all(moved == moved[0])
+
+
 def test_a_resumed_map_gets_one_part_per_label(device):
     gm, vase = plane_map(device)
     gm.labels[vase] = 3

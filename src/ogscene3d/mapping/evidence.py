@@ -68,8 +68,10 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
    weak ones. A small object that SAM absorbs into its support in most views, but showed apart once, stays
    apart; a surface that its first view cut in two joins once later views hold it whole; a merge made
    earlier, by the association or a previous decision, is undone when the views grow to separate the parts.
-3. *relabel*: each group keeps the label most of its Gaussians carry (the largest group first), or takes a
-   new one; a part's Gaussians that carry its former label move with it. Unlabelled Gaussians of a group take
+3. *relabel*: each group keeps the label most of its Gaussians carry (the largest group first), or, where a
+   larger group kept that, the next label of its Gaussians that it holds most of, or takes a new one (a wall
+   piece whose label a larger piece kept does not take the label of the cabinet that a few of its Gaussians
+   carry); a part's Gaussians that carry its former label move with it. Unlabelled Gaussians of a group take
    its label; a group of unlabelled parts only gets a label when one of them owned a segment.
 4. *fill*: an unlabelled Gaussian that is still unlabelled takes the label its segments voted for.
 
@@ -1017,8 +1019,11 @@ class EvidenceModel:
         keys, cnt = torch.unique(g[lg >= 0] * L + lg[lg >= 0], return_counts=True)
         kg, kl = (keys // L).tolist(), (keys % L).tolist()
         votes: dict[int, list[tuple[int, int]]] = {}
+        holder: dict[int, tuple[int, int]] = {}  # per label: the group holding most of its Gaussians
         for gg, ll, cc in zip(kg, kl, cnt.tolist()):
             votes.setdefault(gg, []).append((cc, ll))
+            if (cc, -gg) > holder.get(ll, (0, 1)):
+                holder[ll] = (cc, -gg)
         owned = torch.zeros(P, device=self.device).index_add_(0, group, self.part_owned)
         groups = torch.unique(group[present]).tolist()
         groups.sort(key=lambda x: -int(mass[x]))
@@ -1027,8 +1032,10 @@ class EvidenceModel:
         fresh: list[int] = []
         for gg in groups:
             choice = -1
-            for _, ll in sorted(votes.get(gg, []), reverse=True):
-                if ll not in taken:
+            # the group's most frequent label, or the next that it holds most of: not a few Gaussians of
+            # another object's label (a wall piece whose own label a larger piece kept took the cabinet's)
+            for k, (_, ll) in enumerate(sorted(votes.get(gg, []), reverse=True)):
+                if ll not in taken and (k == 0 or holder[ll][1] == -gg):
                     choice = ll
                     break
             if choice < 0 and (votes.get(gg) or owned[gg] >= 1):
