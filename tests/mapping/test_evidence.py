@@ -344,7 +344,7 @@ def test_near_segment_looks_one_ring_of_pixels_around(device):
 def test_a_gaussian_along_its_labels_edge_is_not_disputed_but_one_further_in_is(device):
     """Two books side by side, each a segment a few pixels wide (kept whole: nearly all boundary). Label 1
     (the left book) also holds the Gaussians seen in the first pixel column of the right book's segment, along
-    the contact line, and a few two columns further in. Every view disputes the ones further in (the label
+    the contact line, and a few seen two columns further in. Every view disputes those further in (the label
     ran over into the neighbour); where a centre lands along the contact line says little: not disputed."""
     gm, _ = plane_map(device)
     seg = np.ones((H, W), np.int32)
