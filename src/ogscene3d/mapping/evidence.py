@@ -492,7 +492,7 @@ class EvidenceModel:
             return n_visible
         n_seg = torch.bincount(s, minlength=S).float()
         self._observe_parts(self.cell_part[cell], gm.labels[g].long(), s, n_seg, w, since[1])
-        self._observe_gaussians(gm, g, s, px[ok], seg, view, revisit)
+        self._observe_gaussians(gm, g, s, S, px[ok], seg, view, revisit)
         return n_visible
 
     def _observe_cells(
@@ -647,12 +647,12 @@ class EvidenceModel:
         gm,
         g: torch.Tensor,
         s: torch.Tensor,
+        S: int,
         px: torch.Tensor,
         seg: torch.Tensor,
         view: int | None,
         revisit: bool,
     ) -> None:
-        S = int(seg.max()) + 1
         lab = gm.labels[g].long()
         labelled = lab >= 0
         L = _n_labels(gm)
