@@ -159,6 +159,19 @@ def test_strong_yardstick_leaves_out_a_mask_over_two_objects():
     assert len(set(lab[fridge])) == 1 and set(lab[fridge]).isdisjoint(lab[floor])
 
 
+def test_strong_yardstick_keeps_a_mask_that_one_view_of_three_splits():
+    """A book (voxels 0-9) on a shelf (10-29), seen in four frames; in one of them boundary noise gives half
+    the book to the shelf's segment. The first frame's book mask is split in 1 of the 3 other frames that
+    see it: not more than ``SPLIT`` of them, so it is no mask over two objects and joins the book's cluster."""
+    book, shelf = np.arange(10), np.arange(10, 30)
+    noisy = [np.arange(5), np.arange(5, 30)]
+    views = _views([[book, shelf]] * 3 + [noisy], 30)
+    h = yardstick.holding(views, np.arange(views.n_masks), views.n_masks)
+    assert h.split[0].sum() == 1
+    node_of_mask = yardstick.cluster(views).node_of_mask
+    assert node_of_mask[0] >= 0 and node_of_mask[0] == node_of_mask[2] == node_of_mask[4]
+
+
 def test_strong_yardstick_distinct_is_numpy_unique():
     rng = np.random.default_rng(0)
     for x in (rng.integers(0, 50, 1000), np.zeros(0, np.int64), np.array([7])):
