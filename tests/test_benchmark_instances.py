@@ -162,7 +162,8 @@ def test_strong_yardstick_leaves_out_a_mask_over_two_objects():
 def test_strong_yardstick_keeps_a_mask_that_one_view_of_three_splits():
     """A book (voxels 0-9) on a shelf (10-29), seen in four frames; in one of them boundary noise gives half
     the book to the shelf's segment. The first frame's book mask is split in 1 of the 3 other frames that
-    see it: not more than ``SPLIT`` of them, so it is no mask over two objects and joins the book's cluster."""
+    see it: not more than ``SPLIT`` of them, so it is no mask over two objects and joins the book's
+    cluster."""
     book, shelf = np.arange(10), np.arange(10, 30)
     noisy = [np.arange(5), np.arange(5, 30)]
     views = _views([[book, shelf]] * 3 + [noisy], 30)
@@ -197,3 +198,13 @@ def test_strong_yardstick_views_from_frames():
     assert len(views.seen[0]) == len(views.seen[1]) == len(views.points)
     assert (views.mask[1] == 2).all() and {0, 1} <= set(views.mask[0].tolist())
     assert np.allclose(views.points[:, 2], 2.0)
+
+
+def test_strong_yardstick_labels_at_a_maps_points():
+    """Three voxels labelled 0, 1 and -1: each query point takes its nearest voxel's label; no voxels, no
+    labels."""
+    points = np.array([[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]])
+    labels = np.array([0, 1, -1])
+    query = np.array([[0.2, 0, 0], [0.9, 0.1, 0], [1.8, 0, 0], [-5.0, 0, 0]])
+    assert yardstick.at_points(points, labels, query).tolist() == [0, 1, -1, 0]
+    assert yardstick.at_points(np.zeros((0, 3)), np.zeros(0, np.int64), query).tolist() == [-1] * 4
