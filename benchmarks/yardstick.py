@@ -38,7 +38,8 @@ separation rule) is ``_maskclustering.py`` (``--weak``).
   cluster's voxels to that cluster (``nested``): a view that merged the cup with the table says nothing
   against it.
 
-The result is a labelled point set (voxel means), scored like a map (``_instances.py``).
+The result is a labelled point set (voxel means), scored like a map (``_instances.py``); :func:`at_points`
+gives its labels at a map's own Gaussians.
 
     python benchmarks/yardstick.py SCENE_DIR          # instance mIoU and class mIoU of the strong yardstick
     python benchmarks/yardstick.py SCENE_DIR --weak   # the earlier one (MaskClustering without separation)
@@ -569,7 +570,7 @@ def strong_consensus(frames: list) -> tuple[np.ndarray, np.ndarray]:
 def at_points(points: np.ndarray, labels: np.ndarray, query: np.ndarray) -> np.ndarray:
     """The yardstick's labels at other points: each of ``query`` [Q, 3] (a map's Gaussians) takes the label
     of its nearest voxel mean of ``points`` [V, 3], so that a map is compared with the yardstick at the map's
-    own points (a room has some 90k voxels and 14k Gaussians, a book 2-16 of them)."""
+    own points (the voxels outnumber a map's Gaussians several times, and a small object's by as much)."""
     from scipy.spatial import cKDTree
 
     if len(points) == 0:
