@@ -16,8 +16,9 @@ separation rule) is ``_maskclustering.py`` (``--weak``).
 * **Consensus** of two clusters: of the frames that hold both (each by some mask), the share where one mask
   holds both (MaskClustering's view consensus).
 * **Under-segmented masks** (MaskClustering's filter): a mask that the other frames clearly split (a second
-  mask holds ``SPLIT_PART`` of it) in more than ``SPLIT`` of the frames that see it lies over two objects (a
-  first view that merged a refrigerator with the floor): it is no node, holds nothing and has no vote.
+  mask holds ``SPLIT_PART`` of it) in more than ``SPLIT`` of the frames that see it (``SPLIT_SMALL`` for a
+  mask under ``SPLIT_SMALL_VOXELS``) lies over two objects (a first view that merged a refrigerator with the
+  floor): it is no node, holds nothing and has no vote.
 * **Separation** (rule a): a frame separates two masks when it holds one by a mask that holds at most
   ``APART`` (a fifth) of the other's voxels seen there, and either that mask is small beside the other (at
   most ``SEP_SIZE`` of the other's voxels: a cup's own segment beside the table) or the other is held there
@@ -63,9 +64,10 @@ SEEN_FRACTION = 0.3
 SEEN_VOXELS = 100
 MIN_VIEWS = 3
 MIN_MASK_VOXELS = 2
-# a mask split in more than this share of the frames that see it is under-segmented; not MaskClustering's
-# 0.3: a book seen in a few frames has its own masks left out when boundary noise splits it in one of three
-SPLIT = 0.4
+SPLIT = 0.3  # a mask split in more than this share of the frames that see it is under-segmented
+# ... a small mask only above this share: a voxel or two that boundary noise moves is a large share of it, and
+# a book seen in a few frames would lose its own masks where noise splits one in one view of three
+SPLIT_SMALL, SPLIT_SMALL_VOXELS = 0.4, 100
 SEP_SIZE: float | None = 0.3
 SEP_MIN = 2  # ... in at least this many frames
 SEP_SHARE = 0.5  # ... and this share of the frames that hold both
@@ -340,12 +342,14 @@ class _Union:
 
 def undersegmented(h: Holding, views: Views) -> np.ndarray:
     """[masks] bool: masks that other frames clearly split (a second mask holds ``SPLIT_PART`` of them) in
-    more than ``SPLIT`` of the frames that see them: a segment over two objects (MaskClustering's
-    under-segmentation filter, with a clear split: a book's few voxels spread by boundary noise are not)."""
+    more than ``SPLIT`` of the frames that see them (``SPLIT_SMALL`` for a small mask): a segment over two
+    objects (MaskClustering's under-segmentation filter, with a clear split: a book's few voxels spread by
+    boundary noise are not)."""
     own = np.zeros_like(h.seen)
     own[np.arange(views.n_masks), views.mask_frame] = True
     look = h.seen & (h.n_in > 0) & ~own
-    return (look & h.split).sum(1) > SPLIT * np.maximum(look.sum(1), 1)
+    share = np.where(h.size < SPLIT_SMALL_VOXELS, SPLIT_SMALL, SPLIT)
+    return (look & h.split).sum(1) > share * np.maximum(look.sum(1), 1)
 
 
 def _drop_masks(h: Holding, drop: np.ndarray) -> None:

@@ -159,11 +159,11 @@ def test_strong_yardstick_leaves_out_a_mask_over_two_objects():
     assert len(set(lab[fridge])) == 1 and set(lab[fridge]).isdisjoint(lab[floor])
 
 
-def test_strong_yardstick_keeps_a_mask_that_one_view_of_three_splits():
+def test_strong_yardstick_keeps_a_small_mask_that_one_view_of_three_splits():
     """A book (voxels 0-9) on a shelf (10-29), seen in four frames; in one of them boundary noise gives half
     the book to the shelf's segment. The first frame's book mask is split in 1 of the 3 other frames that
-    see it: not more than ``SPLIT`` of them, so it is no mask over two objects and joins the book's
-    cluster."""
+    see it: not more than ``SPLIT_SMALL`` of them, so it is no mask over two objects and joins the book's
+    cluster. A mask of ``SPLIT_SMALL_VOXELS`` split the same way is left out (``SPLIT``)."""
     book, shelf = np.arange(10), np.arange(10, 30)
     noisy = [np.arange(5), np.arange(5, 30)]
     views = _views([[book, shelf]] * 3 + [noisy], 30)
@@ -171,6 +171,11 @@ def test_strong_yardstick_keeps_a_mask_that_one_view_of_three_splits():
     assert h.split[0].sum() == 1
     node_of_mask = yardstick.cluster(views).node_of_mask
     assert node_of_mask[0] >= 0 and node_of_mask[0] == node_of_mask[2] == node_of_mask[4]
+    n = yardstick.SPLIT_SMALL_VOXELS
+    big, rest = np.arange(n), np.arange(n, 3 * n)
+    views = _views([[big, rest]] * 3 + [[np.arange(n // 2), np.arange(n // 2, 3 * n)]], 3 * n)
+    h = yardstick.holding(views, np.arange(views.n_masks), views.n_masks)
+    assert h.split[0].sum() == 1 and yardstick.undersegmented(h, views)[0]
 
 
 def test_strong_yardstick_distinct_is_numpy_unique():
