@@ -575,12 +575,12 @@ def at_points(points: np.ndarray, labels: np.ndarray, query: np.ndarray) -> np.n
     """The yardstick's labels at other points: each of ``query`` [Q, 3] (a map's Gaussians) takes the label
     of its nearest voxel mean of ``points`` [V, 3], so that a map is compared with the yardstick at the map's
     own points (the voxels outnumber a map's Gaussians several times, and a small object's by as much)."""
-    from scipy.spatial import cKDTree
+    from ogscene3d.eval.protocols import nearest_neighbors
 
     if len(points) == 0:
         return np.full(len(query), -1, np.int64)
-    _, j = cKDTree(np.asarray(points, np.float64)).query(np.asarray(query, np.float64))
-    return np.asarray(labels)[j]
+    _, j = nearest_neighbors(points, query, k=1)
+    return np.asarray(labels)[j[:, 0]]
 
 
 def main(argv: list[str] | None = None) -> int:
