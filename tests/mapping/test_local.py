@@ -387,3 +387,56 @@ def test_make_probes_small_segments_get_every_pixel(device):
     )
     big_enough = make_probes(frame, ids, {}, dev, InitConfig(pixels_per_gaussian=4, dense_below=2))
     assert torch.equal(big_enough.pix, sparse.pix)
+
+
+def test_make_probes_small_segment_uncovered_pixels_become_gaussians(device):
+    """A small segment's pixels that the map explains (alpha) but where no Gaussian centre lies within a
+    pixel's footprint become new Gaussians (a book that an earlier view merged with its shelf is covered by
+    the shelf's Gaussians, a grid cell or more apart), except one whose depth is the background's; with a
+    centre at every pixel, none do."""
+    import numpy as np
+
+    from ogscene3d.frame import Frame
+    from ogscene3d.mapping.init import DENSE_DEPTH, make_probes
+
+    h, w = 16, 16
+    ids = np.ones((h, w), dtype=np.int32)
+    ids[5:8, 9:12] = 2
+    depth = np.full((h, w), 2.0, np.float32)
+    depth[7, 10] = 2.0 + 2 * DENSE_DEPTH  # the wall seen past the object's edge
+    K = np.array([[20.0, 0, w / 2], [0, 20.0, h / 2], [0, 0, 1]], dtype=np.float32)
+    frame = Frame(0, np.zeros((h, w, 3), np.uint8), depth, K, np.eye(4), segments=ids)
+    dev = torch.device(device)
+    explained = (torch.ones(h, w), torch.full((h, w), 2.0))  # alpha 1, the observed depth: every pixel
+    vv, uu = torch.meshgrid(torch.arange(h), torch.arange(w), indexing="ij")
+    centres = torch.stack(
+        [(uu + 0.5 - w / 2) / 20.0 * 2.0, (vv + 0.5 - h / 2) / 20.0 * 2.0, 2.0 + 0 * uu], -1
+    )
+    everywhere = centres.reshape(-1, 3).float().to(dev)
+    away = ((vv - 6).abs() > 3) | ((uu - 10).abs() > 3)  # none within 3 pixels of the small segment
+    coarse = centres[away].reshape(-1, 3).float().to(dev)
+    cfg = InitConfig(pixels_per_gaussian=4, dense_below=8)
+    kw = {"rendered": explained}
+    assert not make_probes(frame, ids, {}, dev, cfg, **kw).new.any()
+    assert not make_probes(frame, ids, {}, dev, cfg, map_means=everywhere, **kw).new.any()
+    p = make_probes(frame, ids, {}, dev, cfg, map_means=coarse, **kw)
+    small = (p.seg_ids[p.seg.clamp(min=0)] == 2) & (p.seg >= 0)
+    on_grid = (p.pix // w % 2 == 1) & (p.pix % w % 2 == 1)
+    background = p.pix == 7 * w + 10
+    assert torch.equal(p.new.cpu(), (small & ~on_grid & ~background).cpu())  # grid probes: not tested
+    assert int(p.new.sum()) == 9 - 4 - 1
+
+
+def test_segment_medians_match_torch_median(device):
+    """The per-segment median depth, sorted once for all segments, is ``torch.median`` of each segment's
+    depths (the lower middle for an even count); a segment without probes reads 0."""
+    from ogscene3d.mapping.init import _segment_medians
+
+    g = torch.Generator().manual_seed(3)
+    z = torch.rand(200, generator=g, dtype=torch.float64) * 4
+    seg = torch.randint(-1, 6, (200,), generator=g)
+    seg[seg == 4] = 5  # segment 4: no probes
+    got = _segment_medians(z.to(device), seg.to(device), 7).cpu()
+    for s in range(7):
+        want = z[seg == s].median() if (seg == s).any() else torch.tensor(0.0, dtype=z.dtype)
+        assert got[s] == want, s

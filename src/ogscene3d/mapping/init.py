@@ -5,9 +5,12 @@ back-projected to world points; a segment with fewer than ``dense_below`` grid p
 (``mapping.init.dense_below``: a book, a light switch) gets one at every pixel instead. Every probe of a
 segment takes part in the segment's KNN association; only the probes whose pixel the current map does not
 already explain (rendered alpha below ``alpha_thresh``, or observed depth in front of the rendered depth by
-more than ``depth_margin``) become new Gaussians. Scale: isotropic, the footprint of one grid cell at that
-depth (depth * step / focal; one pixel for the dense ones), so neighbouring Gaussians overlap; rotation
-identity; colour from the RGB.
+more than ``depth_margin``) become new Gaussians. A small segment's probe also becomes one where no
+Gaussian centre lies within its pixel's footprint: a book that an earlier view merged with its shelf is
+covered (explained) by the shelf's Gaussians, a grid cell apart, and two or three of them on a book are too
+few for any later decision to tell it from the shelf or the book beside it. Scale: isotropic, the footprint
+of one grid cell at that depth (depth * step / focal; one pixel for the dense ones), so neighbouring
+Gaussians overlap; rotation identity; colour from the RGB.
 
 The paper initializes new Gaussians from every pixel of every segment of each keyframe (``step`` 1);
 adding only the unexplained ones keeps a revisited surface from being duplicated at every keyframe (as in
@@ -31,6 +34,11 @@ from ..frame import Frame
 from ..gaussians import GaussianMap
 from ..rendering import rasterization
 from .local import rescale_sam_scores
+from .neighbors import knn
+
+# metres: a small segment's pixel this far from the segment's median depth is the background seen past the
+# object's edge (the floor beside a cup), not the object: it is left to the map's rendering test
+DENSE_DEPTH = 0.05
 
 
 @dataclass
@@ -70,11 +78,13 @@ def make_probes(
     conf_range: tuple[float, float] = (0.5, 1.0),
     rendered: tuple[torch.Tensor, torch.Tensor] | None = None,
     depth_range: tuple[float, float] = (0.0, 0.0),
+    map_means: torch.Tensor | None = None,
 ) -> Probes:
     """Back-project the grid pixels of ``frame`` (must have a pose), the grid and thresholds from ``cfg``
     (the ``mapping.init`` section). ``segments`` int [H,W] (0 or negative = none) or None; ``rendered``:
     (alpha, expected depth) [H,W] of the map at the frame's pose (None when the map is empty: every probe is
-    new); ``depth_range``: ``data.min_depth``, ``data.max_depth`` (0: no limit)."""
+    new); ``depth_range``: ``data.min_depth``, ``data.max_depth`` (0: no limit); ``map_means``: the map's
+    Gaussian centres [N,3], which a small segment's probes need within their footprint (None: not tested)."""
     if frame.pose is None:
         raise ValueError(f"frame {frame.index}: no pose; mapping needs camera-to-world poses")
     step, (min_depth, max_depth) = max(1, round(math.sqrt(cfg.pixels_per_gaussian))), depth_range
@@ -124,6 +134,10 @@ def make_probes(
         seg >= 0, seg_conf[seg.clamp(min=0)] if len(seg_ids) else 0.0, torch.zeros_like(seg).float()
     )
     new = _unexplained(pix, z32, rendered, cfg.alpha_thresh, cfg.depth_margin)
+    if extra is not None and map_means is not None and len(map_means):
+        tail = slice(len(z) - len(extra[0]), len(z))  # the small segments' off-grid probes come last
+        on_object = (z[tail] - _segment_medians(z, seg, len(seg_ids))[seg[tail]]).abs() <= DENSE_DEPTH
+        new[tail] |= on_object & _uncovered(map_means, pw[tail].float(), (z[tail] / focal).float())
     return Probes(
         means=pw.float(),
         colors=colors,
@@ -148,6 +162,27 @@ def _unexplained(
     a = rendered[0].reshape(-1).to(z.device)[pix]
     d = rendered[1].reshape(-1).to(z.device)[pix]
     return (a < alpha_thresh) | (z < d - depth_margin)
+
+
+def _uncovered(map_means: torch.Tensor, points: torch.Tensor, footprint: torch.Tensor) -> torch.Tensor:
+    """[P] bool: the ``points`` [P,3] with no map centre (``map_means`` [N,3]) within their ``footprint`` [P]
+    (metres: one pixel at the point's depth)."""
+    _, dist = knn(map_means.detach().float(), points, 1, float(footprint.max()))
+    return dist[:, 0] > footprint
+
+
+def _segment_medians(z: torch.Tensor, seg: torch.Tensor, n_seg: int) -> torch.Tensor:
+    """[n_seg] the median depth (the lower one for an even count, as ``torch.median``) of each segment's
+    probes, from their depths ``z`` [P] and segment indices ``seg`` [P] (-1 = none); 0 without probes."""
+    ok = seg >= 0
+    zs, ss = z[ok], seg[ok]
+    if not len(zs):
+        return z.new_zeros(n_seg)
+    by_depth = torch.argsort(zs, stable=True)
+    ordered = zs[by_depth][torch.argsort(ss[by_depth], stable=True)]  # by segment, then by depth
+    counts = torch.bincount(ss, minlength=n_seg)
+    lower_mid = torch.cumsum(counts, 0) - counts + (counts - 1).clamp(min=0) // 2
+    return torch.where(counts > 0, ordered[lower_mid.clamp(max=len(zs) - 1)], 0.0)
 
 
 def _dense_pixels(

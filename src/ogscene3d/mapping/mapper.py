@@ -299,6 +299,7 @@ class Mapper(MapperFiles):
                 conf_range=tuple(seg.conf_range),
                 rendered=k.rendered,
                 depth_range=(data.min_depth, data.max_depth),
+                map_means=self.map.means,
             )
 
     def _local(self, k: _Keyframe) -> None:
