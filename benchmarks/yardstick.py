@@ -36,8 +36,9 @@ separation rule) is ``_maskclustering.py`` (``--weak``).
   (they see the voxel and hold some mask of the cluster), plus ``PRIOR``. A book that a few views show and
   the shelf's views absorb scores near 1 there, the shelf near the absorbing share. A mask that holds
   another cluster apart from its own (a table's segment that absorbed the cup) gives its vote on that
-  cluster's voxels to that cluster (``nested``): a view that merged the cup with the table says nothing
-  against it.
+  cluster's voxels to that cluster (``nested``) where at least ``SEP_MIN`` views showed that cluster on its
+  own: a view that merged the cup with the table says nothing against it, and a piece that one view cut
+  off a vase is no object that the vase's views absorbed.
 
 The result is a labelled point set (voxel means), scored like a map (``_instances.py``); :func:`at_points`
 gives its labels at a map's own Gaussians.
@@ -522,7 +523,7 @@ def _nested(clusters: Clusters, vox, msk, frame, clu, n_frames: int) -> np.ndarr
     """The votes' clusters, where a mask held a mask of a cluster that the views separate from the holding
     mask's own (the table's segment that absorbed the cup): on the voxels the held cluster's own masks
     cover, the vote goes to it (the smallest such cluster), as that view merged the two and says nothing
-    against it."""
+    against it; only to a cluster whose masks come from at least ``SEP_MIN`` views."""
     node_of_mask, h = clusters.node_of_mask, clusters.holding
     m, g = np.nonzero(h.held >= 0)
     k = h.held[m, g]
@@ -532,14 +533,17 @@ def _nested(clusters: Clusters, vox, msk, frame, clu, n_frames: int) -> np.ndarr
     if m.size == 0:
         return clu
     apart = clusters.apart
+    n = int(node_of_mask.max()) + 1
+    # an object that at least SEP_MIN views showed on their own, not a piece that one view cut off a vase
+    views_of = np.bincount(_distinct(clu.astype(np.int64) * n_frames + frame) // n_frames, minlength=n)
     keep = np.array([(min(x, y), max(x, y)) in apart for x, y in zip(c.tolist(), holder.tolist())], bool)
+    keep &= views_of[c] >= SEP_MIN
     g, k, c = g[keep], k[keep], c[keep]
     uniq = np.unique(np.stack([c, g, k], 1), axis=0)
     if uniq.size == 0:
         return clu
     c, g, k = uniq[:, 0], uniq[:, 1], uniq[:, 2]
     # each cluster's own voxels (a CSR over clusters)
-    n = int(node_of_mask.max()) + 1
     nv = int(vox.max()) + 1
     own = _distinct(clu.astype(np.int64) * nv + vox)
     own_c, own_v = own // nv, own % nv

@@ -146,6 +146,22 @@ def test_strong_yardstick_votes_by_share_of_views():
     assert set(lab[book]) == {book_cluster} and book_cluster not in set(lab[shelf])
 
 
+def test_strong_yardstick_gives_absorbing_votes_only_to_an_object_two_views_showed():
+    """A vase (voxels 0-29) is one segment in eight frames; one frame (two in the second case) cuts a piece
+    (0-9) off it, a cluster the views keep apart from the vase's. The vase's masks hold the piece: their
+    votes there go to the piece only where at least ``SEP_MIN`` views showed it on its own (a cup that the
+    table's segment absorbs), not for a piece that one view cut off."""
+    vase, piece, rest = np.arange(30), np.arange(10), np.arange(10, 30)
+    for cuts, piece_wins in ((1, False), (yardstick.SEP_MIN, True)):
+        views = _views([[vase]] * 8 + [[piece, rest]] * cuts, 30)
+        node = np.zeros(views.n_masks, np.int64)
+        node[8::2] = 1  # the pieces
+        h = yardstick.holding(views, np.arange(views.n_masks), views.n_masks)
+        lab = yardstick.vote(views, yardstick.Clusters(node, h, {(0, 1)}))
+        assert set(lab[rest]) == {0}
+        assert set(lab[piece]) == ({1} if piece_wins else {0}), cuts
+
+
 def test_strong_yardstick_leaves_out_a_mask_over_two_objects():
     """A first view merges a refrigerator (voxels 0-9) with the floor (10-29); four later views show them
     apart: the merged mask is under-segmented (split in every view that sees it) and has no vote."""
