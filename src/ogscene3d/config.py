@@ -386,8 +386,8 @@ class InitConfig:
     dense_below: int = setting(
         16,
         "a segment with fewer grid probes than this gets a probe at every pixel (a book, a light switch: "
-        "a few Gaussians could not be told from what surrounds them in later views); the paper takes every "
-        "pixel",
+        "a few Gaussians could not be told from what surrounds them in later views), which becomes a "
+        "Gaussian wherever no Gaussian centre lies within its footprint; the paper takes every pixel",
         _int(0, note="0 = off"),
     )
     alpha_thresh: float = setting(0.5, "rendered alpha below this: unexplained pixel -> new Gaussian", _UNIT)
