@@ -167,7 +167,14 @@ def _unexplained(
 def _uncovered(map_means: torch.Tensor, points: torch.Tensor, footprint: torch.Tensor) -> torch.Tensor:
     """[P] bool: the ``points`` [P,3] with no map centre (``map_means`` [N,3]) within their ``footprint`` [P]
     (metres: one pixel at the point's depth)."""
-    _, dist = knn(map_means.detach().float(), points, 1, float(footprint.max()))
+    r = float(footprint.max())
+    # only the centres in the points' box (grown by r) can be that near: the search grid is built over
+    # what the small segments' neighbourhood holds, not over the whole map at every keyframe
+    means = map_means.detach().float()
+    near = ((means >= points.min(0).values - r) & (means <= points.max(0).values + r)).all(1)
+    if not bool(near.any()):
+        return torch.ones(len(points), dtype=torch.bool, device=points.device)
+    _, dist = knn(means[near], points, 1, r)
     return dist[:, 0] > footprint
 
 
