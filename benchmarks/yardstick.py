@@ -12,7 +12,9 @@ separation rule) is ``_maskclustering.py`` (``--weak``).
   evidence of its masks together (MaskClustering's nodes: its frames and holding masks are its masks', not
   computed again from its voxels). A mask is *seen* in a frame that sees ``SEEN_FRACTION`` of its voxels (or
   ``SEEN_VOXELS``), and *held* by the frame's mask that holds at least ``CONTAIN`` (0.7, rule b) of its
-  voxels that lie in some mask there.
+  voxels that lie in some mask there, where the frame put ``SEGMENTED`` of the node's voxels it sees in a
+  segment: a floor that a frame left mostly unsegmented, seen there on a sliver along a counter whose segment
+  spills onto it, is not held by the counter's segment (a sliver says nothing about which segment holds it).
 * **Consensus** of two clusters: of the frames that hold both (each by some mask), the share where one mask
   holds both (MaskClustering's view consensus).
 * **Under-segmented masks** (MaskClustering's filter): a mask that the other frames clearly split (a second
@@ -62,6 +64,7 @@ VOXEL = 0.03  # metres
 CONTAIN = 0.7  # rule (b): a mask holds a node when it has this share of the node's voxels in masks there
 APART = 0.2  # rule (a): ... and it separates it from a node of which it has at most this share
 SEEN_FRACTION = 0.3
+SEGMENTED = 0.7  # a frame holds a node only where it put this share of the node's voxels it sees in a segment
 SEEN_VOXELS = 100
 MIN_VIEWS = 3
 MIN_MASK_VOXELS = 2
@@ -75,6 +78,7 @@ SEP_SHARE = 0.5  # ... and this share of the frames that hold both
 SPLIT_PART = 0.3  # ... where a second mask holds this share of it
 THRESHOLDS = (0.9, 0.8, 0.7)
 OBSERVER_PERCENTILES = (95, 85, 75, 65, 50)
+UNSEGMENTED = -2  # ``Views.mask`` of a voxel whose pixels lie in no segment (-1: a boundary, or a small mask)
 PRIOR = 1.0  # rule (c): a cluster's share at a voxel is its votes over (the views that could vote + PRIOR)
 
 
@@ -96,8 +100,8 @@ class Views:
     """What every frame saw, on the scene's voxels.
 
     ``points`` [V, 3]: voxel means; per frame ``g``: ``seen[g]`` the voxels it sees and ``mask[g]`` the
-    global mask index each lies in (-1: on a boundary or in no segment); per mask: ``mask_frame``,
-    ``mask_score`` (its segment's SAM score) and ``mask_voxels`` (a CSR of its voxels in its own frame)."""
+    global mask index each lies in (-1: on a boundary; ``UNSEGMENTED``: every pixel there in no segment); per
+    mask: ``mask_frame`` and ``mask_score`` (its segment's SAM score)."""
 
     points: np.ndarray
     seen: list[np.ndarray]
@@ -168,7 +172,7 @@ def build_views(frames: list, voxel: float = VOXEL) -> Views:
         mscore.append(np.array([float(scores.get(int(i), 1.0)) for i in ids[keep]]))
         n_masks += int(keep.sum())
         seen.append(uv)
-        mask.append(index[local])
+        mask.append(np.where(hi_s == 0, UNSEGMENTED, index[local]))
     return Views(points, seen, mask, np.concatenate(mframe), np.concatenate(mscore))
 
 
@@ -238,6 +242,7 @@ def holding(views: Views, node_of_mask: np.ndarray, n_nodes: int) -> Holding:
         n_vis = np.bincount(node, minlength=n_nodes)
         in_mask = m >= 0
         n_in[:, g] = np.bincount(node[in_mask], minlength=n_nodes)
+        n_seg = n_vis - np.bincount(node[m == UNSEGMENTED], minlength=n_nodes)
         seen[:, g] = (n_vis >= np.minimum(SEEN_FRACTION * size, SEEN_VOXELS)) & (n_vis >= MIN_MASK_VOXELS)
         if not in_mask.any():
             continue
@@ -247,7 +252,7 @@ def holding(views: Views, node_of_mask: np.ndarray, n_nodes: int) -> Holding:
         cnt = np.bincount(node[in_mask] * k + local, minlength=n_nodes * k).reshape(n_nodes, k)
         best = cnt.argmax(1)
         top = cnt[np.arange(n_nodes), best]
-        ok = seen[:, g] & (n_in[:, g] > 0) & (top >= CONTAIN * n_in[:, g])
+        ok = seen[:, g] & (n_in[:, g] > 0) & (top >= CONTAIN * n_in[:, g]) & (n_seg >= SEGMENTED * n_vis)
         held[ok, g] = base + best[ok]
         second = np.partition(cnt, -2, axis=1)[:, -2] if k > 1 else np.zeros(n_nodes, np.int64)
         split[:, g] = seen[:, g] & (n_in[:, g] > 0) & (second >= SPLIT_PART * n_in[:, g])

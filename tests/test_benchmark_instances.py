@@ -133,6 +133,21 @@ def test_strong_yardstick_a_frame_separates_two_large_neighbours():
     assert sorted(set(frame.tolist())) == [0, 1, 2]
 
 
+def test_strong_yardstick_a_frame_that_left_a_node_unsegmented_does_not_hold_it():
+    """A floor (voxels 0-59) is one segment in frame 0. Frame 1 sees it whole but segments only a counter
+    (60-79) whose segment spills over floor voxels 0-4; the rest of the floor is in no segment. The counter's
+    segment holds all of the floor's voxels that lie in a mask there, but the frame left the floor mostly
+    unsegmented: it does not hold it. Where the frame segments the rest of the floor, the floor is held."""
+    floor, counter = np.arange(60), np.arange(60, 80)
+    views = _views([[floor], [np.r_[counter, np.arange(5)]]], 80)
+    views.mask[1][5:60] = yardstick.UNSEGMENTED
+    h = yardstick.holding(views, np.arange(views.n_masks), views.n_masks)
+    assert h.seen[0, 1] and h.held[0, 1] == -1
+    views.mask[1][5:60] = -1  # a boundary (two segments in each voxel), not unsegmented
+    h = yardstick.holding(views, np.arange(views.n_masks), views.n_masks)
+    assert h.held[0, 1] == 1
+
+
 def test_strong_yardstick_votes_by_share_of_views():
     """A shelf (voxels 0-19) absorbs a book (20-23) in four views and shows it apart in four: on the book's
     voxels the book's views are 4 of 4 that could have put them in it, the shelf's 4 of 8; counted, the two
