@@ -172,7 +172,7 @@ def build_views(frames: list, voxel: float = VOXEL) -> Views:
         mscore.append(np.array([float(scores.get(int(i), 1.0)) for i in ids[keep]]))
         n_masks += int(keep.sum())
         seen.append(uv)
-        mask.append(np.where(hi_s == 0, UNSEGMENTED, index[local]))
+        mask.append(np.where(hi_s <= 0, UNSEGMENTED, index[local]))  # 0 or negative: no segment
     return Views(points, seen, mask, np.concatenate(mframe), np.concatenate(mscore))
 
 

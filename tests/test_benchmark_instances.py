@@ -137,7 +137,8 @@ def test_strong_yardstick_a_frame_that_left_a_node_unsegmented_does_not_hold_it(
     """A floor (voxels 0-59) is one segment in frame 0. Frame 1 sees it whole but segments only a counter
     (60-79) whose segment spills over floor voxels 0-4; the rest of the floor is in no segment. The counter's
     segment holds all of the floor's voxels that lie in a mask there, but the frame left the floor mostly
-    unsegmented: it does not hold it. Where the frame segments the rest of the floor, the floor is held."""
+    unsegmented: it does not hold it. Where the rest of the floor lies on segment boundaries instead (pixels
+    of two segments in each voxel: segmented, in no one mask), the counter's segment holds it."""
     floor, counter = np.arange(60), np.arange(60, 80)
     views = _views([[floor], [np.r_[counter, np.arange(5)]]], 80)
     views.mask[1][5:60] = yardstick.UNSEGMENTED
