@@ -13,8 +13,8 @@ separation rule) is ``_maskclustering.py`` (``--weak``).
   computed again from its voxels). A mask is *seen* in a frame that sees ``SEEN_FRACTION`` of its voxels (or
   ``SEEN_VOXELS``), and *held* by the frame's mask that holds at least ``CONTAIN`` (0.7, rule b) of its
   voxels that lie in some mask there, where the frame put ``SEGMENTED`` of the node's voxels it sees in a
-  segment: a floor that a frame left mostly unsegmented, seen there on a sliver along a counter whose segment
-  spills onto it, is not held by the counter's segment (a sliver says nothing about which segment holds it).
+  segment: a frame that left most of a floor unsegmented, and whose refrigerator segment spills over the few
+  floor voxels it did segment, does not hold the floor by the refrigerator's segment.
 * **Consensus** of two clusters: of the frames that hold both (each by some mask), the share where one mask
   holds both (MaskClustering's view consensus).
 * **Under-segmented masks** (MaskClustering's filter): a mask that the other frames clearly split (a second
