@@ -13,7 +13,9 @@ Stages: ``local`` (its time includes ``merge``, shown apart but not added twice)
 on a shared machine it moves less than wall time; wall time is printed beside it. Where the run noted the
 Gaussians each keyframe's view sees (``per_keyframe_counts``' ``visible_gaussians``, by the evidence stage),
 their mean over each window is printed too, and the semantic stages' cost per thousand of them: a cost that
-follows what a view sees keeps that ratio near 1 however the views grow.
+follows what a view sees keeps that ratio near 1 however the views grow. Where it noted the memory views each
+long-term pass judged (``memory_views``), their count over each window is printed: the long-term step and
+the evidence's revisits cost per memory view, and the memory holds fewer early in a scan.
 
     python benchmarks/semantic_growth.py RUN_DIR [RUN_DIR ...]          # runs mapped already (full row)
     python benchmarks/semantic_growth.py --seeds 0-2 --device cpu --set mapping.optimize.iters=1 --out growth
@@ -35,6 +37,7 @@ from _common import positive_int, run_main  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 STAGES = ("local", "merge", "evidence", "longterm", "refine")
 VISIBLE = "visible_gaussians"
+MEMORY = "memory_views"
 PER_VISIBLE = ("visible", "per_1k_visible")
 SUMMED = ("local", "evidence", "longterm", "refine")  # merge runs inside local
 TARGET = 2.0
@@ -56,6 +59,9 @@ def window_cost(timings: dict, frame: int, window: int, kind: str = "per_keyfram
     if seen:
         out["visible"] = float(np.mean(seen[end - window : end]))
         out["per_1k_visible"] = 1000 * out["semantic"] / out["visible"] if out["visible"] > 0 else None
+    judged = timings.get("per_keyframe_counts", {}).get(MEMORY)
+    if judged:
+        out[MEMORY] = float(np.sum(judged[end - window : end]))
     out["keyframes"] = (int(frames[end - window]), int(frames[end - 1]))
     return out
 
@@ -68,7 +74,7 @@ def growth(timings: dict, early: int, late: int, window: int) -> dict:
         if a is None or b is None:
             raise SystemExit(f"the run has no {window} keyframes up to frame {late} (or {early})")
         ratio = {s: (b[s] / a[s] if a[s] > 0 else None) for s in (*STAGES, "semantic")}
-        ratio.update({s: b[s] / a[s] for s in PER_VISIBLE if a.get(s) and b.get(s) is not None})
+        ratio.update({s: b[s] / a[s] for s in (*PER_VISIBLE, MEMORY) if a.get(s) and b.get(s) is not None})
         out[name] = {"early": a, "late": b, "ratio": ratio}
     return out
 
@@ -83,6 +89,8 @@ def _row(label: str, g: dict) -> list[str]:
     for s, fmt in zip(PER_VISIBLE, (".0f", ".1f")):
         r = cpu["ratio"].get(s)
         cells.append(f"{cpu['early'][s]:{fmt}} -> {cpu['late'][s]:{fmt}} ({r:.2f}x)" if r else "-")
+    early, late = cpu["early"].get(MEMORY), cpu["late"].get(MEMORY)
+    cells.append(f"{early:.0f} -> {late:.0f}" if early is not None and late is not None else "-")
     return cells
 
 
@@ -124,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("give run directories or --seeds")
     results = {}
     table = [["run", *(f"{s} ms/kf" for s in STAGES), "semantic ms/kf", "semantic wall", "visible Gaussians",
-              "semantic ms per 1k visible"]]  # fmt: skip
+              "semantic ms per 1k visible", "memory views judged"]]  # fmt: skip
     for run in runs:
         path = run / "timings.json"
         if not path.is_file():

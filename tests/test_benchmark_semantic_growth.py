@@ -21,8 +21,9 @@ def timings(seen: bool) -> dict:
         "per_keyframe_cpu_ms": {"local": cost, "evidence": cost},
         "per_keyframe_ms": {"local": cost, "evidence": cost},
     }
-    if seen:
-        doc["per_keyframe_counts"] = {"visible_gaussians": [1000] * 4 + [3000] * 4}
+    if seen:  # the long-term pass every second keyframe: one memory view early, four late
+        doc["per_keyframe_counts"] = {"visible_gaussians": [1000] * 4 + [3000] * 4,
+                                      "memory_views": [0, 1, 0, 1, 0, 4, 0, 4]}  # fmt: skip
     return doc
 
 
@@ -32,10 +33,13 @@ def test_growth_is_the_late_window_over_the_early_one_also_per_visible_gaussian(
     assert g["ratio"]["semantic"] == pytest.approx(3.0)
     assert g["early"]["visible"] == 1000 and g["late"]["visible"] == 3000
     assert g["ratio"]["per_1k_visible"] == pytest.approx(1.0)  # the cost follows what the views see
+    assert g["early"]["memory_views"] == 2 and g["late"]["memory_views"] == 8
+    assert semantic_growth._row("run", {"cpu": g, "wall": g})[-1] == "2 -> 8"
 
 
 def test_growth_without_noted_visible_gaussians_reports_the_times_alone():
     g = semantic_growth.growth(timings(seen=False), early=30, late=70, window=4)["cpu"]
     assert g["ratio"]["semantic"] == pytest.approx(3.0)
     assert "visible" not in g["early"] and "per_1k_visible" not in g["ratio"]
-    assert semantic_growth._row("run", {"cpu": g, "wall": g})[-2:] == ["-", "-"]
+    assert "memory_views" not in g["late"]
+    assert semantic_growth._row("run", {"cpu": g, "wall": g})[-3:] == ["-", "-", "-"]

@@ -182,6 +182,10 @@ def test_full_ablation_runs_longterm_and_refinement(device):
     assert [v > 0 for v in series["longterm"]] == [False, True, False, True]
     assert sum(series["refine"]) < 1000 * t["seconds"]["refine"]
     assert t["counts"]["longterm_updated"] > 0
+    # the memory views each keyframe's long-term pass judged (the finalize pass only in the total)
+    judged = t["per_keyframe_counts"]["memory_views"]
+    assert judged[0] == judged[2] == 0 and 1 <= judged[1] <= judged[3] <= cfg.mapping.longterm.views
+    assert judged[1] + judged[3] < t["counts"]["longterm_views"]
     assert sorted(torch.unique(m.map.labels).tolist()) == [0, 1]
     assert bool(((m.map.confidences >= 0) & (m.map.confidences <= 1)).all())
 

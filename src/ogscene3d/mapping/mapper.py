@@ -418,6 +418,8 @@ class Mapper(MapperFiles):
         """The long-term Eq. 16 update over the next memory views of the round-robin."""
         cfg = self.cfg
         views = self.memory.next_views(cfg.longterm.views)
+        # the views this pass judges (fewer while the memory fills), for benchmarks/semantic_growth.py
+        self.timings.note("memory_views", len(views))
         self.evidence.before_longterm(self.map, views)
         with self.timings.section("longterm"):
             for entry in views:
