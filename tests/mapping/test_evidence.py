@@ -9,6 +9,7 @@ import torch
 from ogscene3d.config import Config, EvidenceConfig
 from ogscene3d.gaussians import GaussianMap
 from ogscene3d.mapping.evidence import (
+    CLEAR,
     EvidenceModel,
     PairTable,
     _agglomerate,
@@ -708,3 +709,40 @@ def test_a_cell_inside_another_labels_segment_votes_apart_but_not_one_on_its_edg
     assert bool(edge.any()) and torch.all(away[cell[edge]] == 0)
     rest = ~(inner | edge | picture)
     assert torch.all(away[cell[rest]] == 0)
+
+
+def cup_held_in_far_views(device: str, peek: range) -> tuple[torch.Tensor, int]:
+    """A cup (label 1, its own part) on a table (label 0, the rest of the plane): two views show it in a
+    segment of its own; five hold it in the table's segment, each through a gap in an occluder (depth 1 m)
+    that leaves pixel rows 18-24 of columns ``peek`` in sight, so that they see only the cup's Gaussians in
+    those columns. Returns the cup's labels after the decision and how many of its Gaussians a holding view
+    sees."""
+    gm, _ = plane_map(device)
+    cup = pixel_mask(gm, range(36, 42), range(18, 24))
+    gm.labels[cup] = 1
+    ev = with_parts(gm, [cup])
+    apart = np.ones((H, W), np.int32)
+    apart[18:24, 36:42] = 2
+    gap = np.full((H, W), 1.0, np.float32)
+    gap[18:24, peek.start : peek.stop] = 2.0
+    seen = int(pixel_mask(gm, peek, range(18, 24))[cup].sum())
+    for _ in range(2):
+        ev.observe(gm, apart, POSE, K, DEPTH)
+    for _ in range(5):
+        ev.observe(gm, WHOLE, POSE, K, gap)
+    ev.decide(gm)
+    return gm.labels[cup], seen
+
+
+def test_a_view_judges_two_parts_as_well_as_it_sees_the_smaller(device):
+    """Five views that see only a few of a cup's Gaussians (fewer than ``CLEAR``) hold it in its table's
+    segment, firmly (4 of the 20 Gaussians the view sees there), two that see it whole show it on its own.
+    Each holding view counts by the share of ``CLEAR`` that it sees, so the separations outweigh the holds
+    and the cup keeps its label. Where the holding views see it whole, five firm holds against two
+    separations merge it into the table."""
+    labels, seen = cup_held_in_far_views(device, range(32, 38))
+    assert 3 <= seen < CLEAR
+    assert torch.all(labels == 1)
+    labels, seen = cup_held_in_far_views(device, range(32, 42))
+    assert seen >= CLEAR
+    assert torch.all(labels == 0)

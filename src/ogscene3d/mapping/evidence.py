@@ -112,6 +112,7 @@ CELL_MIN = 1  # visible Gaussians (in its segment) a cell needs to be judged
 NEIGHBOURS = 8  # a cell's neighbours in a view: its nearest visible cells (within ``radius``)
 COHERE = 2.0  # apart segments hold at most this many times the group
 TINY = 8  # a group of fewer Gaussians counts as this many for COHERE and SMALL
+CLEAR = 8  # visible Gaussians of the smaller of two parts from which a view's judgement of them counts whole
 SPLIT_VIEWS = 1.5  # weighted views apart a split needs (about two)
 SMALL = 5.0  # a group at most 1/SMALL of its part splits on its apart views alone
 SMALL_APART = 3.0  # weight of a cell pair's apart view where one segment is at most 1/SMALL of the other
@@ -638,6 +639,10 @@ class EvidenceModel:
         whole = judged[p[i]] & judged[p[j]]
         apart = (si != sj) & ((major[i] & major[j]) | (whole & (major[i] | major[j])))
         wt = torch.where(same, w[si], torch.minimum(w[si], w[sj]))
+        # a view judges two parts as well as it sees the smaller one: SAM absorbs a cup that a far view shows
+        # with a few Gaussians into its nightstand, and the views that show it well put it apart
+        seen = (n_part[p].float() / CLEAR).clamp(max=1.0)
+        wt = wt * torch.minimum(seen[i], seen[j])
         vals = torch.stack([wt * firm, wt * (same & ~firm), wt * apart], 1)
         self.part_apart.index_add_(0, p[i], wt * apart).index_add_(0, p[j], wt * apart)
         self.part_pairs.add(p[i], p[j], vals)
