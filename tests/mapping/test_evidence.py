@@ -714,9 +714,9 @@ def test_a_cell_inside_another_labels_segment_votes_apart_but_not_one_on_its_edg
 def cup_held_in_far_views(device: str, peek: range) -> tuple[torch.Tensor, int]:
     """A cup (label 1, its own part) on a table (label 0, the rest of the plane): two views show it in a
     segment of its own; five hold it in the table's segment, each through a gap in an occluder (depth 1 m)
-    that leaves pixel rows 18-24 of columns ``peek`` in sight, so that they see only the cup's Gaussians in
-    those columns. Returns the cup's labels after the decision and how many of its Gaussians a holding view
-    sees."""
+    that leaves pixel rows 18-24 of columns ``peek`` in sight: they see only the cup's and the table's
+    Gaussians there. Returns the cup's labels after the decision and how many of its Gaussians a holding
+    view sees."""
     gm, _ = plane_map(device)
     cup = pixel_mask(gm, range(36, 42), range(18, 24))
     gm.labels[cup] = 1

@@ -32,7 +32,10 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
   of its segment (``MAJOR``): one segment holds one and at most 1 - ``CONTAIN`` of the other, and it is about
   that part, not a piece of a surface that SAM cut at a random place; or where one is the main part of its
   segment and the other lies whole (``CONTAIN``) in another (a nightstand's own segment beside the wall's,
-  in which a piece of the wall labelled apart is a minor part). A part can be shown apart where
+  in which a piece of the wall labelled apart is a minor part). A view judges two parts as well as it sees
+  the smaller of them: where it sees fewer than ``CLEAR`` of its Gaussians, its hold or separation counts by
+  their share of ``CLEAR`` (SAM absorbs a cup that a far view shows with a few Gaussians into its
+  nightstand's segment; the views that show the cup well show it on its own). A part can be shown apart where
   ``MAJOR`` of it lies in one segment (SAM cuts a large surface at random places, so it is rarely ``CONTAIN``
   in one segment), and held together only where it is judged. A part *owns* a view's segment when it holds
   ``OWN`` of it.
