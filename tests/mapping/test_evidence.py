@@ -195,16 +195,18 @@ def test_a_small_object_seen_apart_once_keeps_its_label(device):
 
 def test_a_surface_its_first_view_cut_in_two_is_merged_once_views_hold_it_whole(device):
     """Two parts (labels 0 and 1) on either side of x = 0: the first view cut there; each later view holds
-    both whole, each a real part of the segment. One firm view against one separating view is not enough
-    (separation 0.5); two are."""
+    both whole, each a real part of the segment. The first view showed each half on its own, so they merge
+    once the firm views outnumber the separating one by ``MERGE_FIRM``: one or two firm views are not
+    enough, three are."""
     gm, _ = plane_map(device)
     left = gm.means[:, 0] < 0
     gm.labels[~left] = 1
     ev = with_parts(gm, [left])
     ev.observe(gm, halves(), POSE, K, DEPTH)
-    ev.observe(gm, WHOLE, POSE, K, DEPTH)
-    assert ev.decide(gm)["relabelled_parts"] == 0
-    assert torch.unique(gm.labels).numel() == 2
+    for _ in range(2):
+        ev.observe(gm, WHOLE, POSE, K, DEPTH)
+        assert ev.decide(gm)["relabelled_parts"] == 0
+        assert torch.unique(gm.labels).numel() == 2
     ev.observe(gm, WHOLE, POSE, K, DEPTH)
     out = ev.decide(gm)
     assert out["relabelled_parts"] == 1 and out["new_labels"] == 0
@@ -261,14 +263,18 @@ def test_a_piece_of_the_wall_labelled_apart_is_separated_from_the_nightstand_bes
     assert not bool((gm.labels[piece] == 1).any())
 
 
-def test_two_objects_seen_on_their_own_merge_on_two_firm_views_not_one(device):
+def test_two_objects_seen_on_their_own_merge_on_two_more_firm_views_than_apart(device):
     """Groups that views showed apart from something (objects SAM found on their own) need about two firm
-    views (``MERGE_FIRM``) to merge: one view that merged a nightstand with the wall behind it is SAM's
-    error. A fragment that no view showed apart merges on one."""
+    views (``MERGE_FIRM``) more than separating ones to merge: one view that merged a nightstand with the
+    wall behind it is SAM's error, and so are two that held a cup with its nightstand where one view showed
+    it apart. A fragment that no view showed apart merges on one firm view."""
     ev = EvidenceModel(torch.device(device))
-    one, two = np.array([0.71, 1.1, 0.0]), np.array([1.6, 0.0, 0.5])
+    one, two = np.array([0.71, 1.1, 0.0]), np.array([1.6, 0.0, 0.0])
     assert not ev._mergeable(one, owners=True) and ev._mergeable(two, owners=True)
     assert ev._mergeable(one, owners=False)
+    cup = np.array([1.89, 2.6, 0.9])  # scan 1's cup and nightstand: 0.9 apart is under half of 1.89
+    assert ev._mergeable(cup, owners=False) and not ev._mergeable(cup, owners=True)
+    assert ev._mergeable(np.array([2.5, 0.0, 0.9]), owners=True)
     assert not ev._mergeable(np.array([1.6, 0.0, 0.9]), owners=True)  # separated in more than half
 
 
@@ -746,3 +752,34 @@ def test_a_view_judges_two_parts_as_well_as_it_sees_the_smaller(device):
     labels, seen = cup_held_in_far_views(device, range(32, 42))
     assert seen >= CLEAR
     assert torch.all(labels == 0)
+
+
+def test_algorithm_1_does_not_merge_two_objects_that_the_decision_kept_apart(device):
+    """A cup (label 1) that one view showed on its own and two held in the table's segment (label 0, which
+    views showed on its own as well): the decision keeps the two apart (one firm view more than apart, not
+    ``MERGE_FIRM``), and Algorithm 1 may not give the cup's low-confidence cluster the table's label either.
+    Two more holding views make the merge the decision's own."""
+    for holds, merged in ((2, False), (4, True)):
+        gm, _ = plane_map(device)
+        cup = pixel_mask(gm, range(36, 42), range(18, 24))
+        gm.labels[cup] = 1
+        ev = with_parts(gm, [cup])
+        apart = np.ones((H, W), np.int32)
+        apart[18:24, 36:42] = 2
+        gap = np.full((H, W), 1.0, np.float32)
+        gap[18:24, 32:42] = 2.0  # the holding views see the cup whole beside 16 of the table's Gaussians
+        ev.observe(gm, apart, POSE, K, DEPTH)
+        for _ in range(holds):
+            ev.observe(gm, WHOLE, POSE, K, gap)
+        ev.decide(gm)
+        assert bool(torch.all(gm.labels[cup] == (0 if merged else 1)))
+        sep = ev.separation_test(gm)
+        one, zero = torch.tensor([1], device=gm.device), torch.tensor([0], device=gm.device)
+        assert sep(one, zero).tolist() == [not merged]
+        if merged:
+            continue
+        gm.confidences[cup] = 0.2  # a small segment's low SAM score
+        global_refinement(gm.means, gm.labels, gm.confidences, r_search=0.12, separated=sep)
+        assert torch.all(gm.labels[cup] == 1)
+        global_refinement(gm.means, gm.labels, gm.confidences, r_search=0.12)  # the paper's Algorithm 1
+        assert torch.all(gm.labels[cup] == 0)

@@ -67,10 +67,11 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
 2. *group parts into labels*, from scratch every time, greedily by firm support: two groups merge when the
    views held them together (firmly, or weakly with no separation ever) and separated them in at most
    ``mapping.evidence.separation`` (0.5) of their firm views. Two groups that views showed apart from
-   something (objects SAM found on their own) need ``MERGE_FIRM`` (about two) firm views and do not merge on
-   weak ones. A small object that SAM absorbs into its support in most views, but showed apart once, stays
-   apart; a surface that its first view cut in two joins once later views hold it whole; a merge made
-   earlier, by the association or a previous decision, is undone when the views grow to separate the parts.
+   something (objects SAM found on their own) need ``MERGE_FIRM`` (about two) more firm views than
+   separating ones and do not merge on weak ones. A small object that SAM absorbs into its support in most
+   views, but showed apart once, stays apart; a surface that its first view cut in two joins once later views
+   hold it whole; a merge made earlier, by the association or a previous decision, is undone when the views
+   grow to separate the parts.
 3. *relabel*: each group keeps the label most of its Gaussians carry (the largest group first), or, where a
    larger group kept that, the next label of its Gaussians that it holds most of, or takes a new one (a wall
    piece whose label a larger piece kept does not take the label of the cabinet that a few of its Gaussians
@@ -80,7 +81,8 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
 
 **Algorithm 1 and Eq. 16 decide from it**: the refinement may not relabel a cluster or a Gaussian across a
 clear separation (``separated``: two labels whose parts the views separated more than they held firmly
-together), unless the Gaussian is disputed; a disputed Gaussian takes another label than its own. The
+together), nor across two objects found on their own that the views judged together but step 2 would not
+merge, unless the Gaussian is disputed; a disputed Gaussian takes another label than its own. The
 long-term step lowers disputed Gaussians' confidence by their share of disputing views (Eq. 16's decrease
 with P_2D-3D = that share, P_conf = 0), so that Algorithm 1 re-decides them. A Gaussian whose label changed
 (step 3, or Algorithm 1: ``EvidenceFeed.after_refine``) is judged afresh under its new label.
@@ -123,8 +125,9 @@ ANCHOR = 8  # a part's oldest visible cells whose segment anchors its cells' vot
 LINK_RATIO = 2.0  # two groups of a part's cells are linked when held together this many times as apart
 LINK_VIEWS = 2  # views that must have judged pairs of two groups' cells before the groups count as linked
 INHERIT = 2 / 3  # the share of its part a leaving largest group needs to take the part's history along
-# two groups that views showed apart from something (objects SAM found on their own) merge on about two
-# firm views: one view that merged a nightstand with a piece of the wall behind it is SAM's error
+# two groups that views showed apart from something (objects SAM found on their own) merge where their firm
+# views outnumber their separating ones by about two: one view that merged a nightstand with a piece of the
+# wall behind it is SAM's error, and so are two that held a cup with its nightstand where one showed it apart
 MERGE_FIRM = 1.5
 DISPUTE = 0.5  # a Gaussian is disputed when this share of its judged views disputed its label
 # a Gaussian within this many pixels of its label's main segment is not disputed by the view: along a contact
@@ -999,12 +1002,15 @@ class EvidenceModel:
 
     def _mergeable(self, v: np.ndarray, owners: bool = False) -> bool:
         """The merge test on summed statistics v (firm, weak, apart) of two groups; ``owners``: a view showed
-        each group apart from something (objects SAM found on their own), which merge on ``MERGE_FIRM`` firm
-        views and not on weak togetherness (that merges a fragment into what holds it)."""
+        each group apart from something (objects SAM found on their own), which merge where their firm views
+        outnumber their separating ones by ``MERGE_FIRM``, and not on weak togetherness (that merges a
+        fragment into what holds it)."""
         firm, weak, apart = float(v[0]), float(v[1]), float(v[2])
-        if firm >= MERGE_FIRM or (firm > 0 and not owners):
+        if owners:
+            return firm >= MERGE_FIRM + apart and apart <= self.separation * firm
+        if firm > 0:
             return apart <= self.separation * firm
-        return apart == 0 and weak > 0 and not owners
+        return apart == 0 and weak > 0
 
     @staticmethod
     def _score(v: np.ndarray) -> float:
@@ -1104,10 +1110,23 @@ class EvidenceModel:
             ok = (la >= 0) & (lb >= 0) & (la != lb)
             table.add(la[ok], lb[ok], self.part_pairs.vals[ok])
         sep = self.separation
+        # labels with a part that some view showed apart from anything (objects SAM found on their own)
+        L = int(gm.labels.max()) + 1 if len(gm) else 1
+        owner = torch.zeros(max(L, 1), dtype=torch.bool, device=dev)
+        shown = (label_of >= 0) & (self.part_apart[: label_of.numel()] > 0)
+        owner[label_of[shown]] = True
 
         def separated(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
             v = table.get(a.long(), b.long())
             firm, apart = v[:, 0], v[:, 2]
-            return (apart > 0) & (apart > sep * firm) & (a != b)
+            out = (apart > 0) & (apart > sep * firm)
+            # two objects found on their own that the views judged together but the decision would not
+            # merge (``_mergeable``): a cup kept apart from its nightstand, whose confidence its low SAM
+            # score keeps low, is not Algorithm 1's to relabel either
+            ok = (a >= 0) & (b >= 0) & (a < L) & (b < L)
+            both = torch.zeros_like(out)
+            both[ok] = owner[a[ok].long()] & owner[b[ok].long()]
+            out |= both & (v.sum(1) > 0) & (firm < MERGE_FIRM + apart)
+            return out & (a != b)
 
         return separated
