@@ -717,12 +717,12 @@ def test_a_cell_inside_another_labels_segment_votes_apart_but_not_one_on_its_edg
     assert torch.all(away[cell[rest]] == 0)
 
 
-def cup_held_in_far_views(device: str, peek: range) -> tuple[torch.Tensor, int]:
-    """A cup (label 1, its own part) on a table (label 0, the rest of the plane): two views show it in a
-    segment of its own; five hold it in the table's segment, each through a gap in an occluder (depth 1 m)
-    that leaves pixel rows 18-24 of columns ``peek`` in sight: they see only the cup's and the table's
-    Gaussians there. Returns the cup's labels after the decision and how many of its Gaussians a holding
-    view sees."""
+def cup_on_table(device: str, peek: range, shown: int, holds: int):
+    """A cup (label 1, its own part) on a table (label 0, the rest of the plane): ``shown`` views show it in
+    a segment of its own, then ``holds`` views hold it in the table's segment, each through a gap in an
+    occluder (depth 1 m) that leaves pixel rows 18-24 of columns ``peek`` in sight: they see only the cup's
+    and the table's Gaussians there. Returns the map, the evidence, the cup's mask and how many of its
+    Gaussians a holding view sees."""
     gm, _ = plane_map(device)
     cup = pixel_mask(gm, range(36, 42), range(18, 24))
     gm.labels[cup] = 1
@@ -731,11 +731,17 @@ def cup_held_in_far_views(device: str, peek: range) -> tuple[torch.Tensor, int]:
     apart[18:24, 36:42] = 2
     gap = np.full((H, W), 1.0, np.float32)
     gap[18:24, peek.start : peek.stop] = 2.0
-    seen = int(pixel_mask(gm, peek, range(18, 24))[cup].sum())
-    for _ in range(2):
+    for _ in range(shown):
         ev.observe(gm, apart, POSE, K, DEPTH)
-    for _ in range(5):
+    for _ in range(holds):
         ev.observe(gm, WHOLE, POSE, K, gap)
+    return gm, ev, cup, int(pixel_mask(gm, peek, range(18, 24))[cup].sum())
+
+
+def cup_held_in_far_views(device: str, peek: range) -> tuple[torch.Tensor, int]:
+    """``cup_on_table`` shown twice and held five times; the cup's labels after the decision, and how many
+    of its Gaussians a holding view sees."""
+    gm, ev, cup, seen = cup_on_table(device, peek, 2, 5)
     ev.decide(gm)
     return gm.labels[cup], seen
 
@@ -760,17 +766,9 @@ def test_algorithm_1_does_not_merge_two_objects_that_the_decision_kept_apart(dev
     ``MERGE_FIRM``), and Algorithm 1 may not give the cup's low-confidence cluster the table's label either.
     Two more holding views make the merge the decision's own."""
     for holds, merged in ((2, False), (4, True)):
-        gm, _ = plane_map(device)
-        cup = pixel_mask(gm, range(36, 42), range(18, 24))
-        gm.labels[cup] = 1
-        ev = with_parts(gm, [cup])
-        apart = np.ones((H, W), np.int32)
-        apart[18:24, 36:42] = 2
-        gap = np.full((H, W), 1.0, np.float32)
-        gap[18:24, 32:42] = 2.0  # the holding views see the cup whole beside 16 of the table's Gaussians
-        ev.observe(gm, apart, POSE, K, DEPTH)
-        for _ in range(holds):
-            ev.observe(gm, WHOLE, POSE, K, gap)
+        # the holding views see the cup whole beside 16 of the table's Gaussians
+        gm, ev, cup, seen = cup_on_table(device, range(32, 42), 1, holds)
+        assert seen >= CLEAR
         ev.decide(gm)
         assert bool(torch.all(gm.labels[cup] == (0 if merged else 1)))
         sep = ev.separation_test(gm)
