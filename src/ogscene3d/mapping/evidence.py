@@ -311,6 +311,19 @@ def _majority(keys: torch.Tensor, values: torch.Tensor, n: int) -> tuple[torch.T
     return torch.where(cnt > 0, top - 1, torch.full_like(top, -2)), cnt
 
 
+def merge_test(firm, weak, apart, owners, separation: float):
+    """Step 2's merge test on two groups' summed statistics (firm, weak, apart: floats, or tensors
+    elementwise): held together firmly, and separated in at most ``separation`` of the firm views, or held
+    weakly and never separated. ``owners``: a view showed each group apart from something (objects SAM found
+    on their own); those merge where their firm views outnumber their separating ones by ``MERGE_FIRM``, and
+    not on weak togetherness (that merges a fragment into what holds it). Algorithm 1's guard
+    (``EvidenceModel.separation_test``) applies the same test to labels."""
+    few_apart = apart <= separation * firm
+    found = owners & (firm >= MERGE_FIRM + apart) & few_apart
+    fragment = ((firm > 0) & few_apart) | ((firm <= 0) & (apart == 0) & (weak > 0))
+    return found | ((owners == 0) & fragment)
+
+
 def _n_labels(gm) -> int:
     """Label ids of ``gm`` lie below this (its next label, or above its largest label)."""
     lab = gm.labels
@@ -996,21 +1009,9 @@ class EvidenceModel:
         root[keep] = keep[int(torch.argmax(size[stay]))]
         return root
 
-    def _separated(self, v: np.ndarray) -> bool:
-        """Whether summed pair statistics v (firm, weak, apart) show a clear separation."""
-        return float(v[2]) > 0 and float(v[2]) > self.separation * float(v[0])
-
     def _mergeable(self, v: np.ndarray, owners: bool = False) -> bool:
-        """The merge test on summed statistics v (firm, weak, apart) of two groups; ``owners``: a view showed
-        each group apart from something (objects SAM found on their own), which merge where their firm views
-        outnumber their separating ones by ``MERGE_FIRM``, and not on weak togetherness (that merges a
-        fragment into what holds it)."""
-        firm, weak, apart = float(v[0]), float(v[1]), float(v[2])
-        if owners:
-            return firm >= MERGE_FIRM + apart and apart <= self.separation * firm
-        if firm > 0:
-            return apart <= self.separation * firm
-        return apart == 0 and weak > 0
+        """``merge_test`` on the summed statistics v (firm, weak, apart) of two groups."""
+        return bool(merge_test(float(v[0]), float(v[1]), float(v[2]), owners, self.separation))
 
     @staticmethod
     def _score(v: np.ndarray) -> float:
@@ -1118,15 +1119,12 @@ class EvidenceModel:
 
         def separated(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
             v = table.get(a.long(), b.long())
-            firm, apart = v[:, 0], v[:, 2]
-            out = (apart > 0) & (apart > sep * firm)
-            # two objects found on their own that the views judged together but the decision would not
-            # merge (``_mergeable``): a cup kept apart from its nightstand, whose confidence its low SAM
-            # score keeps low, is not Algorithm 1's to relabel either
+            # the pairs the views judged that the decision would not merge: a clear separation, or two
+            # objects found on their own without the firm views to merge them (a cup kept apart from its
+            # nightstand, whose confidence its low SAM score keeps low, is not Algorithm 1's to relabel)
             ok = (a >= 0) & (b >= 0) & (a < L) & (b < L)
-            both = torch.zeros_like(out)
+            both = torch.zeros_like(ok)
             both[ok] = owner[a[ok].long()] & owner[b[ok].long()]
-            out |= both & (v.sum(1) > 0) & (firm < MERGE_FIRM + apart)
-            return out & (a != b)
+            return (v.sum(1) > 0) & ~merge_test(v[:, 0], v[:, 1], v[:, 2], both, sep) & (a != b)
 
         return separated
