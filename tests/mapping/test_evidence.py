@@ -781,3 +781,28 @@ def test_algorithm_1_does_not_merge_two_objects_that_the_decision_kept_apart(dev
         assert torch.all(gm.labels[cup] == 1)
         global_refinement(gm.means, gm.labels, gm.confidences, r_search=0.12)  # the paper's Algorithm 1
         assert torch.all(gm.labels[cup] == 0)
+
+
+def test_a_small_object_in_a_piece_of_its_support_labelled_apart_splits_off_it(device):
+    """A light switch whose Gaussians joined a piece of the wall labelled apart (label 2; the rest of the
+    wall is label 0): the views that show the switch in its own segment put the rest of that piece in its
+    anchor segment, the wall's, which is mostly label 0's. Those views separate the switch's cells from the
+    piece's: a segment at most 1/``SMALL`` of the other and mostly the part's label, beside the part's anchor,
+    whatever label holds most of the anchor. The switch leaves the piece for a label of its own; without the
+    rule the views said nothing of the pairs across the switch's outline, and it stayed linked to the
+    piece."""
+    gm, switch = plane_map(device)
+    piece = pixel_mask(gm, range(28, 55), range(8, 34))
+    gm.labels[piece] = 2
+    ev = with_parts(gm, [piece])
+    for _ in range(3):
+        ev.observe(gm, vase_view(), POSE, K, DEPTH)
+    cell = gm.aux("ev_cell").long()
+    a, b = ev.cell_pairs.pairs()
+    across = torch.isin(a, cell[switch]) ^ torch.isin(b, cell[switch])
+    assert float(ev.cell_pairs.vals[across & torch.isin(a, cell[piece]), 1].sum()) > 0  # put apart
+    assert ev.decide(gm)["part_splits"] >= 1
+    own = gm.labels[switch]
+    assert float((own == torch.mode(own).values).float().mean()) > 0.7
+    far = piece & ~switch & (torch.cdist(gm.means, gm.means[switch]).min(1).values > 0.16)
+    assert not bool(torch.isin(gm.labels[far], torch.mode(own).values).any())

@@ -22,8 +22,11 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
 
 * *cells*: a cell lies in the segment most of its visible Gaussians are in. Two neighbouring cells of one
   part (one among the other's ``NEIGHBOURS`` nearest visible cells of the part, within ``refine.r_search``)
-  are *together* in a view that puts them in one segment, *apart* in one that puts them in two; summed per
-  cell pair over all views (``PairTable``), with the number of views.
+  are *together* in a view that puts them in one segment, *apart* in one that puts them in two segments
+  that are both mostly the part's label, or one in such a segment at most 1/``SMALL`` of the other and the
+  other in the part's anchor segment, off its edge (a light switch whose Gaussians joined a piece of the
+  wall labelled apart, beside the wall's segment, which is mostly the wall's main label); summed per cell
+  pair over all views (``PairTable``), with the number of views.
 * *parts*: a part is judged in a view where at least ``MIN_VISIBLE`` of its Gaussians are visible and
   ``CONTAIN`` of those lie in one segment. Two judged parts in one segment are *held together*: firmly when
   each holds ``mapping.merge.min_part`` of the segment's visible Gaussians (the two halves of a sofa), weakly
@@ -592,14 +595,25 @@ class EvidenceModel:
         sa, sb = top[a], top[b]
         same = sa == sb
         pa = self.cell_part[a]
-        # apart where both segments are mostly the part's (see above)
-        apart = ~same & (held(pa, sa) >= MAJOR * n_seg[sa]) & (held(pa, sb) >= MAJOR * n_seg[sb])
+        # apart where both segments are mostly the part's (see above), or where one cell lies in a segment
+        # that is mostly the part's and at most 1/SMALL of the other's, and the other cell in the part's
+        # anchor segment, off its edge pixels: a light switch that joined a piece of the wall labelled apart
+        # (the piece is a minor share of the wall's segment, which is mostly the wall's main label). A cell of
+        # an object at the edge of its support's segment (a spill) or in a segment that is not its part's
+        # anchor (a cup that SAM cut in two) says nothing here
+        own_a, own_b = held(pa, sa) >= MAJOR * n_seg[sa], held(pa, sb) >= MAJOR * n_seg[sb]
+        lo, hi = torch.minimum(n_seg[sa], n_seg[sb]), torch.maximum(n_seg[sa], n_seg[sb])
+        small = SMALL * lo <= hi
+        a_small = n_seg[sa] <= n_seg[sb]
+        big = torch.where(a_small, b, a)
+        in_anchor = (top[big] == anchor[pa]) & (2 * n_in[big] > n_cell[big])
+        beside = small & torch.where(a_small, own_a, own_b) & in_anchor
+        apart = ~same & ((own_a & own_b) | beside)
         wt = torch.minimum(w[sa], w[sb])
         # a view that shows one of the two in a segment at most 1/SMALL of the other's (a light switch's own
         # segment beside the wall's) counts SMALL_APART views apart: SAM absorbs small objects into their
         # support in most frames (the yardstick's separation rule)
-        lo, hi = torch.minimum(n_seg[sa], n_seg[sb]), torch.maximum(n_seg[sa], n_seg[sb])
-        wx = wt * torch.where(SMALL * lo <= hi, SMALL_APART, 1.0)
+        wx = wt * torch.where(small, SMALL_APART, 1.0)
         self.cell_pairs.add(a, b, torch.stack([wt * same, wx * apart, torch.ones_like(wt)], 1))
 
     def _observe_parts(
