@@ -9,6 +9,7 @@ import torch
 from ogscene3d.config import Config, EvidenceConfig
 from ogscene3d.gaussians import GaussianMap
 from ogscene3d.mapping.evidence import (
+    ANCHOR,
     CLEAR,
     EvidenceModel,
     PairTable,
@@ -806,3 +807,35 @@ def test_a_small_object_in_a_piece_of_its_support_labelled_apart_splits_off_it(d
     assert float((own == torch.mode(own).values).float().mean()) > 0.7
     far = piece & ~switch & (torch.cdist(gm.means, gm.means[switch]).min(1).values > 0.16)
     assert not bool(torch.isin(gm.labels[far], torch.mode(own).values).any())
+
+
+def test_a_parts_anchor_is_its_largest_group_once_decided(device):
+    """One part over a sofa and the table in front of it: the first view held them in one segment, so its
+    cells are all of one age, and the oldest by id are the table's (at the low-x end). Two views show the
+    table on its own, six see the sofa only. With the oldest cells as the anchor, the table's cells lay in the
+    anchor's segment in every view and the sofa's were apart in two of their eight: nothing split. Once a
+    decision has found the part's largest group of linked cells (the sofa's), the views that see ``ANCHOR``
+    of its cells anchor there, and the table, put apart by two more views, splits off with a label of its
+    own."""
+    gm, _ = plane_map(device)
+    table = pixel_mask(gm, range(0, 18), range(0, 21))
+    seg = np.ones((H, W), np.int32)
+    seg[:21, :18] = 2
+    sofa_only = DEPTH.copy()
+    sofa_only[:21, :18] = 0.0  # the table out of view
+    ev = with_parts(gm, [])
+    first = torch.argsort(gm.aux("ev_cell").long())[:ANCHOR]
+    assert bool(table[first].all())  # the part's oldest cells are the table's
+    ev.observe(gm, WHOLE, POSE, K, DEPTH)
+    for _ in range(2):
+        ev.observe(gm, seg, POSE, K, DEPTH)
+    for _ in range(6):
+        ev.observe(gm, WHOLE, POSE, K, sofa_only)
+    assert ev.decide(gm)["part_splits"] == 0
+    for _ in range(2):
+        ev.observe(gm, seg, POSE, K, DEPTH)
+    assert ev.decide(gm)["part_splits"] == 1
+    own = gm.labels[table]
+    label = int(torch.mode(own).values)
+    assert label != 0 and float((own == label).float().mean()) > 0.7
+    assert float((gm.labels[~table] == 0).float().mean()) > 0.9

@@ -124,7 +124,7 @@ CLEAR = 8  # visible Gaussians of the smaller of two parts from which a view's j
 SPLIT_VIEWS = 1.5  # weighted views apart a split needs (about two)
 SMALL = 5.0  # a group at most 1/SMALL of its part splits on its apart views alone
 SMALL_APART = 3.0  # weight of a cell pair's apart view where one segment is at most 1/SMALL of the other
-ANCHOR = 8  # a part's oldest visible cells whose segment anchors its cells' votes in a view
+ANCHOR = 8  # visible cells of a part (its oldest, or its largest linked group's) that anchor its views
 LINK_RATIO = 2.0  # two groups of a part's cells are linked when held together this many times as apart
 LINK_VIEWS = 2  # views that must have judged pairs of two groups' cells before the groups count as linked
 INHERIT = 2 / 3  # the share of its part a leaving largest group needs to take the part's history along
@@ -372,6 +372,9 @@ class EvidenceModel:
         # per cell: views in / apart from its part's anchor segment, and the part's Gaussians in the segments
         # of the apart views (summed, weighted)
         self.cell_main = torch.zeros((0, 3), device=device)
+        # whether a cell is in its part's largest group of linked cells (at the last decision that judged it):
+        # the views anchor the part there
+        self.cell_core = torch.zeros(0, dtype=torch.bool, device=device)
         self._cell_keys = torch.zeros(0, dtype=torch.int64, device=device)  # sorted (part, voxel) keys
         self._cell_ids = torch.zeros(0, dtype=torch.long, device=device)
         self.next_part = 0
@@ -430,6 +433,8 @@ class EvidenceModel:
             self.cell_part = torch.cat([self.cell_part, parts.long()[first]])
             self.cell_vox = torch.cat([self.cell_vox, vox[first]])
             self.cell_main = torch.cat([self.cell_main, torch.zeros((uk.numel(), 3), device=keys.device)])
+            fresh = torch.zeros(uk.numel(), dtype=torch.bool, device=keys.device)
+            self.cell_core = torch.cat([self.cell_core, fresh])
             self._reindex_cells()
             self.stats.cells = int(self.cell_part.numel())
         gm.aux("ev_cell", -1.0)[rows] = cell.float()
@@ -540,7 +545,11 @@ class EvidenceModel:
         # At the edge of one it says nothing here (the Gaussians' disputes judge that: a label that ran over
         # into its neighbour). The anchor is the segment of most of the part's oldest visible cells
         # (``ANCHOR``): the largest share of a part that spans two objects is now one of them, now the other,
-        # as the view moves; its oldest cells are where it began
+        # as the view moves; its oldest cells are where it began. Once a decision has grouped the part's
+        # cells, it is the segment of most of its largest linked group's visible cells, where the view sees
+        # ``ANCHOR`` of them: the cells that one view made are of one age, and the oldest by id lie at one end
+        # of the part (a table in front of a sofa that the first view merged with it, anchored at the table in
+        # the views that show the table on its own, never put it apart)
         part_of = self.cell_part[cell]
         P, S = self.next_part, int(w.numel())
         pc, sc = self.cell_part[c], top[c]
@@ -551,6 +560,10 @@ class EvidenceModel:
         first = torch.cummax(torch.where(start, torch.arange(po.numel(), device=c.device), 0), 0).values
         oldest = order[torch.arange(po.numel(), device=c.device) - first < ANCHOR]
         anchor, _ = _majority(pc[oldest], sc[oldest], P)
+        core = self.cell_core[c]
+        anchor_core, _ = _majority(pc[core], sc[core], P)
+        seen_core = torch.bincount(pc[core], minlength=P)
+        anchor = torch.where(seen_core >= ANCHOR, anchor_core, anchor)
         n_part = torch.bincount(part_of, minlength=P)
         # a segment is the part's when the part's label holds most of it (the label's other parts share it)
         plab, _ = _majority(part_of, lab, P)
@@ -835,6 +848,10 @@ class EvidenceModel:
         go &= live & (stays[comp_part.clamp(min=0)] | ~is_main)
         # the part's largest component may tie with another: one of them stays (the smaller id)
         go_ids = torch.nonzero(go).squeeze(1)
+        # the largest group of each judged part anchors its views until the next decision (a part that loses
+        # it has no core, and its oldest cells anchor it again)
+        judged_part = self.part_touched[self.cell_part]
+        self.cell_core[judged_part] = is_main[comp[judged_part]]
         if go_ids.numel() == 0:
             return 0
         old = comp_part[go_ids]
@@ -845,6 +862,7 @@ class EvidenceModel:
         sel = moved >= 0
         self.cell_part[sel] = moved[sel]
         self.cell_main[sel] = 0.0  # their part's main segment is another now
+        self.cell_core[sel] = True  # a new part is one linked group
         self._reindex_cells()
         # only a piece that is most of its part is what the views judged as the part: where a part that its
         # first view made over a chair and a floor piece loses the piece, the views that separated the part
