@@ -585,8 +585,8 @@ class EvidenceModel:
         # spill across an edge): a picture that the wall's part took in where its first view merged the two,
         # shown in the segment of the label that the picture's own views gave it. SAM merges it with the wall
         # again in most views; these are the views that show where it belongs
-        n_in = torch.bincount(cell[inner], minlength=n_cell.numel())
-        away = wc * (~inside & (own | (2 * n_in[c] > n_cell[c])))
+        off_edge = 2 * torch.bincount(cell[inner], minlength=n_cell.numel()) > n_cell  # per cell id
+        away = wc * (~inside & (own | off_edge[c]))
         # and, for the apart votes, how much of the part that segment held: an object the part took in is
         # all of its segment; a random cut is a large piece of the part
         votes = torch.stack([wc * inside, away, away * held_p[pc * S + sc].float()], 1)
@@ -619,7 +619,7 @@ class EvidenceModel:
         small = SMALL * lo <= hi
         a_small = n_seg[sa] <= n_seg[sb]
         big = torch.where(a_small, b, a)
-        in_anchor = (top[big] == anchor[pa]) & (2 * n_in[big] > n_cell[big])
+        in_anchor = (top[big] == anchor[pa]) & off_edge[big]
         beside = small & torch.where(a_small, own_a, own_b) & in_anchor
         apart = ~same & ((own_a & own_b) | beside)
         wt = torch.minimum(w[sa], w[sb])
