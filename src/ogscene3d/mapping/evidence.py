@@ -52,7 +52,9 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
 
 1. *split parts*: a part's cells are grouped by average linkage: neighbouring groups merge where the views
    held them together ``LINK_RATIO`` times as often as apart, summed over all their cell pairs (judged in
-   ``LINK_VIEWS`` views at least), mutually best pairs first;
+   ``LINK_VIEWS`` views at least), and in one segment in ``LINK_SHARE`` (half) of those views' weight (the
+   views that held them in different segments without a verdict, one segment not their label's, count
+   too), mutually best pairs first;
    a linked group other than the part's largest that views put apart from the rest of the part in at least
    ``mapping.evidence.split_ratio`` of their cross views becomes a part of its own (a fridge that the first
    view merged with the floor, books that it merged with each other), where the segments that put it apart
@@ -127,6 +129,7 @@ SMALL_APART = 3.0  # weight of a cell pair's apart view where one segment is at 
 ANCHOR = 8  # visible cells of a part (its oldest, or its largest linked group's) that anchor its views
 LINK_RATIO = 2.0  # two groups of a part's cells are linked when held together this many times as apart
 LINK_VIEWS = 2  # views that must have judged pairs of two groups' cells before the groups count as linked
+LINK_SHARE = 0.5  # the share of those views' weight that must have held them in one segment
 INHERIT = 2 / 3  # the share of its part a leaving largest group needs to take the part's history along
 # two groups that views showed apart from something (objects SAM found on their own) merge where their firm
 # views outnumber their separating ones by about two: one view that merged a nightstand with a piece of the
@@ -261,28 +264,32 @@ def _components(n: int, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
 
 
 def _agglomerate(n: int, a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, x: torch.Tensor,
-                 nv: torch.Tensor) -> torch.Tensor:
+                 nv: torch.Tensor, seen: torch.Tensor) -> torch.Tensor:
     """Average-linkage groups of n cells from their pair statistics (a[i], b[i]: together t, apart x, in nv
-    views): a group id per cell. Neighbouring groups merge while their summed statistics link them
-    (together at least ``LINK_RATIO`` times apart, in ``LINK_VIEWS`` views), mutually best pairs first, by
-    their margin t - ``LINK_RATIO`` x. Single linkage (components of linked cell pairs) lets a few pairs
-    that the views mostly held in one segment chain two books on a shelf through their boundary; summed over
-    the whole boundary, the views that kept them apart count."""
+    views of summed weight ``seen``): a group id per cell. Neighbouring groups merge while their summed
+    statistics link them (together at least ``LINK_RATIO`` times apart, in ``LINK_VIEWS`` views, and in
+    ``LINK_SHARE`` of those views' weight), mutually best pairs first, by their margin t - ``LINK_RATIO`` x.
+    Single linkage (components of linked cell pairs) lets a few pairs that the views mostly held in one
+    segment chain two books on a shelf through their boundary; summed over the whole boundary, the views that
+    kept them apart count."""
     comp = torch.arange(n, device=a.device)
     if n == 0 or a.numel() == 0:
         return comp
     # the graph of groups, contracted after every round: its pairs carry the summed statistics, so a round
     # costs what is left to merge, not the cells (a floor absorbs its cells a few per round)
     m = n
-    vals = torch.stack([t, x, nv], 1)
+    vals = torch.stack([t, x, nv, seen], 1)
     while True:
         cross = a != b
         if not bool(cross.any()):
             return comp
         keys, vals = PairTable.summed(a[cross], b[cross], vals[cross])
         a, b = PairTable.unkey(keys)
-        T, X, NV = vals.unbind(1)
-        ok = (T >= LINK_RATIO * X) & (T > 0) & (NV >= LINK_VIEWS)
+        T, X, NV, W = vals.unbind(1)
+        # views that held the two in different segments without a verdict (one segment not the part's
+        # label's) count against a link too: a table and the sofa behind it, one part since the first view
+        # merged them, touch at one cell pair that a view in seven held in one segment and none apart
+        ok = (T >= LINK_RATIO * X) & (T > 0) & (NV >= LINK_VIEWS) & (T >= LINK_SHARE * W)
         if not bool(ok.any()):
             return comp
         score = torch.where(ok, T - LINK_RATIO * X, torch.full_like(T, -float("inf")))
@@ -381,7 +388,7 @@ class EvidenceModel:
         self.part_owned = torch.zeros(0, device=device)  # views in which the part owned its segment
         self.part_apart = torch.zeros(0, device=device)  # views that separated the part from another
         self.part_touched = torch.zeros(0, dtype=torch.bool, device=device)  # judged since the last decide
-        self.cell_pairs = PairTable(3, device)  # together, apart (weighted), views
+        self.cell_pairs = PairTable(4, device)  # together, apart (weighted), views, their weight
         self._judged: dict[int, tuple[int, int]] = {}  # view -> (cells, parts) when it was last judged
         self.part_pairs = PairTable(3, device)  # FIRM, WEAK, APART
         self.stats = EvidenceStats()
@@ -627,7 +634,7 @@ class EvidenceModel:
         # segment beside the wall's) counts SMALL_APART views apart: SAM absorbs small objects into their
         # support in most frames (the yardstick's separation rule)
         wx = wt * torch.where(small, SMALL_APART, 1.0)
-        self.cell_pairs.add(a, b, torch.stack([wt * same, wx * apart, torch.ones_like(wt)], 1))
+        self.cell_pairs.add(a, b, torch.stack([wt * same, wx * apart, torch.ones_like(wt), wt], 1))
 
     def _observe_parts(
         self,
@@ -797,11 +804,11 @@ class EvidenceModel:
         if not bool(inside.any()):
             return 0
         a, b = a[inside], b[inside]
-        t, x, nv = (self.cell_pairs.vals[inside, i] for i in range(3))
+        t, x, nv, seen = (self.cell_pairs.vals[inside, i] for i in range(4))
         n_cells = int(self.cell_part.numel())
         # groups of cells linked by their summed statistics: a cell on the edge between two objects, that
         # views give now to one, now to the other, cannot bridge the cut, nor can a few merged pairs
-        comp = _agglomerate(n_cells, a, b, t, x, nv)
+        comp = _agglomerate(n_cells, a, b, t, x, nv, seen)
         cell = gm.aux("ev_cell", -1.0).long()
         mass = torch.bincount(cell[cell >= 0], minlength=n_cells).float()
         st = self._component_votes(comp, mass)
