@@ -494,7 +494,7 @@ def test_cells_group_by_their_summed_statistics(device):
     t = torch.tensor([4.0] * 6 + [3.0, 0.0, 0.0, 0.0], device=device)
     x = torch.tensor([0.0] * 7 + [2.0, 2.0, 2.0], device=device)
     nv = t + x
-    groups = _agglomerate(8, a, b, t, x, nv, nv).cpu()
+    groups = _agglomerate(8, a, b, t, x, nv, nv, torch.full((8,), 3.0, device=device)).cpu()
     assert len(set(groups[:4].tolist())) == 1 and len(set(groups[4:].tolist())) == 1
     assert groups[0] != groups[4]
     linked = (t >= 3 * x) & (t > 0)
@@ -506,15 +506,17 @@ def test_two_groups_that_most_views_held_in_different_segments_do_not_link(devic
     since a first view merged them). Across the rows one pair, judged in seven views of weight 0.7: one held
     it in one segment, none put it apart (the sofa's segment is not mostly the part's label), six held it in
     different segments. Never apart is not enough: the rows stay apart. Held in one segment in five of the
-    seven, they link."""
+    seven, they link; so do two pieces of a few Gaussians each (fewer than ``TINY``), whose cells lie at a
+    segment's edge in most views."""
     a = torch.tensor([0, 1, 2, 4, 5, 6, 3], device=device)
     b = torch.tensor([1, 2, 3, 5, 6, 7, 4], device=device)
     nv = torch.tensor([7.0] * 7, device=device)
     seen = 0.7 * nv
     x = torch.zeros(7, device=device)
-    for held, apart in ((1, True), (5, False)):
+    for held, per_cell, apart in ((1, 3.0, True), (5, 3.0, False), (1, 1.0, False)):
         t = torch.tensor([4.9] * 6 + [0.7 * held], device=device)
-        groups = _agglomerate(8, a, b, t, x, nv, seen).cpu()
+        mass = torch.full((8,), per_cell, device=device)  # a row: 12 Gaussians, or 4 (< TINY)
+        groups = _agglomerate(8, a, b, t, x, nv, seen, mass).cpu()
         assert len(set(groups[:4].tolist())) == 1 and len(set(groups[4:].tolist())) == 1
         assert bool(groups[0] != groups[4]) == apart
 

@@ -52,9 +52,9 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
 
 1. *split parts*: a part's cells are grouped by average linkage: neighbouring groups merge where the views
    held them together ``LINK_RATIO`` times as often as apart, summed over all their cell pairs (judged in
-   ``LINK_VIEWS`` views at least), and in one segment in ``LINK_SHARE`` (half) of those views' weight (the
-   views that held them in different segments without a verdict, one segment not their label's, count
-   too), mutually best pairs first;
+   ``LINK_VIEWS`` views at least), and, between two groups of ``TINY`` Gaussians or more, in one segment in
+   ``LINK_SHARE`` (half) of those views' weight (the views that held them in different segments without a
+   verdict, one segment not their label's, count too), mutually best pairs first;
    a linked group other than the part's largest that views put apart from the rest of the part in at least
    ``mapping.evidence.split_ratio`` of their cross views becomes a part of its own (a fridge that the first
    view merged with the floor, books that it merged with each other), where the segments that put it apart
@@ -129,7 +129,7 @@ SMALL_APART = 3.0  # weight of a cell pair's apart view where one segment is at 
 ANCHOR = 8  # visible cells of a part (its oldest, or its largest linked group's) that anchor its views
 LINK_RATIO = 2.0  # two groups of a part's cells are linked when held together this many times as apart
 LINK_VIEWS = 2  # views that must have judged pairs of two groups' cells before the groups count as linked
-LINK_SHARE = 0.5  # the share of those views' weight that must have held them in one segment
+LINK_SHARE = 0.5  # the share of those views' weight that must have held them in one segment (TINY on)
 INHERIT = 2 / 3  # the share of its part a leaving largest group needs to take the part's history along
 # two groups that views showed apart from something (objects SAM found on their own) merge where their firm
 # views outnumber their separating ones by about two: one view that merged a nightstand with a piece of the
@@ -264,11 +264,12 @@ def _components(n: int, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
 
 
 def _agglomerate(n: int, a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, x: torch.Tensor,
-                 nv: torch.Tensor, seen: torch.Tensor) -> torch.Tensor:
+                 nv: torch.Tensor, seen: torch.Tensor, mass: torch.Tensor) -> torch.Tensor:
     """Average-linkage groups of n cells from their pair statistics (a[i], b[i]: together t, apart x, in nv
-    views of summed weight ``seen``): a group id per cell. Neighbouring groups merge while their summed
-    statistics link them (together at least ``LINK_RATIO`` times apart, in ``LINK_VIEWS`` views, and in
-    ``LINK_SHARE`` of those views' weight), mutually best pairs first, by their margin t - ``LINK_RATIO`` x.
+    views of summed weight ``seen``; ``mass`` Gaussians per cell): a group id per cell. Neighbouring groups
+    merge while their summed statistics link them (together at least ``LINK_RATIO`` times apart, in
+    ``LINK_VIEWS`` views, and, where both groups hold ``TINY`` Gaussians, in ``LINK_SHARE`` of those views'
+    weight), mutually best pairs first, by their margin t - ``LINK_RATIO`` x.
     Single linkage (components of linked cell pairs) lets a few pairs that the views mostly held in one
     segment chain two books on a shelf through their boundary; summed over the whole boundary, the views that
     kept them apart count."""
@@ -279,6 +280,7 @@ def _agglomerate(n: int, a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, x: t
     # costs what is left to merge, not the cells (a floor absorbs its cells a few per round)
     m = n
     vals = torch.stack([t, x, nv, seen], 1)
+    gmass = mass.clone()
     while True:
         cross = a != b
         if not bool(cross.any()):
@@ -288,8 +290,11 @@ def _agglomerate(n: int, a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, x: t
         T, X, NV, W = vals.unbind(1)
         # views that held the two in different segments without a verdict (one segment not the part's
         # label's) count against a link too: a table and the sofa behind it, one part since the first view
-        # merged them, touch at one cell pair that a view in seven held in one segment and none apart
-        ok = (T >= LINK_RATIO * X) & (T > 0) & (NV >= LINK_VIEWS) & (T >= LINK_SHARE * W)
+        # merged them, touch at one cell pair that a view in seven held in one segment and none apart. Not
+        # for a piece of a few Gaussians: most of its cells lie at some segment's edge in most views, and a
+        # book's cells, with perfect segments, ended in pieces
+        held = (T >= LINK_SHARE * W) | (torch.minimum(gmass[a], gmass[b]) < TINY)
+        ok = (T >= LINK_RATIO * X) & (T > 0) & (NV >= LINK_VIEWS) & held
         if not bool(ok.any()):
             return comp
         score = torch.where(ok, T - LINK_RATIO * X, torch.full_like(T, -float("inf")))
@@ -302,6 +307,7 @@ def _agglomerate(n: int, a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, x: t
         lut = _components(m, a[pick], b[pick])
         comp, a, b = lut[comp], lut[a], lut[b]
         m = int(lut.max()) + 1
+        gmass = torch.zeros(m, device=gmass.device).index_add_(0, lut, gmass)
 
 
 def _rows_near(centre: torch.Tensor, part: torch.Tensor, fresh: torch.Tensor, radius: float) -> torch.Tensor:
@@ -808,9 +814,9 @@ class EvidenceModel:
         n_cells = int(self.cell_part.numel())
         # groups of cells linked by their summed statistics: a cell on the edge between two objects, that
         # views give now to one, now to the other, cannot bridge the cut, nor can a few merged pairs
-        comp = _agglomerate(n_cells, a, b, t, x, nv, seen)
         cell = gm.aux("ev_cell", -1.0).long()
         mass = torch.bincount(cell[cell >= 0], minlength=n_cells).float()
+        comp = _agglomerate(n_cells, a, b, t, x, nv, seen, mass)
         st = self._component_votes(comp, mass)
 
         def clearly_apart(st: dict[str, torch.Tensor]) -> torch.Tensor:
