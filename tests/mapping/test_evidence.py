@@ -504,10 +504,10 @@ def test_cells_group_by_their_summed_statistics(device):
 def test_two_groups_that_most_views_held_in_different_segments_do_not_link(device):
     """Two rows of four cells, each row held together in every view (a table and the sofa behind it, one part
     since a first view merged them). Across the rows one pair, judged in seven views of weight 0.7: one held
-    it in one segment, none put it apart (the sofa's segment is not mostly the part's label), six held it in
-    different segments. Never apart is not enough: the rows stay apart. Held in one segment in five of the
-    seven, they link; so do two pieces of a few Gaussians each (fewer than ``TINY``), whose cells lie at a
-    segment's edge in most views."""
+    it in one segment, none put it apart, six held it in different segments without a verdict (one of them
+    not mostly the part's label). Never apart is not enough: the rows stay apart. Held in one segment in five
+    of the seven, they link; so do two pieces of a few Gaussians each (fewer than ``TINY``), whose cells lie
+    at a segment's edge in most views."""
     a = torch.tensor([0, 1, 2, 4, 5, 6, 3], device=device)
     b = torch.tensor([1, 2, 3, 5, 6, 7, 4], device=device)
     nv = torch.tensor([7.0] * 7, device=device)

@@ -290,7 +290,7 @@ def _agglomerate(n: int, a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, x: t
         T, X, NV, W = vals.unbind(1)
         # views that held the two in different segments without a verdict (one segment not the part's
         # label's) count against a link too: a table and the sofa behind it, one part since the first view
-        # merged them, touch at one cell pair that a view in seven held in one segment and none apart. Not
+        # merged them, touch at one cell pair that two of its seven views held in one segment, none apart. Not
         # for a piece of a few Gaussians: most of its cells lie at some segment's edge in most views, and a
         # book's cells, with perfect segments, ended in pieces
         held = (T >= LINK_SHARE * W) | (torch.minimum(gmass[a], gmass[b]) < TINY)
