@@ -27,7 +27,11 @@ separation rule) is ``_maskclustering.py`` (``--weak``).
   by a mask of its own (a cabinet's segment beside the floor's). Two clusters are *apart* when at least
   ``SEP_MIN`` frames, and ``SEP_SHARE`` of the frames that hold both, separate a mask of one from a mask of
   the other: SAM merges an object with its support in some views and shows it apart in others, and a random
-  cut through a wall separates two of its pieces in few of the views that see both.
+  cut through a wall separates two of its pieces in few of the views that see both. A frame whose one mask
+  holds most of both clusters (each cluster's *main* mask there: the one that holds the most of the voxels
+  it sees of the cluster's masks) does not separate them where each has a mask of ``CUT_VOXELS``: it cut
+  some of their masks, not the two (a random cut through the floor leaves masks of both of its clusters on
+  one side and a mask of one on the other).
 * **Levels** (:func:`schedule`): at the first threshold of ``THRESHOLDS``, MaskClustering's falling observer
   counts (the ``OBSERVER_PERCENTILES`` of the pairs' shared frames down to ``MIN_VIEWS``), then each further
   threshold at ``MIN_VIEWS``: the cluster pairs whose consensus reaches it are joined, best consensus first,
@@ -75,6 +79,7 @@ SPLIT_SMALL, SPLIT_SMALL_VOXELS = 0.4, 100
 SEP_SIZE: float | None = 0.3
 SEP_MIN = 2  # ... in at least this many frames
 SEP_SHARE = 0.5  # ... and this share of the frames that hold both
+CUT_VOXELS = 100  # a frame that holds most of two clusters with a mask this large by one mask cut them
 SPLIT_PART = 0.3  # ... where a second mask holds this share of it
 THRESHOLDS = (0.9, 0.8, 0.7)
 OBSERVER_PERCENTILES = (95, 85, 75, 65, 50)
@@ -386,9 +391,12 @@ class _Evidence:
         self.n, self.frames = n, len(views.seen)
         pair, frame = _separating_frames(h, a, b)
         self.sep_a, self.sep_b, self.sep_frame = a[pair], b[pair], frame
+        self.mask_frame, self.mask_size = views.mask_frame, h.mask_size
         r, f = np.nonzero(h.held >= 0)
         self.z = coo_matrix((np.ones(len(r), np.float32), (r, h.held[r, f])), shape=(n, n)).tocsr()
         self.y = coo_matrix((np.ones(len(r), np.float32), (r, f)), shape=(n, self.frames)).tocsr()
+        # each mask's voxels that lie in some mask of a frame, at the mask that holds it there
+        self.z_voxels = coo_matrix((h.n_in[r, f].astype(np.float32), (r, h.held[r, f])), shape=(n, n)).tocsr()
 
     def of(self, node: np.ndarray):
         """For clusters ``node`` (per mask, -1: none, ids from 0): their holding masks [C, masks] and frames
@@ -406,10 +414,41 @@ class _Evidence:
         lo, hi = np.minimum(ca, cb), np.maximum(ca, cb)
         ok = (lo >= 0) & (lo != hi)
         keys = _distinct((lo[ok] * nc + hi[ok]) * self.frames + self.sep_frame[ok])  # a frame counts once
+        keys = keys[~self._cut(node, p, keys, nc)]
         pair, count = np.unique(keys // self.frames, return_counts=True)
         pa, pb = pair // max(nc, 1), pair % max(nc, 1)
         apart = (count >= SEP_MIN) & (count >= SEP_SHARE * _shared(yc, pa, pb))
         return zc, yc, pa[apart], pb[apart]
+
+    def _cut(self, node: np.ndarray, p, keys: np.ndarray, nc: int) -> np.ndarray:
+        """Per separating (cluster pair, frame) key (``(lo * nc + hi) * frames + frame``): whether the
+        frame's one mask holds most of both clusters (the main mask of each, :meth:`_main`), where each
+        cluster has a mask of ``CUT_VOXELS``: the frame cut their masks, not the two."""
+        F = self.frames
+        main_key, main_mask = self._main(p)
+        pair, g = keys // F, keys % F
+        lo, hi = pair // max(nc, 1), pair % max(nc, 1)
+
+        def main(c: np.ndarray) -> np.ndarray:
+            q = c * F + g
+            i = np.clip(np.searchsorted(main_key, q), 0, max(len(main_key) - 1, 0))
+            return np.where(main_key[i] == q, main_mask[i], -1) if len(main_key) else np.full(len(q), -1)
+
+        largest = np.zeros(max(nc, 1))
+        alive = node >= 0
+        np.maximum.at(largest, node[alive], self.mask_size[alive])
+        a = main(lo)
+        return (a >= 0) & (a == main(hi)) & (np.minimum(largest[lo], largest[hi]) >= CUT_VOXELS)
+
+    def _main(self, p) -> tuple[np.ndarray, np.ndarray]:
+        """Each cluster's main mask in each frame that holds it (the mask that holds the most of the voxels
+        the frame sees of the cluster's masks): sorted keys ``cluster * frames + frame`` and their masks."""
+        w = (p @ self.z_voxels).tocoo()  # [clusters, masks]
+        key = w.row.astype(np.int64) * self.frames + self.mask_frame[w.col]
+        order = np.lexsort((-w.data, key))
+        key, mask = key[order], w.col.astype(np.int64)[order]
+        first = np.r_[True, key[1:] != key[:-1]] if len(key) else np.zeros(0, bool)
+        return key[first], mask[first]
 
 
 def cluster(views: Views, thresholds: tuple[float, ...] = THRESHOLDS) -> Clusters:
