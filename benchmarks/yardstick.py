@@ -29,9 +29,9 @@ separation rule) is ``_maskclustering.py`` (``--weak``).
   the other: SAM merges an object with its support in some views and shows it apart in others, and a random
   cut through a wall separates two of its pieces in few of the views that see both. A frame whose one mask
   holds most of both clusters (each cluster's *main* mask there: the one that holds the most of the voxels
-  it sees of the cluster's masks) does not separate them where each has a mask of ``CUT_VOXELS``: it cut
-  some of their masks, not the two (a random cut through the floor leaves masks of both of its clusters on
-  one side and a mask of one on the other).
+  it sees of the cluster's masks) does not separate them where the masks of each are mostly (the median) of
+  ``CUT_VOXELS`` or more: it cut some of their masks, not the two (a random cut through the floor leaves
+  masks of both of its clusters on one side and a mask of one on the other).
 * **Levels** (:func:`schedule`): at the first threshold of ``THRESHOLDS``, MaskClustering's falling observer
   counts (the ``OBSERVER_PERCENTILES`` of the pairs' shared frames down to ``MIN_VIEWS``), then each further
   threshold at ``MIN_VIEWS``: the cluster pairs whose consensus reaches it are joined, best consensus first,
@@ -79,7 +79,7 @@ SPLIT_SMALL, SPLIT_SMALL_VOXELS = 0.4, 100
 SEP_SIZE: float | None = 0.3
 SEP_MIN = 2  # ... in at least this many frames
 SEP_SHARE = 0.5  # ... and this share of the frames that hold both
-CUT_VOXELS = 100  # a frame that holds most of two clusters with a mask this large by one mask cut them
+CUT_VOXELS = 100  # a frame that holds most of two clusters of masks mostly this large by one mask cut them
 SPLIT_PART = 0.3  # ... where a second mask holds this share of it
 THRESHOLDS = (0.9, 0.8, 0.7)
 OBSERVER_PERCENTILES = (95, 85, 75, 65, 50)
@@ -422,8 +422,9 @@ class _Evidence:
 
     def _cut(self, node: np.ndarray, p, keys: np.ndarray, nc: int) -> np.ndarray:
         """Per separating (cluster pair, frame) key (``(lo * nc + hi) * frames + frame``): whether the
-        frame's one mask holds most of both clusters (the main mask of each, :meth:`_main`), where each
-        cluster has a mask of ``CUT_VOXELS``: the frame cut their masks, not the two."""
+        frame's one mask holds most of both clusters (the main mask of each, :meth:`_main`), where the
+        masks of each cluster are mostly of ``CUT_VOXELS`` or more: the frame cut their masks, not the
+        two. (A light switch's cluster that took in one mask of the wall has that mask for its main one.)"""
         F = self.frames
         main_key, main_mask = self._main(p)
         pair, g = keys // F, keys % F
@@ -434,11 +435,9 @@ class _Evidence:
             i = np.clip(np.searchsorted(main_key, q), 0, max(len(main_key) - 1, 0))
             return np.where(main_key[i] == q, main_mask[i], -1) if len(main_key) else np.full(len(q), -1)
 
-        largest = np.zeros(max(nc, 1))
-        alive = node >= 0
-        np.maximum.at(largest, node[alive], self.mask_size[alive])
         a = main(lo)
-        return (a >= 0) & (a == main(hi)) & (np.minimum(largest[lo], largest[hi]) >= CUT_VOXELS)
+        median = _median_per(node, self.mask_size, nc)
+        return (a >= 0) & (a == main(hi)) & (np.minimum(median[lo], median[hi]) >= CUT_VOXELS)
 
     def _main(self, p) -> tuple[np.ndarray, np.ndarray]:
         """Each cluster's main mask in each frame that holds it (the mask that holds the most of the voxels
@@ -449,6 +448,20 @@ class _Evidence:
         key, mask = key[order], w.col.astype(np.int64)[order]
         first = np.r_[True, key[1:] != key[:-1]] if len(key) else np.zeros(0, bool)
         return key[first], mask[first]
+
+
+def _median_per(node: np.ndarray, size: np.ndarray, n: int) -> np.ndarray:
+    """[n] the (upper) median of ``size`` over the masks of each cluster of ``node`` (-1: none; 0 for an
+    empty cluster)."""
+    alive = node >= 0
+    nd, sz = node[alive], size[alive]
+    order = np.lexsort((sz, nd))
+    nd, sz = nd[order], sz[order]
+    count = np.bincount(nd, minlength=n)
+    out = np.zeros(max(n, 1))
+    has = np.nonzero(count)[0]
+    out[has] = sz[np.searchsorted(nd, has) + count[has] // 2]
+    return out
 
 
 def cluster(views: Views, thresholds: tuple[float, ...] = THRESHOLDS) -> Clusters:
