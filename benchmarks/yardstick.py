@@ -393,10 +393,9 @@ class _Evidence:
         self.sep_a, self.sep_b, self.sep_frame = a[pair], b[pair], frame
         self.mask_frame, self.mask_size = views.mask_frame, h.mask_size
         r, f = np.nonzero(h.held >= 0)
-        self.z = coo_matrix((np.ones(len(r), np.float32), (r, h.held[r, f])), shape=(n, n)).tocsr()
+        # each mask's holding masks, weighted by its voxels that lie in some mask of the frame (held: > 0)
+        self.z = coo_matrix((h.n_in[r, f].astype(np.float32), (r, h.held[r, f])), shape=(n, n)).tocsr()
         self.y = coo_matrix((np.ones(len(r), np.float32), (r, f)), shape=(n, self.frames)).tocsr()
-        # each mask's voxels that lie in some mask of a frame, at the mask that holds it there
-        self.z_voxels = coo_matrix((h.n_in[r, f].astype(np.float32), (r, h.held[r, f])), shape=(n, n)).tocsr()
 
     def of(self, node: np.ndarray):
         """For clusters ``node`` (per mask, -1: none, ids from 0): their holding masks [C, masks] and frames
@@ -407,26 +406,27 @@ class _Evidence:
         alive = node >= 0
         p = coo_matrix((np.ones(int(alive.sum()), np.float32), (node[alive], np.nonzero(alive)[0])),
                        shape=(nc, self.n)).tocsr()  # fmt: skip
-        zc, yc = p @ self.z, p @ self.y
+        held, yc = p @ self.z, p @ self.y  # held: [C, masks], the voxels of each cluster each mask holds
+        zc = held.copy()
         zc.data[:] = 1.0
         yc.data[:] = 1.0
         ca, cb = node[self.sep_a], node[self.sep_b]
         lo, hi = np.minimum(ca, cb), np.maximum(ca, cb)
         ok = (lo >= 0) & (lo != hi)
         keys = _distinct((lo[ok] * nc + hi[ok]) * self.frames + self.sep_frame[ok])  # a frame counts once
-        keys = keys[~self._cut(node, p, keys, nc)]
+        keys = keys[~self._cut(node, held, keys, nc)]
         pair, count = np.unique(keys // self.frames, return_counts=True)
         pa, pb = pair // max(nc, 1), pair % max(nc, 1)
         apart = (count >= SEP_MIN) & (count >= SEP_SHARE * _shared(yc, pa, pb))
         return zc, yc, pa[apart], pb[apart]
 
-    def _cut(self, node: np.ndarray, p, keys: np.ndarray, nc: int) -> np.ndarray:
+    def _cut(self, node: np.ndarray, held, keys: np.ndarray, nc: int) -> np.ndarray:
         """Per separating (cluster pair, frame) key (``(lo * nc + hi) * frames + frame``): whether the
         frame's one mask holds most of both clusters (the main mask of each, :meth:`_main`), where the
         masks of each cluster are mostly of ``CUT_VOXELS`` or more: the frame cut their masks, not the
         two. (A light switch's cluster that took in one mask of the wall has that mask for its main one.)"""
         F = self.frames
-        main_key, main_mask = self._main(p)
+        main_key, main_mask = self._main(held)
         pair, g = keys // F, keys % F
         lo, hi = pair // max(nc, 1), pair % max(nc, 1)
 
@@ -439,10 +439,11 @@ class _Evidence:
         median = _median_per(node, self.mask_size, nc)
         return (a >= 0) & (a == main(hi)) & (np.minimum(median[lo], median[hi]) >= CUT_VOXELS)
 
-    def _main(self, p) -> tuple[np.ndarray, np.ndarray]:
+    def _main(self, held) -> tuple[np.ndarray, np.ndarray]:
         """Each cluster's main mask in each frame that holds it (the mask that holds the most of the voxels
-        the frame sees of the cluster's masks): sorted keys ``cluster * frames + frame`` and their masks."""
-        w = (p @ self.z_voxels).tocoo()  # [clusters, masks]
+        the frame sees of the cluster's masks, ``held`` [clusters, masks]): sorted keys ``cluster * frames +
+        frame`` and their masks."""
+        w = held.tocoo()
         key = w.row.astype(np.int64) * self.frames + self.mask_frame[w.col]
         order = np.lexsort((-w.data, key))
         key, mask = key[order], w.col.astype(np.int64)[order]
