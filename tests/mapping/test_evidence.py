@@ -501,6 +501,22 @@ def test_cells_group_by_their_summed_statistics(device):
     assert len(set(_components(8, a[linked], b[linked]).tolist())) == 1  # what single linkage does
 
 
+def test_cell_groups_do_not_depend_on_the_cells_no_pair_holds(device):
+    """The rows above among 40 cells that no pair of this decision holds (the map's other parts, numbered
+    between and after them): the same two groups, each other cell a group of its own, and the groups ordered
+    by their first cell among all 40, as the split's ties are broken."""
+    a = torch.tensor([0, 1, 2, 4, 5, 6, 3, 2, 3, 1], device=device)
+    b = torch.tensor([1, 2, 3, 5, 6, 7, 4, 5, 5, 4], device=device)
+    t = torch.tensor([4.0] * 6 + [3.0, 0.0, 0.0, 0.0], device=device)
+    x = torch.tensor([0.0] * 7 + [2.0, 2.0, 2.0], device=device)
+    spread = torch.tensor([3, 5, 6, 11, 20, 21, 22, 30], device=device)  # where the eight cells are now
+    mass = torch.full((40,), 3.0, device=device)
+    groups = _agglomerate(40, spread[a], spread[b], t, x, t + x, t + x, mass)
+    rows = torch.tensor([[0, 1], [1, 2], [2, 3], [4, 5], [5, 6], [6, 7]], device=device)
+    want = _components(40, spread[rows[:, 0]], spread[rows[:, 1]])  # two rows, the rest alone, by first cell
+    assert torch.equal(torch.unique(groups, return_inverse=True)[1].cpu(), want.cpu())
+
+
 def test_two_groups_that_most_views_held_in_different_segments_do_not_link(device):
     """Two rows of four cells, each row held together in every view (a table and the sofa behind it, one part
     since a first view merged them). Across the rows one pair, judged in seven views of weight 0.7: one held

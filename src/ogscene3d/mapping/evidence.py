@@ -273,14 +273,29 @@ def _agglomerate(n: int, a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, x: t
     Single linkage (components of linked cell pairs) lets a few pairs that the views mostly held in one
     segment chain two books on a shelf through their boundary; summed over the whole boundary, the views that
     kept them apart count."""
-    comp = torch.arange(n, device=a.device)
+    out = torch.arange(n, device=a.device)
     if n == 0 or a.numel() == 0:
-        return comp
+        return out
+    # only the cells of the pairs take part (those of the parts a decision judges), renumbered in their order,
+    # so that a round costs what those parts hold, not every cell the map has made since the stream began
+    cells = torch.unique(torch.cat([a, b]))
+    group = _link_groups(torch.searchsorted(cells, a), torch.searchsorted(cells, b),
+                         torch.stack([t, x, nv, seen], 1), mass[cells])  # fmt: skip
+    # each group is named by its first cell, as the groups of all n cells would be ordered
+    first = torch.full((int(group.max()) + 1,), n, dtype=cells.dtype, device=cells.device)
+    out[cells] = first.scatter_reduce_(0, group, cells, reduce="amin")[group]
+    return out
+
+
+def _link_groups(a: torch.Tensor, b: torch.Tensor, vals: torch.Tensor, gmass: torch.Tensor) -> torch.Tensor:
+    """:func:`_agglomerate` on cells 0..m-1 (``gmass`` [m]), every one of them in some pair of (``a``,
+    ``b``), the pairs' statistics in ``vals`` [P, 4]: a group id per cell, in the order of each group's first
+    cell."""
+    m = int(gmass.numel())
+    comp = torch.arange(m, device=a.device)
+    gmass = gmass.clone()
     # the graph of groups, contracted after every round: its pairs carry the summed statistics, so a round
     # costs what is left to merge, not the cells (a floor absorbs its cells a few per round)
-    m = n
-    vals = torch.stack([t, x, nv, seen], 1)
-    gmass = mass.clone()
     while True:
         cross = a != b
         if not bool(cross.any()):
