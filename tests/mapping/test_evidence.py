@@ -267,12 +267,18 @@ def test_a_piece_of_the_wall_labelled_apart_is_separated_from_the_nightstand_bes
 def test_two_objects_seen_on_their_own_merge_on_two_more_firm_views_than_apart(device):
     """Groups that views showed apart from something (objects SAM found on their own) need about two firm
     views (``MERGE_FIRM``) more than separating ones to merge: one view that merged a nightstand with the
-    wall behind it is SAM's error, and so are two that held a cup with its nightstand where one view showed
-    it apart. A fragment that no view showed apart merges on one firm view."""
+    wall behind it, where another showed them apart, is SAM's error, and so are two that held a cup with its
+    nightstand where one view showed it apart. Never separated, they merge on half a firm view
+    (``MERGE_UNSEPARATED``: two pieces of a book, each shown on its own, that few views saw). A fragment that
+    no view showed apart merges on one firm view."""
     ev = EvidenceModel(torch.device(device))
-    one, two = np.array([0.71, 1.1, 0.0]), np.array([1.6, 0.0, 0.0])
+    one, two = np.array([0.71, 1.1, 0.3]), np.array([1.6, 0.0, 0.0])
     assert not ev._mergeable(one, owners=True) and ev._mergeable(two, owners=True)
     assert ev._mergeable(one, owners=False)
+    book = np.array([0.61, 0.0, 0.0])  # room 4's book 33: two of its pieces, never apart
+    assert ev._mergeable(book, owners=True)
+    assert not ev._mergeable(np.array([0.4, 0.0, 0.0]), owners=True)
+    assert not ev._mergeable(np.array([0.61, 0.0, 0.05]), owners=True)  # once apart: MERGE_FIRM
     cup = np.array([1.89, 2.6, 0.9])  # scan 1's cup and nightstand: 0.9 apart is under half of 1.89
     assert ev._mergeable(cup, owners=False) and not ev._mergeable(cup, owners=True)
     assert ev._mergeable(np.array([2.5, 0.0, 0.9]), owners=True)

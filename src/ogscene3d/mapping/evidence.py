@@ -73,10 +73,11 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
    views held them together (firmly, or weakly with no separation ever) and separated them in at most
    ``mapping.evidence.separation`` (0.5) of their firm views. Two groups that views showed apart from
    something (objects SAM found on their own) need ``MERGE_FIRM`` (about two) more firm views than
-   separating ones and do not merge on weak ones. A small object that SAM absorbs into its support in most
-   views, but showed apart once, stays apart; a surface that its first view cut in two joins once later views
-   hold it whole; a merge made earlier, by the association or a previous decision, is undone when the views
-   grow to separate the parts.
+   separating ones, or, where no view separated them, ``MERGE_UNSEPARATED`` (half a view: the pieces of a
+   book that few views saw), and do not merge on weak ones. A small object that SAM absorbs into its
+   support in most views, but showed apart once, stays apart; a surface that its first view cut in two
+   joins once later views hold it whole; a merge made earlier, by the association or a previous decision,
+   is undone when the views grow to separate the parts.
 3. *relabel*: each group keeps the label most of its Gaussians carry (the largest group first), or, where a
    larger group kept that, the next label of its Gaussians that it holds most of, or takes a new one (a wall
    piece whose label a larger piece kept does not take the label of the cabinet that a few of its Gaussians
@@ -135,6 +136,10 @@ INHERIT = 2 / 3  # the share of its part a leaving largest group needs to take t
 # views outnumber their separating ones by about two: one view that merged a nightstand with a piece of the
 # wall behind it is SAM's error, and so are two that held a cup with its nightstand where one showed it apart
 MERGE_FIRM = 1.5
+# ... or, where no view ever separated them, on this many firm views: the pieces of a book that a few views
+# saw, each shown on its own by the book's segment, are never apart, and their firm views are few and weighed
+# down (CLEAR)
+MERGE_UNSEPARATED = 0.5
 DISPUTE = 0.5  # a Gaussian is disputed when this share of its judged views disputed its label
 # a Gaussian within this many pixels of its label's main segment is not disputed by the view: along a contact
 # line (a book beside a book, a bottle's foot on the table) the side its centre projects to says little
@@ -346,11 +351,13 @@ def merge_test(firm, weak, apart, owners, separation: float):
     """Step 2's merge test on two groups' summed statistics (firm, weak, apart: floats, or tensors
     elementwise): held together firmly, and separated in at most ``separation`` of the firm views, or held
     weakly and never separated. ``owners``: a view showed each group apart from something (objects SAM found
-    on their own); those merge where their firm views outnumber their separating ones by ``MERGE_FIRM``, and
-    not on weak togetherness (that merges a fragment into what holds it). Algorithm 1's guard
-    (``EvidenceModel.separation_test``) applies the same test to labels."""
+    on their own); those merge where their firm views outnumber their separating ones by ``MERGE_FIRM``, or,
+    never separated, on ``MERGE_UNSEPARATED`` firm views, and not on weak togetherness (that merges a fragment
+    into what holds it). Algorithm 1's guard (``EvidenceModel.separation_test``) applies the same test to
+    labels."""
     few_apart = apart <= separation * firm
-    found = owners & (firm >= MERGE_FIRM + apart) & few_apart
+    firmly = (firm >= MERGE_FIRM + apart) | ((apart <= 0) & (firm >= MERGE_UNSEPARATED))
+    found = owners & firmly & few_apart
     fragment = ((firm > 0) & few_apart) | ((firm <= 0) & (apart == 0) & (weak > 0))
     return found | ((owners == 0) & fragment)
 
