@@ -346,6 +346,35 @@ def test_a_label_run_over_into_a_neighbour_is_disputed_lowered_and_relabelled(de
     assert torch.all(gm.labels[right] == 1)
 
 
+def test_a_patch_that_an_earlier_view_gave_the_walls_label_takes_the_label_its_views_name(device):
+    """A picture on a wall (the vase patch, label 2, its Gaussians not yet confident) whose middle an earlier
+    view made with the wall's label 0 (it absorbed the picture into the wall): every later view shows the
+    picture as a segment of its own, mostly label 2, so the views dispute the middle. No confident Gaussian of
+    another label lies within ``r_search`` of it (the picture's are not confident), so Algorithm 1 alone keeps
+    it; the label its views put it in (``disputed_labels``) moves it to the picture."""
+    gm, vase = plane_map(device)
+    u, v = pixel_uv(gm)
+    middle = vase & (u >= 39) & (u < 43) & (v >= 18) & (v < 23)
+    gm.labels[vase & ~middle] = 2
+    gm.confidences[vase & ~middle] = 0.5
+    ev = with_parts(gm, [vase & ~middle, middle])
+    ev.min_views = 3
+    for _ in range(3):
+        ev.observe(gm, vase_view(), POSE, K, DEPTH)
+    exposed = ev.disputed(gm)
+    assert torch.equal(exposed, middle) and int(middle.sum()) >= 4
+    to = ev.disputed_labels(gm)
+    assert torch.all(to[middle] == 2) and torch.all(to[~middle] == -1)
+    ev.lower_disputed(gm)
+    args = dict(tau_low=0.3, tau_high=0.7, r_search=0.12, separated=ev.separation_test(gm), exposed=exposed)
+    labels, conf = gm.labels.clone(), gm.confidences.clone()
+    global_refinement(gm.means, labels, conf, **args)  # fmt: skip
+    assert torch.all(labels[middle] == 0)  # the picture's Gaussians are below tau_high: no neighbour
+    global_refinement(gm.means, gm.labels, gm.confidences, exposed_to=to, **args)
+    assert torch.all(gm.labels[middle] == 2) and torch.all(gm.confidences[middle] == 0.5)
+    assert torch.all(gm.labels[~vase] == 0) and torch.all(gm.labels[vase & ~middle] == 2)
+
+
 def test_near_segment_looks_one_ring_of_pixels_around(device):
     seg = torch.zeros((4, 5), dtype=torch.int64, device=device)
     seg[1, 1] = 7

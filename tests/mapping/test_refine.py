@@ -109,3 +109,37 @@ def test_no_relabel_across_a_clear_separation(device):
     labels, conf = base.clone(), conf0.clone()
     global_refinement(means, labels, conf, r_search=0.1, cluster_radius=0.3)
     assert labels.tolist() == [3] * 41
+
+
+def test_an_exposed_gaussian_with_no_confident_neighbour_takes_the_label_its_views_name(device):
+    """A disputed (exposed) Gaussian takes its nearest confident Gaussian's label of another label; where none
+    lies within r_search (the middle of a picture that an earlier view made with the wall's label, the
+    picture's own Gaussians not yet confident) it takes ``exposed_to``, the label its views put it in, and
+    without one keeps its own."""
+    wall = _patch(0.0, n=6)  # label 3, confident; 30 is its Gaussian at x = 0.25, y = 0
+    shelf = _patch(0.3, n=2)  # label 9, confident, 5 cm from the wall's edge
+    picture = _patch(0.8, n=3)  # label 5, made later, not yet confident; 44 is its middle
+    means = torch.cat([wall, shelf, picture]).to(device)
+    labels = torch.tensor([3] * 36 + [9] * 4 + [5] * 9, dtype=torch.int32, device=device)
+    conf = torch.tensor([0.9] * 40 + [0.5] * 9, device=device)
+    labels[44], conf[44] = 3, 0.0  # made by a view that absorbed the picture into the wall
+    conf[30] = 0.0
+    exposed = torch.zeros(49, dtype=torch.bool, device=device)
+    exposed[[30, 44]] = True
+    to = torch.full((49,), -1, dtype=torch.int64, device=device)
+    to[30], to[44] = 5, 5
+
+    def refine(exposed_to):
+        la, ca = labels.clone(), conf.clone()
+        global_refinement(
+            means, la, ca, r_search=0.1, cluster_radius=0.3, exposed=exposed, exposed_to=exposed_to
+        )
+        others = torch.ones(49, dtype=torch.bool, device=device)
+        others[[30, 44]] = False
+        assert torch.equal(la[others], labels[others])
+        return la[30].item(), la[44].item(), ca[44].item()
+
+    assert refine(None) == (9, 3, 0.0)  # the shelf's, its nearest confident other label; the middle keeps 3
+    assert refine(to) == (9, 5, 0.5)  # the confident neighbour first; the middle takes its views' label
+    to[44] = 3  # its own label: nothing to take
+    assert refine(to) == (9, 3, 0.0)

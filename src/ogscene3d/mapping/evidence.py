@@ -45,8 +45,9 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
 * *Gaussians*: a labelled Gaussian in a segment other than its label's main one (the segment holding most of
   the label) that is mostly other labels, and more than ``EDGE`` pixels from the main one, is *disputed* in
   that view (the label ran over into a neighbour);
-  one in its label's main segment is *confirmed*. An unlabelled Gaussian votes for the label holding most of
-  its segment (a Misra-Gries counter: one candidate per Gaussian).
+  one in its label's main segment is *confirmed*. Every Gaussian counts the label holding most of its
+  segment (a Misra-Gries counter: one candidate per Gaussian), which an unlabelled one takes at the fill and
+  a disputed one in Algorithm 1 (``disputed_labels``).
 
 **Decide** (``decide``, at the global refinement, before Algorithm 1):
 
@@ -88,7 +89,8 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
 **Algorithm 1 and Eq. 16 decide from it**: the refinement may not relabel a cluster or a Gaussian across a
 clear separation (``separated``: two labels whose parts the views separated more than they held firmly
 together), nor across two objects found on their own that the views judged together but step 2 would not
-merge, unless the Gaussian is disputed; a disputed Gaussian takes another label than its own. The
+merge, unless the Gaussian is disputed; a disputed Gaussian takes another label than its own: its nearest
+confident one's, or, with none near, the one its views put it in. The
 long-term step lowers disputed Gaussians' confidence by their share of disputing views (Eq. 16's decrease
 with P_2D-3D = that share, P_conf = 0), so that Algorithm 1 re-decides them. A Gaussian whose label changed
 (step 3, or Algorithm 1: ``EvidenceFeed.after_refine``) is judged afresh under its new label.
@@ -757,8 +759,9 @@ class EvidenceModel:
         disputed[d[near_segment(seg, px[d], main[lab[d]], EDGE)]] = False
         gm.aux("ev_own").index_add_(0, g[own], torch.ones(int(own.sum()), device=g.device))
         gm.aux("ev_disputed").index_add_(0, g[disputed], torch.ones(int(disputed.sum()), device=g.device))
-        # unlabelled Gaussians: one candidate label each (Misra-Gries), for the fill
-        u = ~labelled & (vote >= 0)
+        # one candidate label each (Misra-Gries) of the segments the views put a Gaussian in: an unlabelled
+        # one's for the fill, a disputed one's for Algorithm 1 (``disputed_labels``)
+        u = vote >= 0
         gu, v = g[u], vote[u].float()
         cand, n = gm.aux("ev_cand", -1.0), gm.aux("ev_cand_n")
         c, k = cand[gu], n[gu]
@@ -779,6 +782,20 @@ class EvidenceModel:
         """[N] bool: labelled Gaussians whose views disputed their label (``DISPUTE`` of at least
         ``min_views``)."""
         return (self.disputed_ratio(gm) >= DISPUTE) & (gm.labels >= 0)
+
+    def disputed_labels(self, gm) -> torch.Tensor:
+        """[N] int64: for the disputed Gaussians, the label the views most often put them in (their
+        candidate, where it still exists and is not their own); -1 elsewhere."""
+        cand, n = gm.aux("ev_cand", -1.0), gm.aux("ev_cand_n")
+        c = cand.long()
+        if c.numel() == 0:
+            return c
+        ok = self.disputed(gm) & (c >= 0) & (n >= 1) & (c != gm.labels.long())
+        size = max(_n_labels(gm), int(c.max().clamp(min=0)) + 1)
+        alive = torch.zeros(size, dtype=torch.bool, device=gm.device)
+        alive[gm.labels[gm.labels >= 0].long()] = True
+        ok &= alive[c.clamp(min=0)]
+        return torch.where(ok, c, torch.full_like(c, -1))
 
     def restart_votes(self, gm, rows: torch.Tensor) -> None:
         """The Gaussian-level votes of ``rows`` ([N] bool: Gaussians whose label just changed) start afresh:

@@ -119,16 +119,18 @@ class EvidenceFeed:
         for entry in views:
             self.judge(gm, entry.keyframe, entry.segments, entry.scores, entry, revisit=True)
 
-    def before_refine(self, gm: GaussianMap) -> tuple[torch.Tensor | None, torch.Tensor | None]:
-        """The merges and splits the views decide, then what guards Algorithm 1: (separated, exposed), None
-        where the evidence is not collected."""
+    def before_refine(
+        self, gm: GaussianMap
+    ) -> tuple[torch.Tensor | None, torch.Tensor | None, torch.Tensor | None]:
+        """The merges and splits the views decide, then what guards Algorithm 1: (separated, exposed,
+        exposed_to), None where the evidence is not collected."""
         if not self.enabled:
-            return None, None
+            return None, None, None
         with self.timings.section("evidence"):
             for k, v in self.model.decide(gm).items():
                 self.timings.add(f"evidence_{k}", v)
             self._labels_before_alg1 = gm.labels.clone()  # what Algorithm 1 starts from
-            return self.model.separation_test(gm), self.model.disputed(gm)
+            return self.model.separation_test(gm), self.model.disputed(gm), self.model.disputed_labels(gm)
 
     def after_refine(self, gm: GaussianMap) -> None:
         """The Gaussians whose label Algorithm 1 changed (since ``before_refine``) are judged afresh under

@@ -432,7 +432,7 @@ class Mapper(MapperFiles):
         """Global 3D refinement (Algorithm 1), deciding from the views' evidence where it is collected
         (merges and splits first, then Algorithm 1 guarded by the same views); counts to the timings."""
         cfg = self.cfg
-        separated, exposed = self.evidence.before_refine(self.map)
+        separated, exposed, exposed_to = self.evidence.before_refine(self.map)
         with self.timings.section("refine"):
             st = global_refinement(
                 self.map.means,
@@ -446,6 +446,7 @@ class Mapper(MapperFiles):
                 include_unlabeled=cfg.refine.unlabeled,
                 separated=separated,
                 exposed=exposed,
+                exposed_to=exposed_to,
             )
         self.evidence.after_refine(self.map)
         for k, v in st.as_dict().items():

@@ -27,7 +27,11 @@ separated its own (``separated``): under SAM-like segments a small object's conf
 table's or the wall's label although a view had shown it apart. Gaussians that the views put in another
 label's segment (``exposed``, disputed) are not held back, and take the label of their nearest confident
 Gaussian of *another* label at the individual level: their own label is what the views contradict, and the
-nearest confident neighbour of a wide run-over part is often one of its own label's Gaussians.
+nearest confident neighbour of a wide run-over part is often one of its own label's Gaussians. Where no
+confident Gaussian of another label lies within ``r_search``, they take the label that the disputing views
+put them in (``exposed_to``: the one holding most of the segments they put the Gaussian in): the middle of
+a picture that an earlier view absorbed into the wall has the wall's Gaussians only, and the picture's own,
+made later around them, are not yet confident.
 
 Schedule (``mapper.py``): every ``mapping.refine.every`` = 6 keyframes, right after the long-term update,
 as Sec. IV-A.4 states ("performed every 6 keyframes"); Sec. III-B.3's "intervals determined by cumulative
@@ -92,13 +96,16 @@ def global_refinement(
     include_unlabeled: bool = False,
     separated: Callable[[torch.Tensor, torch.Tensor], torch.Tensor] | None = None,
     exposed: torch.Tensor | None = None,
+    exposed_to: torch.Tensor | None = None,
 ) -> RefineStats:
     """Algorithm 1 on the map's tensors; ``labels`` [N] int32 and ``conf`` [N] are modified in place.
     ``include_unlabeled``: whether unlabeled Gaussians (label -1, confidence 0) take part in the individual
     refinement. ``separated(a, b)`` (beyond the paper, ``mapping.evidence``): [M] bool for label tensors
     a, b [M], whether the views clearly separated label a from label b; no cluster or Gaussian of label a
     takes label b then (``evidence.EvidenceModel.separation_test``). ``exposed`` [N] bool: Gaussians that
-    the guard does not cover (the views disputed their label), which take another label than their own."""
+    the guard does not cover (the views disputed their label), which take another label than their own.
+    ``exposed_to`` [N] int: for those, the label the disputing views put them in (-1: none), taken where no
+    confident Gaussian of another label lies within ``r_search``."""
     stats = RefineStats()
     n = means.shape[0]
     if n == 0:
@@ -113,7 +120,7 @@ def global_refinement(
     if not include_unlabeled:
         cand &= labels >= 0
     stats.individual_gaussians = _individual_level(
-        means, labels, conf, cand, free, tau_high, r_search, separated
+        means, labels, conf, cand, free, tau_high, r_search, separated, exposed_to
     )
     return stats
 
@@ -160,10 +167,11 @@ def _cluster_level(
     return processed
 
 
-def _individual_level(means, labels, conf, cand, free, tau_high, r_search, separated) -> int:
+def _individual_level(means, labels, conf, cand, free, tau_high, r_search, separated, exposed_to=None) -> int:
     """Algorithm 1's individual level (in place, on the labels after the cluster level): each candidate
-    takes its nearest confident Gaussian's label (a disputed one, in ``free``, another label than its own).
-    -> the number relabelled."""
+    takes its nearest confident Gaussian's label (a disputed one, in ``free``, another label than its own,
+    or, with none within ``r_search``, the label its views put it in, ``exposed_to``). -> the number
+    relabelled."""
     high = torch.nonzero((conf > tau_high) & (labels >= 0)).squeeze(1)
     if not high.numel():
         return 0
@@ -181,7 +189,16 @@ def _individual_level(means, labels, conf, cand, free, tau_high, r_search, separ
         if separated is not None and not other:
             ok = ~separated(labels[tgt].long(), labels[src].long())
             tgt, src = tgt[ok], src[ok]
-        labels[tgt] = labels[src]
+        new = labels[src]
+        if other and exposed_to is not None:
+            # a patch of an object that an earlier view gave its support's label (a picture absorbed into the
+            # wall) has no confident Gaussian of the object's label near its middle: the views name it. Only
+            # there: taking the views' label first lost cups and a bottle on the long scans
+            # (docs/consistency.md measures both)
+            rest = q[~found]
+            rest = rest[(exposed_to[rest] >= 0) & (exposed_to[rest] != labels[rest].long())]
+            tgt, new = torch.cat([tgt, rest]), torch.cat([new, exposed_to[rest].to(labels.dtype)])
+        labels[tgt] = new
         conf[tgt] = 0.5
         done += int(tgt.numel())
     return done
