@@ -368,7 +368,7 @@ def test_a_patch_that_an_earlier_view_gave_the_walls_label_takes_the_label_its_v
     ev.lower_disputed(gm)
     args = dict(tau_low=0.3, tau_high=0.7, r_search=0.12, separated=ev.separation_test(gm), exposed=exposed)
     labels, conf = gm.labels.clone(), gm.confidences.clone()
-    global_refinement(gm.means, labels, conf, **args)  # fmt: skip
+    global_refinement(gm.means, labels, conf, **args)
     assert torch.all(labels[middle] == 0)  # the picture's Gaussians are below tau_high: no neighbour
     global_refinement(gm.means, gm.labels, gm.confidences, exposed_to=to, **args)
     assert torch.all(gm.labels[middle] == 2) and torch.all(gm.confidences[middle] == 0.5)

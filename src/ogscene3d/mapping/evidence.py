@@ -370,6 +370,19 @@ def _n_labels(gm) -> int:
     return max(int(gm.next_label), int(lab.max()) + 1 if lab.numel() else 0, 1)
 
 
+def _candidates(gm) -> tuple[torch.Tensor, torch.Tensor]:
+    """Each Gaussian's candidate label (the Misra-Gries counter of the labels holding most of its segments)
+    [N] int64, and [N] bool where it is one: counted at least once more than the others, and still a label
+    of the map (a merge may have retired it)."""
+    c, n = gm.aux("ev_cand", -1.0).long(), gm.aux("ev_cand_n")
+    ok = (c >= 0) & (n >= 1)
+    if not bool(ok.any()):
+        return c, ok
+    alive = torch.zeros(max(_n_labels(gm), int(c.max()) + 1), dtype=torch.bool, device=gm.device)
+    alive[gm.labels[gm.labels >= 0].long()] = True
+    return c, ok & alive[c.clamp(min=0)]
+
+
 @dataclass
 class EvidenceStats(Counters):
     views: int = 0
@@ -783,18 +796,12 @@ class EvidenceModel:
         ``min_views``)."""
         return (self.disputed_ratio(gm) >= DISPUTE) & (gm.labels >= 0)
 
-    def disputed_labels(self, gm) -> torch.Tensor:
-        """[N] int64: for the disputed Gaussians, the label the views most often put them in (their
-        candidate, where it still exists and is not their own); -1 elsewhere."""
-        cand, n = gm.aux("ev_cand", -1.0), gm.aux("ev_cand_n")
-        c = cand.long()
-        if c.numel() == 0:
-            return c
-        ok = self.disputed(gm) & (c >= 0) & (n >= 1) & (c != gm.labels.long())
-        size = max(_n_labels(gm), int(c.max().clamp(min=0)) + 1)
-        alive = torch.zeros(size, dtype=torch.bool, device=gm.device)
-        alive[gm.labels[gm.labels >= 0].long()] = True
-        ok &= alive[c.clamp(min=0)]
+    def disputed_labels(self, gm, disputed: torch.Tensor | None = None) -> torch.Tensor:
+        """[N] int64: for the disputed Gaussians (``disputed``, as :meth:`disputed` gives it, computed when
+        not passed), the label the views most often put them in (their candidate, where it still exists and
+        is not their own); -1 elsewhere."""
+        c, ok = _candidates(gm)
+        ok &= (self.disputed(gm) if disputed is None else disputed) & (c != gm.labels.long())
         return torch.where(ok, c, torch.full_like(c, -1))
 
     def restart_votes(self, gm, rows: torch.Tensor) -> None:
@@ -1164,19 +1171,12 @@ class EvidenceModel:
 
     def _fill(self, gm) -> int:
         """Step 4: unlabelled Gaussians take the label their segments voted for, where it still exists."""
-        cand, n = gm.aux("ev_cand", -1.0), gm.aux("ev_cand_n")
-        rows = torch.nonzero((gm.labels < 0) & (cand >= 0) & (n >= 1)).squeeze(1)
-        if rows.numel() == 0:
-            return 0
-        c = cand[rows].long()
-        alive = torch.zeros(max(_n_labels(gm), int(c.max()) + 1), dtype=torch.bool, device=gm.device)
-        alive[gm.labels[gm.labels >= 0].long()] = True
-        ok = alive[c]
-        rows, c = rows[ok], c[ok]
-        gm.labels[rows] = c.to(gm.labels.dtype)
+        c, ok = _candidates(gm)
+        rows = torch.nonzero((gm.labels < 0) & ok).squeeze(1)
+        gm.labels[rows] = c[rows].to(gm.labels.dtype)
         gm.confidences[rows] = 0.5
-        cand[rows] = -1.0
-        n[rows] = 0.0
+        gm.aux("ev_cand", -1.0)[rows] = -1.0
+        gm.aux("ev_cand_n")[rows] = 0.0
         return int(rows.numel())
 
     # ------------------------------------------------------------------ Algorithm 1's guard

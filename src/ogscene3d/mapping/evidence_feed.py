@@ -130,7 +130,8 @@ class EvidenceFeed:
             for k, v in self.model.decide(gm).items():
                 self.timings.add(f"evidence_{k}", v)
             self._labels_before_alg1 = gm.labels.clone()  # what Algorithm 1 starts from
-            return self.model.separation_test(gm), self.model.disputed(gm), self.model.disputed_labels(gm)
+            exposed = self.model.disputed(gm)
+            return self.model.separation_test(gm), exposed, self.model.disputed_labels(gm, exposed)
 
     def after_refine(self, gm: GaussianMap) -> None:
         """The Gaussians whose label Algorithm 1 changed (since ``before_refine``) are judged afresh under
