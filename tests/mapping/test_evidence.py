@@ -14,6 +14,7 @@ from ogscene3d.mapping.evidence import (
     EvidenceModel,
     PairTable,
     _agglomerate,
+    _cannot_link_join,
     _components,
     _rows_near,
     near_segment,
@@ -157,6 +158,50 @@ def test_an_object_linked_in_pieces_is_split_whole(device):
     out = ev.decide(gm)
     assert out["part_splits"] == 1 and out["new_labels"] == 1
     assert float((gm.labels[vase] == 1).float().mean()) > 0.7
+
+
+def test_a_sparsely_seen_object_whose_pieces_no_pair_links_splits_off_whole(device, monkeypatch):
+    """The vase of the test above with no pair among its cells judged at all (far views see a few of an
+    object's cells at a time, none of them neighbours). Each cell alone holds far less than the segments
+    that put it apart; the cells that views put apart from the anchor and that lie within ``SPARSE_REACH``
+    of each other are judged as one, and the vase splits off whole. Without that reach it stays."""
+    import ogscene3d.mapping.evidence as evidence
+
+    for reach, splits in ((0.01, 0), (evidence.SPARSE_REACH, 1)):
+        monkeypatch.setattr(evidence, "SPARSE_REACH", reach)
+        gm, vase, ev, in_a, in_b = vase_seen_apart(device)
+        ev.cell_pairs.vals[in_a | in_b] = 0.0  # no view judged a pair with a vase cell
+        assert ev.decide(gm)["part_splits"] == splits
+        assert float((gm.labels[vase] == 1).float().mean()) > (0.7 if splits else -1)
+        assert torch.all(gm.labels[vase] == 0) or splits
+
+
+def test_a_large_piece_joined_by_nearness_alone_stays_with_its_part(device):
+    """A third of a wall that SAM cuts at the same place in every view, its cells judged in no pair: joined
+    by nearness it would be coherent, but a group of more than 1/``SMALL`` of its part is a surface cut,
+    not an object the part took in, and it stays."""
+    gm, _ = plane_map(device)
+    ev = with_parts(gm, [])
+    cut = np.ones((H, W), np.int32)
+    cut[:, 44:] = 2
+    ev.observe(gm, WHOLE, POSE, K, DEPTH)
+    for _ in range(3):
+        ev.observe(gm, cut, POSE, K, DEPTH)
+    piece = pixel_mask(gm, range(44, W), range(0, H))
+    cells = torch.unique(gm.aux("ev_cell").long()[piece])
+    a, b = ev.cell_pairs.pairs()
+    ev.cell_pairs.vals[torch.isin(a, cells) | torch.isin(b, cells)] = 0.0
+    assert 0.2 < float(piece.float().mean()) < 0.5
+    assert ev.decide(gm)["part_splits"] == 0
+    assert torch.all(gm.labels == 0)
+
+
+def test_a_join_by_nearness_keeps_groups_held_apart_in_different_sets(device):
+    """``_cannot_link_join``: the pairs joined first (1-2) hold; of the nearness pairs in order, 2-3 joins,
+    3-4 would put 1 and 4 (a pair held apart) in one set and is left out, 5-6 joins."""
+    t = lambda *v: torch.tensor(v, dtype=torch.long, device=device)  # noqa: E731
+    na, nb = _cannot_link_join(t(1), t(2), t(2, 3, 5), t(3, 4, 6), t(4), t(1))
+    assert na.tolist() == [2, 5] and nb.tolist() == [3, 6]
 
 
 def test_random_cuts_do_not_split_a_part(device):

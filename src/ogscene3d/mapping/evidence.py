@@ -68,8 +68,12 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
    SAM merges small objects into their support in most frames, so the few that show them apart are the
    evidence. Neighbouring groups that the views put apart from the anchor (``split_ratio`` of their views),
    and held together more often than apart, are judged as one: an object that its first view merged with its
-   support is often linked in pieces only. Where the part's largest group leaves and holds ``INHERIT`` (two
-   thirds) of the part, it takes the part's history with other parts along.
+   support is often linked in pieces only. So are such groups within ``SPARSE_REACH`` of each other that no
+   cell pair links (far views sample a bookshelf's cells 10 cm apart), where their segments hold more than
+   ``COHERE`` * ``TINY`` of the part, no pair of their cells was held apart as often as together, and the
+   joined group stays at most 1/``SMALL`` of its part (a wall that SAM cuts at one place is no object).
+   Where the part's largest group leaves and holds ``INHERIT`` (two thirds) of the part, it takes the part's
+   history with other parts along.
 2. *group parts into labels*, from scratch every time, greedily by firm support: two groups merge when the
    views held them together (firmly, or weakly with no separation ever) and separated them in at most
    ``mapping.evidence.separation`` (0.5) of their firm views. Two groups that views showed apart from
@@ -123,6 +127,7 @@ MIN_VISIBLE = 3  # visible Gaussians a part needs to be judged
 MIN_PART = 4
 CELL_MIN = 1  # visible Gaussians (in its segment) a cell needs to be judged
 NEIGHBOURS = 8  # a cell's neighbours in a view: its nearest visible cells (within ``radius``)
+SPARSE_REACH = 2.0  # candidate groups of a part this many times ``radius`` apart are judged as one
 COHERE = 2.0  # apart segments hold at most this many times the group
 TINY = 8  # a group of fewer Gaussians counts as this many for COHERE and SMALL
 CLEAR = 8  # visible Gaussians of the smaller of two parts from which a view's judgement of them counts whole
@@ -268,6 +273,48 @@ def _components(n: int, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     an, bn = a.cpu().numpy(), b.cpu().numpy()
     adj = coo_matrix((np.ones(an.size), (an, bn)), shape=(n, n))
     return torch.as_tensor(connected_components(adj, directed=False)[1], dtype=torch.long, device=a.device)
+
+
+def _cannot_link_join(
+    ga: torch.Tensor, gb: torch.Tensor, na: torch.Tensor, nb: torch.Tensor, xa: torch.Tensor, xb: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The pairs (na[i], nb[i]) whose joins, made in order after those of (ga, gb), put no cannot-link pair
+    (xa[j], xb[j]) in one set; returns the kept pairs."""
+    parent: dict[int, int] = {}
+
+    def find(v: int) -> int:
+        parent.setdefault(v, v)
+        while parent[v] != v:
+            parent[v] = parent[parent[v]]
+            v = parent[v]
+        return v
+
+    for u, v in zip(ga.tolist(), gb.tolist()):
+        ru, rv = find(u), find(v)
+        if ru != rv:
+            parent[ru] = rv
+    cannot: dict[int, set[int]] = {}
+    for u, v in zip(xa.tolist(), xb.tolist()):
+        cannot.setdefault(u, set()).add(v)
+        cannot.setdefault(v, set()).add(u)
+    members: dict[int, list[int]] = {}
+    for v in set(cannot):
+        members.setdefault(find(v), []).append(v)
+    keep = []
+    for i, (u, v) in enumerate(zip(na.tolist(), nb.tolist())):
+        ru, rv = find(u), find(v)
+        if ru == rv:
+            continue
+        mu, mv = members.get(ru, []), members.get(rv, [])
+        if any(find(w) == rv for m in mu for w in cannot[m]):
+            continue
+        parent[ru] = rv
+        if mu:
+            members[rv] = mv + mu
+            members.pop(ru, None)
+        keep.append(i)
+    idx = torch.tensor(keep, dtype=torch.long, device=na.device)
+    return na[idx], nb[idx]
 
 
 def _agglomerate(n: int, a: torch.Tensor, b: torch.Tensor, t: torch.Tensor, x: torch.Tensor,
@@ -873,11 +920,12 @@ class EvidenceModel:
         # an object that its first view merged with its support is often linked in pieces only (each cell
         # judged by few views, at a sparse sampling): neighbouring pieces that the views put apart from the
         # part's anchor, and that the views hold together more often than apart, are one candidate, judged
-        # whole (a fragment alone holds less than the segments that separate it, and would look like a cut)
+        # whole (a fragment alone holds less than the segments that separate it, and would look like a cut);
+        # so are the pieces of a sparsely sampled object, near each other but linked by no pair
         cand = clearly_apart(st)
-        grow = cand[comp[a]] & cand[comp[b]] & (comp[a] != comp[b]) & (t > x)
-        if bool(grow.any()):
-            comp = _components(n_cells, comp[a[grow]], comp[b[grow]])[comp]
+        joined = self._join_candidates(comp, cand, st["size"], a, b, t, x, mass)
+        if joined is not None:
+            comp = joined
             st = self._component_votes(comp, mass)
         comp_mass, together, apart = st["mass"], st["together"], st["apart"]
         comp_part = torch.full((n_cells,), -1, dtype=torch.long, device=self.device)
@@ -934,6 +982,64 @@ class EvidenceModel:
                                                    apart[go_ids]], 1))  # fmt: skip
         self.part_touched[new] = True
         return int(go_ids.numel())
+
+    def _join_candidates(
+        self,
+        comp: torch.Tensor,
+        cand: torch.Tensor,
+        size: torch.Tensor,
+        a: torch.Tensor,
+        b: torch.Tensor,
+        t: torch.Tensor,
+        x: torch.Tensor,
+        mass: torch.Tensor,
+    ) -> torch.Tensor | None:
+        """Candidate groups (``cand`` per component) judged as one: a new component per cell, or None where
+        none join. Neighbouring candidates (a cell pair ``a``, ``b`` between them) join where the views held
+        the pair together more often than apart (``t`` > ``x``). Far views sample an object sparsely (a
+        bookshelf's cells 10 cm apart), and its pieces are often not neighbours at all: candidates of one
+        part within ``SPARSE_REACH`` of each other join too, nearest first, where their segments hold more
+        than ``COHERE`` * ``TINY`` of the part (``size``; a small object's segment takes in the support just
+        behind it, and a piece of the support would join it: a cup and its nightstand), unless a pair of
+        their cells was held apart at least as often as together, and only while the joined group stays at
+        most 1/``SMALL`` of its part (a larger one is a surface cut at the same place in most views)."""
+        n_cells = int(comp.numel())
+        pair = cand[comp[a]] & cand[comp[b]] & (comp[a] != comp[b])
+        grow = pair & (t > x)
+        ga, gb = comp[a[grow]], comp[b[grow]]
+        wide = cand & (size > COHERE * TINY)
+        na, nb = self._near_candidates(comp, wide, SPARSE_REACH * max(self.radius, self.cell))
+        if na.numel():
+            held_apart = pair & (x > 0) & (x >= t)
+            na, nb = _cannot_link_join(ga, gb, na, nb, comp[a[held_apart]], comp[b[held_apart]])
+        if ga.numel() == 0 and na.numel() == 0:
+            return None
+        joined = _components(n_cells, torch.cat([ga, na]), torch.cat([gb, nb]))[comp]
+        if na.numel():
+            own = _components(n_cells, ga, gb)[comp] if ga.numel() else comp
+            jm = torch.zeros(n_cells, device=self.device).index_add_(0, joined, mass)
+            pm = torch.zeros(self.next_part, device=self.device).index_add_(0, self.cell_part, mass)
+            big = SMALL * jm[joined] > pm[self.cell_part]
+            joined = torch.unique(torch.where(big, own + n_cells, joined), return_inverse=True)[1]
+        return joined
+
+    def _near_candidates(
+        self, comp: torch.Tensor, cand: torch.Tensor, reach: float
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Pairs of candidate components (``cand`` per component) of one judged part whose cells lie within
+        ``reach`` of each other, the nearest pairs first."""
+        lc = torch.nonzero(self.part_touched[self.cell_part] & cand[comp]).squeeze(1)
+        if lc.numel() < 2:
+            return lc[:0], lc[:0]
+        centre = (self.cell_vox[lc].float() + 0.5) * self.cell
+        pt = self.cell_part[lc]
+        nbr, dist = knn(centre, centre, NEIGHBOURS + 1, reach, pt, pt, "same")
+        i = torch.arange(lc.numel(), device=lc.device)[:, None].expand_as(nbr)
+        ok = nbr >= 0
+        na, nb, d = comp[lc[i[ok]]], comp[lc[nbr[ok].clamp(min=0)]], dist[ok]
+        keep = na != nb
+        order = torch.argsort(d[keep], stable=True)
+        return na[keep][order], nb[keep][order]
 
     def _component_votes(self, comp: torch.Tensor, mass: torch.Tensor) -> dict[str, torch.Tensor]:
         """Per component of cells (``comp`` per cell; ``mass`` Gaussians per cell): its Gaussians, its cells'
