@@ -167,13 +167,16 @@ def test_a_sparsely_seen_object_whose_pieces_no_pair_links_splits_off_whole(devi
     of each other are judged as one, and the vase splits off whole. Without that reach it stays."""
     import ogscene3d.mapping.evidence as evidence
 
-    for reach, splits in ((0.01, 0), (evidence.SPARSE_REACH, 1)):
-        monkeypatch.setattr(evidence, "SPARSE_REACH", reach)
+    def decide_unpaired() -> tuple[int, torch.Tensor]:
         gm, vase, ev, in_a, in_b = vase_seen_apart(device)
         ev.cell_pairs.vals[in_a | in_b] = 0.0  # no view judged a pair with a vase cell
-        assert ev.decide(gm)["part_splits"] == splits
-        assert float((gm.labels[vase] == 1).float().mean()) > (0.7 if splits else -1)
-        assert torch.all(gm.labels[vase] == 0) or splits
+        return ev.decide(gm)["part_splits"], gm.labels[vase]
+
+    splits, vase_labels = decide_unpaired()
+    assert splits == 1 and float((vase_labels == 1).float().mean()) > 0.7
+    monkeypatch.setattr(evidence, "SPARSE_REACH", 0.01)  # no reach beyond a cell
+    splits, vase_labels = decide_unpaired()
+    assert splits == 0 and torch.all(vase_labels == 0)
 
 
 def test_a_large_piece_joined_by_nearness_alone_stays_with_its_part(device):

@@ -127,7 +127,7 @@ MIN_VISIBLE = 3  # visible Gaussians a part needs to be judged
 MIN_PART = 4
 CELL_MIN = 1  # visible Gaussians (in its segment) a cell needs to be judged
 NEIGHBOURS = 8  # a cell's neighbours in a view: its nearest visible cells (within ``radius``)
-SPARSE_REACH = 2.0  # candidate groups of a part this many times ``radius`` apart are judged as one
+SPARSE_REACH = 2.0  # candidate groups of a part within this many times ``radius`` are judged as one
 COHERE = 2.0  # apart segments hold at most this many times the group
 TINY = 8  # a group of fewer Gaussians counts as this many for COHERE and SMALL
 CLEAR = 8  # visible Gaussians of the smaller of two parts from which a view's judgement of them counts whole
@@ -1036,7 +1036,7 @@ class EvidenceModel:
         nbr, dist = knn(centre, centre, NEIGHBOURS + 1, reach, pt, pt, "same")
         i = torch.arange(lc.numel(), device=lc.device)[:, None].expand_as(nbr)
         ok = nbr >= 0
-        na, nb, d = comp[lc[i[ok]]], comp[lc[nbr[ok].clamp(min=0)]], dist[ok]
+        na, nb, d = comp[lc[i[ok]]], comp[lc[nbr[ok]]], dist[ok]
         keep = na != nb
         order = torch.argsort(d[keep], stable=True)
         return na[keep][order], nb[keep][order]
