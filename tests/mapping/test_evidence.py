@@ -18,6 +18,7 @@ from ogscene3d.mapping.evidence import (
     _components,
     _rows_near,
     near_segment,
+    segment_borders,
     spill_pixels,
 )
 from ogscene3d.mapping.evidence_feed import EvidenceFeed
@@ -958,3 +959,91 @@ def test_a_parts_anchor_is_its_largest_group_once_decided(device):
     label = int(torch.mode(own).values)
     assert label != 0 and float((own == label).float().mean()) > 0.7
     assert float((gm.labels[~table] == 0).float().mean()) > 0.9
+
+
+def switch_on_wall(
+    device: str, segments: list[np.ndarray], grain: bool = True, other_from: int = W
+) -> tuple[torch.Tensor, ...]:
+    """A wall of one part whose cells are 0.2 m (a light switch's few Gaussians share them with the wall's),
+    seen in ``segments`` in turn; ``grain=False`` leaves the Gaussians' grain out of the decision; the
+    Gaussians from pixel column ``other_from`` on carry another label. Returns the decision's splits, the
+    labels of the Gaussians in pixels [20:24, 30:34] (the switch) and the rest's of label 0."""
+    gm, _ = plane_map(device)
+    gm.labels[pixel_uv(gm)[0] >= other_from] = 1
+    ev = EvidenceModel(gm.device, EvidenceConfig(cell=0.2))
+    ev.new_parts(1)
+    ev.assign(gm, torch.arange(len(gm), device=gm.device), torch.zeros(len(gm), dtype=torch.long))
+    if not grain:
+        ev._split_small = lambda gm: 0
+    for seg in segments:
+        ev.observe(gm, seg, POSE, K, DEPTH)
+    switch = pixel_mask(gm, range(30, 34), range(20, 24))
+    rest = ~switch & (pixel_uv(gm)[0] < other_from)
+    return ev.decide(gm)["part_splits"], gm.labels[switch], gm.labels[rest]
+
+
+def test_a_switch_whose_cells_hold_the_walls_gaussians_splits_at_the_gaussians_grain(device):
+    """A switch of 9 Gaussians that the views show in a segment of its own in three views of nine: each of
+    its cells holds more of the wall than of it, so no cell is ever in its segment, and only its Gaussians,
+    in a small segment of their label beside that label's main one, can tell. They split off whole, under
+    one new label; the wall keeps its own."""
+    apart = np.ones((H, W), np.int32)
+    apart[20:24, 30:34] = 2
+    views = [WHOLE] + [apart, WHOLE, WHOLE] * 3
+    n, switch, wall = switch_on_wall(device, views)
+    assert int(switch.numel()) == 9 and n == 1
+    assert torch.all(switch == switch[0]) and int(switch[0]) != 0 and torch.all(wall == 0)
+    n, switch, _ = switch_on_wall(device, views, grain=False)
+    assert n == 0 and torch.all(switch == 0)
+
+
+def test_small_segments_elsewhere_in_every_view_or_larger_than_their_shared_piece_split_nothing(device):
+    """Small segments of the wall at another place in every view (SAM's small cuts) put no Gaussian in one
+    twice. Two larger ones (about 60 Gaussians each) that overlap in a corner put the corner's Gaussians in
+    a small segment twice, but those segments held far more than the corner (``COHERE``): no split."""
+    views = [WHOLE]
+    for u in range(4, 60, 8):
+        seg = np.ones((H, W), np.int32)
+        seg[4:10, u : u + 6] = 2
+        views += [seg, WHOLE]
+    n, _, wall = switch_on_wall(device, views)
+    assert n == 0 and torch.all(wall == 0)
+    views = [WHOLE]
+    for v, u in ((10, 20), (15, 25)):
+        seg = np.ones((H, W), np.int32)
+        seg[v : v + 10, u : u + 10] = 2
+        views += [seg, WHOLE]
+    n, _, wall = switch_on_wall(device, views)
+    assert n == 0 and torch.all(wall == 0)
+
+
+def test_fewer_gaussians_than_tiny_shown_small_are_no_object(device):
+    """Two segments of a few pixels inside their label's main one, in three views of nine, hold 4 Gaussians
+    each: fewer than ``TINY`` (a book's spine that takes in Gaussians of the books beside it), so no split."""
+    apart = np.ones((H, W), np.int32)
+    apart[20:23, 30:33] = 2
+    apart[20:23, 50:53] = 3
+    n, switch, wall = switch_on_wall(device, [WHOLE] + [apart, WHOLE, WHOLE] * 3)
+    assert n == 0 and torch.all(switch == 0) and torch.all(wall == 0)
+
+
+def test_a_piece_cut_off_an_objects_side_is_not_shown_small(device):
+    """The same 9 Gaussians in a segment of their own in three views, but at the side of their label's
+    region, jutting into another object's segment (SAM cutting a chair's back off its seat): most of the
+    piece's border is with the other object, not with its label's main segment, so the views do not show it
+    small, and it keeps its label. Only a segment inside its label's main one shows a switch in a wall."""
+    apart = np.ones((H, W), np.int32)
+    apart[:, 30:] = 3
+    apart[20:24, 30:34] = 2
+    whole = np.ones((H, W), np.int32)
+    whole[:, 34:] = 3
+    views = [whole] + [apart, whole, whole] * 3
+    n, switch, rest = switch_on_wall(device, views, other_from=34)
+    assert n == 0 and torch.all(switch == 0) and torch.all(rest == 0)
+
+
+def test_segment_borders_count_the_pixel_edges_between_segments(device):
+    seg = torch.tensor([[1, 1, 2], [1, 3, 2], [0, 3, 3]], device=device)
+    b = segment_borders(seg, 4)
+    assert b[1, 2] == 1 and b[2, 1] == 1 and b[1, 3] == 2 and b[2, 3] == 2 and b[3, 3] == 0
+    assert int(b[0].sum()) == 0 and int(b[:, 0].sum()) == 0

@@ -45,9 +45,11 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
 * *Gaussians*: a labelled Gaussian in a segment other than its label's main one (the segment holding most of
   the label) that is mostly other labels, and more than ``EDGE`` pixels from the main one, is *disputed* in
   that view (the label ran over into a neighbour);
-  one in its label's main segment is *confirmed*. Every Gaussian counts the label holding most of its
-  segment (a Misra-Gries counter: one candidate per Gaussian), which an unlabelled one takes at the fill and
-  a disputed one in Algorithm 1 (``disputed_labels``).
+  one in its label's main segment is *confirmed*; one in a segment that is mostly its own label but not the
+  label's main one, at most 1/``SMALL`` of it and inside it (half its border with it), is *shown small* (a
+  light switch that the wall's label took in, on its own; the segment's size noted). Every Gaussian counts
+  the label holding most of its segment (a Misra-Gries counter: one candidate per Gaussian), which an
+  unlabelled one takes at the fill and a disputed one in Algorithm 1 (``disputed_labels``).
 
 **Decide** (``decide``, at the global refinement, before Algorithm 1):
 
@@ -73,7 +75,11 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
    ``COHERE`` * ``TINY`` of the part, no pair of their cells was held apart as often as together, and the
    joined group stays at most 1/``SMALL`` of its part (a wall that SAM cuts at one place is no object).
    Where the part's largest group leaves and holds ``INHERIT`` (two thirds) of the part, it takes the part's
-   history with other parts along.
+   history with other parts along. At the Gaussians' grain: a part's Gaussians shown small in
+   ``SPLIT_VIEWS`` views, within a cell of each other, become a part of their own where there are ``TINY``
+   of them, small beside their part (``SMALL``), and the segments that showed them small held about them
+   (``COHERE``): a light switch of a dozen Gaussians shares its cells with the wall's, so no cell is ever
+   in its segment (``_split_small``).
 2. *group parts into labels*, from scratch every time, greedily by firm support: two groups merge when the
    views held them together (firmly, or weakly with no separation ever) and separated them in at most
    ``mapping.evidence.separation`` (0.5) of their firm views. Two groups that views showed apart from
@@ -166,6 +172,17 @@ def spill_pixels(seg: torch.Tensor) -> torch.Tensor:
     inner = torch.bincount(flat[~edge.reshape(-1)], minlength=area.numel())
     big = 2 * inner >= area
     return edge & big[flat].reshape(seg.shape)
+
+
+def segment_borders(seg: torch.Tensor, n: int) -> torch.Tensor:
+    """[n,n] the pixel edges (4-neighbours) between each two segments of ``seg`` [H,W] (ids 0..n-1; 0, no
+    segment, borders nothing), counted in both rows."""
+    a = torch.cat([seg[:, :-1].reshape(-1), seg[:-1, :].reshape(-1)])
+    b = torch.cat([seg[:, 1:].reshape(-1), seg[1:, :].reshape(-1)])
+    k = (a != b) & (a > 0) & (b > 0)
+    a, b = a[k], b[k]
+    key = torch.cat([a * n + b, b * n + a])
+    return torch.bincount(key, minlength=n * n).reshape(n, n)
 
 
 def near_segment(seg: torch.Tensor, px: torch.Tensor, ids: torch.Tensor, radius: int) -> torch.Tensor:
@@ -817,6 +834,18 @@ class EvidenceModel:
         disputed = labelled & ~own & (vote != lab)
         d = torch.nonzero(disputed).squeeze(1)
         disputed[d[near_segment(seg, px[d], main[lab[d]], EDGE)]] = False
+        # in a small segment of its own label inside that label's main one: a light switch that the wall's
+        # label took in, shown on its own (its cells mix with the wall's, so only its Gaussians can tell).
+        # A piece at an object's side (SAM cuts a chair's back off its seat) borders other segments as well
+        n_vis = torch.bincount(s, minlength=S)
+        m = main[lab.clamp(min=0)].clamp(min=0)
+        small = labelled & ~own & (vote == lab) & (SMALL * n_vis[s] <= n_vis[m])
+        if bool(small.any()):
+            border = segment_borders(seg, S)
+            inside = border[s, m]
+            small &= (inside > 0) & (2 * inside >= border[s].sum(1))
+        gm.aux("ev_small").index_add_(0, g[small], torch.ones(int(small.sum()), device=g.device))
+        gm.aux("ev_small_seg").index_add_(0, g[small], n_vis[s[small]].float())
         gm.aux("ev_own").index_add_(0, g[own], torch.ones(int(own.sum()), device=g.device))
         gm.aux("ev_disputed").index_add_(0, g[disputed], torch.ones(int(disputed.sum()), device=g.device))
         # one candidate label each (Misra-Gries) of the segments the views put a Gaussian in: an unlabelled
@@ -856,7 +885,7 @@ class EvidenceModel:
         they were cast about the former label. Kept, they would dispute the new one as well (a Gaussian at a
         bottle's foot that the views disputed as the bottle's, in the table's segment, would count as
         disputed as the table's too, and each refinement would move it to the other label)."""
-        for name in ("ev_own", "ev_disputed"):
+        for name in ("ev_own", "ev_disputed", "ev_small", "ev_small_seg"):
             gm.aux(name)[rows] = 0.0
 
     def lower_disputed(self, gm) -> int:
@@ -879,7 +908,7 @@ class EvidenceModel:
         if len(gm) == 0:
             return out
         self.ensure_cells(gm)
-        out["part_splits"] = self._split_parts(gm)
+        out["part_splits"] = self._split_parts(gm) + self._split_small(gm)
         parts = self.parts_of(gm)
         has = parts >= 0
         # each part's former label: the one most of its Gaussians carry (-1: mostly unlabelled)
@@ -981,6 +1010,46 @@ class EvidenceModel:
         self.part_pairs.add(new, old, torch.stack([together[go_ids], torch.zeros_like(together[go_ids]),
                                                    apart[go_ids]], 1))  # fmt: skip
         self.part_touched[new] = True
+        return int(go_ids.numel())
+
+    def _split_small(self, gm) -> int:
+        """Step 1 at the Gaussians' grain: a part's Gaussians that views showed small (in a small segment of
+        their own label, inside the label's main one) in ``SPLIT_VIEWS`` views, within a cell of each other,
+        become a part where there are ``TINY`` of them, those segments held about them (``COHERE``) and they
+        are small beside their part (``SMALL``): a light switch whose few Gaussians share their cells with
+        the wall's. Fewer are a few pixels' segment, which takes in its support's Gaussians behind it (a
+        book's spine picks Gaussians of the books beside it). Returns how many parts it made."""
+        n_small = gm.aux("ev_small")
+        part = self.parts_of(gm)
+        rows = torch.nonzero((n_small >= SPLIT_VIEWS) & (gm.labels >= 0) & (part >= 0)).squeeze(1)
+        if rows.numel() < TINY:
+            return 0
+        pr = part[rows]
+        nb, _ = knn(gm.means[rows], gm.means[rows], NEIGHBOURS, self.cell, pr, pr, "same")
+        i = torch.arange(rows.numel(), device=rows.device)[:, None].expand_as(nb)
+        ok = nb >= 0
+        _, comp = torch.unique(_components(int(rows.numel()), i[ok], nb[ok]), return_inverse=True)
+        n_comp = int(comp.max()) + 1
+        size = torch.bincount(comp, minlength=n_comp).float()
+        votes = torch.zeros(n_comp, device=self.device).index_add_(0, comp, n_small[rows])
+        held = torch.zeros(n_comp, device=self.device).index_add_(0, comp, gm.aux("ev_small_seg")[rows])
+        comp_part = torch.zeros(n_comp, dtype=torch.long, device=self.device).scatter_(0, comp, pr)
+        part_mass = torch.bincount(part[part >= 0], minlength=self.next_part).float()
+        go = (size >= TINY) & (held / votes <= COHERE * size) & (SMALL * size <= part_mass[comp_part])
+        go_ids = torch.nonzero(go).squeeze(1)
+        if go_ids.numel() == 0:
+            return 0
+        lut = torch.full((n_comp,), -1, dtype=torch.long, device=self.device)
+        lut[go_ids] = self.new_parts(int(go_ids.numel()))
+        moved = lut[comp] >= 0
+        self.assign(gm, rows[moved], lut[comp][moved])
+        # the views that showed it small separated it from its former part (no view held it firmly there)
+        apart = votes[go_ids] / size[go_ids]
+        zero = torch.zeros_like(apart)
+        self.part_pairs.add(lut[go_ids], comp_part[go_ids], torch.stack([zero, zero, apart], 1))
+        self.part_touched[lut[go_ids]] = True
+        for name in ("ev_small", "ev_small_seg"):  # they showed it small in its former part
+            gm.aux(name)[rows[moved]] = 0.0
         return int(go_ids.numel())
 
     def _join_candidates(
