@@ -1043,7 +1043,7 @@ class EvidenceModel:
         lut[go_ids] = self.new_parts(int(go_ids.numel()))
         moved = lut[comp] >= 0
         self.assign(gm, rows[moved], lut[comp][moved])
-        # the views that showed it small separated it from its former part (no view held it firmly there)
+        # the views that showed it small separated it from its former part
         apart = votes[go_ids] / size[go_ids]
         zero = torch.zeros_like(apart)
         self.part_pairs.add(lut[go_ids], comp_part[go_ids], torch.stack([zero, zero, apart], 1))
