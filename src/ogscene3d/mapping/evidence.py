@@ -121,6 +121,7 @@ from .local import group_top2
 from .longterm import label_edges
 from .merge import visible_pixels
 from .neighbors import knn
+from .refine import connected_clusters
 from .timings import Counters
 
 CONTAIN = 0.8  # a part is judged in a view when this share of its visible Gaussians lies in one segment
@@ -1025,10 +1026,7 @@ class EvidenceModel:
         if rows.numel() < TINY:
             return 0
         pr = part[rows]
-        nb, _ = knn(gm.means[rows], gm.means[rows], NEIGHBOURS, self.cell, pr, pr, "same")
-        i = torch.arange(rows.numel(), device=rows.device)[:, None].expand_as(nb)
-        ok = nb >= 0
-        _, comp = torch.unique(_components(int(rows.numel()), i[ok], nb[ok]), return_inverse=True)
+        comp = connected_clusters(gm.means[rows], pr, self.cell, NEIGHBOURS - 1)  # k counts the point itself
         n_comp = int(comp.max()) + 1
         size = torch.bincount(comp, minlength=n_comp).float()
         votes = torch.zeros(n_comp, device=self.device).index_add_(0, comp, n_small[rows])
