@@ -61,9 +61,10 @@ def pixel_mask(gm: GaussianMap, us: range, vs: range) -> torch.Tensor:
     return (u >= us.start) & (u < us.stop) & (v >= vs.start) & (v < vs.stop)
 
 
-def with_parts(gm: GaussianMap, masks: list[torch.Tensor]) -> EvidenceModel:
-    """An evidence model whose parts are ``masks`` (one part each, in order) and one more for the rest."""
-    ev = EvidenceModel(gm.device, EvidenceConfig(cell=0.05))
+def with_parts(gm: GaussianMap, masks: list[torch.Tensor], cell: float = 0.05) -> EvidenceModel:
+    """An evidence model (cells of ``cell`` metres) whose parts are ``masks`` (one part each, in order) and
+    one more for the rest."""
+    ev = EvidenceModel(gm.device, EvidenceConfig(cell=cell))
     part = torch.full((len(gm),), len(masks), dtype=torch.long, device=gm.device)
     for i, m in enumerate(masks):
         part[m] = i
@@ -970,9 +971,7 @@ def switch_on_wall(
     labels of the Gaussians in pixels [20:24, 30:34] (the switch) and the rest's of label 0."""
     gm, _ = plane_map(device)
     gm.labels[pixel_uv(gm)[0] >= other_from] = 1
-    ev = EvidenceModel(gm.device, EvidenceConfig(cell=0.2))
-    ev.new_parts(1)
-    ev.assign(gm, torch.arange(len(gm), device=gm.device), torch.zeros(len(gm), dtype=torch.long))
+    ev = with_parts(gm, [], cell=0.2)
     if not grain:
         ev._split_small = lambda gm: 0
     for seg in segments:
