@@ -28,6 +28,7 @@ from functools import partial
 
 import numpy as np
 
+from .._disjoint_sets import DisjointSets
 from .procedural import (
     STRUCTURAL_CLASSES,
     TEXTURE_NOISE,
@@ -508,23 +509,17 @@ def _stops(room: Room, floor: _FreeFloor, rng: np.random.Generator) -> list[_Sto
     their direction from the room centre."""
     big = [o for o in room.zup_objects if o.class_name in LARGE_FURNITURE and o.support_relation == "on"]
     boxes = [o.aabb for o in big]
-    parent = list(range(len(big)))
-
-    def find(i: int) -> int:
-        while parent[i] != i:
-            i = parent[i]
-        return i
-
+    sets = DisjointSets()
     for i in range(len(big)):
         for j in range(i + 1, len(big)):
             gap = np.maximum(
                 np.maximum(boxes[i][0][:2] - boxes[j][1][:2], boxes[j][0][:2] - boxes[i][1][:2]), 0
             )
             if np.linalg.norm(gap) < 0.5:
-                parent[find(i)] = find(j)
+                sets.union(i, j)
     groups: dict[int, list[int]] = {}
     for i in range(len(big)):
-        groups.setdefault(find(i), []).append(i)
+        groups.setdefault(sets.find(i), []).append(i)
     stops = []
     for members in groups.values():
         lo = np.min([boxes[i][0] for i in members], 0)

@@ -116,6 +116,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from .._disjoint_sets import DisjointSets
 from ..config import EvidenceConfig
 from .local import group_top2
 from .longterm import label_edges
@@ -298,19 +299,12 @@ def _cannot_link_join(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """The pairs (na[i], nb[i]) whose joins, made in order after those of (ga, gb), put no cannot-link pair
     (xa[j], xb[j]) in one set; returns the kept pairs."""
-    parent: dict[int, int] = {}
-
-    def find(v: int) -> int:
-        parent.setdefault(v, v)
-        while parent[v] != v:
-            parent[v] = parent[parent[v]]
-            v = parent[v]
-        return v
-
+    sets = DisjointSets()
+    find = sets.find
     for u, v in zip(ga.tolist(), gb.tolist()):
         ru, rv = find(u), find(v)
         if ru != rv:
-            parent[ru] = rv
+            sets.attach(ru, rv)
     cannot: dict[int, set[int]] = {}
     for u, v in zip(xa.tolist(), xb.tolist()):
         cannot.setdefault(u, set()).add(v)
@@ -326,7 +320,7 @@ def _cannot_link_join(
         mu, mv = members.get(ru, []), members.get(rv, [])
         if any(find(w) == rv for m in mu for w in cannot[m]):
             continue
-        parent[ru] = rv
+        sets.attach(ru, rv)
         if mu:
             members[rv] = mv + mu
             members.pop(ru, None)
@@ -1198,14 +1192,8 @@ class EvidenceModel:
             if self._mergeable(v, owned[i] and owned[j]):
                 heap.append((-self._score(v), i, j))
         heapq.heapify(heap)
-        parent: dict[int, int] = {}
-
-        def find(x: int) -> int:
-            while parent.get(x, x) != x:
-                parent[x] = parent.get(parent[x], parent[x])
-                x = parent[x]
-            return x
-
+        sets = DisjointSets()
+        find = sets.find
         while heap:
             neg, i, j = heapq.heappop(heap)
             ri, rj = find(i), find(j)
@@ -1220,7 +1208,7 @@ class EvidenceModel:
                 continue
             if len(group_adj.get(ri, {})) < len(group_adj.get(rj, {})):
                 ri, rj = rj, ri
-            parent[rj] = ri
+            sets.attach(rj, ri)
             owned[ri] = owned[ri] or owned[rj]
             dri = group_adj.setdefault(ri, {})
             for k, vk in group_adj.pop(rj, {}).items():
@@ -1234,7 +1222,7 @@ class EvidenceModel:
                 if self._mergeable(acc, owned[ri] and owned[k]):
                     heapq.heappush(heap, (-self._score(acc), ri, k))
             dri.pop(rj, None)
-        if not parent:
+        if not sets:
             return root
         top = torch.tensor([find(x) for x in range(n)], dtype=torch.long, device=dev)
         return top[root]

@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
+from .._disjoint_sets import DisjointSets
 from .local import CASE_AMBIGUOUS, CASE_MATCHED, CASE_NOVEL, coherence
 
 if TYPE_CHECKING:
@@ -149,24 +150,13 @@ def merge_labels(labels: torch.Tensor, pairs: torch.Tensor) -> dict[int, int]:
     Chains (a~b, b~c) collapse into one label. Returns {dropped label: kept label}."""
     if pairs.numel() == 0:
         return {}
-    parent: dict[int, int] = {}
-
-    def find(x: int) -> int:
-        while parent.get(x, x) != x:
-            x = parent[x]
-        return x
-
     # a handful of pairs per keyframe: a union-find over them in Python is cheap
+    sets = DisjointSets()
     for a, b in pairs.tolist():
-        ra, rb = find(a), find(b)
-        if ra != rb:
-            parent[rb] = ra
-    groups: dict[int, list[int]] = {}
-    for x in set(parent) | set(parent.values()):
-        groups.setdefault(find(x), []).append(x)
+        sets.union(b, a)
     mapping: dict[int, int] = {}
-    for members in groups.values():
-        ids = torch.tensor(sorted(set(members)), dtype=labels.dtype, device=labels.device)
+    for members in sets.groups().values():
+        ids = torch.tensor(members, dtype=labels.dtype, device=labels.device)
         counts = (labels[:, None] == ids[None, :]).sum(0)
         keep = int(ids[int(torch.argmax(counts))])
         for m in ids.tolist():
