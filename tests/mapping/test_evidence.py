@@ -115,6 +115,31 @@ def test_spill_pixels_leave_small_segments_whole(device):
     assert not out[0, 0]
 
 
+def test_a_view_does_not_hold_together_two_parts_that_it_made(device):
+    """Two parts (the plane's halves) made by keyframe 5: its own view, one segment over both, does not hold
+    them together (its segment made them); keyframe 6's view, the same segment, does. A part of keyframe 3's
+    Gaussians is held with one of keyframe 5's by keyframe 5's view."""
+    gm, _ = plane_map(device)
+    u, _ = pixel_uv(gm)
+    left = u < 32
+    ev = with_parts(gm, [left])
+    gm.origin_kf[:] = 5
+    pair = (torch.tensor([0], device=device), torch.tensor([1], device=device))
+    ev.observe(gm, WHOLE, POSE, K, DEPTH, view=5)
+    assert ev.part_pairs.get(*pair)[0, :2].sum().item() == 0.0
+    ev.observe(gm, WHOLE, POSE, K, DEPTH, view=6)
+    assert ev.part_pairs.get(*pair)[0, EvidenceModel.FIRM].item() > 0.5
+
+    gm.origin_kf[left] = 3
+    ev = with_parts(gm, [left])
+    ev.observe(gm, WHOLE, POSE, K, DEPTH, view=5)
+    assert ev.part_pairs.get(*pair)[0, EvidenceModel.FIRM].item() > 0.5
+    ev = with_parts(gm, [left])  # two segments: the view that made one of them still separates them
+    gm.origin_kf[:] = 5
+    ev.observe(gm, halves(), POSE, K, DEPTH, view=5)
+    assert ev.part_pairs.get(*pair)[0, EvidenceModel.APART].item() > 0.5
+
+
 def test_a_part_that_the_first_view_merged_is_split_by_later_views(device):
     """One part (label 0) over a cabinet front and the vase on it: the first view held them in one segment;
     three later views segment the vase apart. The vase's cells become a part, and a label, of their own."""

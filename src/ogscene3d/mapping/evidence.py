@@ -583,7 +583,8 @@ class EvidenceModel:
         view sees (centres in the image, at the observed depth within ``margin``). ``segments`` [H,W] ids
         (0 = none); ``pose`` c2w, ``K``, ``depth`` the view's (metres); ``weights`` each segment's weight (its
         rescaled SAM score; 1 where missing); ``view``: the keyframe index of this view, whose own new
-        Gaussians cast no Gaussian-level vote (their label came from these segments). A view judged again
+        Gaussians cast no Gaussian-level vote (their label came from these segments), and whose own parts it
+        does not hold together (they came from its segments). A view judged again
         (``revisit``: the long-term step's memory views) votes only where it has not yet: for the cells and
         parts made since it was last judged, and the Gaussians made after it, so that no view counts twice
         for anything however often it is revisited."""
@@ -628,7 +629,8 @@ class EvidenceModel:
         if g.numel() == 0:
             return n_visible
         n_seg = torch.bincount(s, minlength=S).float()
-        self._observe_parts(self.cell_part[cell], gm.labels[g].long(), s, n_seg, w, since[1])
+        mine = (gm.origin_kf[g] == view) if (view is not None and not revisit) else None
+        self._observe_parts(self.cell_part[cell], gm.labels[g].long(), s, n_seg, w, since[1], mine)
         self._observe_gaussians(gm, g, s, S, px[ok], seg, view, revisit)
         return n_visible
 
@@ -746,11 +748,14 @@ class EvidenceModel:
         n_seg: torch.Tensor,
         w: torch.Tensor,
         since: int = 0,
+        mine: torch.Tensor | None = None,
     ) -> None:
         """Part pairs of one view (``part``, ``lab``, ``s`` per visible Gaussian). A part's share of a segment
         is its label's (the parts of one object share the segment that shows it): each of two parts in one
         segment is a real part of it when its label holds ``min_part`` of it, and a view separates two parts
-        in two segments where each one's label is the main one of its segment (``MAJOR``)."""
+        in two segments where each one's label is the main one of its segment (``MAJOR``). ``mine`` (per
+        visible Gaussian, None on a revisit): made by this view; two parts made of its Gaussians alone are
+        not held together by it."""
         P, S = self.next_part, int(n_seg.numel())
         n_part = torch.bincount(part, minlength=P)
         top, cnt = _majority(part, s, P)
@@ -780,6 +785,13 @@ class EvidenceModel:
         si, sj = sp[i], sp[j]
         both = judged[p[i]] & judged[p[j]]
         same = (si == sj) & both
+        if mine is not None:
+            # two parts that this view made: its segment made them (a part per piece of it apart in space), so
+            # its hold restates that. A first view that merged a cabinet with a piece of the sofa beside it
+            # held them once; no later view judged them together, and once the piece went to the sofa's label
+            # that one view merged the cabinet into it
+            made = torch.bincount(part[mine], minlength=P) == n_part
+            same &= ~(made[p[i]] & made[p[j]])
         big = share >= self.min_part
         firm = same & big[i] & big[j]
         # apart: each part's label the main one in its segment. A SAM cut through a wall puts a small piece of
