@@ -302,9 +302,7 @@ def _cannot_link_join(
     sets = DisjointSets()
     find = sets.find
     for u, v in zip(ga.tolist(), gb.tolist()):
-        ru, rv = find(u), find(v)
-        if ru != rv:
-            sets.attach(ru, rv)
+        sets.union(u, v)
     cannot: dict[int, set[int]] = {}
     for u, v in zip(xa.tolist(), xb.tolist()):
         cannot.setdefault(u, set()).add(v)
