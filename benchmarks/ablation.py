@@ -327,9 +327,11 @@ def map_rows(cfg, scene: Path, seed_out: Path, ablations: list[str], device, reu
     return out
 
 
-def score_seed(scene: Path, seed_out: Path, res: dict[str, dict], yardstick: bool) -> dict:
-    """Every row's scores (see the module docstring), the yardstick's, and the objects of wrong first
-    views."""
+def score_seed(
+    scene: Path, seed_out: Path, res: dict[str, dict], yardstick: bool, depth_snap: float | None = None
+) -> dict:
+    """Every row's scores (see the module docstring), the yardstick's (on the segments moved onto the depth
+    edges by ``depth_snap``, as the rows' mapper moved them), and the objects of wrong first views."""
     gt = load_ground_truth(scene)
     wrong = wrong_first_views(scene)
     rows: dict[str, dict] = {}
@@ -353,7 +355,7 @@ def score_seed(scene: Path, seed_out: Path, res: dict[str, dict], yardstick: boo
         from yardstick import _frames, at_points, strong_consensus
 
         t0 = time.perf_counter()
-        pts, lab = strong_consensus(_frames(scene))
+        pts, lab = strong_consensus(_frames(scene, depth_snap))
         inst = instance_scores(pts, lab, gt)
         cls, fcls = class_scores(pts, lab, gt)
         rows[YARDSTICK] = {
@@ -504,7 +506,8 @@ def main(argv: list[str] | None = None) -> int:
                 f"{layout} {seed}: mapping {len(ablations)} rows of {scene} ...", file=sys.stderr, flush=True
             )
             res = map_rows(cfg, scene, seed_out, ablations, args.device, args.reuse)
-            per_seed[seed] = score_seed(scene, seed_out, res, not args.no_yardstick)
+            snap = cfg.segmentation.depth_snap
+            per_seed[seed] = score_seed(scene, seed_out, res, not args.no_yardstick, snap)
             for row, m in per_seed[seed].items():
                 if row in ("wrong_first_views", "classes"):
                     continue

@@ -5,6 +5,8 @@ the whole stream, and so tells how much instance accuracy the same segments allo
 beat (docs/consistency.md measures it); the earlier, weaker yardstick (MaskClustering's consensus without a
 separation rule) is ``_maskclustering.py`` (``--weak``).
 
+* **Segments** are the mapper's: each frame's segment borders moved onto the depth edges
+  (``ogscene3d.segmentation.snap_to_depth_edges``, ``segmentation.depth_snap``).
 * **Scene points**: every frame's valid pixels are back-projected and pooled in ``VOXEL`` voxels. A frame
   *sees* the voxels its pixels fall in, and puts a voxel in a mask when all its segmented pixels there are of
   that one segment (else it is on a boundary, seen but in no mask, as MaskClustering's boundary points).
@@ -94,10 +96,19 @@ def _distinct(x: np.ndarray) -> np.ndarray:
     return x[np.r_[True, x[1:] != x[:-1]]] if x.size else x
 
 
-def _frames(scene: str | Path) -> list:
+def _frames(scene: str | Path, depth_snap: float | None = None) -> list:
+    """The scene's frames, their segments' borders moved onto the depth edges as the mapper moves them
+    (``depth_snap`` metres; None: the default ``segmentation.depth_snap``; 0: not moved)."""
+    from ogscene3d.config import Config
     from ogscene3d.datasets import open_dataset
+    from ogscene3d.segmentation import snap_to_depth_edges
 
-    return list(open_dataset(scene, kind="synthetic"))
+    frames = list(open_dataset(scene, kind="synthetic"))
+    margin = Config().segmentation.depth_snap if depth_snap is None else depth_snap
+    for fr in frames:
+        if fr.segments is not None and margin > 0:
+            fr.segments = snap_to_depth_edges(fr.segments, fr.depth, margin)
+    return frames
 
 
 @dataclass

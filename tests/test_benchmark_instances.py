@@ -272,3 +272,21 @@ def test_strong_yardstick_labels_at_a_maps_points():
     query = np.array([[0.2, 0, 0], [0.9, 0.1, 0], [1.8, 0, 0], [-5.0, 0, 0]])
     assert yardstick.at_points(points, labels, query).tolist() == [0, 1, -1, 0]
     assert yardstick.at_points(np.zeros((0, 3)), np.zeros(0, np.int64), query).tolist() == [-1] * 4
+
+
+def test_strong_yardstick_reads_the_segments_as_the_mapper_moves_them(tmp_path):
+    """The yardstick's frames carry the segments moved onto the depth edges by the mapper's setting (the
+    default, or the one given; 0: as stored)."""
+    from ogscene3d.config import Config
+    from ogscene3d.datasets import make_synthetic_scene
+    from ogscene3d.segmentation import snap_to_depth_edges
+
+    scene = make_synthetic_scene(tmp_path / "room", 1, 4, 64, 48)
+    stored = yardstick._frames(scene, 0.0)
+    moved = yardstick._frames(scene)
+    margin = Config().segmentation.depth_snap
+    changed = 0
+    for a, b in zip(stored, moved, strict=True):
+        assert np.array_equal(b.segments, snap_to_depth_edges(a.segments, a.depth, margin))
+        changed += int((a.segments != b.segments).sum())
+    assert changed > 0  # the simulated segments run past some edges

@@ -369,6 +369,12 @@ class SegmentationConfig:
     classical_normal_weight: float = setting(
         100.0, "classical: dE per unit of (1 - cos) between neighbouring normals", _NONNEG
     )
+    depth_snap: float = setting(
+        0.05,
+        "metres: a segment's border pixel whose depth continues a neighbouring segment's surface within "
+        "this, and not its own, moves to that segment (segmentation/depth_edges.py); 0 = off",
+        _NONNEG,
+    )
     simulated_noise: NoiseLevel = setting(
         "default", "simulated SAM from ground-truth instances (synthetic scenes only): how far it errs"
     )

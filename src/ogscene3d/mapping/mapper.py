@@ -124,7 +124,7 @@ class Mapper(MapperFiles):
         )
         self.recent: deque[MemoryEntry] = deque(maxlen=max(1, cfg.optimize.memory_frames))
         self.timings = Timings(self.device)
-        self.segments = KeyframeSegments(config, segmenter, self.timings)
+        self.segments = KeyframeSegments(config, segmenter, self.timings, self.device)
         self.frames_seen = 0
         # the dataset position after the latest frame given to process (mapped, untracked or not a
         # keyframe): where a resumed run goes on, also when frames were skipped

@@ -1,5 +1,6 @@
 """A keyframe's 2D segments: the frame's precomputed ones, else those of the run's segmenter (built from
-the config on first need), else none (geometry only)."""
+the config on first need), else none (geometry only); their borders moved onto the frame's depth edges
+(``segmentation.depth_snap``, ``segmentation/depth_edges.py``), so that every stage reads those segments."""
 
 from __future__ import annotations
 
@@ -7,11 +8,13 @@ import logging
 from dataclasses import replace
 
 import numpy as np
+import torch
 
 from ..config import Config
 from ..errors import DataError
 from ..frame import Frame
 from ..segmentation import make_segmenter
+from ..segmentation.depth_edges import snap_to_depth_edges
 from .timings import Timings
 
 log = logging.getLogger(__name__)
@@ -39,15 +42,26 @@ def segment_ids(ids, frame: Frame, source: str) -> np.ndarray:
 class KeyframeSegments:
     """``segments(frame)``: the keyframe's segment ids, scores and (where a detector named them) class
     names; ``segmenter`` is the one given, or the one built from ``config.segmentation`` for frames that
-    carry no segments."""
+    carry no segments; ``device``: where the borders are moved onto the depth edges (the mapper's)."""
 
-    def __init__(self, config: Config, segmenter, timings: Timings) -> None:
+    def __init__(
+        self, config: Config, segmenter, timings: Timings, device: torch.device | None = None
+    ) -> None:
         self.config = config
+        self.device = device if device is not None else torch.device("cpu")
         self.segmenter = segmenter
         self.timings = timings
         self._warned = False
 
     def __call__(self, frame: Frame) -> tuple[np.ndarray | None, dict[int, float], dict[int, str]]:
+        ids, scores, names = self._segments(frame)
+        margin = self.config.segmentation.depth_snap
+        if ids is not None and margin > 0:
+            with self.timings.section("segment"):
+                ids = snap_to_depth_edges(ids, frame.depth, margin, device=self.device)
+        return ids, scores, names
+
+    def _segments(self, frame: Frame) -> tuple[np.ndarray | None, dict[int, float], dict[int, str]]:
         if frame.segments is not None:
             ids = segment_ids(frame.segments, frame, "frame.segments")
             return ids, dict(frame.segment_scores), dict(frame.segment_names)

@@ -9,6 +9,7 @@ __getattr__, __dir__ = lazy_exports(
     {
         ".base": ["Segmentation", "Segmenter"],
         ".classical": ["ClassicalSegmenter"],
+        ".depth_edges": ["snap_to_depth_edges"],
         ".detector_onnx": ["DetectorOnnx"],
         ".factory": ["make_segmenter"],
         ".fusion": ["SamDetectorSegmenter", "fuse_segmentations"],
@@ -26,6 +27,7 @@ __all__ = [
     "Segmenter",
     "fuse_segmentations",
     "make_segmenter",
+    "snap_to_depth_edges",
     "read_segmentation",
     "read_segments",
     "write_segments",
