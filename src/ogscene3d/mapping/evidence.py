@@ -74,6 +74,10 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
    cell pair links (far views sample a bookshelf's cells 10 cm apart), where their segments hold more than
    ``COHERE`` * ``TINY`` of the part, no pair of their cells was held apart as often as together, and the
    joined group stays at most 1/``SMALL`` of its part (a wall that SAM cuts at one place is no object).
+   Such groups too far apart for that pass ``COHERE`` together: each where its segments held at most
+   ``COHERE`` times the groups of its part that segments of about the same size (within ``COHERE``) put apart,
+   while those stay at most 1/``SMALL`` of the part (a bookshelf's boards in the floor's part: the segments
+   that put each board apart held them all).
    Where the part's largest group leaves and holds ``INHERIT`` (two thirds) of the part, it takes the part's
    history with other parts along. At the Gaussians' grain: a part's Gaussians shown small in
    ``SPLIT_VIEWS`` views, within a cell of each other, become a part of their own where there are ``TINY``
@@ -974,11 +978,13 @@ class EvidenceModel:
         # the segments that put it apart held about the component itself, not a larger piece of its part:
         # SAM cuts a floor at random places, each time another piece; an object is its segment every time
         coherent = st["size"] <= COHERE * counted
+        part_mass = torch.zeros(self.next_part, device=self.device)
+        part_mass.index_add_(0, comp_part[comp_mass > 0], comp_mass[comp_mass > 0])
+        coherent |= self._coherent_together(clearly_apart(st) & (comp_mass > 0) & (comp_part >= 0), comp_part,
+                                            comp_mass, st["size"], counted, part_mass)  # fmt: skip
         # a component that is small beside the rest of its part (a light switch in the wall's part, a cup in
         # the table's) splits on the views that showed it apart, however many absorbed it: SAM merges small
         # objects into their support in most frames, so those frames say little (the yardstick's rule)
-        part_mass = torch.zeros(self.next_part, device=self.device)
-        part_mass.index_add_(0, comp_part[comp_mass > 0], comp_mass[comp_mass > 0])
         small = SMALL * counted <= part_mass[comp_part.clamp(min=0)]
         go = coherent & (clearly_apart(st) | (small & (apart >= SPLIT_VIEWS)))
         # a part keeps the components that stay; if none would, its largest
@@ -1053,6 +1059,32 @@ class EvidenceModel:
         for name in ("ev_small", "ev_small_seg"):  # they showed it small in its former part
             gm.aux(name)[rows[moved]] = 0.0
         return int(go_ids.numel())
+
+    @staticmethod
+    def _coherent_together(
+        cand: torch.Tensor,
+        comp_part: torch.Tensor,
+        mass: torch.Tensor,
+        size: torch.Tensor,
+        counted: torch.Tensor,
+        part_mass: torch.Tensor,
+    ) -> torch.Tensor:
+        """Per component: a candidate (put apart from its part's anchor, ``cand``) whose segments held more
+        than ``COHERE`` times it, but at most ``COHERE`` times the candidates of its part that segments of
+        about the same size (within ``COHERE``) put apart, where those stay at most 1/``SMALL`` of the part:
+        the pieces of one object that its first view merged with a large part, too far apart to be joined
+        (a bookshelf's boards in the floor's part; the segments that put each board apart held them all)."""
+        out = torch.zeros_like(cand)
+        fail = torch.nonzero(cand & (size > COHERE * counted)).squeeze(1)
+        if fail.numel() == 0:
+            return out
+        allc = torch.nonzero(cand).squeeze(1)
+        s_f, s_a = size[fail][:, None], size[allc][None, :]
+        alike = comp_part[allc][None, :] == comp_part[fail][:, None]
+        alike &= (s_a <= COHERE * s_f) & (COHERE * s_a >= s_f)
+        joint = (alike * mass[allc][None, :]).sum(1)
+        out[fail] = (size[fail] <= COHERE * joint) & (SMALL * joint <= part_mass[comp_part[fail]])
+        return out
 
     def _join_candidates(
         self,
