@@ -968,6 +968,8 @@ class EvidenceModel:
         comp_mass, together, apart = st["mass"], st["together"], st["apart"]
         comp_part = torch.full((n_cells,), -1, dtype=torch.long, device=self.device)
         comp_part[comp] = self.cell_part
+        present = (comp_mass > 0) & (comp_part >= 0)
+        put_apart = clearly_apart(st)
         best = torch.full((self.next_part,), -1.0, device=self.device)
         best.scatter_reduce_(0, comp_part[comp_mass > 0], comp_mass[comp_mass > 0], reduce="amax")
         is_main = (comp_mass >= best[comp_part.clamp(min=0)]) & (comp_part >= 0)
@@ -980,17 +982,16 @@ class EvidenceModel:
         coherent = st["size"] <= COHERE * counted
         part_mass = torch.zeros(self.next_part, device=self.device)
         part_mass.index_add_(0, comp_part[comp_mass > 0], comp_mass[comp_mass > 0])
-        coherent |= self._coherent_together(clearly_apart(st) & (comp_mass > 0) & (comp_part >= 0), comp_part,
-                                            comp_mass, st["size"], counted, part_mass)  # fmt: skip
+        coherent |= self._coherent_together(put_apart & present, comp_part, comp_mass, st["size"], counted,
+                                            part_mass)  # fmt: skip
         # a component that is small beside the rest of its part (a light switch in the wall's part, a cup in
         # the table's) splits on the views that showed it apart, however many absorbed it: SAM merges small
         # objects into their support in most frames, so those frames say little (the yardstick's rule)
         small = SMALL * counted <= part_mass[comp_part.clamp(min=0)]
-        go = coherent & (clearly_apart(st) | (small & (apart >= SPLIT_VIEWS)))
+        go = coherent & (put_apart | (small & (apart >= SPLIT_VIEWS)))
         # a part keeps the components that stay; if none would, its largest
         stays = torch.zeros(self.next_part, dtype=torch.bool, device=self.device)
-        live = (comp_mass > 0) & (comp_part >= 0)
-        live &= self.part_touched[comp_part.clamp(min=0)]
+        live = present & self.part_touched[comp_part.clamp(min=0)]
         stays[comp_part[live & ~go]] = True
         go &= live & (stays[comp_part.clamp(min=0)] | ~is_main)
         # the part's largest component may tie with another: one of them stays (the smaller id)
