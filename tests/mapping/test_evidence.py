@@ -1099,3 +1099,40 @@ def test_the_pieces_of_an_object_too_far_apart_to_join_split_off_on_the_segments
         out = ev.decide(gm)
         split = [float((gm.labels[b] != 0).float().mean()) > 0.7 for b in boards]
         assert split == [not small_part] * 3, out
+
+
+def test_coherent_together_matches_its_dense_reference():
+    """``_coherent_together`` finds each failing candidate's like-sized candidates of its part by binary
+    search; the dense [fail x candidates] comparison it replaces is the reference, on random components with
+    tied sizes, sizes exactly COHERE apart and several parts."""
+    from ogscene3d.mapping.evidence import COHERE, SMALL, TINY
+
+    def dense(cand, comp_part, mass, size, counted, part_mass):
+        out = torch.zeros_like(cand)
+        fail = torch.nonzero(cand & (size > COHERE * counted)).squeeze(1)
+        allc = torch.nonzero(cand).squeeze(1)
+        if fail.numel() == 0:
+            return out
+        s_f, s_a = size[fail][:, None], size[allc][None, :]
+        alike = comp_part[allc][None, :] == comp_part[fail][:, None]
+        alike &= (s_a <= COHERE * s_f) & (COHERE * s_a >= s_f)
+        joint = (alike * mass[allc][None, :]).sum(1)
+        out[fail] = (size[fail] <= COHERE * joint) & (SMALL * joint <= part_mass[comp_part[fail]])
+        return out
+
+    rng = np.random.default_rng(3)
+    decided = 0
+    for _ in range(40):
+        n = int(rng.integers(1, 300))
+        comp_part = torch.as_tensor(rng.integers(-1, 6, n))
+        mass = torch.as_tensor(rng.integers(0, 60, n).astype(np.float32))
+        # sizes on a coarse grid, so that ties and pairs exactly COHERE apart occur
+        size = torch.as_tensor(rng.integers(1, 40, n).astype(np.float32) * 4.0)
+        cand = torch.as_tensor(rng.random(n) < 0.5) & (comp_part >= 0) & (mass > 0)
+        counted = mass.clamp(min=TINY)
+        part_mass = torch.zeros(6).index_add_(0, comp_part.clamp(min=0), mass * (comp_part >= 0)) * 3
+        got = EvidenceModel._coherent_together(cand, comp_part, mass, size, counted, part_mass)
+        want = dense(cand, comp_part, mass, size, counted, part_mass)
+        assert torch.equal(got, want)
+        decided += int(got.sum())
+    assert decided > 20  # the cases exercise both outcomes, not only "no"

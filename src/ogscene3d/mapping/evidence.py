@@ -1079,11 +1079,19 @@ class EvidenceModel:
         fail = torch.nonzero(cand & (size > COHERE * counted)).squeeze(1)
         if fail.numel() == 0:
             return out
+        # the candidates' mass within a size window of the same part, by binary search over the candidates
+        # sorted by (part, size rank): memory and time grow with the candidates, not with fail x candidates
         allc = torch.nonzero(cand).squeeze(1)
-        s_f, s_a = size[fail][:, None], size[allc][None, :]
-        alike = comp_part[allc][None, :] == comp_part[fail][:, None]
-        alike &= (s_a <= COHERE * s_f) & (COHERE * s_a >= s_f)
-        joint = (alike * mass[allc][None, :]).sum(1)
+        by_size, order = torch.sort(size[allc], stable=True)
+        rank = torch.empty_like(order)
+        rank[order] = torch.arange(order.numel(), device=order.device)
+        stride = order.numel() + 1
+        key, at = torch.sort(comp_part[allc] * stride + rank)
+        cum = torch.cat([mass.new_zeros(1), torch.cumsum(mass[allc][at], 0)])
+        lo = torch.searchsorted(by_size, size[fail] / COHERE)  # COHERE * s_a >= s_f
+        hi = torch.searchsorted(by_size, size[fail] * COHERE, right=True)  # s_a <= COHERE * s_f
+        base = comp_part[fail] * stride
+        joint = cum[torch.searchsorted(key, base + hi)] - cum[torch.searchsorted(key, base + lo)]
         out[fail] = (size[fail] <= COHERE * joint) & (SMALL * joint <= part_mass[comp_part[fail]])
         return out
 
