@@ -11,6 +11,9 @@ from ogscene3d.gaussians import GaussianMap
 from ogscene3d.mapping.evidence import (
     ANCHOR,
     CLEAR,
+    COHERE,
+    SMALL,
+    TINY,
     EvidenceModel,
     PairTable,
     _agglomerate,
@@ -1105,14 +1108,13 @@ def test_coherent_together_matches_its_dense_reference():
     """``_coherent_together`` finds each failing candidate's like-sized candidates of its part by binary
     search; the dense [fail x candidates] comparison it replaces is the reference, on random components with
     tied sizes, sizes exactly COHERE apart and several parts."""
-    from ogscene3d.mapping.evidence import COHERE, SMALL, TINY
 
     def dense(cand, comp_part, mass, size, counted, part_mass):
         out = torch.zeros_like(cand)
         fail = torch.nonzero(cand & (size > COHERE * counted)).squeeze(1)
-        allc = torch.nonzero(cand).squeeze(1)
         if fail.numel() == 0:
             return out
+        allc = torch.nonzero(cand).squeeze(1)
         s_f, s_a = size[fail][:, None], size[allc][None, :]
         alike = comp_part[allc][None, :] == comp_part[fail][:, None]
         alike &= (s_a <= COHERE * s_f) & (COHERE * s_a >= s_f)

@@ -971,7 +971,7 @@ class EvidenceModel:
         present = (comp_mass > 0) & (comp_part >= 0)
         put_apart = clearly_apart(st)
         best = torch.full((self.next_part,), -1.0, device=self.device)
-        best.scatter_reduce_(0, comp_part[comp_mass > 0], comp_mass[comp_mass > 0], reduce="amax")
+        best.scatter_reduce_(0, comp_part[present], comp_mass[present], reduce="amax")
         is_main = (comp_mass >= best[comp_part.clamp(min=0)]) & (comp_part >= 0)
         # a component of a few Gaussians counts as TINY in the two tests below: its segment of a few pixels
         # also holds the support's Gaussians just behind the object (within the depth margin), and one
@@ -981,7 +981,7 @@ class EvidenceModel:
         # SAM cuts a floor at random places, each time another piece; an object is its segment every time
         coherent = st["size"] <= COHERE * counted
         part_mass = torch.zeros(self.next_part, device=self.device)
-        part_mass.index_add_(0, comp_part[comp_mass > 0], comp_mass[comp_mass > 0])
+        part_mass.index_add_(0, comp_part[present], comp_mass[present])
         coherent |= self._coherent_together(put_apart & present, comp_part, comp_mass, st["size"], counted,
                                             part_mass)  # fmt: skip
         # a component that is small beside the rest of its part (a light switch in the wall's part, a cup in
