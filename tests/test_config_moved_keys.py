@@ -104,7 +104,7 @@ mapping:
   opt_iters: 3
   merge_duplicates: false
   refine_every: 4
-  longterm_views: 2
+  longterm_views: 3
   evidence: false
   evidence_cell: 0.08
 """
@@ -119,7 +119,7 @@ def test_an_old_yaml_loads_its_flat_mapping_keys_into_their_sections_with_one_no
     assert (m.keyframe_every, m.init.pixels_per_gaussian, m.association.knn_radius, m.optimize.iters) == (
         2, 9, 0.03, 3
     )  # fmt: skip
-    assert not m.merge.enabled and m.refine.every == 4 and m.longterm.views == 2
+    assert not m.merge.enabled and m.refine.every == 4 and m.longterm.views == 3
     assert not m.evidence.enabled and m.evidence.cell == 0.08  # the old switch is the section's enabled
     (notice,) = _moved_notices(caplog)
     assert "mapping.{pixels_per_gaussian,knn_radius," in notice and "opt_iters" in notice

@@ -504,7 +504,13 @@ class LongtermConfig:
         0.5, "paper tau_long: viewpoint-distinctiveness and overlap threshold of the long-term memory", _UNIT
     )
     every: int = setting(6, "keyframes between long-term optimisations", _int(0, note="0 = off"))
-    views: int = setting(4, "memory views used per long-term optimisation", _int(1))
+    views: int = setting(
+        2,
+        "memory views judged per long-term optimisation (the paper's N_view, which it does not give): the "
+        "step's cost a keyframe is this many views' renders every `every` keyframes once the memory holds "
+        "them. Measured effect: docs/consistency.md (cost along a scan)",
+        _int(1),
+    )
     memory_max: int = setting(64, "long-term memory buffer capacity (frames)", _int(1))
     memory_point_step: int = setting(
         4, "pixel grid step of the memory point clouds (overlap criterion)", _int(1)
