@@ -348,20 +348,24 @@ def test_two_objects_seen_on_their_own_merge_on_two_more_firm_views_than_apart(d
     views (``MERGE_FIRM``) more than separating ones to merge: one view that merged a nightstand with the
     wall behind it, where another showed them apart, is SAM's error, and so are two that held a cup with its
     nightstand where one view showed it apart. Never separated, they merge on half a firm view
-    (``MERGE_UNSEPARATED``: two pieces of a book, each shown on its own, that few views saw). A fragment that
-    no view showed apart merges on one firm view."""
+    (``MERGE_UNSEPARATED``: two pieces of a book, each shown on its own, that few views saw). Only the firm
+    views that saw both well count for them: a table's edge that far views held in the floor's segment stays
+    apart. A fragment that no view showed apart merges on one firm view. (Columns: firm, weak, apart, firm
+    seeing both well.)"""
     ev = EvidenceModel(torch.device(device))
-    one, two = np.array([0.71, 1.1, 0.3]), np.array([1.6, 0.0, 0.0])
+    one, two = np.array([0.71, 1.1, 0.3, 0.71]), np.array([1.6, 0.0, 0.0, 1.6])
     assert not ev._mergeable(one, owners=True) and ev._mergeable(two, owners=True)
     assert ev._mergeable(one, owners=False)
-    book = np.array([0.61, 0.0, 0.0])  # room 4's book 33: two of its pieces, never apart
+    book = np.array([0.61, 0.0, 0.0, 0.61])  # room 4's book 33: two of its pieces, never apart
     assert ev._mergeable(book, owners=True)
-    assert not ev._mergeable(np.array([0.4, 0.0, 0.0]), owners=True)
-    assert not ev._mergeable(np.array([0.61, 0.0, 0.05]), owners=True)  # once apart: MERGE_FIRM
-    cup = np.array([1.89, 2.6, 0.9])  # scan 1's cup and nightstand: 0.9 apart is under half of 1.89
+    assert not ev._mergeable(np.array([0.4, 0.0, 0.0, 0.4]), owners=True)
+    assert not ev._mergeable(np.array([0.61, 0.0, 0.05, 0.61]), owners=True)  # once apart: MERGE_FIRM
+    cup = np.array([1.89, 2.6, 0.9, 1.89])  # scan 1's cup and nightstand: 0.9 apart is under half of 1.89
     assert ev._mergeable(cup, owners=False) and not ev._mergeable(cup, owners=True)
-    assert ev._mergeable(np.array([2.5, 0.0, 0.9]), owners=True)
-    assert not ev._mergeable(np.array([1.6, 0.0, 0.9]), owners=True)  # separated in more than half
+    assert ev._mergeable(np.array([2.5, 0.0, 0.9, 2.5]), owners=True)
+    assert not ev._mergeable(np.array([1.6, 0.0, 0.9, 1.6]), owners=True)  # separated in more than half
+    glimpse = np.array([1.0, 0.0, 0.0, 0.0])  # scan 12's table: 3-4 of its Gaussians in three far views
+    assert not ev._mergeable(glimpse, owners=True) and ev._mergeable(glimpse, owners=False)
 
 
 def test_unlabelled_gaussians_take_the_label_of_their_segments(device):
@@ -909,6 +913,25 @@ def test_a_view_judges_two_parts_as_well_as_it_sees_the_smaller(device):
     labels, seen = cup_held_in_far_views(device, range(32, 42))
     assert seen >= CLEAR
     assert torch.all(labels == 0)
+
+
+def test_a_firm_hold_counts_clear_where_the_view_sees_clear_of_each_part_or_most_of_it(device):
+    """One view holds a part with the rest of the plane (one label) through a gap in an occluder: the gap
+    shows 4 of the part's Gaussians. The hold is firm either way; it counts as seen clearly where those 4 are
+    most of the part (a book's piece), not where they are the edge of a large part (a table behind the
+    occluder)."""
+    gm, _ = plane_map(device)
+    gap = np.full((H, W), 1.0, np.float32)
+    gap[18:21, 36:39] = 2.0
+    gap[:, 48:] = 2.0
+    peek = pixel_mask(gm, range(36, 39), range(18, 21))
+    for large in (True, False):
+        part = pixel_mask(gm, range(8, 39), range(4, 40)) if large else peek
+        ev = with_parts(gm, [part])
+        ev.observe(gm, WHOLE, POSE, K, gap)
+        v = ev.part_pairs.get(torch.tensor([0]), torch.tensor([1]))[0]
+        assert 3 <= int(peek.sum()) < CLEAR and v[ev.FIRM] > 0
+        assert (v[ev.CLEAR_FIRM] > 0) == (not large)
 
 
 def test_algorithm_1_does_not_merge_two_objects_that_the_decision_kept_apart(device):

@@ -38,7 +38,9 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
   in which a piece of the wall labelled apart is a minor part). A view judges two parts as well as it sees
   the smaller of them: where it sees fewer than ``CLEAR`` of its Gaussians, its hold or separation counts by
   their share of ``CLEAR`` (SAM absorbs a cup that a far view shows with a few Gaussians into its
-  nightstand's segment; the views that show the cup well show it on its own). A part can be shown apart where
+  nightstand's segment; the views that show the cup well show it on its own). A firm hold counts as *clear*
+  too where the view sees ``CLEAR`` of each part's Gaussians or most of it (``MAJOR``): a book's piece of a
+  dozen Gaussians, not the edge of a table in a far view's floor segment. A part can be shown apart where
   ``MAJOR`` of it lies in one segment (SAM cuts a large surface at random places, so it is rarely ``CONTAIN``
   in one segment), and held together only where it is judged. A part *owns* a view's segment when it holds
   ``OWN`` of it.
@@ -87,12 +89,13 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
 2. *group parts into labels*, from scratch every time, greedily by firm support: two groups merge when the
    views held them together (firmly, or weakly with no separation ever) and separated them in at most
    ``mapping.evidence.separation`` (0.5) of their firm views. Two groups that views showed apart from
-   something (objects SAM found on their own) need ``MERGE_FIRM`` (about two) more firm views than
+   something (objects SAM found on their own) need ``MERGE_FIRM`` (about two) more clear firm views than
    separating ones, or, where no view separated them, ``MERGE_UNSEPARATED`` (half a view: the pieces of a
-   book that few views saw), and do not merge on weak ones. A small object that SAM absorbs into its
-   support in most views, but showed apart once, stays apart; a surface that its first view cut in two
-   joins once later views hold it whole; a merge made earlier, by the association or a previous decision,
-   is undone when the views grow to separate the parts.
+   book that few views saw), and do not merge on weak ones (a table and a piece of floor that the table's
+   views never saw, held by three far views that see the table's edge, stay apart). A small object that
+   SAM absorbs into its support in most views, but showed apart once, stays apart; a surface that its first
+   view cut in two joins once later views hold it whole; a merge made earlier, by the association or a
+   previous decision, is undone when the views grow to separate the parts.
 3. *relabel*: each group keeps the label most of its Gaussians carry (the largest group first), or, where a
    larger group kept that, the next label of its Gaussians that it holds most of, or takes a new one (a wall
    piece whose label a larger piece kept does not take the label of the cabinet that a few of its Gaussians
@@ -410,16 +413,17 @@ def _majority(keys: torch.Tensor, values: torch.Tensor, n: int) -> tuple[torch.T
     return torch.where(cnt > 0, top - 1, torch.full_like(top, -2)), cnt
 
 
-def merge_test(firm, weak, apart, owners, separation: float):
-    """Step 2's merge test on two groups' summed statistics (firm, weak, apart: floats, or tensors
+def merge_test(firm, weak, apart, owners, separation: float, clear):
+    """Step 2's merge test on two groups' summed statistics (firm, weak, apart, clear: floats, or tensors
     elementwise): held together firmly, and separated in at most ``separation`` of the firm views, or held
     weakly and never separated. ``owners``: a view showed each group apart from something (objects SAM found
     on their own); those merge where their firm views outnumber their separating ones by ``MERGE_FIRM``, or,
     never separated, on ``MERGE_UNSEPARATED`` firm views, and not on weak togetherness (that merges a fragment
-    into what holds it). Algorithm 1's guard (``EvidenceModel.separation_test``) applies the same test to
-    labels."""
+    into what holds it); ``clear``: the firm views that saw both groups well, which alone count there (a far
+    view that holds a table's edge, three of its Gaussians, in the floor's segment says little about the
+    table). Algorithm 1's guard (``EvidenceModel.separation_test``) applies the same test to labels."""
     few_apart = apart <= separation * firm
-    firmly = (firm >= MERGE_FIRM + apart) | ((apart <= 0) & (firm >= MERGE_UNSEPARATED))
+    firmly = (clear >= MERGE_FIRM + apart) | ((apart <= 0) & (clear >= MERGE_UNSEPARATED))
     found = owners & firmly & few_apart
     fragment = ((firm > 0) & few_apart) | ((firm <= 0) & (apart == 0) & (weak > 0))
     return found | ((owners == 0) & fragment)
@@ -460,8 +464,9 @@ class EvidenceStats(Counters):
 class EvidenceModel:
     """Co-segmentation evidence between cells, parts and labels (see the module docstring)."""
 
-    # part pair columns: views that held both firmly together, weakly together, clearly apart
-    FIRM, WEAK, APART = 0, 1, 2
+    # part pair columns: views that held both firmly together, weakly together, clearly apart, and firmly
+    # together seeing each of them well (``CLEAR`` of its Gaussians, or most of it)
+    FIRM, WEAK, APART, CLEAR_FIRM = 0, 1, 2, 3
 
     def __init__(
         self, device: torch.device, cfg: EvidenceConfig | None = None, *, radius: float = 0.1,
@@ -494,7 +499,7 @@ class EvidenceModel:
         self.part_touched = torch.zeros(0, dtype=torch.bool, device=device)  # judged since the last decide
         self.cell_pairs = PairTable(4, device)  # together, apart (weighted), views, their weight
         self._judged: dict[int, tuple[int, int]] = {}  # view -> (cells, parts) when it was last judged
-        self.part_pairs = PairTable(3, device)  # FIRM, WEAK, APART
+        self.part_pairs = PairTable(4, device)  # FIRM, WEAK, APART, CLEAR_FIRM
         self.stats = EvidenceStats()
 
     # ------------------------------------------------------------------ ids
@@ -632,7 +637,9 @@ class EvidenceModel:
             return n_visible
         n_seg = torch.bincount(s, minlength=S).float()
         mine = (gm.origin_kf[g] == view) if (view is not None and not revisit) else None
-        self._observe_parts(self.cell_part[cell], gm.labels[g].long(), s, n_seg, w, since[1], mine)
+        parts = self.parts_of(gm)
+        size = torch.bincount(parts[parts >= 0], minlength=self.next_part)
+        self._observe_parts(self.cell_part[cell], gm.labels[g].long(), s, n_seg, w, size, since[1], mine)
         self._observe_gaussians(gm, g, s, S, px[ok], seg, view, revisit)
         return n_visible
 
@@ -749,10 +756,12 @@ class EvidenceModel:
         s: torch.Tensor,
         n_seg: torch.Tensor,
         w: torch.Tensor,
+        size: torch.Tensor,
         since: int = 0,
         mine: torch.Tensor | None = None,
     ) -> None:
-        """Part pairs of one view (``part``, ``lab``, ``s`` per visible Gaussian). A part's share of a segment
+        """Part pairs of one view (``part``, ``lab``, ``s`` per visible Gaussian; ``size``: each part's
+        Gaussians in the map). A part's share of a segment
         is its label's (the parts of one object share the segment that shows it): each of two parts in one
         segment is a real part of it when its label holds ``min_part`` of it, and a view separates two parts
         in two segments where each one's label is the main one of its segment (``MAJOR``). ``mine`` (per
@@ -811,8 +820,13 @@ class EvidenceModel:
         # a view judges two parts as well as it sees the smaller one: SAM absorbs a cup that a far view shows
         # with a few Gaussians into its nightstand, and the views that show it well put it apart
         seen = (n_part[p].float() / CLEAR).clamp(max=1.0)
-        wt = wt * torch.minimum(seen[i], seen[j])
-        vals = torch.stack([wt * firm, wt * (same & ~firm), wt * apart], 1)
+        well = torch.minimum(seen[i], seen[j])
+        # and the firm holds of two parts each seen well: CLEAR of its Gaussians, or most of a smaller part
+        # (a book's pieces of a dozen Gaussians, not a table's edge)
+        clear = (n_part[p] >= CLEAR) | (n_part[p] >= MAJOR * size[p])
+        vals = torch.stack([wt * well * firm, wt * well * (same & ~firm), wt * well * apart,
+                            wt * firm * clear[i] * clear[j]], 1)  # fmt: skip
+        wt = wt * well
         self.part_apart.index_add_(0, p[i], wt * apart).index_add_(0, p[j], wt * apart)
         self.part_pairs.add(p[i], p[j], vals)
 
@@ -1020,7 +1034,7 @@ class EvidenceModel:
         # the new part starts its history with what the cells said about it and its former part (the views
         # that held them in one segment held two real parts of it)
         self.part_pairs.add(new, old, torch.stack([together[go_ids], torch.zeros_like(together[go_ids]),
-                                                   apart[go_ids]], 1))  # fmt: skip
+                                                   apart[go_ids], together[go_ids]], 1))  # fmt: skip
         self.part_touched[new] = True
         return int(go_ids.numel())
 
@@ -1055,7 +1069,7 @@ class EvidenceModel:
         # the views that showed it small separated it from its former part
         apart = votes[go_ids] / size[go_ids]
         zero = torch.zeros_like(apart)
-        self.part_pairs.add(lut[go_ids], comp_part[go_ids], torch.stack([zero, zero, apart], 1))
+        self.part_pairs.add(lut[go_ids], comp_part[go_ids], torch.stack([zero, zero, apart, zero], 1))
         self.part_touched[lut[go_ids]] = True
         for name in ("ev_small", "ev_small_seg"):  # they showed it small in its former part
             gm.aux(name)[rows[moved]] = 0.0
@@ -1213,7 +1227,7 @@ class EvidenceModel:
         vals = self.part_pairs.vals
         # 1. parts that leave their label: each part's statistics with the rest of its label
         inner = (lab[a] == lab[b]) & (lab[a] >= 0)
-        rest = torch.zeros((n, 3), device=dev)
+        rest = torch.zeros((n, vals.shape[1]), device=dev)
         rest.index_add_(0, a[inner], vals[inner]).index_add_(0, b[inner], vals[inner])
         sep = (rest[:, 2] > 0) & (rest[:, 2] > self.separation * rest[:, 0])
         for label in torch.unique(lab[sep]).tolist():
@@ -1295,7 +1309,7 @@ class EvidenceModel:
         pos = torch.full((int(lab.numel()),), -1, dtype=torch.long, device=lab.device)
         pos[ms] = torch.arange(m, device=lab.device)
         inner = (pos[a] >= 0) & (pos[b] >= 0)
-        mat = torch.zeros((m, m, 3), device=lab.device)
+        mat = torch.zeros((m, m, vals.shape[1]), device=lab.device)
         mat[pos[a[inner]], pos[b[inner]]] = vals[inner]
         mat = mat + mat.transpose(0, 1)
         stay = torch.ones(m, dtype=torch.bool, device=lab.device)
@@ -1313,8 +1327,8 @@ class EvidenceModel:
         return root
 
     def _mergeable(self, v: np.ndarray, owners: bool = False) -> bool:
-        """``merge_test`` on the summed statistics v (firm, weak, apart) of two groups."""
-        return bool(merge_test(float(v[0]), float(v[1]), float(v[2]), owners, self.separation))
+        """``merge_test`` on the summed statistics v (firm, weak, apart, clear firm) of two groups."""
+        return bool(merge_test(float(v[0]), float(v[1]), float(v[2]), owners, self.separation, float(v[3])))
 
     @staticmethod
     def _score(v: np.ndarray) -> float:
@@ -1400,7 +1414,7 @@ class EvidenceModel:
         parts = self.parts_of(gm)
         has = (parts >= 0) & (gm.labels >= 0)
         label_of, _ = _majority(parts[has], gm.labels[has].long(), max(self.next_part, 1))
-        table = PairTable(3, dev)
+        table = PairTable(4, dev)
         if len(self.part_pairs):
             pa, pb = self.part_pairs.pairs()
             la, lb = label_of[pa], label_of[pb]
@@ -1421,6 +1435,6 @@ class EvidenceModel:
             ok = (a >= 0) & (b >= 0) & (a < L) & (b < L)
             both = torch.zeros_like(ok)
             both[ok] = owner[a[ok].long()] & owner[b[ok].long()]
-            return (v.sum(1) > 0) & ~merge_test(v[:, 0], v[:, 1], v[:, 2], both, sep) & (a != b)
+            return (v.sum(1) > 0) & ~merge_test(v[:, 0], v[:, 1], v[:, 2], both, sep, v[:, 3]) & (a != b)
 
         return separated
