@@ -512,6 +512,35 @@ def test_a_group_whose_label_a_larger_one_kept_takes_a_new_label_not_another_obj
     assert out["new_labels"] == 1 and int(moved[0]) > two and torch.all(moved == moved[0])
 
 
+def test_an_unsegmented_strip_does_not_take_the_label_of_the_vase_whose_part_holds_less_of_it(device):
+    """A strip of Gaussians outside every segment (an unsegmented part over a vase, its cabinet and the wall),
+    mostly unlabelled, holding more of the vase's label than the vase's own part, and more of the cabinet's
+    than of any other; the cabinet's part is larger than the strip, so the cabinet keeps its label. The strip
+    does not take the vase's label, which the vase's part keeps; a part made by a segment that held the same
+    Gaussians would take it, and the vase's part a new one."""
+    for unsegmented in (True, False):
+        gm, _ = plane_map(device)
+        cabinet = pixel_mask(gm, range(21, 34), range(4, 40))
+        vase = pixel_mask(gm, range(34, 38), range(10, 15))
+        strip = pixel_mask(gm, range(40, 48), range(4, 30))
+        assert int(cabinet.sum()) > int(strip.sum()) > int(vase.sum())
+        c, v = gm.new_labels(2).tolist()
+        gm.labels[cabinet], gm.labels[vase] = c, v
+        rows = torch.nonzero(strip).squeeze(1)
+        gm.labels[rows] = -1
+        n = int(vase.sum())
+        gm.labels[rows[: n + 2]] = v
+        gm.labels[rows[n + 2 : 2 * n + 6]] = c
+        blank = strip & (gm.labels < 0)
+        ev = with_parts(gm, [cabinet, vase, strip])
+        ev.part_unsegmented[2] = unsegmented
+        old = torch.tensor([c, v, -1, 0], device=gm.device)
+        ev._relabel(gm, ev.parts_of(gm), old, torch.arange(4, device=gm.device))
+        assert torch.all(gm.labels[cabinet] == c)
+        assert bool(torch.all(gm.labels[vase] == v)) == unsegmented
+        assert bool(torch.all(gm.labels[blank] == v)) == (not unsegmented)
+
+
 def test_a_resumed_map_gets_one_part_per_label(device):
     gm, vase = plane_map(device)
     gm.labels[vase] = 3

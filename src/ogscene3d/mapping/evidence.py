@@ -9,8 +9,10 @@ judged view, at three grains, and the refinement and the long-term step decide f
 
 **Units.** Every Gaussian belongs to a *cell*: the Gaussians one *part* has in one voxel of
 ``mapping.evidence.cell`` metres. A *part* is what one segment made: the new Gaussians of a novel (or
-ambiguous, or unsegmented) segment start a part; those of a segment that local association matched with a
-label join the part most of its matched Gaussians belong to. Labels are groups of parts. Parts never merge
+ambiguous) segment start a part; those of a segment that local association matched with a label join the
+part most of its matched Gaussians belong to. The new Gaussians outside every segment start parts too, one
+per spatial component (*unsegmented* parts: a book that SAM missed, or a strip along the borders of several
+objects). Labels are groups of parts. Parts never merge
 (a merge of labels is a grouping, so it can be undone); a part is split when its cells are clearly
 separated (below). Ids are per-Gaussian auxiliary values (``ev_cell``) plus small tables per cell
 (``cell_part``, its voxel); nothing is saved: a resumed run starts one part per label.
@@ -99,8 +101,10 @@ c_sam of Eq. 5): a view's vote counts its segments' confidence.
 3. *relabel*: each group keeps the label most of its Gaussians carry (the largest group first), or, where a
    larger group kept that, the next label of its Gaussians that it holds most of, or takes a new one (a wall
    piece whose label a larger piece kept does not take the label of the cabinet that a few of its Gaussians
-   carry); a part's Gaussians that carry its former label move with it. Unlabelled Gaussians of a group take
-   its label; a group of unlabelled parts only gets a label when one of them owned a segment.
+   carry; a label that parts made by segments carry is held where most of those parts' Gaussians are, so
+   that an unsegmented strip over a vase and its neighbours does not take the vase's label from the vase's
+   own part); a part's Gaussians that carry its former label move with it. Unlabelled Gaussians of a group
+   take its label; a group of unlabelled parts only gets a label when one of them owned a segment.
 4. *fill*: an unlabelled Gaussian that is still unlabelled takes the label its segments voted for.
 
 **Algorithm 1 and Eq. 16 decide from it**: the refinement may not relabel a cluster or a Gaussian across a
@@ -497,6 +501,8 @@ class EvidenceModel:
         self.part_owned = torch.zeros(0, device=device)  # views in which the part owned its segment
         self.part_apart = torch.zeros(0, device=device)  # views that separated the part from another
         self.part_touched = torch.zeros(0, dtype=torch.bool, device=device)  # judged since the last decide
+        # made of Gaussians outside every segment of their view (no segment held them together)
+        self.part_unsegmented = torch.zeros(0, dtype=torch.bool, device=device)
         self.cell_pairs = PairTable(4, device)  # together, apart (weighted), views, their weight
         self._judged: dict[int, tuple[int, int]] = {}  # view -> (cells, parts) when it was last judged
         self.part_pairs = PairTable(4, device)  # FIRM, WEAK, APART, CLEAR_FIRM
@@ -506,7 +512,7 @@ class EvidenceModel:
     def new_parts(self, count: int) -> torch.Tensor:
         start = self.next_part
         self.next_part += int(count)
-        for name in ("part_owned", "part_apart", "part_touched"):
+        for name in ("part_owned", "part_apart", "part_touched", "part_unsegmented"):
             t = getattr(self, name)
             grown = torch.zeros(self.next_part, dtype=t.dtype, device=self.device)
             grown[: t.numel()] = t
@@ -1356,6 +1362,17 @@ class EvidenceModel:
             votes.setdefault(gg, []).append((cc, ll))
             if (cc, -gg) > holder.get(ll, (0, 1)):
                 holder[ll] = (cc, -gg)
+        # a label that parts made by segments carry is held where most of those parts' Gaussians are: a strip
+        # outside every segment, over a vase and the objects around it, that holds more of the vase's label
+        # than the vase's own part does not take it from the vase
+        made = has & (lab >= 0) & ~self.part_unsegmented[parts.clamp(min=0)]
+        if bool(made.any()):
+            mk, mc = torch.unique(group[parts[made]] * L + lab[made], return_counts=True)
+            by_segments: dict[int, tuple[int, int]] = {}
+            for gg, ll, cc in zip((mk // L).tolist(), (mk % L).tolist(), mc.tolist()):
+                if (cc, -gg) > by_segments.get(ll, (0, 1)):
+                    by_segments[ll] = (cc, -gg)
+            holder.update(by_segments)
         owned = torch.zeros(P, device=self.device).index_add_(0, group, self.part_owned)
         groups = torch.unique(group[present]).tolist()
         groups.sort(key=lambda x: -int(mass[x]))

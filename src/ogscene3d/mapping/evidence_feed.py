@@ -56,7 +56,9 @@ class EvidenceFeed:
             group = torch.full((len(probes),), S, dtype=torch.int32, device=self.device)  # S: no segment
             group[sel] = seg.to(torch.int32)
             comp = self._components(probes.means[fresh], group[fresh], S)
-            parts[fresh] = self.model.new_parts(int(comp.max()) + 1)[comp]
+            ids = self.model.new_parts(int(comp.max()) + 1)
+            parts[fresh] = ids[comp]
+            self.model.part_unsegmented[ids[comp[group[fresh] == S]]] = True
         return parts
 
     def _components(self, means: torch.Tensor, group: torch.Tensor, S: int) -> torch.Tensor:
