@@ -1349,30 +1349,32 @@ class EvidenceModel:
         P = self.next_part
         lab = gm.labels.long()
         present = old > -2
-        # label votes per group (labelled Gaussians only), mass per group
-        g = group[parts[has]]
-        lg = lab[has]
-        mass = torch.bincount(g, minlength=P)
+        mass = torch.bincount(group[parts[has]], minlength=P)  # per group
         L = _n_labels(gm)
-        keys, cnt = torch.unique(g[lg >= 0] * L + lg[lg >= 0], return_counts=True)
-        kg, kl = (keys // L).tolist(), (keys % L).tolist()
-        votes: dict[int, list[tuple[int, int]]] = {}
-        holder: dict[int, tuple[int, int]] = {}  # per label: the group holding most of its Gaussians
-        for gg, ll, cc in zip(kg, kl, cnt.tolist()):
+
+        def counts(rows: torch.Tensor):
+            """(group, label, Gaussians) of the labelled Gaussians ``rows``."""
+            k, c = torch.unique(group[parts[rows]] * L + lab[rows], return_counts=True)
+            return zip((k // L).tolist(), (k % L).tolist(), c.tolist())
+
+        def holders(rows: torch.Tensor) -> dict[int, tuple[int, int]]:
+            """Per label: (Gaussians, -group) of the group holding most of its Gaussians among ``rows``."""
+            best: dict[int, tuple[int, int]] = {}
+            for gg, ll, cc in counts(rows):
+                best[ll] = max(best.get(ll, (0, 1)), (cc, -gg))
+            return best
+
+        labelled = has & (lab >= 0)
+        votes: dict[int, list[tuple[int, int]]] = {}  # per group: (Gaussians, label) of its labelled ones
+        for gg, ll, cc in counts(labelled):
             votes.setdefault(gg, []).append((cc, ll))
-            if (cc, -gg) > holder.get(ll, (0, 1)):
-                holder[ll] = (cc, -gg)
+        holder = holders(labelled)
         # a label that parts made by segments carry is held where most of those parts' Gaussians are: a strip
         # outside every segment, over a vase and the objects around it, that holds more of the vase's label
         # than the vase's own part does not take it from the vase
-        made = has & (lab >= 0) & ~self.part_unsegmented[parts.clamp(min=0)]
+        made = labelled & ~self.part_unsegmented[parts.clamp(min=0)]
         if bool(made.any()):
-            mk, mc = torch.unique(group[parts[made]] * L + lab[made], return_counts=True)
-            by_segments: dict[int, tuple[int, int]] = {}
-            for gg, ll, cc in zip((mk // L).tolist(), (mk % L).tolist(), mc.tolist()):
-                if (cc, -gg) > by_segments.get(ll, (0, 1)):
-                    by_segments[ll] = (cc, -gg)
-            holder.update(by_segments)
+            holder.update(holders(made))
         owned = torch.zeros(P, device=self.device).index_add_(0, group, self.part_owned)
         groups = torch.unique(group[present]).tolist()
         groups.sort(key=lambda x: -int(mass[x]))
