@@ -819,7 +819,7 @@ def test_a_small_object_apart_in_its_segment_starts_a_part_of_its_own(device):
     """A new segment over a shelf (40 Gaussians) and a book of 5 Gaussians 0.3 m beside it (SAM merged
     them): the book starts a part of its own, which later views may keep apart or hold with the shelf; 3
     Gaussians apart (a hole the map did not explain) join the segment's largest part."""
-    feed = EvidenceFeed(Config(), torch.device(device), Timings(device), enabled=True)
+    feed = EvidenceFeed(Config(), torch.device(device), Timings(torch.device(device)), enabled=True)
     xs, ys = np.meshgrid(np.arange(8) * 0.05, np.arange(5) * 0.05)
     shelf = np.stack([xs.ravel(), ys.ravel(), np.full(xs.size, 2.0)], 1)
     book = np.array([[0.65 + 0.03 * i, 0.1, 2.0] for i in range(5)])
@@ -829,6 +829,30 @@ def test_a_small_object_apart_in_its_segment_starts_a_part_of_its_own(device):
     s, b, k = comp[:40], comp[40:45], comp[45:]
     assert torch.all(s == s[0]) and torch.all(b == b[0]) and torch.all(k == s[0])
     assert int(b[0]) != int(s[0])
+
+
+def test_a_keyframe_without_segments_starts_unsegmented_parts_one_per_spatial_component(device):
+    """A keyframe whose segmenter found nothing adds a shelf's 40 Gaussians and a book's 5 that lie 0.3 m
+    apart: they start two parts, both flagged unsegmented (outside every segment), as such Gaussians of a
+    segmented keyframe do, not one part over both that the label holders of step 3 would count."""
+    feed = EvidenceFeed(Config(), torch.device(device), Timings(torch.device(device)), enabled=True)
+    xs, ys = np.meshgrid(np.arange(8) * 0.05, np.arange(5) * 0.05)
+    shelf = np.stack([xs.ravel(), ys.ravel(), np.full(xs.size, 2.0)], 1)
+    book = np.array([[0.65 + 0.03 * i, 0.1, 2.0] for i in range(5)])
+    pts = torch.as_tensor(np.concatenate([shelf, book]), dtype=torch.float32)
+    gm = GaussianMap(device)
+    n = len(pts)
+    rows = gm.append(
+        pts, torch.full((n, 3), 0.5), torch.full((n,), -3.0),
+        labels=torch.full((n,), -1, dtype=torch.int32), confidences=torch.zeros(n),
+    )  # fmt: skip
+    feed.assign(gm, rows, None)
+    parts = feed.model.parts_of(gm)
+    assert torch.all(parts[:40] == parts[0]) and torch.all(parts[40:] == parts[40])
+    assert int(parts[0]) != int(parts[40])
+    assert bool(feed.model.part_unsegmented[parts].all())
+    feed.assign(gm, range(n, n), None)  # an empty keyframe adds nothing
+    assert feed.model.next_part == 2
 
 
 def test_observe_counts_the_gaussians_the_view_sees(device):

@@ -55,11 +55,16 @@ class EvidenceFeed:
         if fresh.numel():
             group = torch.full((len(probes),), S, dtype=torch.int32, device=self.device)  # S: no segment
             group[sel] = seg.to(torch.int32)
-            comp = self._components(probes.means[fresh], group[fresh], S)
-            ids = self.model.new_parts(int(comp.max()) + 1)
-            parts[fresh] = ids[comp]
-            self.model.part_unsegmented[ids[comp[group[fresh] == S]]] = True
+            parts[fresh] = self._new_components(probes.means[fresh], group[fresh], S)
         return parts
+
+    def _new_components(self, means: torch.Tensor, group: torch.Tensor, S: int) -> torch.Tensor:
+        """New parts, one per spatial component of each segment (``group``, S: outside every segment, whose
+        parts are flagged unsegmented); returns each point's part."""
+        comp = self._components(means, group, S)
+        ids = self.model.new_parts(int(comp.max()) + 1)
+        self.model.part_unsegmented[ids[comp[group == S]]] = True
+        return ids[comp]
 
     def _components(self, means: torch.Tensor, group: torch.Tensor, S: int) -> torch.Tensor:
         """Per point: its spatial component within its segment (``group``, S: none), numbered from 0. A few
@@ -77,15 +82,19 @@ class EvidenceFeed:
         comp = torch.where(size[comp] >= MIN_PART, comp, main[seg_of[comp]])
         return torch.unique(comp, return_inverse=True)[1]
 
-    def assign(self, gm: GaussianMap, rows: range, parts: torch.Tensor | None) -> None:
+    def assign(self, gm: GaussianMap, rows: slice | range, parts: torch.Tensor | None) -> None:
         """The Gaussians just appended (``rows`` of ``gm``) join their ``parts`` (None: the keyframe had no
-        segments; one part for all of them)."""
+        segments; they lie outside every segment, so they start unsegmented parts, one per spatial
+        component, as such Gaussians of a segmented keyframe do)."""
         if not self.enabled:
             return
         with self.timings.section("evidence"):
             idx = torch.arange(rows.start, rows.stop, device=self.device)
+            if idx.numel() == 0:
+                return
             if parts is None:
-                parts = self.model.new_parts(1).expand(idx.numel())
+                none = torch.zeros(idx.numel(), dtype=torch.int32, device=self.device)
+                parts = self._new_components(gm.means[idx], none, 0)
             self.model.assign(gm, idx, parts)
 
     def judge(self, gm: GaussianMap, view: int, segments, scores: dict[int, float], source, revisit=False):
