@@ -855,6 +855,14 @@ def test_a_keyframe_without_segments_starts_unsegmented_parts_one_per_spatial_co
     assert feed.model.next_part == 2
 
 
+def test_the_separation_test_answers_before_any_part_exists(device):
+    """A run whose keyframes had no valid depth pixel has an empty map and no part: the separation test
+    that guards Algorithm 1 separates nothing."""
+    ev = EvidenceModel(torch.device(device))
+    sep = ev.separation_test(GaussianMap(device))
+    assert not bool(sep(torch.tensor([0, 1], device=device), torch.tensor([1, 0], device=device)).any())
+
+
 def test_observe_counts_the_gaussians_the_view_sees(device):
     """``observe`` returns how many Gaussians the view sees (centres in the image at the observed depth):
     the whole plane in front of the camera, none where the depth says the surface is a metre nearer."""

@@ -1443,8 +1443,9 @@ class EvidenceModel:
         # labels with a part that some view showed apart from anything (objects SAM found on their own)
         L = int(gm.labels.max()) + 1 if len(gm) else 1
         owner = torch.zeros(max(L, 1), dtype=torch.bool, device=dev)
-        shown = (label_of >= 0) & (self.part_apart[: label_of.numel()] > 0)
-        owner[label_of[shown]] = True
+        n = self.part_apart.numel()  # label_of has one entry at least, for a model with no part yet
+        shown = (label_of[:n] >= 0) & (self.part_apart > 0)
+        owner[label_of[:n][shown]] = True
 
         def separated(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
             v = table.get(a.long(), b.long())
