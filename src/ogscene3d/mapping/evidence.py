@@ -830,9 +830,9 @@ class EvidenceModel:
         # and the firm holds of two parts each seen well: CLEAR of its Gaussians, or most of a smaller part
         # (a book's pieces of a dozen Gaussians, not a table's edge)
         clear = (n_part[p] >= CLEAR) | (n_part[p] >= MAJOR * size[p])
-        vals = torch.stack([wt * well * firm, wt * well * (same & ~firm), wt * well * apart,
-                            wt * firm * clear[i] * clear[j]], 1)  # fmt: skip
+        clear_firm = wt * firm * clear[i] * clear[j]
         wt = wt * well
+        vals = torch.stack([wt * firm, wt * (same & ~firm), wt * apart, clear_firm], 1)
         self.part_apart.index_add_(0, p[i], wt * apart).index_add_(0, p[j], wt * apart)
         self.part_pairs.add(p[i], p[j], vals)
 
