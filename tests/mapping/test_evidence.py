@@ -19,6 +19,7 @@ from ogscene3d.mapping.evidence import (
     _agglomerate,
     _cannot_link_join,
     _components,
+    _link_groups,
     _rows_near,
     near_segment,
     segment_borders,
@@ -646,6 +647,41 @@ def test_cells_group_by_their_summed_statistics(device):
     assert groups[0] != groups[4]
     linked = (t >= 3 * x) & (t > 0)
     assert len(set(_components(8, a[linked], b[linked]).tolist())) == 1  # what single linkage does
+
+
+def test_the_group_by_group_rounds_give_the_tensor_rounds_groups(device, monkeypatch):
+    """The average linkage goes on group by group once few pairs are left (``TAIL_PAIRS``). On random graphs
+    of cells (integer counts, which tie, and weighted views, which sum in float32 in the order of the pairs'
+    keys; masses on both sides of ``TINY``) it gives exactly the groups of the tensor rounds, from the first
+    round on as from later ones."""
+    import ogscene3d.mapping.evidence as evidence
+
+    gen = torch.Generator().manual_seed(7)
+    linked = 0
+    for trial in range(150):
+        n = int(torch.randint(4, 60, (1,), generator=gen))
+        a, b = torch.randint(0, n, (2, 4 * n), generator=gen)
+        keep = a != b
+        a, b = torch.minimum(a[keep], b[keep]), torch.maximum(a[keep], b[keep])
+        if trial % 2:
+            t = torch.randint(0, 6, a.shape, generator=gen).float()
+            x = torch.randint(0, 3, a.shape, generator=gen).float()
+        else:
+            t = torch.rand(a.shape, generator=gen) * 5
+            x = torch.rand(a.shape, generator=gen) * (torch.rand(a.shape, generator=gen) < 0.4)
+        nv = t + x + torch.randint(0, 3, a.shape, generator=gen)
+        vals = torch.stack([t, x, nv, 2 * nv * torch.rand(a.shape, generator=gen)], 1)
+        cells = torch.unique(torch.cat([a, b]))  # every cell in some pair
+        a, b = torch.searchsorted(cells, a), torch.searchsorted(cells, b)
+        mass = torch.randint(1, 3 * TINY, cells.shape, generator=gen).float()
+        args = [v.to(device) for v in (a, b, vals, mass)]
+        monkeypatch.setattr(evidence, "TAIL_PAIRS", 0)
+        want = _link_groups(*args)
+        for tail in (10**9, int(a.numel()) // 3):
+            monkeypatch.setattr(evidence, "TAIL_PAIRS", tail)
+            assert torch.equal(_link_groups(*args), want), (trial, tail)
+        linked += int(want.max()) + 1 < cells.numel()
+    assert linked > 100  # most graphs link some cells
 
 
 def test_cell_groups_do_not_depend_on_the_cells_no_pair_holds(device):

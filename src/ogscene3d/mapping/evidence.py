@@ -148,6 +148,7 @@ CELL_MIN = 1  # visible Gaussians (in its segment) a cell needs to be judged
 NEIGHBOURS = 8  # a cell's neighbours in a view: its nearest visible cells (within ``radius``)
 SPARSE_REACH = 2.0  # candidate groups of a part within this many times ``radius`` are judged as one
 COHERE = 2.0  # apart segments hold at most this many times the group
+TAIL_PAIRS = 4096  # the average linkage of a part's cells goes on group by group once this few pairs are left
 TINY = 8  # a group of fewer Gaussians counts as this many for COHERE and SMALL
 CLEAR = 8  # visible Gaussians of the smaller of two parts from which a view's judgement of them counts whole
 SPLIT_VIEWS = 1.5  # weighted views apart a split needs (about two)
@@ -377,6 +378,8 @@ def _link_groups(a: torch.Tensor, b: torch.Tensor, vals: torch.Tensor, gmass: to
             return comp
         keys, vals = PairTable.summed(a[cross], b[cross], vals[cross])
         a, b = PairTable.unkey(keys)
+        if a.numel() <= TAIL_PAIRS:
+            return _link_tail(a, b, vals, gmass)[comp]
         T, X, NV, W = vals.unbind(1)
         # views that held the two in different segments without a verdict (one segment not the part's
         # label's) count against a link too: a table and the sofa behind it, one part since the first view
@@ -398,6 +401,115 @@ def _link_groups(a: torch.Tensor, b: torch.Tensor, vals: torch.Tensor, gmass: to
         comp, a, b = lut[comp], lut[a], lut[b]
         m = int(lut.max()) + 1
         gmass = torch.zeros(m, device=gmass.device).index_add_(0, lut, gmass)
+
+
+def _link_tail(a: torch.Tensor, b: torch.Tensor, vals: torch.Tensor, gmass: torch.Tensor) -> torch.Tensor:
+    """:func:`_link_groups`' rounds on a graph of few groups' pairs (a[i] < b[i], distinct, in key order;
+    their statistics ``vals``; ``gmass`` Gaussians per group), a group at a time: a round looks again only at
+    the groups whose pairs changed, where a round of tensors goes over every pair (late in a long scan a few
+    large parts absorb one neighbour a round, for hundreds of rounds). Every sum is taken in float32 in the
+    order the tensor rounds take it, so the groups are the same. Returns the group of each of the
+    ``gmass.numel()`` groups, numbered in the order of each one's first group (as the tensor rounds number
+    them)."""
+    m = int(gmass.numel())
+    mass = gmass.cpu().numpy().astype(np.float32)  # per node (a merged group lives on in one member's node)
+    first = list(range(m))  # per node: its group's first group, which orders the pairs' keys
+    ratio, share, inf = np.float32(LINK_RATIO), np.float32(LINK_SHARE), -float("inf")
+
+    def link(u: int, v: int, e: np.ndarray) -> tuple[np.ndarray, float]:
+        """The pair's statistics and its margin (-inf where the two do not link; see _link_groups)."""
+        t, x, nv, w = e
+        x2 = ratio * x
+        ok = t >= x2 and t > 0 and nv >= LINK_VIEWS and (t >= share * w or min(mass[u], mass[v]) < TINY)
+        return e, float(t - x2) if ok else inf
+
+    def key(u: int, v: int) -> tuple[int, int]:
+        fu, fv = first[u], first[v]
+        return (fu, fv) if fu < fv else (fv, fu)
+
+    adj: dict[int, dict[int, tuple[np.ndarray, float]]] = {}
+    for u, v, e in zip(a.tolist(), b.tolist(), vals.cpu().numpy()):
+        adj.setdefault(u, {})[v] = adj.setdefault(v, {})[u] = link(u, v, e)
+    best: dict[int, float] = {}
+    sets = DisjointSets()
+    dirty = set(adj)
+    while True:
+        for u in dirty:
+            best[u] = max((s for _, s in adj[u].values()), default=inf)
+        # mutual bests (a pair of two groups whose pairs did not change was no pick last round, nor is it now)
+        picks = DisjointSets()
+        for u in dirty:
+            bu = best[u]
+            if bu != inf:
+                for v, (_, s) in adj[u].items():
+                    if s >= bu and s >= best[v]:
+                        picks.union(u, v)
+        if not picks:
+            break
+        groups = list(picks.groups().values())
+        # each merged group lives on in its member with the most pairs, whose row is kept and amended
+        into = {}
+        for members in groups:
+            node = max(members, key=lambda u: len(adj[u]))
+            for u in members:
+                into[u] = node
+        # the merged groups' Gaussians (summed in the order of their first groups), before any pair's test
+        small = {}
+        for members in groups:
+            node = into[members[0]]
+            small[node] = mass[node] < TINY  # its pairs' link test may change with its mass
+            acc = np.float32(0.0)
+            for u in sorted(members, key=first.__getitem__):
+                acc = acc + mass[u]
+            mass[node] = acc
+        dirty = set()
+        for members in groups:
+            node = into[members[0]]
+            row = adj[node]
+            # the pairs that the merge sums: to any merged group, and to the groups the other members touch
+            sums: dict[int, list[tuple[tuple[int, int], np.ndarray]]] = {}
+            for w in [w for w in row if w in into] if len(row) < len(into) else [w for w in into if w in row]:
+                entry = row.pop(w)
+                if into[w] != node:
+                    sums.setdefault(into[w], []).append((key(node, w), entry[0]))
+            for u in members:
+                if u != node:
+                    for w, (e, _) in adj[u].items():
+                        h = into.get(w, w)
+                        if h != node:
+                            sums.setdefault(h, []).append((key(u, w), e))
+                        if w not in into:
+                            del adj[w][u]
+            for h, contrib in sums.items():
+                if h in row:  # a group that did not merge, a pair of the kept member's
+                    contrib.append((key(node, h), row[h][0]))
+                contrib.sort(key=lambda c: c[0])  # the tensor rounds sum in the order of the pairs' keys
+                e = np.zeros(4, dtype=np.float32)
+                for _, c in contrib:
+                    e = e + c
+                sums[h] = e
+            for h, e in sums.items():
+                row[h] = link(node, h, e)
+                if h not in into:
+                    adj[h][node] = row[h]
+                dirty.add(h)
+            if small[node]:
+                for h, (e, s) in row.items():
+                    if h not in sums and link(node, h, e)[1] != s:
+                        row[h] = link(node, h, e)
+                        adj[h][node] = row[h]
+                        dirty.add(h)
+            dirty.add(node)
+        for members in groups:  # the keys' order changes only now: the sums above were in the former one
+            first[into[members[0]]] = min(first[u] for u in members)
+        for u, node in into.items():
+            if u != node:
+                del adj[u]
+                best.pop(u, None)
+                sets.attach(u, node)
+    root = [sets.find(x) for x in range(m)]
+    order = torch.tensor([first[r] for r in root], dtype=torch.long, device=gmass.device)
+    return torch.unique(order, return_inverse=True)[1]
 
 
 def _rows_near(centre: torch.Tensor, part: torch.Tensor, fresh: torch.Tensor, radius: float) -> torch.Tensor:
