@@ -468,7 +468,10 @@ def _link_tail(a: torch.Tensor, b: torch.Tensor, vals: torch.Tensor, gmass: torc
             row = adj[node]
             # the pairs that the merge sums: to any merged group, and to the groups the other members touch
             sums: dict[int, list[tuple[tuple[int, int], np.ndarray]]] = {}
-            for w in [w for w in row if w in into] if len(row) < len(into) else [w for w in into if w in row]:
+            # the kept member's pairs to merged groups, found from the shorter of its row and the merged ones
+            shorter, longer = (row, into) if len(row) < len(into) else (into, row)
+            to_merged = [w for w in shorter if w in longer]
+            for w in to_merged:
                 entry = row.pop(w)
                 if into[w] != node:
                     sums.setdefault(into[w], []).append((key(node, w), entry[0]))
@@ -487,8 +490,6 @@ def _link_tail(a: torch.Tensor, b: torch.Tensor, vals: torch.Tensor, gmass: torc
                 e = np.zeros(4, dtype=np.float32)
                 for _, c in contrib:
                     e = e + c
-                sums[h] = e
-            for h, e in sums.items():
                 row[h] = link(node, h, e)
                 if h not in into:
                     adj[h][node] = row[h]
