@@ -851,16 +851,21 @@ def test_a_gaussian_that_algorithm_1_moved_is_judged_afresh_under_its_new_label(
     assert torch.all(gm.labels[strip] == 0) and torch.all(gm.labels[right] == 1)
 
 
+def shelf_and_book() -> np.ndarray:
+    """[45, 3] a shelf's 40 Gaussians (8 x 5, 0.05 m apart, at z = 2), a book's 5 in a row 0.3 m beside it."""
+    xs, ys = np.meshgrid(np.arange(8) * 0.05, np.arange(5) * 0.05)
+    shelf = np.stack([xs.ravel(), ys.ravel(), np.full(xs.size, 2.0)], 1)
+    book = np.array([[0.65 + 0.03 * i, 0.1, 2.0] for i in range(5)])
+    return np.concatenate([shelf, book])
+
+
 def test_a_small_object_apart_in_its_segment_starts_a_part_of_its_own(device):
     """A new segment over a shelf (40 Gaussians) and a book of 5 Gaussians 0.3 m beside it (SAM merged
     them): the book starts a part of its own, which later views may keep apart or hold with the shelf; 3
     Gaussians apart (a hole the map did not explain) join the segment's largest part."""
     feed = EvidenceFeed(Config(), torch.device(device), Timings(torch.device(device)), enabled=True)
-    xs, ys = np.meshgrid(np.arange(8) * 0.05, np.arange(5) * 0.05)
-    shelf = np.stack([xs.ravel(), ys.ravel(), np.full(xs.size, 2.0)], 1)
-    book = np.array([[0.65 + 0.03 * i, 0.1, 2.0] for i in range(5)])
     speck = np.array([[-0.3 - 0.03 * i, 0.1, 2.0] for i in range(3)])
-    means = torch.as_tensor(np.concatenate([shelf, book, speck]), dtype=torch.float32, device=device)
+    means = torch.as_tensor(np.concatenate([shelf_and_book(), speck]), dtype=torch.float32, device=device)
     comp = feed._components(means, torch.zeros(len(means), dtype=torch.int32, device=device), 1)
     s, b, k = comp[:40], comp[40:45], comp[45:]
     assert torch.all(s == s[0]) and torch.all(b == b[0]) and torch.all(k == s[0])
@@ -872,10 +877,7 @@ def test_a_keyframe_without_segments_starts_unsegmented_parts_one_per_spatial_co
     apart: they start two parts, both flagged unsegmented (outside every segment), as such Gaussians of a
     segmented keyframe do, not one part over both that the label holders of step 3 would count."""
     feed = EvidenceFeed(Config(), torch.device(device), Timings(torch.device(device)), enabled=True)
-    xs, ys = np.meshgrid(np.arange(8) * 0.05, np.arange(5) * 0.05)
-    shelf = np.stack([xs.ravel(), ys.ravel(), np.full(xs.size, 2.0)], 1)
-    book = np.array([[0.65 + 0.03 * i, 0.1, 2.0] for i in range(5)])
-    pts = torch.as_tensor(np.concatenate([shelf, book]), dtype=torch.float32)
+    pts = torch.as_tensor(shelf_and_book(), dtype=torch.float32)
     gm = GaussianMap(device)
     n = len(pts)
     rows = gm.append(

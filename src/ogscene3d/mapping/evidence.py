@@ -387,6 +387,7 @@ def _link_groups(a: torch.Tensor, b: torch.Tensor, vals: torch.Tensor, gmass: to
         # for a piece of a few Gaussians: most of its cells lie at some segment's edge in most views, and a
         # book's cells, with perfect segments, ended in pieces
         held = (T >= LINK_SHARE * W) | (torch.minimum(gmass[a], gmass[b]) < TINY)
+        # (_link_tail's ``link`` takes this test pair by pair: the two change together)
         ok = (T >= LINK_RATIO * X) & (T > 0) & (NV >= LINK_VIEWS) & held
         if not bool(ok.any()):
             return comp
