@@ -52,7 +52,7 @@ def run_dir(root: Path, name: str, scene: str | None, late_ms: float) -> Path:
 
     run = root / name
     run.mkdir(parents=True)
-    doc = timings(seen=False)
+    doc = timings(seen=True)  # the views see 1000 Gaussians early, 3000 late
     cost = [10.0] * 4 + [late_ms] * 4
     doc["per_keyframe_cpu_ms"] = doc["per_keyframe_ms"] = {"local": cost, "evidence": cost}
     (run / "timings.json").write_text(json.dumps(doc))
@@ -82,6 +82,7 @@ def test_rounds_of_one_scene_report_the_median_of_their_ratios(tmp_path, capsys)
     assert scenes["scan_2"]["median"] == pytest.approx(1.8)
     assert scenes["scan_2"]["early"]["semantic"] == 20.0 and scenes["scan_2"]["late"]["semantic"] == 36.0
     assert scenes["scan_3"]["runs"] == {str(runs[3]): pytest.approx(1.1)}
+    assert scenes["scan_2"]["per_1k_visible"] == pytest.approx(1.8 / 3)  # three times the Gaussians seen
 
 
 def test_a_run_with_no_config_is_a_scene_of_its_own(tmp_path, capsys):
