@@ -1,4 +1,4 @@
-"""CPU time per keyframe of the mapper's semantic modules, this tree against a base revision, side by side.
+"""Wall time per keyframe of the mapper's semantic modules, this tree against a base revision, side by side.
 
     python benchmarks/semantic_ab.py prepare 23b0e14 .ab/base          # lay out the base revision's package
     python benchmarks/mapping_semantic_ab.py .ab/base SCENE --rounds 2 --device cpu [--set KEY=VALUE ...]
@@ -7,7 +7,9 @@ Maps the synthetic scene SCENE (``ogscene3d synth``) with the full system (``map
 scene graph off) in fresh processes, this tree and the base (``PYTHONPATH=DIR``) in turn for ``--rounds``
 rounds, and compares the per-keyframe time of the semantic modules from each run's ``timings.json``: the local
 association (with the duplicate merge), long-term, refinement and, where present, the evidence step
-(``mapping/evidence.py``). Median over rounds; the ratio this / base is what issue 26 bounds (<= 1.5).
+(``mapping/evidence.py``). Median over rounds; the ratio this / base is what issue 26 bounds (<= 1.5). The
+times are ``timings.json``'s ``ms_per_keyframe``, wall-clock: run it alone on the machine. (The per-keyframe
+CPU times that ``semantic_growth.py`` reads count every thread of the process, and read higher.)
 """
 
 from __future__ import annotations
@@ -86,7 +88,7 @@ def main() -> None:
     for t, m in med.items():
         print(f"{t[:12]:>12}  " + "  ".join(f"{m[k]:>9.1f}" for k in (*SEMANTIC, "semantic")))
     base = med[rev]["semantic"]
-    print(f"semantic CPU time per keyframe, this / base: {med['this tree']['semantic'] / base:.3f}")
+    print(f"semantic wall time per keyframe, this / base: {med['this tree']['semantic'] / base:.3f}")
 
 
 if __name__ == "__main__":
