@@ -36,7 +36,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import positive_int, run_main  # noqa: E402
@@ -131,12 +130,10 @@ def _map_scans(args) -> list[Path]:
 def scene_of(run: Path) -> str:
     """The name of the scene directory that ``run`` mapped (its ``config.yaml``'s ``data.path``); the run
     directory itself where it has no such record."""
-    cfg = run / "config.yaml"
-    if cfg.is_file():
-        path = (yaml.safe_load(cfg.read_text()) or {}).get("data", {}).get("path")
-        if path:
-            return Path(path).name
-    return str(run)
+    from ogscene3d.runs import recorded_data_path
+
+    path = recorded_data_path(run)
+    return path.name if path is not None else str(run)
 
 
 def by_scene(results: dict[str, dict], scenes: dict[str, str]) -> dict[str, dict]:

@@ -497,10 +497,11 @@ def _link_tail(a: torch.Tensor, b: torch.Tensor, vals: torch.Tensor, gmass: torc
                 dirty.add(h)
             if small[node]:
                 for h, (e, s) in row.items():
-                    if h not in sums and link(node, h, e)[1] != s:
-                        row[h] = link(node, h, e)
-                        adj[h][node] = row[h]
-                        dirty.add(h)
+                    if h not in sums:
+                        again = link(node, h, e)
+                        if again[1] != s:
+                            row[h] = adj[h][node] = again
+                            dirty.add(h)
             dirty.add(node)
         for members in groups:  # the keys' order changes only now: the sums above were in the former one
             first[into[members[0]]] = min(first[u] for u in members)
